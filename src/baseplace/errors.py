@@ -1,0 +1,42 @@
+"""The one exception hierarchy of baseplace.
+
+Every error a user can cause derives from :class:`BaseplaceError`; its message is one line that
+names what is wrong and, where there is a finite set, the valid choices. The CLI maps
+:class:`InputError` to exit code 2 and :class:`NothingFoundError` to exit code 3.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+
+class BaseplaceError(Exception):
+    """Root of every error baseplace raises on purpose."""
+
+    exit_code = 2
+
+
+class InputError(BaseplaceError, ValueError):
+    """Bad input: a malformed file, an unknown name, a value out of range (CLI exit 2)."""
+
+    exit_code = 2
+
+
+class NothingFoundError(BaseplaceError):
+    """The computation ran but found nothing, e.g. no reachable placement (CLI exit 3)."""
+
+    exit_code = 3
+
+
+def choices(valid: Iterable[str], limit: int = 12) -> str:
+    """Format a list of valid choices for an error message, shortening long lists."""
+    items = sorted(set(valid))
+    shown = ", ".join(items[:limit])
+    if len(items) > limit:
+        shown += f", ... ({len(items)} in all)"
+    return shown
+
+
+def unknown(kind: str, name: str, valid: Iterable[str]) -> InputError:
+    """Build the standard 'unknown X' error that lists the valid choices."""
+    return InputError(f"unknown {kind} {name!r}; valid: {choices(valid)}")

@@ -1,0 +1,141 @@
+"""Pose conventions shared by every module and the CLI.
+
+* ``T_a_b`` is the pose of frame b in frame a, a (4, 4) homogeneous matrix mapping points from b
+  to a: ``p_a = T_a_b @ p_b``. Batches are (N, 4, 4).
+* Euler angles follow ROS (REP 103): ``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)``, radians.
+* A 6D pose on the command line is ``"x y z roll pitch yaw"`` (metres, radians); a base pose on
+  the floor is ``"x y yaw"``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from baseplace.errors import InputError
+
+FloatArray = NDArray[np.float64]
+
+
+def rpy_to_matrix(roll: ArrayLike, pitch: ArrayLike, yaw: ArrayLike) -> FloatArray:
+    """Rotation matrices ``Rz(yaw) Ry(pitch) Rx(roll)``.
+
+    Args:
+        roll: angle about x [rad], scalar or shape (N,).
+        pitch: angle about y [rad], same shape.
+        yaw: angle about z [rad], same shape.
+
+    Returns:
+        (3, 3) for scalars, else (N, 3, 3).
+    """
+    r, p, y = (np.asarray(a, dtype=float) for a in (roll, pitch, yaw))
+    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+    R = np.empty((*np.broadcast(r, p, y).shape, 3, 3))
+    R[..., 0, 0] = cy * cp
+    R[..., 0, 1] = cy * sp * sr - sy * cr
+    R[..., 0, 2] = cy * sp * cr + sy * sr
+    R[..., 1, 0] = sy * cp
+    R[..., 1, 1] = sy * sp * sr + cy * cr
+    R[..., 1, 2] = sy * sp * cr - cy * sr
+    R[..., 2, 0] = -sp
+    R[..., 2, 1] = cp * sr
+    R[..., 2, 2] = cp * cr
+    return R
+
+
+def matrix_to_rpy(R: ArrayLike) -> FloatArray:
+    """Inverse of :func:`rpy_to_matrix`: (..., 3, 3) -> (..., 3) as (roll, pitch, yaw) [rad]."""
+    R = np.asarray(R, dtype=float)
+    pitch = np.arcsin(np.clip(-R[..., 2, 0], -1.0, 1.0))
+    roll = np.arctan2(R[..., 2, 1], R[..., 2, 2])
+    yaw = np.arctan2(R[..., 1, 0], R[..., 0, 0])
+    return np.stack([roll, pitch, yaw], axis=-1)
+
+
+def pose_from_xyz_rpy(xyz_rpy: ArrayLike) -> FloatArray:
+    """Homogeneous poses from ``(x, y, z, roll, pitch, yaw)``.
+
+    Args:
+        xyz_rpy: shape (6,) or (N, 6), metres and radians.
+
+    Returns:
+        (4, 4) or (N, 4, 4).
+    """
+    v = np.asarray(xyz_rpy, dtype=float)
+    if v.shape[-1] != 6:
+        raise InputError(f"a 6D pose needs 6 numbers (x y z roll pitch yaw), got {v.shape[-1]}")
+    T = np.zeros((*v.shape[:-1], 4, 4))
+    T[..., :3, :3] = rpy_to_matrix(v[..., 3], v[..., 4], v[..., 5])
+    T[..., :3, 3] = v[..., :3]
+    T[..., 3, 3] = 1.0
+    return T
+
+
+def invert_transforms(T: ArrayLike) -> FloatArray:
+    """Invert rigid transforms (..., 4, 4) using R^T, without a general matrix inverse."""
+    T = np.asarray(T, dtype=float)
+    out = np.zeros_like(T)
+    Rt = np.swapaxes(T[..., :3, :3], -1, -2)
+    out[..., :3, :3] = Rt
+    out[..., :3, 3] = -np.einsum("...ij,...j->...i", Rt, T[..., :3, 3])
+    out[..., 3, 3] = 1.0
+    return out
+
+
+def _parse_numbers(text: str, count: int, what: str) -> FloatArray:
+    parts = text.replace(",", " ").split()
+    if len(parts) != count:
+        raise InputError(f"{what} needs {count} numbers, got {len(parts)} in {text!r}")
+    try:
+        values = np.array([float(p) for p in parts])
+    except ValueError:
+        raise InputError(f"{what} must be numbers, got {text!r}") from None
+    if not np.all(np.isfinite(values)):
+        raise InputError(f"{what} contains NaN or infinity: {text!r}")
+    return values
+
+
+def parse_pose6(text: str) -> FloatArray:
+    """Parse ``"x y z roll pitch yaw"`` (metres, radians) into a (4, 4) pose."""
+    return pose_from_xyz_rpy(_parse_numbers(text, 6, "pose 'x y z roll pitch yaw'"))
+
+
+def parse_base_pose(text: str) -> BasePose:
+    """Parse ``"x y yaw"`` (metres, radians) into a :class:`BasePose`."""
+    x, y, yaw = _parse_numbers(text, 3, "base pose 'x y yaw'")
+    return BasePose(float(x), float(y), float(yaw))
+
+
+@dataclass(frozen=True)
+class BasePose:
+    """A base pose on the flat floor: position (x, y) [m] and heading yaw [rad] about world z.
+
+    ``matrix()`` is ``T_world_base`` with the base frame on the floor (z = 0).
+    """
+
+    x: float
+    y: float
+    yaw: float
+
+    def matrix(self) -> FloatArray:
+        """``T_world_base``, shape (4, 4)."""
+        return pose_from_xyz_rpy([self.x, self.y, 0.0, 0.0, 0.0, self.yaw])
+
+    @classmethod
+    def from_matrix(cls, T_world_base: ArrayLike) -> BasePose:
+        """Project a (4, 4) pose onto the floor: keep x, y and the heading of the x axis."""
+        T = np.asarray(T_world_base, dtype=float)
+        return cls(float(T[0, 3]), float(T[1, 3]), float(np.arctan2(T[1, 0], T[0, 0])))
+
+    @staticmethod
+    def batch_matrix(xy_yaw: ArrayLike) -> FloatArray:
+        """``T_world_base`` for an (N, 3) array of ``(x, y, yaw)``; returns (N, 4, 4)."""
+        v = np.asarray(xy_yaw, dtype=float).reshape(-1, 3)
+        T = np.zeros((len(v), 4, 4))
+        c, s = np.cos(v[:, 2]), np.sin(v[:, 2])
+        T[:, 0, 0], T[:, 0, 1], T[:, 1, 0], T[:, 1, 1] = c, -s, s, c
+        T[:, 2, 2] = T[:, 3, 3] = 1.0
+        T[:, 0, 3], T[:, 1, 3] = v[:, 0], v[:, 1]
+        return T
