@@ -1,0 +1,119 @@
+"""Self-collision checks with coal through pinocchio's GeometryModel.
+
+Pairs that can never collide meaningfully are disabled: the SRDF's ``disable_collisions`` where
+the robot has one; otherwise, as MoveIt's setup assistant does, geometries rigidly attached to
+the same joint, geometries on adjacent joints, and pairs already touching at the reference
+configuration (parts that are in contact by design).
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import ArrayLike, NDArray
+
+from baseplace.errors import InputError
+from baseplace.robots.model import Arm, Robot
+
+
+def load_collision_model(robot: Robot) -> pin.GeometryModel:
+    """The robot's collision geometry (meshes resolved through the spec's package dirs)."""
+    spec = robot.spec
+    try:
+        return pin.buildGeomFromUrdf(
+            robot.model, str(spec.urdf), pin.COLLISION, package_dirs=[str(p) for p in spec.package_dirs]
+        )
+    except Exception as exc:
+        lines = str(exc).strip().splitlines()
+        raise InputError(f"cannot load collision meshes of {spec.urdf}: {lines[0] if lines else exc!r}") from None
+
+
+class SelfCollision:
+    """Self-collision checker for one robot.
+
+    Args:
+        robot: the robot.
+        num_threads: threads for batched checks (default: all cores).
+    """
+
+    def __init__(self, robot: Robot, num_threads: int | None = None) -> None:
+        self.robot = robot
+        self.model = robot.model
+        self.geom = load_collision_model(robot)
+        self.geom.addAllCollisionPairs()
+        if robot.spec.srdf is not None:
+            pin.removeCollisionPairs(self.model, self.geom, str(robot.spec.srdf))
+        else:
+            self._disable_structural_pairs()
+        self.num_threads = num_threads or os.cpu_count() or 1
+        self.data = self.model.createData()
+        self.geom_data = pin.GeometryData(self.geom)
+        self._arm_data: dict[str, pin.GeometryData] = {}
+
+    def _disable_structural_pairs(self) -> None:
+        parents = self.model.parents
+        objects = self.geom.geometryObjects
+        keep = []
+        for pair in self.geom.collisionPairs:
+            ja, jb = objects[pair.first].parentJoint, objects[pair.second].parentJoint
+            if ja == jb or parents[ja] == jb or parents[jb] == ja:
+                continue
+            keep.append((pair.first, pair.second))  # copies: the vector is cleared below
+        self.geom.removeAllCollisionPairs()
+        for first, second in keep:
+            self.geom.addCollisionPair(pin.CollisionPair(first, second))
+        data, geom_data = self.model.createData(), pin.GeometryData(self.geom)
+        pin.computeCollisions(self.model, data, self.geom, geom_data, self.robot.q_reference, False)
+        touching = [
+            pin.CollisionPair(pair.first, pair.second)
+            for pair, res in zip(self.geom.collisionPairs, geom_data.collisionResults, strict=True)
+            if res.isCollision()
+        ]
+        for pair in touching:
+            self.geom.removeCollisionPair(pair)
+
+    @property
+    def n_pairs(self) -> int:
+        """Number of active collision pairs."""
+        return len(self.geom.collisionPairs)
+
+    def colliding(self, q_full: ArrayLike) -> bool:
+        """True if the robot at the full pinocchio configuration collides with itself."""
+        q = np.asarray(q_full, dtype=float)
+        return bool(pin.computeCollisions(self.model, self.data, self.geom, self.geom_data, q, True))
+
+    def _arm_geometry_data(self, arm: Arm) -> pin.GeometryData:
+        """GeometryData with only the pairs whose relative pose changes when ``arm`` moves.
+
+        Geometries are grouped by the last arm joint that moves them; two geometries in one group
+        keep their relative pose for every arm configuration, so checking them is wasted work.
+        """
+        if arm.name not in self._arm_data:
+            arm_ids = [self.model.getJointId(j) for j in arm.joint_names]
+            objects = self.geom.geometryObjects
+
+            def group(geom_id: int) -> int:
+                supports = set(self.model.supports[objects[geom_id].parentJoint])
+                return max((i for i, j in enumerate(arm_ids) if j in supports), default=-1)
+
+            geom_data = pin.GeometryData(self.geom)
+            for k, pair in enumerate(self.geom.collisionPairs):
+                if group(pair.first) == group(pair.second):
+                    geom_data.deactivateCollisionPair(k)
+            self._arm_data[arm.name] = geom_data
+        return self._arm_data[arm.name]
+
+    def colliding_arm(self, arm: Arm, q_arm: ArrayLike) -> NDArray[np.bool_]:
+        """Self-collision of (N, n) arm configurations, other joints at their reference values."""
+        Q = np.asarray(q_arm, dtype=float).reshape(-1, arm.n_joints)
+        q_ref = self.robot.q_reference
+        geom_data = self._arm_geometry_data(arm)
+        return np.array(
+            [
+                pin.computeCollisions(self.model, self.data, self.geom, geom_data, arm.to_pinocchio(q, q_ref), True)
+                for q in Q
+            ],
+            dtype=bool,
+        )

@@ -1,0 +1,260 @@
+"""Inverse kinematics of an arm's TCP pose relative to its base.
+
+The contract (as in ROS-Industrial reach's ``IKSolver``): :meth:`IKSolver.solve` returns joint
+values within the limits that put the TCP at the requested pose, or None. The default solver is
+damped least squares (Levenberg-Marquardt) on the compiled chain, with joint clamping, angle
+wrapping for unbounded joints and random restarts; pinocchio FK is the test oracle.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Protocol
+
+import numba as nb
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from baseplace.errors import InputError
+from baseplace.geometry.poses import FloatArray, invert_transforms
+from baseplace.robots.model import Arm
+
+
+class IKSolver(Protocol):
+    """Solves ``T_base_tcp`` for joint values: a (n,) array within the limits, or None."""
+
+    arm: Arm
+
+    def solve(
+        self, T_base_tcp: ArrayLike, rng: np.random.Generator, q_seed: ArrayLike | None = None
+    ) -> FloatArray | None:
+        """Joint values reaching the pose, or None if none was found."""
+        ...
+
+
+@nb.njit(cache=True, inline="always")
+def _pose_and_jacobian(q, placements, axes, kinds, T_last, R, t, J):  # type: ignore[no-untyped-def]
+    """TCP pose (R, t) and the 6 x n Jacobian (linear; angular), both in the base frame."""
+    n = q.shape[0]
+    origins = np.empty((n, 3))
+    zs = np.empty((n, 3))
+    for a in range(3):
+        for b in range(3):
+            R[a, b] = 1.0 if a == b else 0.0
+        t[a] = 0.0
+    for i in range(n):
+        P = placements[i]
+        tn = np.empty(3)
+        Rn = np.empty((3, 3))
+        for a in range(3):
+            tn[a] = t[a] + R[a, 0] * P[0, 3] + R[a, 1] * P[1, 3] + R[a, 2] * P[2, 3]
+            for b in range(3):
+                Rn[a, b] = R[a, 0] * P[0, b] + R[a, 1] * P[1, b] + R[a, 2] * P[2, b]
+        ax, ay, az = axes[i, 0], axes[i, 1], axes[i, 2]
+        for a in range(3):
+            zs[i, a] = Rn[a, 0] * ax + Rn[a, 1] * ay + Rn[a, 2] * az
+            origins[i, a] = tn[a]
+        if kinds[i] == 1:
+            for a in range(3):
+                t[a] = tn[a] + zs[i, a] * q[i]
+                for b in range(3):
+                    R[a, b] = Rn[a, b]
+        else:
+            c = math.cos(q[i])
+            s = math.sin(q[i])
+            C = 1.0 - c
+            M = np.empty((3, 3))
+            M[0, 0] = c + ax * ax * C
+            M[0, 1] = ax * ay * C - az * s
+            M[0, 2] = ax * az * C + ay * s
+            M[1, 0] = ay * ax * C + az * s
+            M[1, 1] = c + ay * ay * C
+            M[1, 2] = ay * az * C - ax * s
+            M[2, 0] = az * ax * C - ay * s
+            M[2, 1] = az * ay * C + ax * s
+            M[2, 2] = c + az * az * C
+            for a in range(3):
+                t[a] = tn[a]
+                for b in range(3):
+                    R[a, b] = Rn[a, 0] * M[0, b] + Rn[a, 1] * M[1, b] + Rn[a, 2] * M[2, b]
+    P = T_last
+    tn = np.empty(3)
+    Rn = np.empty((3, 3))
+    for a in range(3):
+        tn[a] = t[a] + R[a, 0] * P[0, 3] + R[a, 1] * P[1, 3] + R[a, 2] * P[2, 3]
+        for b in range(3):
+            Rn[a, b] = R[a, 0] * P[0, b] + R[a, 1] * P[1, b] + R[a, 2] * P[2, b]
+    for a in range(3):
+        t[a] = tn[a]
+        for b in range(3):
+            R[a, b] = Rn[a, b]
+    for i in range(n):
+        zx, zy, zz = zs[i, 0], zs[i, 1], zs[i, 2]
+        if kinds[i] == 1:
+            J[0, i], J[1, i], J[2, i] = zx, zy, zz
+            J[3, i] = J[4, i] = J[5, i] = 0.0
+        else:
+            dx, dy, dz = t[0] - origins[i, 0], t[1] - origins[i, 1], t[2] - origins[i, 2]
+            J[0, i] = zy * dz - zz * dy
+            J[1, i] = zz * dx - zx * dz
+            J[2, i] = zx * dy - zy * dx
+            J[3, i], J[4, i], J[5, i] = zx, zy, zz
+
+
+@nb.njit(cache=True, inline="always")
+def rotation_log(E, out):  # type: ignore[no-untyped-def]
+    """Rotation vector (3,) of a rotation matrix E (3, 3), robust near 0 and pi."""
+    vx = E[2, 1] - E[1, 2]
+    vy = E[0, 2] - E[2, 0]
+    vz = E[1, 0] - E[0, 1]
+    s = 0.5 * math.sqrt(vx * vx + vy * vy + vz * vz)
+    c = 0.5 * (E[0, 0] + E[1, 1] + E[2, 2] - 1.0)
+    angle = math.atan2(s, c)
+    if s > 1e-7:
+        k = angle / (2.0 * s)
+        out[0], out[1], out[2] = vx * k, vy * k, vz * k
+    elif c > 0.0:
+        out[0], out[1], out[2] = 0.5 * vx, 0.5 * vy, 0.5 * vz
+    else:  # angle ~ pi: E ~ 2 a a^T - I
+        k = 0
+        if E[1, 1] > E[k, k]:
+            k = 1
+        if E[2, 2] > E[k, k]:
+            k = 2
+        a = np.empty(3)
+        a[k] = math.sqrt(max(0.0, 0.5 * (E[k, k] + 1.0)))
+        for j in range(3):
+            if j != k:
+                a[j] = 0.5 * (E[k, j] + E[j, k]) / (2.0 * a[k])
+        norm = math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+        for j in range(3):
+            out[j] = a[j] / norm * angle
+
+
+@nb.njit(cache=True)
+def _solve_one(T_goal, seeds, placements, axes, kinds, T_last, lower, upper, continuous,
+               max_iter, tol_p, tol_r, damping, q_out):  # type: ignore[no-untyped-def]  # fmt: skip
+    n = seeds.shape[1]
+    R = np.empty((3, 3))
+    t = np.empty(3)
+    J = np.empty((6, n))
+    e = np.empty(6)
+    E = np.empty((3, 3))
+    w = np.empty(3)
+    q = np.empty(n)
+    for attempt in range(seeds.shape[0]):
+        for j in range(n):
+            q[j] = seeds[attempt, j]
+        checkpoint = np.inf
+        for it in range(max_iter):
+            _pose_and_jacobian(q, placements, axes, kinds, T_last, R, t, J)
+            for a in range(3):
+                e[a] = T_goal[a, 3] - t[a]
+                for b in range(3):  # E = R_goal R^T
+                    E[a, b] = T_goal[a, 0] * R[b, 0] + T_goal[a, 1] * R[b, 1] + T_goal[a, 2] * R[b, 2]
+            rotation_log(E, w)
+            e[3], e[4], e[5] = w[0], w[1], w[2]
+            err_p = math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
+            err_r = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+            if err_p < tol_p and err_r < tol_r:
+                for j in range(n):
+                    q_out[j] = q[j]
+                return attempt
+            if it % 10 == 9:  # stalled (usually against a joint limit): restart elsewhere
+                if err_p + err_r > 0.95 * checkpoint:
+                    break
+                checkpoint = err_p + err_r
+            A = J @ J.T
+            lam = damping * (1.0 + err_p + err_r)
+            for a in range(6):
+                A[a, a] += lam
+            dq = J.T @ np.linalg.solve(A, e)
+            step = np.max(np.abs(dq))
+            if step > 0.4:
+                dq *= 0.4 / step
+            for j in range(n):
+                v = q[j] + dq[j]
+                if continuous[j]:
+                    v = (v + math.pi) % (2.0 * math.pi) - math.pi
+                q[j] = min(upper[j], max(lower[j], v))
+    return -1
+
+
+@nb.njit(cache=True, parallel=True)
+def _solve_batch(T_goals, seeds, placements, axes, kinds, T_last, lower, upper, continuous,
+                 max_iter, tol_p, tol_r, damping, q_out, attempts):  # type: ignore[no-untyped-def]  # fmt: skip
+    for i in nb.prange(T_goals.shape[0]):
+        attempts[i] = _solve_one(T_goals[i], seeds[i], placements, axes, kinds, T_last, lower,
+                                 upper, continuous, max_iter, tol_p, tol_r, damping, q_out[i])  # fmt: skip
+
+
+@dataclass(frozen=True)
+class DampedLeastSquaresIK:
+    """Levenberg-Marquardt IK with random restarts on an arm's compiled chain.
+
+    Attributes:
+        arm: the arm to solve for.
+        restarts: random restarts after the first attempt from the seed (or mid-range).
+        max_iterations: iterations per attempt.
+        tol_position: position tolerance [m].
+        tol_rotation: orientation tolerance [rad].
+        damping: Levenberg-Marquardt damping added to J J^T (scaled by the error).
+    """
+
+    arm: Arm
+    restarts: int = 80
+    max_iterations: int = 150
+    tol_position: float = 1e-4
+    tol_rotation: float = 1e-3
+    damping: float = 1e-4
+
+    def _seeds(self, rng: np.random.Generator, count: int, q_seed: ArrayLike | None) -> FloatArray:
+        arm = self.arm
+        seeds = np.empty((count, 1 + self.restarts, arm.n_joints))
+        seeds[:, 0] = 0.5 * (arm.lower + arm.upper) if q_seed is None else np.asarray(q_seed, dtype=float)
+        seeds[:, 1:] = rng.uniform(arm.lower, arm.upper, size=(count, self.restarts, arm.n_joints))
+        return seeds
+
+    def _run(self, T: FloatArray, seeds: FloatArray) -> tuple[FloatArray, NDArray[np.int64]]:
+        arm = self.arm
+        q_out = np.zeros((len(T), arm.n_joints))
+        attempts = np.empty(len(T), dtype=np.int64)
+        _solve_batch(np.ascontiguousarray(T), seeds, arm.placements, arm.axes, arm.kinds,
+                     arm.T_last_tcp, arm.lower, arm.upper, arm.continuous, self.max_iterations,
+                     self.tol_position, self.tol_rotation, self.damping, q_out, attempts)  # fmt: skip
+        return q_out, attempts
+
+    def solve(
+        self, T_base_tcp: ArrayLike, rng: np.random.Generator, q_seed: ArrayLike | None = None
+    ) -> FloatArray | None:
+        """Joint values (n,) that put the TCP at ``T_base_tcp`` (4, 4), or None."""
+        T = _check_poses(T_base_tcp)
+        q, attempts = self._run(T, self._seeds(rng, 1, q_seed))
+        return q[0] if attempts[0] >= 0 else None
+
+    def solve_batch(
+        self, T_base_tcp: ArrayLike, rng: np.random.Generator
+    ) -> tuple[FloatArray, NDArray[np.bool_]]:
+        """Solve (N, 4, 4) poses in parallel; returns q (N, n) and success (N,)."""
+        T = _check_poses(T_base_tcp)
+        q, attempts = self._run(T, self._seeds(rng, len(T), None))
+        return q, attempts >= 0
+
+    def solve_world(
+        self,
+        T_world_tcp: ArrayLike,
+        T_world_base: ArrayLike,
+        rng: np.random.Generator,
+        q_seed: ArrayLike | None = None,
+    ) -> FloatArray | None:
+        """Solve a world TCP pose (4, 4) from a world base pose (4, 4)."""
+        T_base_tcp = invert_transforms(np.asarray(T_world_base, dtype=float)) @ np.asarray(T_world_tcp, dtype=float)
+        return self.solve(T_base_tcp, rng, q_seed)
+
+
+def _check_poses(T: ArrayLike) -> FloatArray:
+    arr = np.asarray(T, dtype=np.float64).reshape(-1, 4, 4)
+    if not np.all(np.isfinite(arr)):
+        raise InputError("IK target pose contains NaN or infinity")
+    return arr
