@@ -80,7 +80,10 @@ class Arm:
 
     def sample(self, rng: np.random.Generator, n: int) -> FloatArray:
         """``n`` configurations drawn uniformly within the joint limits, shape (n, n_joints)."""
-        return rng.uniform(self.lower, self.upper, size=(n, self.n_joints))
+        Q = rng.random((n, self.n_joints))
+        Q *= self.upper - self.lower
+        Q += self.lower
+        return Q
 
     def within_limits(self, q: ArrayLike, tol: float = 1e-9) -> NDArray[np.bool_]:
         """True where every joint of (N, n) configurations lies within its limits."""

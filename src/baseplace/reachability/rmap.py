@@ -1,0 +1,245 @@
+"""Reachability maps (RM) and their inverse queries (IRM).
+
+A :class:`ReachabilityMap` stores, for each SE(3) cell of TCP poses relative to the base
+(:class:`~baseplace.reachability.grid.SE3Grid`), how many random joint samples landed in it. The
+reachability index of a cell is its count divided by the largest count, in [0, 1]; 0 means no
+sample reached the cell. Inverse queries evaluate ``T_base_tcp = inv(T_world_base) @
+T_world_target`` for batches of world base poses (seed 000, section III-A; Vahrenkamp et al. 2013).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Literal, Protocol
+
+import numba as nb
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from baseplace.errors import InputError
+from baseplace.geometry.poses import FloatArray
+from baseplace.reachability.grid import SE3Grid, cell_of
+
+
+@dataclass(frozen=True)
+class MapInfo:
+    """Provenance of a map, stored with it.
+
+    Attributes:
+        robot: robot name.
+        urdf_sha256: SHA-256 of the URDF the map was built from.
+        arm: arm name.
+        joint_names: the sampled joints, in chain order.
+        base_frame: frame the TCP poses are relative to.
+        tcp_frame: the TCP frame.
+        samples: joint samples drawn.
+        seed: random seed of the build.
+        build_time_s: wall time of the build [s].
+        self_collision: whether self-colliding samples were dropped.
+        dropped_self_collision: samples dropped as self-colliding.
+    """
+
+    robot: str
+    urdf_sha256: str
+    arm: str
+    joint_names: tuple[str, ...]
+    base_frame: str
+    tcp_frame: str
+    samples: int
+    seed: int
+    build_time_s: float = 0.0
+    self_collision: bool = False
+    dropped_self_collision: int = 0
+
+
+@dataclass(frozen=True)
+class ReachabilityMap:
+    """Sample counts over an SE(3) grid of ``T_base_tcp``, stored sparsely.
+
+    Attributes:
+        grid: the SE(3) grid.
+        cells: (K,) sorted flat indices of the cells reached by at least one sample.
+        counts: (K,) samples per reached cell.
+        info: provenance.
+        manipulability: (K,) best Yoshikawa manipulability per cell, or None.
+    """
+
+    grid: SE3Grid
+    cells: NDArray[np.int64]
+    counts: NDArray[np.uint32]
+    info: MapInfo
+    manipulability: NDArray[np.float32] | None = None
+    _lookup: tuple[NDArray[np.int32], NDArray[np.float32]] | None = field(
+        default=None, init=False, repr=False, compare=False
+    )
+
+    @property
+    def n_reached(self) -> int:
+        """Number of cells with reachability > 0."""
+        return len(self.cells)
+
+    @cached_property
+    def index(self) -> NDArray[np.float32]:
+        """Reachability index per stored cell, ``count / max(count)`` in (0, 1]."""
+        if len(self.counts) == 0:
+            return np.zeros(0, dtype=np.float32)
+        return (self.counts / self.counts.max()).astype(np.float32)
+
+    @cached_property
+    def tables(self) -> tuple[NDArray[np.int32], NDArray[np.float32]]:
+        """Dense lookup: per voxel a row in a (voxels reached, orientations) block, or -1."""
+        n_orient = self.grid.n_orientations
+        voxels, orient = np.divmod(self.cells, n_orient)
+        reached, row = np.unique(voxels, return_inverse=True)
+        offset = np.full(self.grid.n_voxels, -1, dtype=np.int32)
+        offset[reached] = np.arange(len(reached), dtype=np.int32)
+        blocks = np.zeros((len(reached), n_orient), dtype=np.float32)
+        blocks[row, orient] = self.index
+        return offset, blocks
+
+    def reachability(self, T_base_tcp: ArrayLike) -> NDArray[np.float32]:
+        """Reachability index of TCP poses relative to the base.
+
+        Args:
+            T_base_tcp: (N, 4, 4) or (4, 4).
+
+        Returns:
+            (N,) values in [0, 1]; 0 outside the map.
+        """
+        T = _poses(T_base_tcp, "T_base_tcp")
+        identity = np.eye(4)
+        out = np.empty(len(T), dtype=np.float32)
+        offset, blocks = self.tables
+        _lookup_batch(identity, T, False, *self.grid.params, offset, blocks, out)
+        return out
+
+    def inverse(self, T_world_target: ArrayLike, T_world_base: ArrayLike) -> NDArray[np.float32]:
+        """Reachability of one world target from each of a batch of world base poses.
+
+        Args:
+            T_world_target: (4, 4) TCP target in the world.
+            T_world_base: (N, 4, 4) base poses in the world.
+
+        Returns:
+            (N,) reachability index of ``inv(T_world_base) @ T_world_target``.
+        """
+        target = _poses(T_world_target, "T_world_target")
+        if len(target) != 1:
+            raise InputError(f"inverse() takes one target pose (4, 4), got {len(target)}")
+        bases = _poses(T_world_base, "T_world_base")
+        out = np.empty(len(bases), dtype=np.float32)
+        offset, blocks = self.tables
+        _lookup_batch(target[0], bases, True, *self.grid.params, offset, blocks, out)
+        return out
+
+
+class ReachabilityQuery(Protocol):
+    """Anything that scores world base poses for a world target: higher is more reachable."""
+
+    def inverse(self, T_world_target: ArrayLike, T_world_base: ArrayLike) -> NDArray[np.float32]:
+        """(N,) reachability in [0, 1] of the target from each base pose (N, 4, 4)."""
+        ...
+
+
+@dataclass(frozen=True)
+class ArmCombination:
+    """Several arms' maps as one query: ``any`` arm (max) or ``both``/all arms (min).
+
+    Attributes:
+        maps: one map per arm, all of the same robot.
+        mode: "any" (either arm reaches: max) or "both" (every arm reaches: min).
+    """
+
+    maps: tuple[ReachabilityMap, ...]
+    mode: Literal["any", "both"] = "any"
+
+    def __post_init__(self) -> None:
+        if self.mode not in ("any", "both"):
+            raise InputError(f"unknown arm combination {self.mode!r}; valid: any, both")
+        if len({m.info.robot for m in self.maps}) != 1:
+            raise InputError("arm combination needs maps of one robot")
+
+    def inverse(self, T_world_target: ArrayLike, T_world_base: ArrayLike) -> NDArray[np.float32]:
+        """(N,) combined reachability of the target from each base pose."""
+        values = np.stack([m.inverse(T_world_target, T_world_base) for m in self.maps])
+        return values.max(axis=0) if self.mode == "any" else values.min(axis=0)
+
+
+def inverse_reachability(
+    query: ReachabilityQuery, T_world_targets: ArrayLike, T_world_base: ArrayLike
+) -> NDArray[np.float32]:
+    """Reachability of several targets that must all be reached: the min over targets.
+
+    Args:
+        query: a map or an arm combination.
+        T_world_targets: (K, 4, 4) or (4, 4) world TCP targets.
+        T_world_base: (N, 4, 4) world base poses.
+
+    Returns:
+        (N,) min over the K targets.
+    """
+    targets = _poses(T_world_targets, "T_world_targets")
+    bases = _poses(T_world_base, "T_world_base")
+    value = np.ones(len(bases), dtype=np.float32)
+    for target in targets:
+        np.minimum(value, query.inverse(target, bases), out=value)
+    return value
+
+
+def _poses(T: ArrayLike, name: str) -> FloatArray:
+    arr = np.asarray(T, dtype=np.float64)
+    if arr.shape[-2:] != (4, 4):
+        raise InputError(f"{name} must have shape (4, 4) or (N, 4, 4), got {arr.shape}")
+    arr = np.ascontiguousarray(arr.reshape(-1, 4, 4))
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"{name} contains NaN or infinity")
+    return arr
+
+
+@nb.njit(cache=True, parallel=True)
+def _lookup_batch(T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist, pixel_phi,
+                  offset, blocks, out):  # type: ignore[no-untyped-def]  # fmt: skip
+    n_orient = blocks.shape[1]
+    for i in nb.prange(T_wb.shape[0]):
+        B = T_wb[i]
+        R = np.empty((3, 3))
+        if invert:  # T_base_tcp = B^-1 T_wt: R = B_R^T T_R, p = B_R^T (T_p - B_p)
+            dx, dy, dz = T_wt[0, 3] - B[0, 3], T_wt[1, 3] - B[1, 3], T_wt[2, 3] - B[2, 3]
+            px = B[0, 0] * dx + B[1, 0] * dy + B[2, 0] * dz
+            py = B[0, 1] * dx + B[1, 1] * dy + B[2, 1] * dz
+            pz = B[0, 2] * dx + B[1, 2] * dy + B[2, 2] * dz
+            for a in range(3):
+                for b in range(3):
+                    R[a, b] = B[0, a] * T_wt[0, b] + B[1, a] * T_wt[1, b] + B[2, a] * T_wt[2, b]
+        else:
+            px, py, pz = B[0, 3], B[1, 3], B[2, 3]
+            for a in range(3):
+                for b in range(3):
+                    R[a, b] = B[a, b]
+        c = cell_of(R, px, py, pz, origin, voxel_size, shape, nside, n_twist, pixel_phi)
+        if c < 0:
+            out[i] = 0.0
+            continue
+        row = offset[c // n_orient]
+        out[i] = 0.0 if row < 0 else blocks[row, c % n_orient]
+
+
+def reach_bounds(placements: FloatArray, axes: FloatArray, kinds: NDArray[np.int64],
+                 T_last: FloatArray, lower: FloatArray, upper: FloatArray) -> tuple[FloatArray, FloatArray]:  # fmt: skip
+    """Axis-aligned box in the base frame that provably contains every TCP position.
+
+    Every transform after the first joint moves the TCP by at most the length of its
+    translation (plus the stroke of prismatic joints), so the TCP lies within that total radius
+    of the first joint's origin, which itself slides along its axis if that joint is prismatic.
+    """
+    radius = float(np.linalg.norm(T_last[:3, 3]))
+    radius += sum(float(np.linalg.norm(P[:3, 3])) for P in placements[1:])
+    radius += sum(max(abs(lo), abs(hi)) for k, lo, hi in zip(kinds[1:], lower[1:], upper[1:], strict=True) if k == 1)
+    P0 = placements[0]
+    ends = [P0[:3, 3] + (P0[:3, :3] @ axes[0]) * (q if kinds[0] == 1 else 0.0) for q in (lower[0], upper[0])]
+    lo = np.minimum(*ends) - radius
+    hi = np.maximum(*ends) + radius
+    margin = 1e-6 + 1e-9 * math.fsum(abs(v) for v in (*lo, *hi))
+    return lo - margin, hi + margin
