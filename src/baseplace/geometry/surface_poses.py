@@ -41,9 +41,8 @@ def plane_frame(normal: ArrayLike) -> FloatArray:
         (3, 3) rotation whose columns are the base x, y and z axes at gamma = 0.
     """
     n = _unit_up_normal(normal)
-    ey = np.array([0.0, 1.0, 0.0])
-    y_hat = ey - n[1] * n  # component of e_y in the plane; its xy projection is along +y
-    y_hat /= np.linalg.norm(y_hat)
+    # The in-plane unit vector with no x component: its xy projection points along +y.
+    y_hat = np.array([0.0, n[2], -n[1]]) / np.hypot(n[1], n[2])
     x_hat = np.cross(y_hat, n)
     return np.column_stack([x_hat, y_hat, n])
 

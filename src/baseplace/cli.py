@@ -1,0 +1,280 @@
+"""The ``baseplace`` command.
+
+Every command takes ``--json`` (exactly one JSON object on stdout) and ``--help``; commands with
+randomness take ``--seed``. Exit codes: 0 ok, 2 bad input (one ``error: ...`` line on stderr),
+3 ran but found nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any, NoReturn
+
+import numpy as np
+
+from baseplace.errors import BaseplaceError, InputError, NothingFoundError
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors and exit code 2."""
+
+    def error(self, message: str) -> NoReturn:
+        sys.stderr.write(f"error: {message} (see '{self.prog} --help')\n")
+        raise SystemExit(2)
+
+
+def _count(text: str) -> int:
+    """Parse sample counts such as 5e7 or 50000000."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not math.isfinite(value) or value < 1 or value != int(value):
+        raise argparse.ArgumentTypeError(f"must be a positive whole number, got {text!r}")
+    return int(value)
+
+
+def _nonneg_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
+    return value
+
+
+def _emit(args: argparse.Namespace, obj: dict[str, Any], text: str) -> None:
+    if args.json:
+        sys.stdout.write(json.dumps(obj) + "\n")
+    else:
+        sys.stdout.write(text.rstrip("\n") + "\n")
+
+
+def _progress(args: argparse.Namespace, total: int, desc: str) -> tuple[Callable[[int], None] | None, Any]:
+    if args.json:
+        return None, None
+    from tqdm import tqdm
+
+    bar = tqdm(total=total, desc=desc, unit="samples", unit_scale=True, file=sys.stderr, leave=False)
+
+    def update(done: int) -> None:
+        bar.update(done - bar.n)
+
+    return update, bar
+
+
+def _set_workers(workers: int | None) -> None:
+    if workers is None:
+        return
+    import numba
+
+    cores = os.cpu_count() or 1
+    limit = numba.config.NUMBA_NUM_THREADS
+    if not (1 <= workers <= limit):
+        raise InputError(f"--workers must be between 1 and {limit} (this machine has {cores} cores), got {workers}")
+    numba.set_num_threads(workers)
+
+
+def cmd_robots(args: argparse.Namespace) -> int:
+    from baseplace.robots.spec import BUILTIN_ROBOTS, builtin_spec
+
+    rows = []
+    for name in BUILTIN_ROBOTS:
+        spec = builtin_spec(name)
+        rows.append({
+            "name": name,
+            "urdf": str(spec.urdf),
+            "base_frame": spec.base_frame,
+            "default_arm": spec.default_arm,
+            "arms": {a: {"joints": list(s.joints), "tcp_frame": s.tcp_frame} for a, s in spec.arms.items()},
+            "footprint": {"radius": spec.footprint_radius} if spec.footprint_radius is not None
+            else {"polygon": [list(p) for p in spec.footprint_polygon or ()]},
+        })  # fmt: skip
+    lines = [
+        f"{r['name']:<11} base {r['base_frame']}; arms "
+        + ", ".join(f"{a} (TCP {v['tcp_frame']}, {len(v['joints'])} joints)" for a, v in r["arms"].items())
+        for r in rows
+    ]
+    lines.append("custom robots: pass --robot path/to/robot.toml (see docs/concepts.md)")
+    _emit(args, {"robots": rows}, "\n".join(lines))
+    return 0
+
+
+def cmd_build_map(args: argparse.Namespace) -> int:
+    from baseplace.reachability.build import BuildSettings, build_map
+    from baseplace.reachability.storage import save_map
+    from baseplace.robots.model import Robot
+
+    _set_workers(args.workers)
+    out = Path(args.out)
+    if not (out.parent if str(out.parent) else Path(".")).is_dir():
+        raise InputError(f"--out directory {out.parent} does not exist")
+    settings = BuildSettings(
+        samples=args.samples, seed=args.seed, voxel_size=args.voxel_size,
+        orientation_resolution=args.orientation_resolution,
+        self_collision=args.self_collision, manipulability=args.manipulability,
+    )  # fmt: skip
+    robot = Robot(args.robot)
+    robot.arm(args.arm)  # validate before spending time
+    update, bar = _progress(args, settings.samples, f"build-map {robot.name}")
+    try:
+        rmap = build_map(robot, args.arm, settings, update)
+    finally:
+        if bar is not None:
+            bar.close()
+    size = save_map(rmap, out)
+    info = rmap.info
+    rate = info.samples / info.build_time_s if info.build_time_s > 0 else float("nan")
+    obj = {
+        "out": str(out), "robot": info.robot, "arm": info.arm, "samples": info.samples,
+        "seed": info.seed, "cells_reached": rmap.n_reached, "build_time_s": round(info.build_time_s, 3),
+        "samples_per_s": round(rate), "file_bytes": size,
+        "dropped_self_collision": info.dropped_self_collision,
+    }  # fmt: skip
+    _emit(args, obj, f"wrote {out}: {rmap.n_reached} cells reached by {info.samples:.3g} samples "
+                     f"in {info.build_time_s:.1f} s ({rate / 1e6:.2f} M samples/s), {size / 1e6:.1f} MB")  # fmt: skip
+    return 0
+
+
+def _read_pose_file(path: str, width: int, what: str) -> np.ndarray:
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"{what} file {p} does not exist")
+    rows = []
+    for lineno, line in enumerate(p.read_text().splitlines(), 1):
+        text = line.split("#", 1)[0].strip()
+        if not text:
+            continue
+        parts = text.replace(",", " ").split()
+        try:
+            values = [float(v) for v in parts]
+        except ValueError:
+            raise InputError(f"{p}:{lineno}: {what} must be numbers, got {text!r}") from None
+        if len(values) != width:
+            raise InputError(f"{p}:{lineno}: a {what} needs {width} numbers, got {len(values)}")
+        if not all(math.isfinite(v) for v in values):
+            raise InputError(f"{p}:{lineno}: {what} contains NaN or infinity")
+        rows.append(values)
+    if not rows:
+        raise InputError(f"{what} file {p} holds no poses")
+    return np.array(rows)
+
+
+def cmd_reach(args: argparse.Namespace) -> int:
+    from baseplace.geometry.poses import BasePose, parse_base_pose, parse_pose6, pose_from_xyz_rpy
+    from baseplace.reachability.storage import check_map_matches, load_map
+
+    if (args.target is None) == (args.targets is None):
+        raise InputError("give exactly one of --target or --targets FILE")
+    if (args.base is None) == (args.bases is None):
+        raise InputError("give exactly one of --base or --bases FILE")
+    rmap = load_map(args.map)
+    if args.robot is not None:
+        from baseplace.robots.model import Robot
+
+        check_map_matches(rmap, Robot(args.robot), rmap.info.arm, args.map)
+    targets = (parse_pose6(args.target)[None] if args.target is not None
+               else pose_from_xyz_rpy(_read_pose_file(args.targets, 6, "target pose")))  # fmt: skip
+    bases = (parse_base_pose(args.base).matrix()[None] if args.base is not None
+             else BasePose.batch_matrix(_read_pose_file(args.bases, 3, "base pose")))  # fmt: skip
+    if len(targets) != len(bases) and len(targets) != 1:
+        raise InputError(f"--targets has {len(targets)} poses but --bases has {len(bases)}; they pair row by row")
+    if len(targets) == 1:
+        values = rmap.inverse(targets[0], bases)
+    else:
+        from baseplace.geometry.poses import invert_transforms
+
+        values = rmap.reachability(invert_transforms(bases) @ targets)
+    vals = [round(float(v), 6) for v in values]
+    _emit(args, {"values": vals}, "\n".join(f"{v:.6g}" for v in vals))
+    return 0
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    from baseplace.demo import run_demo
+
+    update, bar = _progress(args, args.samples, "default TIAGo map (first run only)")
+    try:
+        result = run_demo(Path(args.out), samples=args.samples, seed=args.seed, progress=update)
+    finally:
+        if bar is not None:
+            bar.close()
+    best = result["best"]
+    if best is None:
+        raise NothingFoundError("the demo found no IK-verified base pose for its target")
+    text = (
+        f"map {result['map']['path']} ({'built' if result['map']['built_now'] else 'cached'}, "
+        f"{result['map']['cells_reached']} cells)\n"
+        f"{result['base_poses_evaluated']} base poses scored in {result['timings_s']['irm_query'] * 1e3:.1f} ms\n"
+        f"best verified base pose x={best['x']:.2f} y={best['y']:.2f} yaw={best['yaw']:.2f} "
+        f"(reachability {best['reachability']:.3f})\nwrote {args.out}/demo.json and {result['png']}"
+    )
+    _emit(args, result, text)
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of the ``baseplace`` command."""
+    parser = _Parser(prog="baseplace", description="Where should a mobile manipulator stand?")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub.required = True
+
+    def command(name: str, help_text: str, func: Callable[[argparse.Namespace], int]) -> argparse.ArgumentParser:
+        p = sub.add_parser(name, help=help_text, description=help_text)
+        p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
+        p.set_defaults(func=func)
+        return p
+
+    command("robots", "list the built-in robots, their arms and TCP frames", cmd_robots)
+
+    p = command("build-map", "build a reachability map by random joint sampling", cmd_build_map)
+    p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
+    p.add_argument("--arm", default=None, help="arm name (default: the robot's default arm)")
+    p.add_argument("--samples", type=_count, default=50_000_000, help="joint samples, e.g. 5e7 (default)")
+    p.add_argument("--out", required=True, help="output map file (.rmap, HDF5)")
+    p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
+    p.add_argument("--workers", type=int, default=None, help="threads (default: all cores)")
+    p.add_argument("--voxel-size", type=float, default=0.05, help="position resolution [m] (default 0.05)")
+    p.add_argument("--orientation-resolution", type=float, default=0.8,
+                   help="largest orientation bin [rad] (default 0.8)")  # fmt: skip
+    p.add_argument("--self-collision", action="store_true", help="drop self-colliding samples (slow)")
+    p.add_argument("--manipulability", action="store_true", help="store the best manipulability per cell")
+
+    p = command("reach", "reachability of a TCP target from base poses (inverse lookup)", cmd_reach)
+    p.add_argument("--map", required=True, help="map file from build-map")
+    p.add_argument("--robot", default=None, help="check the map was built for this robot")
+    p.add_argument("--target", help='world TCP pose "x y z roll pitch yaw" [m, rad]')
+    p.add_argument("--targets", help="file with one target pose per line")
+    p.add_argument("--base", help='base pose "x y yaw" [m, rad]')
+    p.add_argument("--bases", help="file with one base pose per line, paired with --targets")
+
+    p = command("demo", "the main job on built-in defaults (writes out/demo.json and a PNG)", cmd_demo)
+    p.add_argument("--out", default="out", help="output directory (default: out)")
+    p.add_argument("--samples", type=_count, default=50_000_000, help="samples of the cached map")
+    p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point: run one command, map errors to exit codes."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args))
+    except BaseplaceError as exc:
+        sys.stderr.write(f"error: {exc}\n")
+        return exc.exit_code
+    except KeyboardInterrupt:
+        sys.stderr.write("error: interrupted\n")
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

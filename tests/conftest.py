@@ -1,0 +1,38 @@
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from baseplace.reachability.build import BuildSettings, build_map
+from baseplace.robots.model import Robot
+
+DATA = Path(__file__).parent / "data"
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+@pytest.fixture(scope="session")
+def tiago() -> Robot:
+    return Robot("tiago")
+
+
+@pytest.fixture(scope="session")
+def pr2() -> Robot:
+    return Robot("pr2")
+
+
+@pytest.fixture(scope="session")
+def planar3() -> Robot:
+    return Robot(DATA / "planar3.toml")
+
+
+@pytest.fixture(scope="session")
+def tiago_map(tiago: Robot):
+    """A small TIAGo map (2e6 samples): fast to build, enough for lookup tests."""
+    return build_map(tiago, None, BuildSettings(samples=2_000_000, seed=3))
+
+
+@pytest.fixture()
+def rng() -> np.random.Generator:
+    return np.random.default_rng(2024)
