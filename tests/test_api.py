@@ -1,0 +1,21 @@
+from __future__ import annotations
+
+import importlib
+
+import pytest
+
+import baseplace
+
+MODULES = ["baseplace", "baseplace.geometry", "baseplace.reachability", "baseplace.robots"]
+
+
+@pytest.mark.parametrize("module", MODULES)
+def test_every_public_name_imports(module):
+    mod = importlib.import_module(module)
+    for name in mod.__all__:
+        assert getattr(mod, name) is not None, name
+
+
+def test_errors_share_one_root():
+    assert issubclass(baseplace.InputError, baseplace.BaseplaceError)
+    assert issubclass(baseplace.NothingFoundError, baseplace.BaseplaceError)
