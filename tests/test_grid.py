@@ -73,7 +73,10 @@ def test_orientation_bins_are_compact(rng):
 
 def test_positions_outside_the_box_are_minus_one():
     grid = SE3Grid.covering([0, 0, 0], [1, 1, 1], 0.05, 0.8)
-    T = _as_T(np.repeat(np.eye(3)[None], 3, axis=0), np.array([[0.5, 0.5, 0.5], [1.2, 0.5, 0.5], [-0.01, 0, 0]]))
+    T = _as_T(
+        np.repeat(np.eye(3)[None], 3, axis=0),
+        np.array([[0.5, 0.5, 0.5], [1.2, 0.5, 0.5], [-0.01, 0, 0]]),
+    )
     idx = grid.cell_index(T)
     assert idx[0] >= 0 and idx[1] == -1 and idx[2] == -1
     centre = grid.cell_centre(idx[:1])[0]

@@ -10,7 +10,6 @@ from baseplace.robots.fk import forward_kinematics
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Robot
 from baseplace.robots.spec import BUILTIN_ROBOTS, builtin_spec
-
 from conftest import DATA
 
 ARMS = [(name, arm) for name in BUILTIN_ROBOTS for arm in builtin_spec(name).arms] + [("planar3", "arm")]

@@ -65,7 +65,14 @@ def test_plane_poses_on_flat_floor_are_yaw_poses():
 
 
 @settings(max_examples=100)
-@given(st.floats(-0.6, 0.6), st.floats(-0.6, 0.6), st.floats(-2, 2), st.floats(-3, 3), st.floats(-3, 3), angles)
+@given(
+    st.floats(-0.6, 0.6),
+    st.floats(-0.6, 0.6),
+    st.floats(-2, 2),
+    st.floats(-3, 3),
+    st.floats(-3, 3),
+    angles,
+)
 def test_plane_poses_lie_on_the_plane(nx, ny, d, x, y, gamma):
     n = np.array([nx, ny, 1.0])
     n_unit = n / np.linalg.norm(n)

@@ -55,7 +55,9 @@ def test_joint_off_the_tcp_chain(tmp_path):
 def test_malformed_urdf_is_one_line(tmp_path):
     (tmp_path / "broken.urdf").write_text((DATA / "broken.urdf").read_text())
     path = tmp_path / "r.toml"
-    path.write_text(BASE.replace("planar3.urdf", "broken.urdf") + '[arms.arm]\njoints = ["j"]\ntcp_frame = "a"\n')
+    path.write_text(
+        BASE.replace("planar3.urdf", "broken.urdf") + '[arms.arm]\njoints = ["j"]\ntcp_frame = "a"\n'
+    )
     with pytest.raises(InputError, match="cannot parse URDF") as info:
         Robot(path)
     assert "\n" not in str(info.value)

@@ -76,16 +76,19 @@ def _set_workers(workers: int | None) -> None:
     import numba
 
     cores = os.cpu_count() or 1
-    limit = numba.config.NUMBA_NUM_THREADS
+    limit = int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
     if not (1 <= workers <= limit):
-        raise InputError(f"--workers must be between 1 and {limit} (this machine has {cores} cores), got {workers}")
+        raise InputError(
+            f"--workers must be between 1 and {limit} (this machine has {cores} cores), got {workers}"
+        )
     numba.set_num_threads(workers)
 
 
 def cmd_robots(args: argparse.Namespace) -> int:
+    """List the built-in robots."""
     from baseplace.robots.spec import BUILTIN_ROBOTS, builtin_spec
 
-    rows = []
+    rows: list[dict[str, Any]] = []
     for name in BUILTIN_ROBOTS:
         spec = builtin_spec(name)
         rows.append({
@@ -97,17 +100,18 @@ def cmd_robots(args: argparse.Namespace) -> int:
             "footprint": {"radius": spec.footprint_radius} if spec.footprint_radius is not None
             else {"polygon": [list(p) for p in spec.footprint_polygon or ()]},
         })  # fmt: skip
-    lines = [
-        f"{r['name']:<11} base {r['base_frame']}; arms "
-        + ", ".join(f"{a} (TCP {v['tcp_frame']}, {len(v['joints'])} joints)" for a, v in r["arms"].items())
-        for r in rows
-    ]
+    lines = []
+    for name in BUILTIN_ROBOTS:
+        spec = builtin_spec(name)
+        arms = ", ".join(f"{a} (TCP {s.tcp_frame}, {len(s.joints)} joints)" for a, s in spec.arms.items())
+        lines.append(f"{name:<11} base {spec.base_frame}; arms {arms}")
     lines.append("custom robots: pass --robot path/to/robot.toml (see docs/concepts.md)")
     _emit(args, {"robots": rows}, "\n".join(lines))
     return 0
 
 
 def cmd_build_map(args: argparse.Namespace) -> int:
+    """Build a map and save it."""
     from baseplace.reachability.build import BuildSettings, build_map
     from baseplace.reachability.storage import save_map
     from baseplace.robots.model import Robot
@@ -168,6 +172,7 @@ def _read_pose_file(path: str, width: int, what: str) -> np.ndarray:
 
 
 def cmd_reach(args: argparse.Namespace) -> int:
+    """Print inverse-reachability values."""
     from baseplace.geometry.poses import BasePose, parse_base_pose, parse_pose6, pose_from_xyz_rpy
     from baseplace.reachability.storage import check_map_matches, load_map
 
@@ -185,7 +190,9 @@ def cmd_reach(args: argparse.Namespace) -> int:
     bases = (parse_base_pose(args.base).matrix()[None] if args.base is not None
              else BasePose.batch_matrix(_read_pose_file(args.bases, 3, "base pose")))  # fmt: skip
     if len(targets) != len(bases) and len(targets) != 1:
-        raise InputError(f"--targets has {len(targets)} poses but --bases has {len(bases)}; they pair row by row")
+        raise InputError(
+            f"--targets has {len(targets)} poses but --bases has {len(bases)}; they pair row by row"
+        )
     if len(targets) == 1:
         values = rmap.inverse(targets[0], bases)
     else:
@@ -198,6 +205,7 @@ def cmd_reach(args: argparse.Namespace) -> int:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
+    """Run the demo."""
     from baseplace.demo import run_demo
 
     update, bar = _progress(args, args.samples, "default TIAGo map (first run only)")
@@ -226,7 +234,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
 
-    def command(name: str, help_text: str, func: Callable[[argparse.Namespace], int]) -> argparse.ArgumentParser:
+    def command(
+        name: str, help_text: str, func: Callable[[argparse.Namespace], int]
+    ) -> argparse.ArgumentParser:
         p = sub.add_parser(name, help=help_text, description=help_text)
         p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
         p.set_defaults(func=func)

@@ -72,6 +72,7 @@ def run_demo(
     yaws = np.arange(n_yaw) * 2 * np.pi / n_yaw
     X, Y, G = np.meshgrid(xs, ys, yaws, indexing="ij")
     poses = np.stack([X.ravel(), Y.ravel(), G.ravel()], axis=1)
+    _ = rmap.tables  # build the lookup tables outside the timed query
     t1 = time.perf_counter()
     values = rmap.inverse(T_world_target, BasePose.batch_matrix(poses)).reshape(len(xs), len(ys), n_yaw)
     t_query = time.perf_counter() - t1
@@ -97,8 +98,13 @@ def run_demo(
     result: dict[str, Any] = {
         "robot": robot.name,
         "target": DEMO_TARGET,
-        "map": {"path": str(path), "built_now": built, "samples": rmap.info.samples,
-                "cells_reached": rmap.n_reached, "build_time_s": round(rmap.info.build_time_s, 2)},  # fmt: skip
+        "map": {
+            "path": str(path),
+            "built_now": built,
+            "samples": rmap.info.samples,
+            "cells_reached": rmap.n_reached,
+            "build_time_s": round(rmap.info.build_time_s, 2),
+        },
         "base_poses_evaluated": int(values.size),
         "timings_s": {"map": round(t_map, 3), "irm_query": round(t_query, 4)},
         "best": None,

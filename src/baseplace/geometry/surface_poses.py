@@ -47,9 +47,7 @@ def plane_frame(normal: ArrayLike) -> FloatArray:
     return np.column_stack([x_hat, y_hat, n])
 
 
-def plane_base_poses(
-    x: ArrayLike, y: ArrayLike, gamma: ArrayLike, normal: ArrayLike, d: float
-) -> FloatArray:
+def plane_base_poses(x: ArrayLike, y: ArrayLike, gamma: ArrayLike, normal: ArrayLike, d: float) -> FloatArray:
     """World base poses ``T_world_base`` on the plane ``n . p + d = 0``.
 
     Args:
@@ -63,7 +61,7 @@ def plane_base_poses(
         (N, 4, 4) poses; the base origin lies on the plane and the base z axis is ``n``.
     """
     n = _unit_up_normal(normal)
-    scale = np.linalg.norm(np.asarray(normal, dtype=float))
+    scale = float(np.linalg.norm(np.asarray(normal, dtype=float)))
     d = float(d) / scale
     x, y, gamma = np.broadcast_arrays(*(np.asarray(a, dtype=float).ravel() for a in (x, y, gamma)))
     R0 = plane_frame(n)

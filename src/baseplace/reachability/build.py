@@ -64,7 +64,7 @@ def grid_for(arm: Arm, settings: BuildSettings) -> SE3Grid:
 
 @nb.njit(cache=True, parallel=True)
 def _bin_chunk(Q, placements, axes, kinds, T_last, origin, voxel_size, shape, nside, n_twist,
-               pixel_phi, want_manip, cells, manip):  # type: ignore[no-untyped-def]  # fmt: skip
+               pixel_phi, want_manip, cells, manip):  # fmt: skip
     n = Q.shape[1]
     for i in nb.prange(Q.shape[0]):
         R = np.empty((3, 3))
@@ -79,7 +79,7 @@ def _bin_chunk(Q, placements, axes, kinds, T_last, origin, voxel_size, shape, ns
 
 
 @nb.njit(cache=True)
-def _accumulate(cells, keep, counts, manip, best, want_manip):  # type: ignore[no-untyped-def]
+def _accumulate(cells, keep, counts, manip, best, want_manip):
     outside = 0
     for i in range(cells.shape[0]):
         c = cells[i]

@@ -211,7 +211,7 @@ def cell_of(
 
 
 @nb.njit(cache=True, parallel=True)
-def _cell_index_batch(T, origin, voxel_size, shape, nside, n_twist, pixel_phi, out):  # type: ignore[no-untyped-def]
+def _cell_index_batch(T, origin, voxel_size, shape, nside, n_twist, pixel_phi, out):
     for i in nb.prange(T.shape[0]):
         out[i] = cell_of(
             T[i, :3, :3], T[i, 0, 3], T[i, 1, 3], T[i, 2, 3],

@@ -200,7 +200,7 @@ def _poses(T: ArrayLike, name: str) -> FloatArray:
 
 @nb.njit(cache=True, parallel=True)
 def _lookup_batch(T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist, pixel_phi,
-                  offset, blocks, out):  # type: ignore[no-untyped-def]  # fmt: skip
+                  offset, blocks, out):  # fmt: skip
     n_orient = blocks.shape[1]
     for i in nb.prange(T_wb.shape[0]):
         B = T_wb[i]
@@ -236,7 +236,9 @@ def reach_bounds(placements: FloatArray, axes: FloatArray, kinds: NDArray[np.int
     """
     radius = float(np.linalg.norm(T_last[:3, 3]))
     radius += sum(float(np.linalg.norm(P[:3, 3])) for P in placements[1:])
-    radius += sum(max(abs(lo), abs(hi)) for k, lo, hi in zip(kinds[1:], lower[1:], upper[1:], strict=True) if k == 1)
+    radius += sum(
+        max(abs(lo), abs(hi)) for k, lo, hi in zip(kinds[1:], lower[1:], upper[1:], strict=True) if k == 1
+    )
     P0 = placements[0]
     ends = [P0[:3, 3] + (P0[:3, :3] @ axes[0]) * (q if kinds[0] == 1 else 0.0) for q in (lower[0], upper[0])]
     lo = np.minimum(*ends) - radius

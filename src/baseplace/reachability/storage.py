@@ -48,13 +48,18 @@ def save_map(rmap: ReachabilityMap, path: str | Path) -> int:
             f.attrs["format_version"] = FORMAT_VERSION
             grid = rmap.grid
             f.attrs["grid"] = json.dumps(
-                {"origin": list(grid.origin), "voxel_size": grid.voxel_size, "shape": list(grid.shape),
-                 "nside": grid.nside, "n_twist": grid.n_twist}  # fmt: skip
+                {
+                    "origin": list(grid.origin),
+                    "voxel_size": grid.voxel_size,
+                    "shape": list(grid.shape),
+                    "nside": grid.nside,
+                    "n_twist": grid.n_twist,
+                }
             )
             f.attrs["info"] = json.dumps(dataclasses.asdict(rmap.info))
             f.create_dataset("cells", data=rmap.cells, compression="gzip", compression_opts=4, shuffle=True)
             f.create_dataset("counts", data=rmap.counts, compression="gzip", compression_opts=4, shuffle=True)
-            arrays = [rmap.cells, rmap.counts]
+            arrays: list[np.ndarray] = [rmap.cells, rmap.counts]
             if rmap.manipulability is not None:
                 f.create_dataset("manipulability", data=rmap.manipulability, compression="gzip")
                 arrays.append(rmap.manipulability)
@@ -95,8 +100,10 @@ def load_map(path: str | Path, robot: Robot | None = None, arm: str | None = Non
     except InputError:
         raise
     except (OSError, KeyError, ValueError, TypeError) as exc:
-        raise InputError(f"cannot read map {path}: the file is truncated or corrupt ({type(exc).__name__})") from None
-    arrays = [cells, counts] + ([manip] if manip is not None else [])
+        raise InputError(
+            f"cannot read map {path}: the file is truncated or corrupt ({type(exc).__name__})"
+        ) from None
+    arrays: list[np.ndarray] = [cells, counts] + ([manip] if manip is not None else [])
     if _digest(*arrays) != digest:
         raise InputError(f"cannot read map {path}: checksum mismatch, the file is corrupt")
     info_raw["joint_names"] = tuple(info_raw["joint_names"])
@@ -108,11 +115,15 @@ def load_map(path: str | Path, robot: Robot | None = None, arm: str | None = Non
     return rmap
 
 
-def check_map_matches(rmap: ReachabilityMap, robot: Robot, arm: str | None, source: Path | str = "map") -> None:
+def check_map_matches(
+    rmap: ReachabilityMap, robot: Robot, arm: str | None, source: Path | str = "map"
+) -> None:
     """Raise unless ``rmap`` was built for ``robot`` (same name and URDF) and ``arm``."""
     info = rmap.info
     if info.robot != robot.name:
-        raise InputError(f"{source} was built for robot {info.robot!r}, not {robot.name!r}; rebuild it with build-map")
+        raise InputError(
+            f"{source} was built for robot {info.robot!r}, not {robot.name!r}; rebuild it with build-map"
+        )
     if info.urdf_sha256 != robot.spec.urdf_sha256:
         raise InputError(
             f"{source} was built from a different URDF of {robot.name!r} "

@@ -50,8 +50,8 @@ def _expr(terms: list[Term]) -> str:
 
 
 def _times(value: list[Term], factor: str, coef: float) -> list[Term]:
-    """value * coef * factor, where value is a constant or a single variable."""
-    out = []
+    """Value * coef * factor, where value is a constant or a single variable."""
+    out: list[Term] = []
     for c, f in value:
         out.append((c * coef, factor if f is None else f"{f} * {factor}"))
     return out
@@ -87,7 +87,10 @@ def chain_source(arm: Arm) -> str:
     def compose(P: np.ndarray) -> None:
         nonlocal R, t
         t = [em.value(t[a] + [tc for k in range(3) for tc in _scale(R[a][k], P[k, 3])]) for a in range(3)]
-        R = [[em.value([tc for k in range(3) for tc in _scale(R[a][k], P[k, b])]) for b in range(3)] for a in range(3)]
+        R = [
+            [em.value([tc for k in range(3) for tc in _scale(R[a][k], P[k, b])]) for b in range(3)]
+            for a in range(3)
+        ]
 
     for i in range(arm.n_joints):
         if i > 0:
@@ -95,7 +98,10 @@ def chain_source(arm: Arm) -> str:
         axis = arm.axes[i]
         if arm.kinds[i] == PRISMATIC:
             q = f"q[{i}]"
-            t = [em.value(t[a] + [tc for k in range(3) for tc in _times(R[a][k], q, axis[k])]) for a in range(3)]
+            t = [
+                em.value(t[a] + [tc for k in range(3) for tc in _times(R[a][k], q, axis[k])])
+                for a in range(3)
+            ]
             continue
         em.lines.append(f"    c{i} = math.cos(q[{i}])")
         em.lines.append(f"    s{i} = math.sin(q[{i}])")
@@ -179,7 +185,10 @@ def arm_kernels(arm: Arm) -> ModuleType:
     source = _TEMPLATE.format(robot=arm.robot_name, arm=arm.name, body=chain_source(arm))
     deps = "".join(
         Path(m.__file__).read_text()  # a change in the binning code must not reuse stale kernels
-        for m in (sys.modules["baseplace.reachability.grid"], sys.modules["baseplace.geometry.healpix"])
+        for m in (
+            sys.modules["baseplace.reachability.grid"],
+            sys.modules["baseplace.geometry.healpix"],
+        )
         if m.__file__
     )
     key = hashlib.sha256((source + deps).encode()).hexdigest()[:20]

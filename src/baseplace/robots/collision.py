@@ -15,19 +15,25 @@ import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError
-from baseplace.robots.model import Arm, Robot
+from baseplace.robots.model import Arm, Robot, native_stderr_captured
 
 
 def load_collision_model(robot: Robot) -> pin.GeometryModel:
     """The robot's collision geometry (meshes resolved through the spec's package dirs)."""
     spec = robot.spec
     try:
-        return pin.buildGeomFromUrdf(
-            robot.model, str(spec.urdf), pin.COLLISION, package_dirs=[str(p) for p in spec.package_dirs]
-        )
+        with native_stderr_captured():
+            return pin.buildGeomFromUrdf(
+                robot.model,
+                str(spec.urdf),
+                pin.COLLISION,
+                package_dirs=[str(p) for p in spec.package_dirs],
+            )
     except Exception as exc:
         lines = str(exc).strip().splitlines()
-        raise InputError(f"cannot load collision meshes of {spec.urdf}: {lines[0] if lines else exc!r}") from None
+        raise InputError(
+            f"cannot load collision meshes of {spec.urdf}: {lines[0] if lines else exc!r}"
+        ) from None
 
 
 class SelfCollision:
@@ -112,7 +118,9 @@ class SelfCollision:
         geom_data = self._arm_geometry_data(arm)
         return np.array(
             [
-                pin.computeCollisions(self.model, self.data, self.geom, geom_data, arm.to_pinocchio(q, q_ref), True)
+                pin.computeCollisions(
+                    self.model, self.data, self.geom, geom_data, arm.to_pinocchio(q, q_ref), True
+                )
                 for q in Q
             ],
             dtype=bool,

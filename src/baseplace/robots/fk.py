@@ -19,8 +19,21 @@ from baseplace.robots.model import Arm
 
 
 @nb.njit(cache=True, inline="always")
-def chain_pose(q, placements, axes, kinds, T_last, R, t):  # type: ignore[no-untyped-def]
+def chain_pose(q, placements, axes, kinds, T_last, R, t):
     """Pose of the TCP for one configuration q (n,): writes rotation R (3, 3) and position t (3,)."""
+    chain_frames(q, placements, axes, kinds, T_last, R, t, _NO_FRAMES, _NO_FRAMES, False)
+
+
+_NO_FRAMES = np.empty((0, 3))
+
+
+@nb.njit(cache=True, inline="always")
+def chain_frames(q, placements, axes, kinds, T_last, R, t, zs, origins, record):
+    """TCP pose as :func:`chain_pose`; with ``record`` also each joint's frame.
+
+    The joint axes go to ``zs`` (n, 3) and the joint origins to ``origins`` (n, 3), both in the
+    base frame, as the Jacobian needs them.
+    """
     for a in range(3):
         for b in range(3):
             R[a, b] = 1.0 if a == b else 0.0
@@ -42,6 +55,11 @@ def chain_pose(q, placements, axes, kinds, T_last, R, t):  # type: ignore[no-unt
         r21 = R[2, 0] * P[0, 1] + R[2, 1] * P[1, 1] + R[2, 2] * P[2, 1]
         r22 = R[2, 0] * P[0, 2] + R[2, 1] * P[1, 2] + R[2, 2] * P[2, 2]
         ax, ay, az = axes[i, 0], axes[i, 1], axes[i, 2]
+        if record:
+            zs[i, 0] = r00 * ax + r01 * ay + r02 * az
+            zs[i, 1] = r10 * ax + r11 * ay + r12 * az
+            zs[i, 2] = r20 * ax + r21 * ay + r22 * az
+            origins[i, 0], origins[i, 1], origins[i, 2] = t[0], t[1], t[2]
         if kinds[i] == 1:  # prismatic: t += R a q
             v = q[i]
             t[0] += (r00 * ax + r01 * ay + r02 * az) * v
@@ -85,7 +103,7 @@ def chain_pose(q, placements, axes, kinds, T_last, R, t):  # type: ignore[no-unt
 
 
 @nb.njit(cache=True, parallel=True)
-def _fk_batch(Q, placements, axes, kinds, T_last, out):  # type: ignore[no-untyped-def]
+def _fk_batch(Q, placements, axes, kinds, T_last, out):
     for i in nb.prange(Q.shape[0]):
         R = np.empty((3, 3))
         t = np.empty(3)

@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError
 from baseplace.geometry.poses import FloatArray, invert_transforms
+from baseplace.robots.fk import chain_frames
 from baseplace.robots.model import Arm
 
 
@@ -34,61 +35,12 @@ class IKSolver(Protocol):
 
 
 @nb.njit(cache=True, inline="always")
-def _pose_and_jacobian(q, placements, axes, kinds, T_last, R, t, J):  # type: ignore[no-untyped-def]
+def _pose_and_jacobian(q, placements, axes, kinds, T_last, R, t, J):
     """TCP pose (R, t) and the 6 x n Jacobian (linear; angular), both in the base frame."""
     n = q.shape[0]
     origins = np.empty((n, 3))
     zs = np.empty((n, 3))
-    for a in range(3):
-        for b in range(3):
-            R[a, b] = 1.0 if a == b else 0.0
-        t[a] = 0.0
-    for i in range(n):
-        P = placements[i]
-        tn = np.empty(3)
-        Rn = np.empty((3, 3))
-        for a in range(3):
-            tn[a] = t[a] + R[a, 0] * P[0, 3] + R[a, 1] * P[1, 3] + R[a, 2] * P[2, 3]
-            for b in range(3):
-                Rn[a, b] = R[a, 0] * P[0, b] + R[a, 1] * P[1, b] + R[a, 2] * P[2, b]
-        ax, ay, az = axes[i, 0], axes[i, 1], axes[i, 2]
-        for a in range(3):
-            zs[i, a] = Rn[a, 0] * ax + Rn[a, 1] * ay + Rn[a, 2] * az
-            origins[i, a] = tn[a]
-        if kinds[i] == 1:
-            for a in range(3):
-                t[a] = tn[a] + zs[i, a] * q[i]
-                for b in range(3):
-                    R[a, b] = Rn[a, b]
-        else:
-            c = math.cos(q[i])
-            s = math.sin(q[i])
-            C = 1.0 - c
-            M = np.empty((3, 3))
-            M[0, 0] = c + ax * ax * C
-            M[0, 1] = ax * ay * C - az * s
-            M[0, 2] = ax * az * C + ay * s
-            M[1, 0] = ay * ax * C + az * s
-            M[1, 1] = c + ay * ay * C
-            M[1, 2] = ay * az * C - ax * s
-            M[2, 0] = az * ax * C - ay * s
-            M[2, 1] = az * ay * C + ax * s
-            M[2, 2] = c + az * az * C
-            for a in range(3):
-                t[a] = tn[a]
-                for b in range(3):
-                    R[a, b] = Rn[a, 0] * M[0, b] + Rn[a, 1] * M[1, b] + Rn[a, 2] * M[2, b]
-    P = T_last
-    tn = np.empty(3)
-    Rn = np.empty((3, 3))
-    for a in range(3):
-        tn[a] = t[a] + R[a, 0] * P[0, 3] + R[a, 1] * P[1, 3] + R[a, 2] * P[2, 3]
-        for b in range(3):
-            Rn[a, b] = R[a, 0] * P[0, b] + R[a, 1] * P[1, b] + R[a, 2] * P[2, b]
-    for a in range(3):
-        t[a] = tn[a]
-        for b in range(3):
-            R[a, b] = Rn[a, b]
+    chain_frames(q, placements, axes, kinds, T_last, R, t, zs, origins, True)
     for i in range(n):
         zx, zy, zz = zs[i, 0], zs[i, 1], zs[i, 2]
         if kinds[i] == 1:
@@ -103,7 +55,7 @@ def _pose_and_jacobian(q, placements, axes, kinds, T_last, R, t, J):  # type: ig
 
 
 @nb.njit(cache=True, inline="always")
-def rotation_log(E, out):  # type: ignore[no-untyped-def]
+def rotation_log(E, out):
     """Rotation vector (3,) of a rotation matrix E (3, 3), robust near 0 and pi."""
     vx = E[2, 1] - E[1, 2]
     vy = E[0, 2] - E[2, 0]
@@ -134,7 +86,7 @@ def rotation_log(E, out):  # type: ignore[no-untyped-def]
 
 @nb.njit(cache=True)
 def _solve_one(T_goal, seeds, placements, axes, kinds, T_last, lower, upper, continuous,
-               max_iter, tol_p, tol_r, damping, q_out):  # type: ignore[no-untyped-def]  # fmt: skip
+               max_iter, tol_p, tol_r, damping, q_out):  # fmt: skip
     n = seeds.shape[1]
     R = np.empty((3, 3))
     t = np.empty(3)
@@ -183,7 +135,7 @@ def _solve_one(T_goal, seeds, placements, axes, kinds, T_last, lower, upper, con
 
 @nb.njit(cache=True, parallel=True)
 def _solve_batch(T_goals, seeds, placements, axes, kinds, T_last, lower, upper, continuous,
-                 max_iter, tol_p, tol_r, damping, q_out, attempts):  # type: ignore[no-untyped-def]  # fmt: skip
+                 max_iter, tol_p, tol_r, damping, q_out, attempts):  # fmt: skip
     for i in nb.prange(T_goals.shape[0]):
         attempts[i] = _solve_one(T_goals[i], seeds[i], placements, axes, kinds, T_last, lower,
                                  upper, continuous, max_iter, tol_p, tol_r, damping, q_out[i])  # fmt: skip
@@ -249,7 +201,9 @@ class DampedLeastSquaresIK:
         q_seed: ArrayLike | None = None,
     ) -> FloatArray | None:
         """Solve a world TCP pose (4, 4) from a world base pose (4, 4)."""
-        T_base_tcp = invert_transforms(np.asarray(T_world_base, dtype=float)) @ np.asarray(T_world_tcp, dtype=float)
+        T_base_tcp = invert_transforms(np.asarray(T_world_base, dtype=float)) @ np.asarray(
+            T_world_tcp, dtype=float
+        )
         return self.solve(T_base_tcp, rng, q_seed)
 
 

@@ -9,10 +9,16 @@ tested against.
 
 from __future__ import annotations
 
+import contextlib
 import math
+import os
+import sys
+import tempfile
+from collections.abc import Iterator
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
+from xml.etree import ElementTree
 
 import numpy as np
 import pinocchio as pin
@@ -25,12 +31,37 @@ from baseplace.robots.spec import RobotSpec, load_spec
 REVOLUTE, PRISMATIC = 0, 1
 
 
+@contextlib.contextmanager
+def native_stderr_captured() -> Iterator[list[str]]:
+    """Capture what C++ libraries (urdfdom's console_bridge, assimp) write to file descriptor 2.
+
+    They print parse errors straight to the process's stderr; the CLI promises one line.
+    """
+    lines: list[str] = []
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile(mode="w+b") as sink:
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield lines
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            sink.seek(0)
+            lines.extend(sink.read().decode(errors="replace").splitlines())
+
+
 def load_urdf(path: Path) -> pin.Model:
     """Parse a URDF into a pinocchio model, turning parser failures into one-line errors."""
     if not path.is_file():
         raise InputError(f"URDF {path} does not exist")
     try:
-        return pin.buildModelFromUrdf(str(path))
+        ElementTree.parse(path)
+    except ElementTree.ParseError as exc:
+        raise InputError(f"cannot parse URDF {path}: malformed XML ({exc})") from None
+    try:
+        with native_stderr_captured():
+            return pin.buildModelFromUrdf(str(path))
     except Exception as exc:  # pinocchio raises ValueError/RuntimeError with multi-line text
         lines = str(exc).strip().splitlines()
         raise InputError(f"cannot parse URDF {path}: {lines[0] if lines else exc!r}") from None
@@ -104,7 +135,10 @@ class Arm:
         """Read the arm joint values (n,) out of a full pinocchio configuration."""
         q = np.asarray(q_full, dtype=float)
         return np.array(
-            [math.atan2(q[i + 1], q[i]) if w == 2 else q[i] for i, w in zip(self.q_index, self.q_width, strict=True)]
+            [
+                math.atan2(q[i + 1], q[i]) if w == 2 else q[i]
+                for i, w in zip(self.q_index, self.q_width, strict=True)
+            ]
         )
 
 
@@ -215,7 +249,11 @@ class Robot:
             T_acc = pin.SE3.Identity()
             name = model.names[j]
             is_cont = jm.nq == 2
-            lo, hi = (-math.pi, math.pi) if is_cont else (model.lowerPositionLimit[jm.idx_q], model.upperPositionLimit[jm.idx_q])
+            lo, hi = (
+                (-math.pi, math.pi)
+                if is_cont
+                else (model.lowerPositionLimit[jm.idx_q], model.upperPositionLimit[jm.idx_q])
+            )
             lo, hi = self.spec.joint_limits.get(name, (lo, hi))
             if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
                 raise InputError(f"joint {name!r} needs finite limits lo < hi; set them in joint_limits")

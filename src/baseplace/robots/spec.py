@@ -171,12 +171,8 @@ def _builtin_specs() -> dict[str, RobotSpec]:
             srdf=_erd("pr2_description/srdf/pr2.srdf"),
             base_frame="base_footprint",
             arms={
-                "left": ArmSpec(
-                    ("torso_lift_joint", *(f"l_{j}" for j in _PR2_ARM)), "l_gripper_tool_frame"
-                ),
-                "right": ArmSpec(
-                    ("torso_lift_joint", *(f"r_{j}" for j in _PR2_ARM)), "r_gripper_tool_frame"
-                ),
+                "left": ArmSpec(("torso_lift_joint", *(f"l_{j}" for j in _PR2_ARM)), "l_gripper_tool_frame"),
+                "right": ArmSpec(("torso_lift_joint", *(f"r_{j}" for j in _PR2_ARM)), "r_gripper_tool_frame"),
             },
             default_arm="right",
             footprint_polygon=(

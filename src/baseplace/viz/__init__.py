@@ -1,0 +1,1 @@
+"""Figures (matplotlib) and viewers; core modules never import this package."""

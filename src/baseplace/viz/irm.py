@@ -7,9 +7,9 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from numpy.typing import NDArray  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from numpy.typing import NDArray
 
 
 def plot_irm_topdown(
@@ -47,7 +47,15 @@ def plot_irm_topdown(
         ax.arrow(*target_xyz[:2], *d, color="red", width=0.01, length_includes_head=True)
     if best_xy_yaw is not None:
         x, y, yaw = best_xy_yaw
-        ax.plot(x, y, marker="o", color="white", markeredgecolor="black", markersize=9, label="best base pose")
+        ax.plot(
+            x,
+            y,
+            marker="o",
+            color="white",
+            markeredgecolor="black",
+            markersize=9,
+            label="best base pose",
+        )
         ax.arrow(x, y, 0.25 * np.cos(yaw), 0.25 * np.sin(yaw), color="white", width=0.01,
                  length_includes_head=True)  # fmt: skip
     ax.set_xlabel("x [m]")

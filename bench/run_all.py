@@ -1,0 +1,16 @@
+"""Run every benchmark (long: several minutes); results land in bench/results/."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).parent
+
+for script in ["bench_build.py", "bench_ik.py", "bench_irm.py", "bench_accuracy.py"]:
+    print(f"== {script}", flush=True)
+    subprocess.run([sys.executable, str(HERE / script)], check=True, cwd=HERE)
+subprocess.run(
+    [sys.executable, str(HERE / "bench_ik.py"), "--robot", "pr2", "--arm", "right"], check=True, cwd=HERE
+)

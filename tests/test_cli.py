@@ -1,0 +1,181 @@
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from conftest import DATA
+
+
+def run(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "baseplace.cli", *args], capture_output=True, text=True,
+                          cwd=cwd, stdin=subprocess.DEVNULL, timeout=600)  # fmt: skip
+
+
+def assert_one_line_error(proc: subprocess.CompletedProcess[str], code: int, *fragments: str) -> None:
+    assert proc.returncode == code, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), proc.stderr
+    assert "Traceback" not in proc.stderr
+    for fragment in fragments:
+        assert fragment in lines[0], lines[0]
+
+
+@pytest.fixture(scope="module")
+def map_file(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("maps") / "planar3.rmap"
+    proc = run("build-map", "--robot", str(DATA / "planar3.toml"), "--samples", "2e5", "--out", str(path),
+               "--seed", "1", "--json")  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout)
+    assert out["samples"] == 200_000 and out["cells_reached"] > 0 and proc.stderr == ""
+    return path
+
+
+def test_help_lists_every_command():
+    proc = run("--help")
+    assert proc.returncode == 0
+    for command in ("robots", "build-map", "reach", "demo"):
+        assert command in proc.stdout
+
+
+def test_robots_json():
+    proc = run("robots", "--json")
+    robots = {r["name"]: r for r in json.loads(proc.stdout)["robots"]}
+    assert set(robots) == {"tiago", "pr2", "tiago_dual"}
+    assert robots["tiago"]["arms"]["arm"]["tcp_frame"] == "arm_tool_link"
+    assert set(robots["pr2"]["arms"]) == {"left", "right"}
+
+
+def test_reach_single_and_batch(map_file, tmp_path):
+    # Target: the planar3 TCP at joint values (0.2, 0.3, -0.4, 0.5), from a pinocchio oracle.
+    import numpy as np
+    import pinocchio as pin
+
+    from baseplace.geometry.poses import matrix_to_rpy
+    from baseplace.robots.model import Robot
+
+    robot = Robot(DATA / "planar3.toml")
+    arm = robot.arm()
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, arm.to_pinocchio([0.2, 0.3, -0.4, 0.5], robot.q_reference))
+    T = data.oMf[robot.model.getFrameId("tool0")].homogeneous
+    # Put the base at (1, 2, yaw 0.7): the world target is T_world_base @ T_base_tcp.
+    c, s = np.cos(0.7), np.sin(0.7)
+    T_wb = np.array([[c, -s, 0, 1.0], [s, c, 0, 2.0], [0, 0, 1, 0], [0, 0, 0, 1]])
+    T_w = T_wb @ T
+    target = " ".join(f"{v:.12f}" for v in [*T_w[:3, 3], *matrix_to_rpy(T_w[:3, :3])])
+    proc = run("reach", "--map", str(map_file), "--target", target, "--base", "1 2 0.7", "--json")
+    assert proc.returncode == 0, proc.stderr
+    value = json.loads(proc.stdout)["values"][0]
+    assert value > 0
+    far = run("reach", "--map", str(map_file), "--target", target, "--base", "9 9 0")
+    assert far.returncode == 0 and float(far.stdout) == 0.0
+
+    (tmp_path / "t.txt").write_text(f"{target}\n# comment\n{target}\n")
+    (tmp_path / "b.txt").write_text("1 2 0.7\n9 9 0\n")
+    proc = run("reach", "--map", str(map_file), "--targets", str(tmp_path / "t.txt"), "--bases",
+               str(tmp_path / "b.txt"), "--json")  # fmt: skip
+    assert json.loads(proc.stdout)["values"] == [value, 0.0]
+    proc = run(
+        "reach",
+        "--map",
+        str(map_file),
+        "--target",
+        target,
+        "--bases",
+        str(tmp_path / "b.txt"),
+        "--json",
+    )
+    assert json.loads(proc.stdout)["values"] == [value, 0.0]
+
+
+@pytest.mark.parametrize(
+    ("args", "fragments"),
+    [
+        (["reach", "--target", "1 2 nan 0 0 0", "--base", "0 0 0"], ["NaN"]),
+        (["reach", "--target", "1 2 3", "--base", "0 0 0"], ["6 numbers"]),
+        (["reach", "--target", "1 2 3 0 0 0", "--base", "0 0 0", "--robot", "tiago"],
+         ["built for robot 'planar3', not 'tiago'"]),
+        (["reach", "--target", "1 2 3 0 0 0", "--base", "0 0 0", "--robot", "rover"], ["unknown robot", "tiago"]),
+        (["reach", "--base", "0 0 0"], ["exactly one of --target or --targets"]),
+    ],
+)  # fmt: skip
+def test_reach_bad_input(map_file, args, fragments):
+    assert_one_line_error(run(*args[:1], "--map", str(map_file), *args[1:]), 2, *fragments)
+
+
+def test_truncated_map_and_mismatched_files(map_file, tmp_path):
+    bad = tmp_path / "bad.rmap"
+    bad.write_bytes(map_file.read_bytes()[:1000])
+    assert_one_line_error(run("reach", "--map", str(bad), "--target", "1 2 3 0 0 0", "--base", "0 0 0"), 2,
+                          "truncated or corrupt")  # fmt: skip
+    (tmp_path / "t.txt").write_text("0 0 0 0 0 0\n0 0 0 0 0 0\n0 0 0 0 0 0\n")
+    (tmp_path / "b.txt").write_text("0 0 0\n0 0 0\n")
+    assert_one_line_error(run("reach", "--map", str(map_file), "--targets", str(tmp_path / "t.txt"), "--bases",
+                              str(tmp_path / "b.txt")), 2, "pair row by row")  # fmt: skip
+
+
+def test_build_map_bad_input(tmp_path):
+    out = str(tmp_path / "m.rmap")
+    assert_one_line_error(
+        run("build-map", "--robot", "tiagoo", "--out", out), 2, "unknown robot", "pr2, tiago"
+    )
+    assert_one_line_error(run("build-map", "--samples", "-5", "--out", out), 2, "--samples")
+    assert_one_line_error(run("build-map", "--samples", "1e3", "--out", str(tmp_path / "no" / "m.rmap")), 2,
+                          "does not exist")  # fmt: skip
+    assert_one_line_error(run("build-map", "--robot", "pr2", "--arm", "middle", "--samples", "10", "--out", out), 2,
+                          "unknown arm", "left, right")  # fmt: skip
+    assert_one_line_error(run("build-map", "--samples", "10", "--workers", "0", "--out", out), 2, "--workers")
+    (tmp_path / "broken.urdf").write_text((DATA / "broken.urdf").read_text())
+    robot = tmp_path / "r.toml"
+    robot.write_text('name = "b"\nurdf = "broken.urdf"\nbase_frame = "a"\nfootprint = { radius = 0.2 }\n'
+                     '[arms.arm]\njoints = ["j"]\ntcp_frame = "a"\n')  # fmt: skip
+    assert_one_line_error(run("build-map", "--robot", str(robot), "--samples", "10", "--out", out), 2,
+                          "cannot parse URDF")  # fmt: skip
+    (tmp_path / "broken.urdf").write_text((DATA / "missing_link.urdf").read_text())  # valid XML, bad model
+    assert_one_line_error(run("build-map", "--robot", str(robot), "--samples", "10", "--out", out), 2,
+                          "cannot parse URDF")  # fmt: skip
+    assert not (tmp_path / "m.rmap").exists()
+    robot.write_text('name = "b"\nurdf = "planar3.urdf"\nbase_frame = "base_link"\nfootprint = { radius = 0.2 }\n'
+                     '[arms.arm]\njoints = ["joint1"]\ntcp_frame = "gripper"\n')  # fmt: skip
+    (tmp_path / "planar3.urdf").write_text((DATA / "planar3.urdf").read_text())
+    assert_one_line_error(run("build-map", "--robot", str(robot), "--samples", "10", "--out", out), 2,
+                          "unknown TCP frame 'gripper'", "tool0")  # fmt: skip
+    robot.write_text(robot.read_text().replace('"gripper"', '"tool0"').replace('["joint1"]', '["elbow"]'))
+    assert_one_line_error(run("build-map", "--robot", str(robot), "--samples", "10", "--out", out), 2,
+                          "unknown joint 'elbow'", "joint1")  # fmt: skip
+    assert_one_line_error(run("frobnicate"), 2, "invalid choice")
+
+
+def test_demo_writes_a_verified_pose(tmp_path, monkeypatch):
+    import numpy as np
+    import pinocchio as pin
+
+    from baseplace.geometry.poses import BasePose, parse_pose6
+    from baseplace.robots.model import Robot
+
+    env_cache = tmp_path / "cache"
+    proc = subprocess.run(
+        [sys.executable, "-m", "baseplace.cli", "demo", "--samples", "3e6", "--out", str(tmp_path / "out"), "--json"],
+        capture_output=True, text=True, stdin=subprocess.DEVNULL, timeout=600,
+        env={**__import__("os").environ, "BASEPLACE_CACHE": str(env_cache)},
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    result = json.loads(proc.stdout)
+    assert (tmp_path / "out" / "demo.json").is_file() and (
+        tmp_path / "out" / "demo_irm.png"
+    ).stat().st_size > 10_000
+    best = result["best"]
+    # Oracle: pinocchio FK of the reported joints, placed at the reported base pose, hits the target.
+    robot = Robot("tiago")
+    arm = robot.arm()
+    q = arm.to_pinocchio([best["joints"][j] for j in arm.joint_names], robot.q_reference)
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, q)
+    T_base_tcp = data.oMf[robot.model.getFrameId(arm.tcp_frame)].homogeneous  # base_footprint is the root
+    T_world_tcp = BasePose(best["x"], best["y"], best["yaw"]).matrix() @ T_base_tcp
+    np.testing.assert_allclose(T_world_tcp[:3, 3], parse_pose6(result["target"])[:3, 3], atol=2e-4)
