@@ -37,6 +37,7 @@ def choices(valid: Iterable[str], limit: int = 12) -> str:
     return shown
 
 
-def unknown(kind: str, name: str, valid: Iterable[str]) -> InputError:
-    """Build the standard 'unknown X' error that lists the valid choices."""
-    return InputError(f"unknown {kind} {name!r}; valid: {choices(valid)}")
+def unknown(kind: str, name: str, valid: Iterable[str], owner: str | None = None) -> InputError:
+    """Build the standard "unknown X 'name' [of owner]; valid: ..." error."""
+    of = f" of {owner}" if owner else ""
+    return InputError(f"unknown {kind} {name!r}{of}; valid: {choices(valid)}")

@@ -153,7 +153,7 @@ class Robot:
         self.spec = spec if isinstance(spec, RobotSpec) else load_spec(spec)
         self.model = load_urdf(self.spec.urdf)
         if not self.model.existFrame(self.spec.base_frame):
-            raise unknown(f"base frame of robot {self.name!r}", self.spec.base_frame, self.frame_names)
+            raise unknown("base frame", self.spec.base_frame, self.frame_names, f"robot {self.name!r}")
         for joint in [*self.spec.joint_limits, *self.spec.reference]:
             self._joint_id(joint)
         self._arms: dict[str, Arm] = {}
@@ -176,7 +176,7 @@ class Robot:
     def _joint_id(self, name: str) -> int:
         j = self.model.getJointId(name)
         if j >= self.model.njoints:
-            raise unknown(f"joint of robot {self.name!r}", name, self.joint_names)
+            raise unknown("joint", name, self.joint_names, f"robot {self.name!r}")
         return int(j)
 
     @cached_property
@@ -202,7 +202,7 @@ class Robot:
         spec = self.spec.arm(arm_name)
         model = self.model
         if not model.existFrame(spec.tcp_frame):
-            raise unknown(f"TCP frame of robot {self.name!r}", spec.tcp_frame, self.frame_names)
+            raise unknown("TCP frame", spec.tcp_frame, self.frame_names, f"robot {self.name!r}")
         arm_ids = {self._joint_id(j) for j in spec.joints}
         data = model.createData()
         q_ref = self.q_reference

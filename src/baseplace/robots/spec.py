@@ -101,7 +101,7 @@ class RobotSpec:
         """The arm called ``name`` (the default arm if None)."""
         key = self.default_arm if name is None else name
         if key not in self.arms:
-            raise unknown(f"arm of robot {self.name!r}", key, self.arms)
+            raise unknown("arm", key, self.arms, f"robot {self.name!r}")
         return self.arms[key]
 
     @property
