@@ -6,7 +6,7 @@ import pytest
 
 import baseplace
 
-MODULES = ["baseplace", "baseplace.geometry", "baseplace.reachability", "baseplace.robots"]
+MODULES = ["baseplace", "baseplace.geometry", "baseplace.reachability", "baseplace.robots", "baseplace.terrain", "baseplace.sim"]
 
 
 @pytest.mark.parametrize("module", MODULES)

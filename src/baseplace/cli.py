@@ -228,6 +228,39 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_segment(args: argparse.Namespace) -> int:
+    """Segment a cloud into planar regions."""
+    from baseplace.terrain.io import load_cloud, load_transform
+    from baseplace.terrain.pipeline import terrain_from_points, terrain_json
+
+    cloud = load_cloud(args.cloud)
+    if args.transform is not None:
+        cloud = cloud.transformed(load_transform(args.transform))
+    out = Path(args.out) if args.out else None
+    if out is not None and not (out.parent if str(out.parent) else Path(".")).is_dir():
+        raise InputError(f"--out directory {out.parent} does not exist")
+    terrain = terrain_from_points(cloud.points, args.algorithm, args.resolution)
+    result = terrain_json(terrain)
+    result["cloud"] = {"path": str(args.cloud), "points": len(cloud.points)}
+    result["algorithm"] = args.algorithm
+    if out is not None:
+        from baseplace.viz.regions import plot_regions
+
+        plot_regions(terrain.segmentation, terrain.graph, out)
+        result["png"] = str(out)
+    lines = [f"{len(result['regions'])} planar regions from {len(cloud.points)} points "
+             f"({result['timings_ms']['total']:.0f} ms, {args.algorithm})"]  # fmt: skip
+    for r in result["regions"]:
+        lines.append(f"  region {r['id']}: tilt {r['tilt_deg']:.1f} deg, area {r['area_m2']:.2f} m^2, "
+                     f"centroid z {r['centroid'][2]:.3f} m")  # fmt: skip
+    trav = sum(e["traversable"] for e in result["edges"])
+    lines.append(f"{len(result['edges'])} border edges, {trav} traversable")
+    if out is not None:
+        lines.append(f"wrote {out}")
+    _emit(args, result, "\n".join(lines))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``baseplace`` command."""
     parser = _Parser(prog="baseplace", description="Where should a mobile manipulator stand?")
@@ -264,6 +297,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--targets", help="file with one target pose per line")
     p.add_argument("--base", help='base pose "x y yaw" [m, rad]')
     p.add_argument("--bases", help="file with one base pose per line, paired with --targets")
+
+    p = command("segment", "planar regions, polygons and region graph of a point cloud", cmd_segment)
+    p.add_argument("cloud", help="point cloud: .pcd, .ply, .bt (OctoMap), .npy, .xyz")
+    p.add_argument("--algorithm", choices=["robust", "baseline"], default="robust",
+                   help="robust (seed 000) or baseline region growing (default: robust)")  # fmt: skip
+    p.add_argument("--transform", default=None,
+                   help='world_T_sensor: a file with a 4x4 matrix, or the sensor-frame up vector "ux uy uz"')  # fmt: skip
+    p.add_argument("--resolution", type=float, default=0.05, help="height map cell [m] (default 0.05)")
+    p.add_argument("--out", default=None, help="PNG of the regions (as seed 000 Fig. 2a)")
 
     p = command("demo", "the main job on built-in defaults (writes out/demo.json and a PNG)", cmd_demo)
     p.add_argument("--out", default="out", help="output directory (default: out)")

@@ -1,0 +1,501 @@
+"""Point clouds in and out: PCD, PLY, NPY, OctoMap ``.bt`` and XYZ text.
+
+A :class:`Cloud` holds finite points only; loaders drop NaN/inf rows (organized sensors mark
+missing depth that way) and raise :class:`~baseplace.errors.InputError` with one line for every
+problem a user can cause: an unknown suffix, a missing, truncated or corrupt file, or a cloud with
+no finite point left. Writes are atomic (temporary file in the target directory, then
+``os.replace``). :func:`load_transform` parses the sensor-to-world transform given next to a cloud.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import os
+import re
+import tempfile
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import BinaryIO
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from baseplace.errors import InputError, choices
+
+FloatArray = NDArray[np.float64]
+ColorArray = NDArray[np.uint8]
+
+MAX_OCTOMAP_POINTS = 20_000_000
+"""Most finest-resolution voxel centres a ``.bt`` file may expand to (about 0.5 GB of points)."""
+
+_ORTHONORMAL_TOL = 1e-6
+_BT_HEADER = b"# Octomap OcTree binary file"
+
+
+@dataclass(frozen=True, eq=False)
+class Cloud:
+    """Points in some frame (the sensor's, or the world's after :meth:`transformed`).
+
+    Attributes:
+        points: (N, 3) float64 [m], finite only (loaders drop NaN/inf rows).
+        colors: (N, 3) uint8 RGB per point, or None.
+        source: where the points came from (a path), for messages.
+        width: columns of the organized layout of the original file (before dropping non-finite
+            rows), or None when the file was not organized.
+        height: rows of that layout, or None.
+    """
+
+    points: FloatArray
+    colors: ColorArray | None = None
+    source: str = ""
+    width: int | None = None
+    height: int | None = None
+
+    def __post_init__(self) -> None:
+        points = np.asarray(self.points, dtype=np.float64)
+        if points.ndim != 2 or points.shape[1] != 3:
+            raise InputError(f"cloud points must have shape (N, 3), got {points.shape}")
+        if not np.isfinite(points).all():
+            raise InputError("cloud points must be finite; drop NaN/inf rows first (load_cloud does)")
+        object.__setattr__(self, "points", points)
+        if self.colors is not None:
+            colors = np.asarray(self.colors)
+            if colors.shape != points.shape or colors.dtype != np.uint8:
+                raise InputError(
+                    f"cloud colors must be uint8 of shape {points.shape}, got {colors.dtype} {colors.shape}"
+                )
+            object.__setattr__(self, "colors", colors)
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+    def transformed(self, T_world_sensor: ArrayLike) -> Cloud:
+        """The same cloud in the world frame: ``p_world = T_world_sensor @ p_sensor``.
+
+        Args:
+            T_world_sensor: (4, 4) homogeneous transform with last row ``0 0 0 1``.
+
+        Returns:
+            A new cloud with transformed points; colors, source and layout are kept.
+        """
+        T = np.asarray(T_world_sensor, dtype=np.float64)
+        if T.shape != (4, 4) or not np.isfinite(T).all():
+            raise InputError(f"T_world_sensor must be a finite (4, 4) matrix, got shape {T.shape}")
+        if not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0], rtol=0.0, atol=_ORTHONORMAL_TOL):
+            raise InputError(f"T_world_sensor must have last row 0 0 0 1, got {_fmt(T[3])}")
+        return dataclasses.replace(self, points=self.points @ T[:3, :3].T + T[:3, 3])
+
+
+def load_cloud(path: str | Path) -> Cloud:
+    """Read a point cloud, keeping its finite points.
+
+    Formats by suffix: ``.pcd`` (ascii, binary, binary_compressed; colors from ``rgb``/``rgba``
+    packed fields or ``r g b``), ``.ply`` (vertex ``x y z``, colors from ``red green blue``),
+    ``.npy`` (numeric (N, >=3) array, first 3 columns), ``.bt`` (OctoMap: centres of occupied
+    voxels at the finest resolution; a pruned leaf is expanded into all its finest sub-voxels so
+    the density is uniform), ``.xyz``/``.txt`` (whitespace or comma separated text, first 3
+    columns, ``#`` comments).
+
+    Args:
+        path: the file.
+
+    Returns:
+        The cloud in the file's frame, ``source`` set to ``path``.
+
+    Raises:
+        InputError: unknown suffix, missing, truncated or corrupt file, or no finite point.
+    """
+    path = Path(path)
+    reader = _READERS.get(path.suffix.lower())
+    if reader is None:
+        raise InputError(
+            f"cannot read cloud {path}: unknown suffix {path.suffix!r}; valid: {choices(_READERS)}"
+        )
+    if not path.is_file():
+        raise InputError(f"cloud file {path} does not exist")
+    try:
+        points, colors, layout = reader(path)
+    except InputError:
+        raise
+    except Exception as exc:  # the format libraries raise anything from ValueError to TypeError
+        raise InputError(f"cannot read cloud {path}: truncated or corrupt file ({_brief(exc)})") from None
+    keep = np.isfinite(points).all(axis=1)
+    if not keep.any():
+        raise InputError(f"cloud {path} has no finite points ({len(points)} points, all NaN/inf or none)")
+    width, height = layout if layout is not None else (None, None)
+    return Cloud(
+        np.ascontiguousarray(points[keep]),
+        None if colors is None else np.ascontiguousarray(colors[keep]),
+        str(path),
+        width,
+        height,
+    )
+
+
+def save_cloud(cloud: Cloud, path: str | Path) -> None:
+    """Write ``cloud`` atomically; nothing is left behind on failure.
+
+    Formats by suffix: ``.ply`` (binary little endian, float64 ``x y z``, uchar
+    ``red green blue`` when the cloud has colors), ``.pcd`` (binary, float32 ``x y z`` and a packed
+    float ``rgb`` as PCL writes it), ``.npy`` ((N, 3) float64 points; colors are not stored).
+
+    Raises:
+        InputError: unknown suffix or missing directory.
+    """
+    path = Path(path)
+    writer = _WRITERS.get(path.suffix.lower())
+    if writer is None:
+        raise InputError(
+            f"cannot write cloud {path}: unknown suffix {path.suffix!r}; valid: {choices(_WRITERS)}"
+        )
+    directory = path.parent
+    if not directory.is_dir():
+        raise InputError(f"cannot write cloud {path}: directory {directory} does not exist")
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            writer(cloud, f)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def load_transform(spec: str) -> FloatArray:
+    """Parse a sensor-to-world transform given as a file or as an up vector.
+
+    Args:
+        spec: a path to a text file holding ``T_world_sensor`` (16 numbers row by row, whitespace
+            or comma separated, ``#`` comments), or ``"ux uy uz"``: the sensor-frame direction
+            that points up in the world (see :func:`up_vector_transform`).
+
+    Returns:
+        ``T_world_sensor``, shape (4, 4).
+
+    Raises:
+        InputError: a missing file, not 16 numbers, a block that is not a proper rotation
+            (orthonormal within 1e-6, det +1), a last row other than ``0 0 0 1``, or a bad up
+            vector.
+    """
+    path = Path(spec.strip()).expanduser()
+    if path.is_file():
+        return _read_transform_file(path)
+    numbers = _floats(spec.replace(",", " ").split())
+    if numbers is None:
+        raise InputError(
+            f"transform {spec!r} is neither an existing file nor an up vector; give a path to a "
+            "4x4 matrix file (T_world_sensor) or 3 numbers 'ux uy uz'"
+        )
+    if len(numbers) != 3:
+        raise InputError(
+            f"an up vector needs 3 numbers 'ux uy uz', got {len(numbers)} in {spec!r} "
+            "(a 4x4 matrix goes in a file)"
+        )
+    return up_vector_transform(numbers)
+
+
+def up_vector_transform(up: ArrayLike) -> FloatArray:
+    """The minimal rotation that maps the sensor-frame ``up`` onto world +z.
+
+    Args:
+        up: (3,) direction in the sensor frame that points up in the world; any non-zero length.
+            ``0 0 -1`` gives a 180 deg rotation about x.
+
+    Returns:
+        ``T_world_sensor``, (4, 4), rotation only (zero translation).
+    """
+    try:
+        u = np.asarray(up, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"an up vector needs 3 numbers 'ux uy uz', got {up!r}") from None
+    if u.shape != (3,):
+        raise InputError(f"an up vector needs 3 numbers 'ux uy uz', got shape {u.shape}")
+    if not np.isfinite(u).all():
+        raise InputError(f"the up vector must be finite, got {_fmt(u)}")
+    norm = np.linalg.norm(u)
+    if norm == 0.0:
+        raise InputError("the up vector must be non-zero, got 0 0 0")
+    ux, uy, uz = u / norm
+    sin = float(np.hypot(ux, uy))  # |u x z|
+    if sin == 0.0:
+        R = np.eye(3) if uz > 0 else np.diag([1.0, -1.0, -1.0])
+    else:
+        # Rodrigues about the unit axis u x z with sin = |u x z|, cos = u . z; stable near -z too.
+        K = np.array([[0.0, 0.0, -ux], [0.0, 0.0, -uy], [ux, uy, 0.0]]) / sin
+        R = np.eye(3) + sin * K + (1.0 - uz) * (K @ K)
+    T = np.eye(4)
+    T[:3, :3] = R
+    return T
+
+
+# --- readers: path -> (points (N, 3) float64 possibly non-finite, colors or None, (width, height)) ---
+
+_Layout = tuple[int, int] | None
+_Raw = tuple[FloatArray, ColorArray | None, _Layout]
+
+
+def _read_pcd(path: Path) -> _Raw:
+    from pypcd4 import PointCloud
+
+    pc = PointCloud.from_path(path)
+    meta = pc.metadata
+    data = np.atleast_1d(pc.pc_data)
+    if len(data) != meta.points or meta.width * meta.height != meta.points:
+        raise InputError(
+            f"cannot read cloud {path}: header says {meta.points} points "
+            f"({meta.width} x {meta.height}), data holds {len(data)}; the file is truncated or corrupt"
+        )
+    names = data.dtype.names or ()
+    missing = [f for f in "xyz" if f not in names]
+    if missing:
+        raise InputError(f"PCD {path} has no field {', '.join(missing)}; fields: {', '.join(meta.fields)}")
+    points = np.column_stack([data[f].astype(np.float64) for f in "xyz"])
+    layout = (meta.width, meta.height) if meta.height > 1 else None
+    return points, _pcd_colors(data, names), layout
+
+
+def _pcd_colors(data: np.ndarray, names: tuple[str, ...]) -> ColorArray | None:
+    for name in ("rgb", "rgba"):
+        if name in names:
+            column = np.ascontiguousarray(data[name])
+            if column.dtype == np.float32:  # PCL packs 0x00RRGGBB into the bits of a float
+                packed = column.view(np.uint32)
+            elif column.dtype.kind in "iu":
+                packed = column.astype(np.uint32)
+            else:
+                return None
+            shifts = np.array([16, 8, 0], dtype=np.uint32)
+            return ((packed[:, None] >> shifts) & 0xFF).astype(np.uint8)
+    if all(c in names for c in "rgb"):
+        return _to_uint8(np.column_stack([data[c] for c in "rgb"]))
+    return None
+
+
+def _read_ply(path: Path) -> _Raw:
+    from plyfile import PlyData
+
+    ply = PlyData.read(str(path), mmap=False)
+    elements = [e.name for e in ply.elements]
+    if "vertex" not in elements:
+        raise InputError(f"PLY {path} has no 'vertex' element; elements: {', '.join(elements) or 'none'}")
+    vertex = ply["vertex"].data
+    names = vertex.dtype.names or ()
+    missing = [f for f in "xyz" if f not in names]
+    if missing:
+        raise InputError(f"PLY {path} vertices have no {', '.join(missing)}; properties: {', '.join(names)}")
+    points = np.column_stack([vertex[f].astype(np.float64) for f in "xyz"])
+    rgb = ("red", "green", "blue")
+    colors = _to_uint8(np.column_stack([vertex[c] for c in rgb])) if all(c in names for c in rgb) else None
+    return points, colors, None
+
+
+def _read_npy(path: Path) -> _Raw:
+    array = np.load(path, allow_pickle=False)
+    if (
+        not isinstance(array, np.ndarray)
+        or array.ndim != 2
+        or array.shape[1] < 3
+        or array.dtype.kind not in "fiu"
+    ):
+        shape = getattr(array, "shape", "?")
+        raise InputError(
+            f"{path} must hold a numeric (N, 3) or (N, >=3) array of points, got shape {shape} "
+            f"dtype {getattr(array, 'dtype', type(array).__name__)}"
+        )
+    return array[:, :3].astype(np.float64), None, None
+
+
+def _read_xyz(path: Path) -> _Raw:
+    text = path.read_text().replace(",", " ")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # "input contained no data": reported below
+        array = np.loadtxt(io.StringIO(text), comments="#", usecols=(0, 1, 2), ndmin=2)
+    return array.astype(np.float64), None, None
+
+
+def _read_bt(path: Path) -> _Raw:
+    import pyoctomap
+
+    resolution = _check_bt(path)
+    tree = pyoctomap.OcTree(resolution)
+    if not tree.readBinary(str(path)):
+        raise InputError(f"cannot read OctoMap {path}: octomap rejected the file")
+    max_depth = tree.getTreeDepth()
+    centres: list[list[float]] = []
+    depths: list[int] = []
+    for leaf in tree.begin_leafs():
+        node = leaf.current_node
+        if node is not None and tree.isNodeOccupied(node):
+            centres.append(leaf.getCoordinate())
+            depths.append(leaf.getDepth())
+    if not centres:
+        return np.empty((0, 3)), None, None
+    sides = 2 ** (max_depth - np.asarray(depths, dtype=np.int64))
+    total = int(np.sum(sides**3))
+    if total > MAX_OCTOMAP_POINTS:
+        raise InputError(
+            f"OctoMap {path} expands to {total} voxels at {resolution} m, more than {MAX_OCTOMAP_POINTS}"
+        )
+    centre = np.asarray(centres, dtype=np.float64)
+    parts = []
+    for side in np.unique(sides):
+        offsets = (np.indices((side, side, side)).reshape(3, -1).T - (side - 1) / 2.0) * resolution
+        parts.append((centre[sides == side][:, None, :] + offsets[None]).reshape(-1, 3))
+    # octomap keeps coordinates in float32; snap to the exact voxel centres (k + 1/2) * resolution
+    points = (np.floor(np.concatenate(parts) / resolution) + 0.5) * resolution
+    return points, None, None
+
+
+def _check_bt(path: Path) -> float:
+    """Validate a ``.bt`` header and node stream; returns the resolution [m].
+
+    octomap prints to stderr and may read garbage on bad input, so the stream is checked first:
+    each inner node is two bytes of 2-bit child codes (1 free leaf, 2 occupied leaf, 3 inner,
+    0 none) in depth-first order, so a complete stream has one record per inner node and
+    ``size`` = 1 + the number of children.
+    """
+    blob = path.read_bytes()
+    if not blob.startswith(_BT_HEADER):
+        raise InputError(
+            f"{path} is not an OctoMap binary file (.bt): first line is not {_BT_HEADER.decode()!r}"
+        )
+    match = re.search(rb"\ndata\n", blob)
+    if match is None:
+        raise InputError(f"cannot read OctoMap {path}: the header has no 'data' line; truncated or corrupt")
+    header = {}
+    for line in blob[: match.start()].decode("ascii", "replace").splitlines()[1:]:
+        words = line.split()
+        if len(words) == 2 and not line.startswith("#"):
+            header[words[0]] = words[1]
+    if header.get("id") != "OcTree":
+        raise InputError(
+            f"OctoMap {path} holds a {header.get('id', 'unknown')!r} tree; only 'OcTree' is read"
+        )
+    size, resolution = int(header["size"]), float(header["res"])
+    if not resolution > 0:
+        raise InputError(f"OctoMap {path} has resolution {resolution}; it must be positive")
+    stream = np.frombuffer(blob, dtype=np.uint8, offset=match.end())
+    codes = (stream[:, None] >> np.array([0, 2, 4, 6], dtype=np.uint8)) & 3
+    n_records = len(stream) // 2
+    n_inner = int(np.count_nonzero(codes == 3))
+    n_nodes = 1 + int(np.count_nonzero(codes)) if size else 0
+    if len(stream) % 2 or (size and n_records != 1 + n_inner) or n_nodes != size:
+        raise InputError(
+            f"cannot read OctoMap {path}: header says {size} nodes, the data does not match; "
+            "truncated or corrupt"
+        )
+    return resolution
+
+
+_READERS: dict[str, Callable[[Path], _Raw]] = {
+    ".pcd": _read_pcd,
+    ".ply": _read_ply,
+    ".npy": _read_npy,
+    ".bt": _read_bt,
+    ".xyz": _read_xyz,
+    ".txt": _read_xyz,
+}
+
+
+# --- writers ---
+
+
+def _write_ply(cloud: Cloud, f: BinaryIO) -> None:
+    from plyfile import PlyData, PlyElement
+
+    fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
+    if cloud.colors is not None:
+        fields += [("red", "u1"), ("green", "u1"), ("blue", "u1")]
+    vertex = np.empty(len(cloud.points), dtype=fields)
+    for i, name in enumerate("xyz"):
+        vertex[name] = cloud.points[:, i]
+    if cloud.colors is not None:
+        for i, name in enumerate(("red", "green", "blue")):
+            vertex[name] = cloud.colors[:, i]
+    PlyData([PlyElement.describe(vertex, "vertex")], text=False, byte_order="<").write(f)
+
+
+def _write_pcd(cloud: Cloud, f: BinaryIO) -> None:
+    from pypcd4 import Encoding, PointCloud
+
+    columns = [cloud.points[:, i].astype(np.float32) for i in range(3)]
+    fields = ["x", "y", "z"]
+    if cloud.colors is not None:
+        c = cloud.colors.astype(np.uint32)
+        columns.append(((c[:, 0] << 16) | (c[:, 1] << 8) | c[:, 2]).view(np.float32))
+        fields.append("rgb")
+    pc = PointCloud.from_points(columns, fields, [np.float32] * len(fields))
+    pc.save(f, encoding=Encoding.BINARY)
+
+
+def _write_npy(cloud: Cloud, f: BinaryIO) -> None:
+    np.save(f, cloud.points, allow_pickle=False)
+
+
+_WRITERS: dict[str, Callable[[Cloud, BinaryIO], None]] = {
+    ".ply": _write_ply,
+    ".pcd": _write_pcd,
+    ".npy": _write_npy,
+}
+
+
+# --- helpers ---
+
+
+def _read_transform_file(path: Path) -> FloatArray:
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read transform file {path} ({_brief(exc)})") from None
+    body = " ".join(line.split("#", 1)[0] for line in text.splitlines())
+    tokens = re.sub(r"[,;\[\]]", " ", body).split()
+    numbers = _floats(tokens)
+    if numbers is None:
+        raise InputError(f"transform file {path} must hold only numbers (16, a 4x4 matrix row by row)")
+    if len(numbers) != 16:
+        raise InputError(f"transform file {path} holds {len(numbers)} numbers; a 4x4 matrix needs 16")
+    T = np.asarray(numbers, dtype=np.float64).reshape(4, 4)
+    if not np.isfinite(T).all():
+        raise InputError(f"transform file {path} contains NaN or infinity")
+    if not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0], rtol=0.0, atol=_ORTHONORMAL_TOL):
+        raise InputError(f"transform file {path}: the last row must be 0 0 0 1, got {_fmt(T[3])}")
+    R = T[:3, :3]
+    error = float(np.abs(R.T @ R - np.eye(3)).max())
+    if error > _ORTHONORMAL_TOL:
+        raise InputError(
+            f"transform file {path}: the 3x3 block is not a rotation (max |R^T R - I| = {error:.2g}, "
+            f"tolerance {_ORTHONORMAL_TOL:g}); give T_world_sensor without scale or shear"
+        )
+    if np.linalg.det(R) < 0:
+        raise InputError(
+            f"transform file {path}: the 3x3 block is a reflection (det -1); a rotation has det +1"
+        )
+    return T
+
+
+def _floats(tokens: list[str]) -> list[float] | None:
+    try:
+        return [float(t) for t in tokens]
+    except ValueError:
+        return None
+
+
+def _to_uint8(values: np.ndarray) -> ColorArray:
+    """Colors as uint8: floats in [0, 1] are scaled by 255, everything is clipped to 0..255."""
+    v = values.astype(np.float64)
+    if values.dtype.kind == "f" and v.size and np.nanmax(v) <= 1.0:
+        v = v * 255.0
+    return np.clip(np.rint(np.nan_to_num(v)), 0, 255).astype(np.uint8)
+
+
+def _brief(exc: BaseException) -> str:
+    lines = str(exc).strip().splitlines()
+    text = f"{type(exc).__name__}: {lines[0]}" if lines else type(exc).__name__
+    return text if len(text) <= 160 else text[:157] + "..."
+
+
+def _fmt(values: ArrayLike) -> str:
+    return " ".join(f"{v:g}" for v in np.asarray(values, dtype=np.float64).ravel())

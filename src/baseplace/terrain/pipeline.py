@@ -1,0 +1,123 @@
+"""Points to planar regions in one call: voxels, height map, segmentation, region graph."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import networkx as nx
+import numpy as np
+from numpy.typing import ArrayLike
+
+from baseplace.errors import InputError, unknown
+from baseplace.terrain.graph import GraphSettings, build_region_graph
+from baseplace.terrain.heightmap import HeightMap
+from baseplace.terrain.segmentation import BaselineSegmenter, RobustSegmenter, Segmentation, Segmenter
+from baseplace.terrain.voxels import VoxelMap
+
+ALGORITHMS = ("robust", "baseline")
+
+
+def make_segmenter(algorithm: str) -> Segmenter:
+    """The segmenter called ``algorithm`` ("robust" or "baseline") with default settings."""
+    if algorithm == "robust":
+        return RobustSegmenter()
+    if algorithm == "baseline":
+        return BaselineSegmenter()
+    raise unknown("segmentation algorithm", algorithm, ALGORITHMS)
+
+
+@dataclass(frozen=True)
+class Terrain:
+    """Everything the perception layer derives from a cloud.
+
+    Attributes:
+        voxels: occupied voxels (seed 000: 25 mm).
+        segmentation: height map, labels and planar regions.
+        graph: the region graph (networkx MultiGraph).
+        timings_ms: voxels, height map, segmentation steps, graph [ms].
+    """
+
+    voxels: VoxelMap
+    segmentation: Segmentation
+    graph: nx.MultiGraph
+    timings_ms: dict[str, float]
+
+
+def terrain_from_points(
+    points: ArrayLike,
+    algorithm: Literal["robust", "baseline"] | str = "robust",
+    resolution: float = 0.05,
+    voxel_size: float = 0.025,
+    graph_settings: GraphSettings | None = None,
+) -> Terrain:
+    """Segment a z-up world cloud (N, 3) [m] into planar regions and their graph."""
+    segmenter = make_segmenter(algorithm)
+    if not (0.01 <= resolution <= 1.0):
+        raise InputError(f"--resolution must be between 0.01 and 1 m, got {resolution}")
+    t0 = time.perf_counter()
+    voxels = VoxelMap.from_points(points, min(voxel_size, resolution))
+    t1 = time.perf_counter()
+    hmap = HeightMap.from_voxels(voxels, resolution)
+    t2 = time.perf_counter()
+    seg = segmenter.segment(hmap)
+    t3 = time.perf_counter()
+    graph = build_region_graph(seg, graph_settings)
+    t4 = time.perf_counter()
+    timings = {
+        "voxels": (t1 - t0) * 1e3,
+        "height_map": (t2 - t1) * 1e3,
+        "segmentation": (t3 - t2) * 1e3,
+        "graph": (t4 - t3) * 1e3,
+        "total": (t4 - t0) * 1e3,
+    }
+    return Terrain(voxels, seg, graph, timings)
+
+
+def terrain_json(terrain: Terrain) -> dict[str, Any]:
+    """The JSON summary ``baseplace segment --json`` prints."""
+    seg = terrain.segmentation
+    regions = []
+    for r in seg.regions:
+        poly = terrain.graph.nodes[r.id]["polygon"]
+        polys = list(poly.geoms) if poly.geom_type == "MultiPolygon" else [poly]
+        regions.append({
+            "id": r.id,
+            "normal": [round(float(v), 6) for v in r.normal],
+            "d": round(r.d, 6),
+            "tilt_deg": round(float(np.degrees(r.tilt)), 3),
+            "area_m2": round(r.area, 4),
+            "cells": r.n_cells,
+            "centroid": [round(float(v), 4) for v in r.centroid],
+            "polygon": [
+                {"exterior": np.round(np.asarray(p.exterior.coords), 4).tolist(),
+                 "holes": [np.round(np.asarray(h.coords), 4).tolist() for h in p.interiors]}
+                for p in polys if not p.is_empty
+            ],
+        })  # fmt: skip
+    edges = [
+        {"a": int(a), "b": int(b), "p_s": np.round(e["p_s"], 4).tolist(), "p_e": np.round(e["p_e"], 4).tolist(),
+         "step": round(e["step"], 4), "traversable": bool(e["traversable"])}
+        for a, b, e in terrain.graph.edges(data=True)
+    ]  # fmt: skip
+    hmap = seg.hmap
+    return {
+        "height_map": {
+            "origin": list(hmap.origin),
+            "resolution": hmap.resolution,
+            "shape": list(hmap.shape),
+            "known_cells": int(hmap.known.sum()),
+        },
+        "voxels": len(terrain.voxels),
+        "regions": regions,
+        "edges": edges,
+        "non_planar_cells": int(((seg.labels < 0) & hmap.known).sum()),
+        "timings_ms": {
+            k: round(v, 2)
+            for k, v in {
+                **terrain.timings_ms,
+                **{f"segmentation.{k}": v for k, v in seg.timings_ms.items()},
+            }.items()
+        },
+    }
