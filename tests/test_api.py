@@ -6,7 +6,14 @@ import pytest
 
 import baseplace
 
-MODULES = ["baseplace", "baseplace.geometry", "baseplace.reachability", "baseplace.robots", "baseplace.terrain", "baseplace.sim"]
+MODULES = [
+    "baseplace",
+    "baseplace.geometry",
+    "baseplace.reachability",
+    "baseplace.robots",
+    "baseplace.terrain",
+    "baseplace.sim",
+]
 
 
 @pytest.mark.parametrize("module", MODULES)

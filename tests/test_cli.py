@@ -5,6 +5,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from conftest import DATA
@@ -179,3 +180,67 @@ def test_demo_writes_a_verified_pose(tmp_path, monkeypatch):
     T_base_tcp = data.oMf[robot.model.getFrameId(arm.tcp_frame)].homogeneous  # base_footprint is the root
     T_world_tcp = BasePose(best["x"], best["y"], best["yaw"]).matrix() @ T_base_tcp
     np.testing.assert_allclose(T_world_tcp[:3, 3], parse_pose6(result["target"])[:3, 3], atol=2e-4)
+
+
+def test_scene_generate_and_segment(tmp_path):
+    cloud = tmp_path / "scene.ply"
+    proc = run(
+        "scene",
+        "generate",
+        "--size-class",
+        "small",
+        "--planes",
+        "2",
+        "--seed",
+        "4",
+        "--out",
+        str(cloud),
+        "--json",
+    )
+    assert proc.returncode == 0, proc.stderr
+    info = json.loads(proc.stdout)
+    assert Path(info["truth"]).is_file() and info["planes"] == 2
+    png = tmp_path / "regions.png"
+    proc = run("segment", str(cloud), "--out", str(png), "--json")
+    assert proc.returncode == 0, proc.stderr
+    result = json.loads(proc.stdout)
+    assert len(result["regions"]) >= 3 and png.stat().st_size > 5000
+    truth = json.loads(Path(info["truth"]).read_text())
+    found = [r["normal"] for r in result["regions"]]
+    for plane in truth["planes"]:  # every true plane has a region with its normal (within 1 deg)
+        best = max(float(np.dot(plane["normal"], n)) for n in found)
+        assert best > np.cos(np.radians(1.0))
+    assert {"p_s", "p_e", "traversable"} <= set(result["edges"][0])
+
+
+@pytest.mark.parametrize(
+    ("make", "fragments"),
+    [
+        (
+            lambda p: p.write_text(
+                "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\n"
+                "property float z\nend_header\n"
+            ),
+            ["no finite points", "0 points"],
+        ),  # fmt: skip
+        (lambda p: np.save(p.with_suffix(".npy"), np.full((10, 3), np.nan)), ["no finite points"]),
+    ],
+)
+def test_segment_bad_clouds(tmp_path, make, fragments):
+    path = tmp_path / "c.ply"
+    make(path)
+    target = path if path.exists() else path.with_suffix(".npy")
+    assert_one_line_error(run("segment", str(target)), 2, *fragments)
+
+
+def test_segment_bad_arguments(tmp_path):
+    cloud = tmp_path / "scene.npy"
+    np.save(cloud, np.c_[np.random.default_rng(0).uniform(0, 3, (20000, 2)), np.zeros(20000)])
+    assert_one_line_error(run("segment", str(cloud), "--resolution", "1e-5"), 2, "resolution")
+    assert_one_line_error(run("segment", str(cloud), "--transform", "1 0 0"), 2, "up direction")
+    assert_one_line_error(run("segment", str(cloud), "--transform", "0 0 0"), 2)
+    assert_one_line_error(run("segment", str(cloud), "--algorithm", "ransac"), 2, "invalid choice")
+    assert_one_line_error(
+        run("scene", "generate", "--size-class", "huge", "--out", str(tmp_path / "s.ply")), 2
+    )
+    assert_one_line_error(run("segment", str(tmp_path / "missing.pcd")), 2, "does not exist")

@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
-from baseplace.errors import InputError, NothingFoundError
+from baseplace.errors import InputError
 from baseplace.terrain.heightmap import FloatArray, HeightMap
 from baseplace.terrain.planes import fit_region_planes, local_planes
 
@@ -141,7 +141,7 @@ class RobustSettings:
     angles_deg: tuple[float, ...] = (1.5, 3.0, 4.5, 6.0)
     max_rms: float = 0.03
     min_cells: int = 40
-    extend_dist: float = 0.04
+    extend_dist: float = 0.05
     merge_angle_deg: float = 3.0
     merge_dist: float = 0.04
     merge_share: float = 0.9
@@ -155,8 +155,13 @@ class RobustSettings:
 
 
 @nb.njit(cache=True)
-def _grow(normals, eligible, labels, cos_thr, min_cells, order, next_label):  # pragma: no cover
-    """Region growing over 4-neighbours from seeds in ``order``; returns the next free label."""
+def _grow(normals, eligible, labels, cos_thr, min_cells, order, next_label, against_mean):  # pragma: no cover
+    """Region growing over 4-neighbours from seeds in ``order``; returns the next free label.
+
+    A neighbour joins if its normal is within the threshold of the current cell's normal
+    (Karkowski and Bennewitz) or, with ``against_mean``, of the region's mean normal so far, which
+    cannot drift across a smooth bend from one plane into the next.
+    """
     H, W = labels.shape
     queue = np.empty(H * W, dtype=np.int64)
     tried = np.zeros(H * W, dtype=np.bool_)
@@ -168,10 +173,16 @@ def _grow(normals, eligible, labels, cos_thr, min_cells, order, next_label):  # 
         head, tail = 0, 1
         queue[0] = s
         labels[r0, c0] = lab
+        sx, sy, sz = normals[r0, c0, 0], normals[r0, c0, 1], normals[r0, c0, 2]
         while head < tail:
             cur = queue[head]
             head += 1
             r, c = cur // W, cur % W
+            if against_mean:
+                norm = math.sqrt(sx * sx + sy * sy + sz * sz)
+                rx, ry, rz = sx / norm, sy / norm, sz / norm
+            else:
+                rx, ry, rz = normals[r, c, 0], normals[r, c, 1], normals[r, c, 2]
             for k in range(4):
                 rr = r + (1 if k == 0 else -1 if k == 1 else 0)
                 cc = c + (1 if k == 2 else -1 if k == 3 else 0)
@@ -179,9 +190,11 @@ def _grow(normals, eligible, labels, cos_thr, min_cells, order, next_label):  # 
                     continue
                 if labels[rr, cc] != -1 or not eligible[rr, cc]:
                     continue
-                dot = normals[r, c, 0] * normals[rr, cc, 0] + normals[r, c, 1] * normals[rr, cc, 1]
-                dot += normals[r, c, 2] * normals[rr, cc, 2]
+                dot = rx * normals[rr, cc, 0] + ry * normals[rr, cc, 1] + rz * normals[rr, cc, 2]
                 if dot >= cos_thr:
+                    sx += normals[rr, cc, 0]
+                    sy += normals[rr, cc, 1]
+                    sz += normals[rr, cc, 2]
                     labels[rr, cc] = lab
                     queue[tail] = rr * W + cc
                     tail += 1
@@ -305,9 +318,10 @@ def _check(hmap: HeightMap) -> None:
 
 def _no_support(segmentation: Segmentation) -> Segmentation:
     if not any(r.normal[2] > math.cos(math.radians(30)) for r in segmentation.regions):
-        raise NothingFoundError(
-            "no horizontal support surface found (every planar region is steeper than 30 deg); "
-            "is the cloud's up direction right? pass --transform"
+        raise InputError(
+            "no horizontal support surface found (no planar region is within 30 deg of level); "
+            "is the cloud's up direction right? pass --transform with a 4x4 world_T_sensor file "
+            'or the sensor-frame up vector, e.g. --transform "0 -1 0" for a y-down camera'
         )
     return segmentation
 
@@ -329,7 +343,7 @@ class BaselineSegmenter:
         eligible = lp.rms <= s.max_rms
         normals = np.nan_to_num(lp.normals)
         n = _grow(normals, eligible, labels, math.cos(math.radians(s.angle_deg)), s.min_cells,
-                  _seed_order(lp.rms), 0)  # fmt: skip
+                  _seed_order(lp.rms), 0, False)  # fmt: skip
         labels = _drop_steep(hmap, labels, n, s.max_tilt_deg)
         labels, n = _compact(labels, s.min_cells)
         regions = _regions(hmap, labels, n)
@@ -366,7 +380,9 @@ class RobustSegmenter:
         labels = np.full(hmap.shape, -1, dtype=np.int32)
         n = 0
         for angle in s.angles_deg:  # over-segments first; later steps merge
-            n = _grow(normals_local, eligible, labels, math.cos(math.radians(angle)), s.min_cells, order, n)
+            n = _grow(
+                normals_local, eligible, labels, math.cos(math.radians(angle)), s.min_cells, order, n, True
+            )
         labels = _drop_steep(hmap, labels, n, s.max_tilt_deg)
         lap("growing")
 
@@ -380,11 +396,15 @@ class RobustSegmenter:
         labels, n = self._merge(hmap, labels, n)
         lap("merging")
 
-        for _ in range(s.reassign_rounds):
-            normals, d, _, _ = fit_region_planes(hmap, labels, n)
-            labels, changed = _reassign(labels, z, X, Y, np.nan_to_num(normals), np.nan_to_num(d, nan=1e9))
-            if changed == 0:
-                break
+        for _ in range(2):  # reassignment can reunite pieces of one plane: merge them, reassign again
+            for _ in range(s.reassign_rounds):
+                normals, d, _, _ = fit_region_planes(hmap, labels, n)
+                labels, changed = _reassign(
+                    labels, z, X, Y, np.nan_to_num(normals), np.nan_to_num(d, nan=1e9)
+                )
+                if changed == 0:
+                    break
+            labels, n = self._merge(hmap, labels, n)
         lap("reassignment")
 
         labels = self._largest_components(hmap, labels, n)
@@ -404,16 +424,25 @@ class RobustSegmenter:
             labels, n = _compact(labels, 1)
             if n < 2:
                 return labels, n
-            normals, d, centroids, _ = fit_region_planes(hmap, labels, n)
+            normals, d, centroids, counts = fit_region_planes(hmap, labels, n)
             pairs = _adjacent_pairs(labels)
             X, Y = hmap.cell_centres()
             sel = (labels >= 0) & hmap.known
             lab, pts = labels[sel], np.c_[X[sel], Y[sel], hmap.raw[sel]]
             parent = np.arange(n)
+            # Star merges per round, most similar pairs first, then refit: a larger region may absorb
+            # several neighbours, each tested against it, but an absorbed region takes part in nothing
+            # else that round. Merging transitively would let a noisy patch chain two planes together.
+            pairs = sorted(pairs, key=lambda p: -float(np.nan_to_num(normals[p[0]] @ normals[p[1]])))
+            absorbed = np.zeros(n, dtype=bool)
+            absorber = np.zeros(n, dtype=bool)
 
             merged = False
             for a, b in pairs:
-                if not (np.all(np.isfinite(normals[[a, b]]))):
+                big, small = (a, b) if counts[a] >= counts[b] else (b, a)
+                if absorbed[big] or absorbed[small] or absorber[small]:
+                    continue
+                if not np.all(np.isfinite(normals[[a, b]])):
                     continue
                 seed_test = (
                     normals[a] @ normals[b] >= cos_thr
@@ -428,13 +457,12 @@ class RobustSegmenter:
                         explained |= bool(close.mean() >= s.merge_share) if len(own) else False
                     if not explained:
                         continue
-                ra, rb = _find(parent, a), _find(parent, b)
-                if ra != rb:
-                    parent[max(ra, rb)] = min(ra, rb)
-                    merged = True
+                parent[small] = big
+                absorbed[small] = absorber[big] = True
+                merged = True
             if not merged:
                 return labels, n
-            roots = np.array([_find(parent, k) for k in range(n)], dtype=np.int32)
+            roots = parent.astype(np.int32)
             labels = np.where(labels >= 0, roots[np.maximum(labels, 0)], -1).astype(np.int32)
 
     def _largest_components(self, hmap: HeightMap, labels: Labels, n: int) -> Labels:
@@ -456,14 +484,6 @@ class RobustSegmenter:
         # Orphans join the neighbouring region whose plane is closest, spreading inward.
         _extend_closest(labels, orphan, z, X, Y, np.nan_to_num(normals), np.nan_to_num(d, nan=1e9))
         return labels
-
-
-def _find(parent: NDArray[np.int64], a: int) -> int:
-    """Union-find root of ``a`` with path halving."""
-    while parent[a] != a:
-        parent[a] = parent[parent[a]]
-        a = int(parent[a])
-    return a
 
 
 def _adjacent_pairs(labels: Labels) -> list[tuple[int, int]]:
