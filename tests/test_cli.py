@@ -222,7 +222,7 @@ def test_scene_generate_and_segment(tmp_path):
                 "property float z\nend_header\n"
             ),
             ["no finite points", "0 points"],
-        ),  # fmt: skip
+        ),
         (lambda p: np.save(p.with_suffix(".npy"), np.full((10, 3), np.nan)), ["no finite points"]),
     ],
 )

@@ -11,14 +11,13 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import os
-import tempfile
 from pathlib import Path
 
 import h5py
 import numpy as np
 
 from baseplace.errors import InputError
+from baseplace.files import atomic_write
 from baseplace.reachability.grid import SE3Grid
 from baseplace.reachability.rmap import MapInfo, ReachabilityMap
 from baseplace.robots.model import Robot
@@ -37,37 +36,27 @@ def _digest(*arrays: np.ndarray) -> str:
 def save_map(rmap: ReachabilityMap, path: str | Path) -> int:
     """Write ``rmap`` to ``path`` atomically; returns the file size in bytes."""
     path = Path(path)
-    directory = path.parent if str(path.parent) else Path(".")
-    if not directory.is_dir():
-        raise InputError(f"cannot write map: directory {directory} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
-    os.close(fd)
-    try:
-        with h5py.File(tmp, "w") as f:
-            f.attrs["format"] = FORMAT
-            f.attrs["format_version"] = FORMAT_VERSION
-            grid = rmap.grid
-            f.attrs["grid"] = json.dumps(
-                {
-                    "origin": list(grid.origin),
-                    "voxel_size": grid.voxel_size,
-                    "shape": list(grid.shape),
-                    "nside": grid.nside,
-                    "n_twist": grid.n_twist,
-                }
-            )
-            f.attrs["info"] = json.dumps(dataclasses.asdict(rmap.info))
-            f.create_dataset("cells", data=rmap.cells, compression="gzip", compression_opts=4, shuffle=True)
-            f.create_dataset("counts", data=rmap.counts, compression="gzip", compression_opts=4, shuffle=True)
-            arrays: list[np.ndarray] = [rmap.cells, rmap.counts]
-            if rmap.manipulability is not None:
-                f.create_dataset("manipulability", data=rmap.manipulability, compression="gzip")
-                arrays.append(rmap.manipulability)
-            f.attrs["sha256"] = _digest(*arrays)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_write(path, "map") as tmp, h5py.File(tmp, "w") as f:
+        f.attrs["format"] = FORMAT
+        f.attrs["format_version"] = FORMAT_VERSION
+        grid = rmap.grid
+        f.attrs["grid"] = json.dumps(
+            {
+                "origin": list(grid.origin),
+                "voxel_size": grid.voxel_size,
+                "shape": list(grid.shape),
+                "nside": grid.nside,
+                "n_twist": grid.n_twist,
+            }
+        )
+        f.attrs["info"] = json.dumps(dataclasses.asdict(rmap.info))
+        f.create_dataset("cells", data=rmap.cells, compression="gzip", compression_opts=4, shuffle=True)
+        f.create_dataset("counts", data=rmap.counts, compression="gzip", compression_opts=4, shuffle=True)
+        arrays: list[np.ndarray] = [rmap.cells, rmap.counts]
+        if rmap.manipulability is not None:
+            f.create_dataset("manipulability", data=rmap.manipulability, compression="gzip")
+            arrays.append(rmap.manipulability)
+        f.attrs["sha256"] = _digest(*arrays)
     return path.stat().st_size
 
 

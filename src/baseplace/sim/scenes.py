@@ -18,8 +18,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -30,6 +28,7 @@ import shapely
 from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError, unknown
+from baseplace.files import atomic_write
 from baseplace.geometry.poses import FloatArray, pose_from_xyz_rpy
 
 SIZE_CLASSES = {"small": (1.0, 1.5), "medium": (1.5, 2.0), "large": (2.0, 2.5)}
@@ -669,15 +668,8 @@ def save_scene(scene: Scene, truth_path: str | Path) -> None:
         "box": box,
         "objects": [asdict(o) for o in scene.objects],
     }
-    path = Path(truth_path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            json.dump(doc, f, indent=1)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_write(truth_path, "ground truth") as tmp:
+        tmp.write_text(json.dumps(doc, indent=1))
 
 
 def _get(obj: Any, key: str, where: str) -> Any:

@@ -11,9 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import io
-import os
 import re
-import tempfile
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -24,6 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError, choices
+from baseplace.files import atomic_write
 
 FloatArray = NDArray[np.float64]
 ColorArray = NDArray[np.uint8]
@@ -151,17 +150,8 @@ def save_cloud(cloud: Cloud, path: str | Path) -> None:
         raise InputError(
             f"cannot write cloud {path}: unknown suffix {path.suffix!r}; valid: {choices(_WRITERS)}"
         )
-    directory = path.parent
-    if not directory.is_dir():
-        raise InputError(f"cannot write cloud {path}: directory {directory} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            writer(cloud, f)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_write(path, "cloud") as tmp, tmp.open("wb") as f:
+        writer(cloud, f)
 
 
 def load_transform(spec: str) -> FloatArray:
