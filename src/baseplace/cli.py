@@ -312,6 +312,82 @@ def cmd_experiment_segmentation(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_place(args: argparse.Namespace) -> int:
+    """Find verified base placements for the targets in a scanned scene."""
+    from baseplace.demo import cached_map
+    from baseplace.geometry.poses import matrix_to_rpy, parse_pose6
+    from baseplace.placement.pipeline import PlaceSettings, place
+    from baseplace.reachability.build import BuildSettings
+    from baseplace.reachability.storage import load_map
+    from baseplace.robots.model import Robot
+    from baseplace.terrain.io import load_cloud, load_transform
+
+    if not args.target:
+        raise InputError('give at least one --target "x y z roll pitch yaw"')
+    targets = np.stack([parse_pose6(t) for t in args.target])
+    settings = PlaceSettings(strategy=args.strategy, placements=args.placements, tries=args.tries)
+    out = Path(args.out) if args.out else None
+    if out is not None and not (out.parent if str(out.parent) else Path(".")).is_dir():
+        raise InputError(f"--out directory {out.parent} does not exist")
+    robot = Robot(args.robot)
+    cloud = load_cloud(args.cloud)
+    if args.transform is not None:
+        cloud = cloud.transformed(load_transform(args.transform))
+    if args.map is not None:
+        rmap = load_map(args.map, robot, args.arm)
+    else:
+        update, bar = _progress(args, 50_000_000, f"default {robot.name} map (first run only)")
+        try:
+            rmap, _, _ = cached_map(robot, BuildSettings(), args.arm, update)
+        finally:
+            if bar is not None:
+                bar.close()
+    result = place(robot, rmap, cloud.points, targets, settings, np.random.default_rng(args.seed))
+    arm = robot.arm(rmap.info.arm)
+    placements = []
+    for p in result.placements:
+        T = p.T_world_base
+        placements.append({
+            "base_pose": np.round(T, 6).tolist(), "x": round(float(T[0, 3]), 4), "y": round(float(T[1, 3]), 4),
+            "z": round(float(T[2, 3]), 4), "yaw": round(p.yaw, 4),
+            "roll_pitch_yaw": [round(float(v), 5) for v in matrix_to_rpy(T[:3, :3])],
+            "region": p.region, "reachability": round(p.reachability, 5),
+            "joints": [dict(zip(p.joint_names, np.round(q, 6).tolist(), strict=True)) for q in p.joints],
+        })  # fmt: skip
+    obj = {
+        "robot": {"name": robot.name, "urdf": str(robot.spec.urdf), "base_frame": robot.spec.base_frame,
+                  "tcp_frames": {a: s.tcp_frame for a, s in robot.spec.arms.items()}, "arm": arm.name},
+        "strategy": args.strategy, "seed": args.seed, "targets": args.target,
+        "placements": placements,
+        "tries": result.tries,
+        "failures": dict(result.failures),
+        "timings_ms": {k: round(v, 2) for k, v in result.timings_ms.items()},
+        "regions": len(result.terrain.segmentation.regions),
+    }  # fmt: skip
+    if out is not None:
+        from baseplace.terrain.polygons import footprint_outline
+        from baseplace.viz.placement import plot_placement
+
+        outline = footprint_outline(robot.spec.footprint_radius, robot.spec.footprint_polygon)
+        plot_placement(result.osrm, result.placements, outline, out,
+                       f"{robot.name}, {args.strategy}: {len(placements)} placement(s) in {result.tries} tries")  # fmt: skip
+        obj["png"] = str(out)
+    if not placements:
+        raise NothingFoundError(
+            f"no verified placement in {result.tries} tries with {args.strategy} "
+            f"(failures: {dict(result.failures) or 'none'}); try --tries, another --strategy or check the target"
+        )
+    lines = [f"{len(placements)} verified placement(s) in {result.tries} tries ({args.strategy}, "
+             f"{result.timings_ms['total']:.0f} ms)"]  # fmt: skip
+    for row in placements:
+        lines.append(f"  x={row['x']:.3f} y={row['y']:.3f} z={row['z']:.3f} yaw={row['yaw']:.3f} "
+                     f"region {row['region']} reachability {row['reachability']:.3f}")  # fmt: skip
+    if out is not None:
+        lines.append(f"wrote {out}")
+    _emit(args, obj, "\n".join(lines))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``baseplace`` command."""
     parser = _Parser(prog="baseplace", description="Where should a mobile manipulator stand?")
@@ -348,6 +424,28 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--targets", help="file with one target pose per line")
     p.add_argument("--base", help='base pose "x y yaw" [m, rad]')
     p.add_argument("--bases", help="file with one base pose per line, paired with --targets")
+
+    p = command("place", "verified base placements for TCP targets in a scanned scene (seed 000)", cmd_place)
+    p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
+    p.add_argument("--arm", default=None, help="arm (default: the robot's default arm)")
+    p.add_argument(
+        "--cloud", required=True, help="scene cloud: .pcd, .ply, .bt, .npy, .xyz (z up, or --transform)"
+    )
+    p.add_argument(
+        "--transform", default=None, help='world_T_sensor file, or the sensor-frame up vector "ux uy uz"'
+    )
+    p.add_argument(
+        "--target", action="append", help='TCP target "x y z roll pitch yaw" [m, rad]; repeat for several'
+    )
+    p.add_argument("--strategy", default="MR", choices=["MR", "TO", "MRTO", "orm", "grid", "random"],
+                   help="seed 000's MR, TO, MRTO, or a baseline (default MR)")  # fmt: skip
+    p.add_argument("--placements", type=int, default=1, help="M: placements to return (default 1)")
+    p.add_argument("--tries", type=int, default=100, help="N: candidates to check at most (default 100)")
+    p.add_argument(
+        "--map", default=None, help="reachability map (default: the cached default map, built once)"
+    )
+    p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
+    p.add_argument("--out", default=None, help="PNG: OSRM over the scene with the placements (Fig. 2b)")
 
     p = command("segment", "planar regions, polygons and region graph of a point cloud", cmd_segment)
     p.add_argument("cloud", help="point cloud: .pcd, .ply, .bt (OctoMap), .npy, .xyz")

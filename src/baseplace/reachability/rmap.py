@@ -81,6 +81,15 @@ class ReachabilityMap:
         return len(self.cells)
 
     @cached_property
+    def horizontal_reach(self) -> float:
+        """Largest horizontal distance [m] from the base origin to a reached voxel's far corner."""
+        if len(self.cells) == 0:
+            return 0.0
+        voxels = np.unique(self.cells // self.grid.n_orientations)
+        centres = self.grid.voxel_centre(voxels)
+        return float(np.hypot(centres[:, 0], centres[:, 1]).max() + self.grid.voxel_size * math.sqrt(0.5))
+
+    @cached_property
     def index(self) -> NDArray[np.float32]:
         """Reachability index per stored cell, ``count / max(count)`` in (0, 1]."""
         if len(self.counts) == 0:

@@ -25,7 +25,10 @@ from baseplace.robots.model import Arm
 class IKSolver(Protocol):
     """Solves ``T_base_tcp`` for joint values: a (n,) array within the limits, or None."""
 
-    arm: Arm
+    @property
+    def arm(self) -> Arm:
+        """The arm solved for."""
+        ...
 
     def solve(
         self, T_base_tcp: ArrayLike, rng: np.random.Generator, q_seed: ArrayLike | None = None

@@ -1,0 +1,172 @@
+"""Placement generation end to end (seed 000, Algorithm 2).
+
+cloud -> planar regions -> obstacle voxels (support removed) -> OSRM -> strategy candidates ->
+verification (footprint, IK per target, collision) -> at most M placements within N tries.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import Counter
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from baseplace.errors import InputError
+from baseplace.geometry.poses import FloatArray
+from baseplace.placement.osrm import OSRM, build_osrm
+from baseplace.placement.strategies import make_strategy
+from baseplace.placement.verify import Placement, Verifier
+from baseplace.reachability.rmap import ReachabilityMap
+from baseplace.robots.ik import DampedLeastSquaresIK
+from baseplace.robots.model import Robot
+from baseplace.terrain.pipeline import Terrain, terrain_from_points
+from baseplace.terrain.polygons import footprint_outline
+from baseplace.terrain.segmentation import Segmentation
+from baseplace.terrain.voxels import VoxelMap
+from baseplace.world.environment import Environment, obstacle_voxels
+
+
+@dataclass(frozen=True)
+class PlaceSettings:
+    """How to search for placements.
+
+    Attributes:
+        strategy: MR, TO, MRTO (seed 000) or the baselines orm, grid, random.
+        placements: M, stop after this many verified placements.
+        tries: N, stop after this many candidates.
+        n_orientations: l, OSRM orientations per cell (seed 000: 36).
+        gamma_max: largest angle between the base's forward axis and the targets [rad].
+        support_dist: voxels this close to their region's plane are support, not obstacles [m].
+        resolution: height-map cell [m].
+    """
+
+    strategy: str = "MR"
+    placements: int = 1
+    tries: int = 100
+    n_orientations: int = 36
+    gamma_max: float = math.pi / 4
+    support_dist: float = 0.08
+    resolution: float = 0.05
+
+    def __post_init__(self) -> None:
+        if self.placements < 1 or self.tries < 1:
+            raise InputError(f"placements and tries must be >= 1, got {self.placements} and {self.tries}")
+        if not (0 < self.gamma_max <= math.pi):
+            raise InputError(f"gamma_max must be in (0, pi], got {self.gamma_max}")
+
+
+@dataclass
+class PlacementResult:
+    """What a placement query found.
+
+    Attributes:
+        placements: verified placements (at most M).
+        failures: counts of rejected candidates by reason, and "exhausted" when the strategy ran dry.
+        tries: candidates checked.
+        timings_ms: segmentation, osrm, query and total [ms].
+        terrain: the segmented scene.
+        osrm: the OSRM.
+    """
+
+    placements: list[Placement]
+    failures: Counter[str]
+    tries: int
+    timings_ms: dict[str, float]
+    terrain: Terrain
+    osrm: OSRM
+
+
+def place(
+    robot: Robot,
+    rmap: ReachabilityMap,
+    points: ArrayLike,
+    targets: ArrayLike,
+    settings: PlaceSettings | None = None,
+    rng: np.random.Generator | None = None,
+    terrain: Terrain | None = None,
+) -> PlacementResult:
+    """Find verified base placements from which the map's arm reaches every target.
+
+    Args:
+        robot: the robot (must match the map).
+        rmap: reachability map of the arm to use.
+        points: (N, 3) z-up world cloud of the scene [m].
+        targets: (K, 4, 4) or (4, 4) world TCP targets.
+        settings: search settings.
+        rng: randomness (default: seed 0).
+        terrain: a segmentation of the same cloud to reuse (skips segmentation).
+    """
+    s = settings or PlaceSettings()
+    rng = rng or np.random.default_rng(0)
+    T_targets = np.asarray(targets, dtype=float).reshape(-1, 4, 4)
+    if not np.all(np.isfinite(T_targets)):
+        raise InputError("target pose contains NaN or infinity")
+    strategy = make_strategy(s.strategy, s.gamma_max)
+    t0 = time.perf_counter()
+    terrain = terrain or terrain_from_points(points, resolution=s.resolution)
+    seg = terrain.segmentation
+    t1 = time.perf_counter()
+    outline = footprint_outline(robot.spec.footprint_radius, robot.spec.footprint_polygon)
+    _check_targets(seg, T_targets, rmap.horizontal_reach)
+    osrm = build_osrm(seg, rmap, T_targets, outline, rmap.horizontal_reach, s.n_orientations)
+    if not osrm.near.any():
+        raise InputError(
+            f"no planar region lies within the arm's reach ({rmap.horizontal_reach:.2f} m) of every target"
+        )
+    t2 = time.perf_counter()
+    env = Environment(robot, _obstacles(terrain, seg, s))
+    arm = robot.arm(rmap.info.arm)
+    verifier = Verifier(arm, DampedLeastSquaresIK(arm), env, T_targets,
+                        {r.id: terrain.graph.nodes[r.id]["polygon"] for r in seg.regions}, outline)  # fmt: skip
+    t3 = time.perf_counter()
+    placements: list[Placement] = []
+    tries = 0
+    candidates = strategy.candidates(osrm, rmap, rng)
+    while tries < s.tries and len(placements) < s.placements:
+        candidate = next(candidates, None)
+        if candidate is None:
+            verifier.failures["exhausted"] += 1
+            break
+        tries += 1
+        placement = verifier.check(candidate, rng)
+        if placement is not None:
+            placements.append(placement)
+    t4 = time.perf_counter()
+    timings = {
+        "segmentation": (t1 - t0) * 1e3,
+        "osrm": osrm.build_ms,
+        "collision_setup": (t3 - t2) * 1e3,
+        "query": (t4 - t3) * 1e3,
+        "total": (t4 - t0) * 1e3,
+    }
+    return PlacementResult(placements, verifier.failures, tries, timings, terrain, osrm)
+
+
+def _obstacles(terrain: Terrain, seg: Segmentation, s: PlaceSettings) -> VoxelMap:
+    if s.strategy != "orm":
+        return obstacle_voxels(terrain.voxels, seg, s.support_dist)
+    # The flat-floor baseline knows one support surface: the floor at z = 0. Ramps are obstacles.
+    z = terrain.voxels.centres[:, 2]
+    return terrain.voxels.without(np.abs(z) <= s.support_dist)
+
+
+def _check_targets(seg: Segmentation, targets: FloatArray, reach: float) -> None:
+    """Targets inside an obstacle or far from every region get a clear message."""
+    hmap = seg.hmap
+    row, col, inside = hmap.cell_of(targets[:, :2, 3])
+    for k, T in enumerate(targets):
+        if not inside[k]:
+            continue
+        top = hmap.raw[row[k], col[k]]
+        label = seg.labels[row[k], col[k]]
+        if np.isfinite(top) and label >= 0:
+            region = seg.regions[int(label)]
+            below = float(region.height_at(T[None, :2, 3])[0])
+            if T[2, 3] < below - 0.05:
+                raise InputError(
+                    f"target {k} at z = {T[2, 3]:.2f} m lies {below - T[2, 3]:.2f} m below the surface "
+                    f"of region {region.id}: inside an obstacle"
+                )

@@ -1,0 +1,105 @@
+"""The one verification every placement method uses before it returns a pose (seed 000 Alg. 2).
+
+A candidate base pose is accepted only if (1) its footprint lies inside the polygon of its
+planar region (when it has one), (2) IK reaches every target from it, and (3) the whole robot at
+each IK configuration is free of self-collision and of the obstacle voxels.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+from shapely.geometry import MultiPolygon, Polygon
+
+from baseplace.geometry.poses import FloatArray, invert_transforms
+from baseplace.robots.ik import IKSolver
+from baseplace.robots.model import Arm
+from baseplace.terrain.polygons import footprint_inside
+from baseplace.world.environment import Environment
+
+Failure = Literal["footprint", "no_ik", "collision", "exhausted"]
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A base pose proposed by a strategy, not yet verified.
+
+    Attributes:
+        T_world_base: (4, 4) pose.
+        region: planar region id it stands on, or -1 (flat floor baselines).
+        reachability: the map's value for it (0 when the strategy does not use the map).
+    """
+
+    T_world_base: FloatArray
+    region: int
+    reachability: float
+
+
+@dataclass(frozen=True)
+class Placement:
+    """A verified placement.
+
+    Attributes:
+        T_world_base: (4, 4) base pose.
+        region: planar region id, or -1.
+        reachability: the map's value at the pose.
+        joints: per target, the arm joint values (n,) that reach it.
+        joint_names: names of those joints.
+    """
+
+    T_world_base: FloatArray
+    region: int
+    reachability: float
+    joints: list[FloatArray]
+    joint_names: tuple[str, ...]
+
+    @property
+    def yaw(self) -> float:
+        """Heading of the base x axis projected on the xy plane [rad]."""
+        return float(np.arctan2(self.T_world_base[1, 0], self.T_world_base[0, 0]))
+
+
+@dataclass
+class Verifier:
+    """Checks candidates; counts why the rejected ones failed.
+
+    Attributes:
+        arm: the arm that must reach the targets.
+        ik: the IK solver.
+        environment: obstacle collision checker.
+        targets: (K, 4, 4) world targets.
+        polygons: region id -> polygon, for the footprint test.
+        outline: (F, 2) footprint in the base frame.
+        failures: counts per failure reason.
+    """
+
+    arm: Arm
+    ik: IKSolver
+    environment: Environment
+    targets: FloatArray
+    polygons: dict[int, Polygon | MultiPolygon]
+    outline: FloatArray
+    failures: Counter[str] = field(default_factory=Counter)
+
+    def check(self, candidate: Candidate, rng: np.random.Generator) -> Placement | None:
+        """The verified placement, or None (the reason is counted in ``failures``)."""
+        T = candidate.T_world_base
+        if candidate.region >= 0 and not footprint_inside(self.polygons[candidate.region], self.outline, T):
+            self.failures["footprint"] += 1
+            return None
+        T_base_world = invert_transforms(T)
+        joints = []
+        for target in self.targets:
+            q = self.ik.solve(T_base_world @ target, rng)
+            if q is None:
+                self.failures["no_ik"] += 1
+                return None
+            joints.append(q)
+        for q in joints:
+            if self.environment.colliding_arm(self.arm, q, T):
+                self.failures["collision"] += 1
+                return None
+        return Placement(T.copy(), candidate.region, candidate.reachability, joints, self.arm.joint_names)

@@ -1,0 +1,96 @@
+"""Whole-robot collision checks against the environment (seed 000, Algorithm 2).
+
+The obstacles are the occupied voxels without the support voxels: a voxel is support when its
+cell belongs to a planar region and its centre lies within ``support_dist`` of that region's plane
+(seed 000 V: "remove all voxels ... that belong to a planar region"). The rest go into a coal
+OcTree, checked against every collision mesh of the robot, together with self-collision.
+"""
+
+from __future__ import annotations
+
+import coal
+import numpy as np
+import pinocchio as pin
+from numpy.typing import ArrayLike, NDArray
+
+from baseplace.errors import InputError
+from baseplace.robots.collision import SelfCollision
+from baseplace.robots.model import Arm, Robot
+from baseplace.terrain.segmentation import Segmentation
+from baseplace.terrain.voxels import VoxelMap
+
+
+def obstacle_voxels(voxels: VoxelMap, seg: Segmentation, support_dist: float = 0.08) -> VoxelMap:
+    """The voxels that are obstacles: all but those lying on the plane of their cell's region."""
+    centres = voxels.centres
+    region = seg.region_at(centres[:, :2])
+    support = np.zeros(len(centres), dtype=bool)
+    for r in seg.regions:
+        sel = region == r.id
+        support[sel] = np.abs(centres[sel] @ r.normal + r.d) <= support_dist
+    return voxels.without(support)
+
+
+class Environment:
+    """Collision checks of the whole robot, placed in the world, against obstacle voxels.
+
+    Args:
+        robot: the robot.
+        obstacles: obstacle voxels in the world frame (see :func:`obstacle_voxels`).
+        self_collision: also check self-collision (default True).
+    """
+
+    def __init__(self, robot: Robot, obstacles: VoxelMap, self_collision: bool = True) -> None:
+        self.robot = robot
+        self.model = robot.model
+        self._self = SelfCollision(robot) if self_collision else None
+        base_geom = self._self.geom if self._self is not None else None
+        if base_geom is None:
+            from baseplace.robots.collision import load_collision_model
+
+            base_geom = load_collision_model(robot)
+        self.geom = base_geom.copy()
+        self.geom.removeAllCollisionPairs()
+        n_robot = self.geom.ngeoms
+        if len(obstacles) == 0:
+            self.env_id = None
+        else:
+            tree = coal.makeOctree(np.ascontiguousarray(obstacles.centres), obstacles.resolution)
+            self.env_id = self.geom.addGeometryObject(
+                pin.GeometryObject("environment", 0, pin.SE3.Identity(), tree)
+            )
+            for k in range(n_robot):
+                self.geom.addCollisionPair(pin.CollisionPair(k, self.env_id))
+        self.data = self.model.createData()
+        self.geom_data = pin.GeometryData(self.geom)
+        ref = self.model.createData()
+        pin.framesForwardKinematics(self.model, ref, robot.q_reference)
+        self._T_root_base = ref.oMf[self.model.getFrameId(robot.spec.base_frame)]
+
+    def colliding(self, q_full: ArrayLike, T_world_base: ArrayLike) -> bool:
+        """True if the robot touches an obstacle voxel or itself.
+
+        Args:
+            q_full: full pinocchio configuration.
+            T_world_base: (4, 4) base pose in the world.
+        """
+        q = np.asarray(q_full, dtype=float)
+        if self._self is not None and self._self.colliding(q):
+            return True
+        if self.env_id is None:
+            return False
+        T = np.asarray(T_world_base, dtype=float)
+        if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+            raise InputError("base pose must be a finite (4, 4) matrix")
+        T_root_world = self._T_root_base * pin.SE3(T).inverse()
+        self.geom.geometryObjects[self.env_id].placement = T_root_world
+        return bool(pin.computeCollisions(self.model, self.data, self.geom, self.geom_data, q, True))
+
+    def colliding_arm(self, arm: Arm, q_arm: ArrayLike, T_world_base: ArrayLike) -> bool:
+        """:meth:`colliding` for arm joint values (n,), other joints at their reference values."""
+        return self.colliding(arm.to_pinocchio(q_arm, self.robot.q_reference), T_world_base)
+
+
+def points_of(voxels: VoxelMap) -> NDArray[np.float64]:
+    """Voxel centres (M, 3), for plotting."""
+    return voxels.centres
