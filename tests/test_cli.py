@@ -244,3 +244,54 @@ def test_segment_bad_arguments(tmp_path):
         run("scene", "generate", "--size-class", "huge", "--out", str(tmp_path / "s.ply")), 2
     )
     assert_one_line_error(run("segment", str(tmp_path / "missing.pcd")), 2, "does not exist")
+
+
+def test_place_command(tmp_path):
+    cloud = tmp_path / "flat.ply"
+    assert (
+        run(
+            "scene",
+            "generate",
+            "--planes",
+            "0",
+            "--no-box",
+            "--extent",
+            "6",
+            "--seed",
+            "2",
+            "--out",
+            str(cloud),
+        ).returncode
+        == 0
+    )
+    map_file = tmp_path / "tiago.rmap"
+    assert run("build-map", "--samples", "5e6", "--out", str(map_file)).returncode == 0
+    png = tmp_path / "place.png"
+    target = "1.0 0.5 0.75 0 1.5708 0"
+    proc = run("place", "--cloud", str(cloud), "--target", target, "--map", str(map_file), "--placements", "2",
+               "--tries", "200", "--out", str(png), "--json")  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout)
+    assert out["robot"]["tcp_frames"] == {"arm": "arm_tool_link"} and len(out["placements"]) == 2
+    placement = out["placements"][0]
+    assert set(placement) >= {"base_pose", "x", "y", "z", "yaw", "region", "reachability", "joints"}
+    assert set(out["timings_ms"]) >= {"segmentation", "osrm", "query", "total"}
+    assert len(placement["joints"]) == 1 and "arm_1_joint" in placement["joints"][0]
+    assert png.stat().st_size > 5000
+    # Unreachable (3.5 m up): exit 3 with the failure counts.
+    proc = run(
+        "place",
+        "--cloud",
+        str(cloud),
+        "--target",
+        "1.0 0.5 3.5 0 0 0",
+        "--map",
+        str(map_file),
+        "--tries",
+        "20",
+    )
+    assert_one_line_error(proc, 3, "no verified placement", "failures")
+    # A map of another robot is refused.
+    assert_one_line_error(run("place", "--robot", "pr2", "--cloud", str(cloud), "--target", target, "--map",
+                              str(map_file)), 2, "built for robot 'tiago'")  # fmt: skip
+    assert_one_line_error(run("place", "--cloud", str(cloud), "--map", str(map_file)), 2, "--target")

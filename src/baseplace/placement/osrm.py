@@ -35,6 +35,7 @@ class OSRM:
         targets: (K, 4, 4) world targets.
         near: (H, W) region cells within arm reach of every target (whether or not the footprint fits).
         reach: the horizontal reach used [m].
+        fits: (H, W) cells within reach where the footprint fits at some orientation.
         build_ms: construction time [ms].
     """
 
@@ -44,6 +45,7 @@ class OSRM:
     targets: FloatArray
     near: NDArray[np.bool_]
     reach: float
+    fits: NDArray[np.bool_]
     build_ms: float
 
     @property
@@ -127,6 +129,7 @@ def build_osrm(
     for T in targets:
         near &= np.hypot(X - T[0, 3], Y - T[1, 3]) <= reach
     near &= seg.labels >= 0
+    fits_any = np.zeros((h, w), dtype=bool)
     kernels = [footprint_kernel(outline, g, hmap.resolution) for g in gammas]
     for r in seg.regions:
         mask = (seg.labels == r.id).astype(np.uint8)
@@ -135,6 +138,7 @@ def build_osrm(
             continue
         rows, cols = np.nonzero(cand)
         fits = np.stack([cv2.erode(mask, k, borderValue=0)[rows, cols] > 0 for k in kernels], axis=1)
+        fits_any[rows, cols] = fits.any(axis=1)
         sel_cell, sel_gamma = np.nonzero(fits)
         if len(sel_cell) == 0:
             continue
@@ -142,4 +146,4 @@ def build_osrm(
                                  gammas[sel_gamma], r.normal, r.d)  # fmt: skip
         values[rows[sel_cell], cols[sel_cell], sel_gamma] = inverse_reachability(query, targets, poses)
     build_ms = (time.perf_counter() - start) * 1e3
-    return OSRM(seg, values, gammas, np.asarray(targets, dtype=float), near, reach, build_ms)
+    return OSRM(seg, values, gammas, np.asarray(targets, dtype=float), near, reach, fits_any, build_ms)

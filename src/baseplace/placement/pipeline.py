@@ -116,6 +116,12 @@ def place(
         raise InputError(
             f"no planar region lies within the arm's reach ({rmap.horizontal_reach:.2f} m) of every target"
         )
+    if not osrm.fits.any():
+        size = robot.spec.footprint_bounding_radius
+        raise InputError(
+            f"no planar region within reach of the targets is large enough for the robot's footprint "
+            f"(bounding radius {size:.2f} m)"
+        )
     t2 = time.perf_counter()
     env = Environment(robot, _obstacles(terrain, seg, s))
     arm = robot.arm(rmap.info.arm)

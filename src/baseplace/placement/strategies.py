@@ -89,7 +89,9 @@ class ToObject:
 
     def _cells(self, osrm: OSRM) -> tuple[np.ndarray, np.ndarray]:
         summed = np.where(_deviation(osrm) <= self.gamma_max, osrm.values, 0).sum(axis=2)
-        rows, cols = np.nonzero(summed > self.threshold * float(summed.max()) if summed.max() > 0 else summed > 0)
+        rows, cols = np.nonzero(
+            summed > self.threshold * float(summed.max()) if summed.max() > 0 else summed > 0
+        )
         return rows, cols
 
     def candidates(
