@@ -124,3 +124,16 @@ def test_self_collision_drops_samples(tiago):
     m = build_map(tiago, None, BuildSettings(samples=400, self_collision=True, seed=2))
     assert 0 < m.info.dropped_self_collision < 400
     assert int(m.counts.sum()) == 400 - m.info.dropped_self_collision
+
+
+def test_fused_plane_lookup_equals_explicit_poses(tiago_map, rng):
+    # The fused kernel against the plain path: build the poses, then the generic inverse lookup.
+    target = np.eye(4)
+    target[:3, 3] = [0.6, 0.3, 0.9]
+    n = np.array([0.1, -0.05, 1.0])
+    xy = rng.uniform(-1.0, 1.5, (5000, 2))
+    gamma = rng.uniform(-np.pi, np.pi, 5000)
+    fused = tiago_map.inverse_on_plane(target, xy, gamma, n, -0.3)
+    explicit = tiago_map.inverse(target, plane_base_poses(xy[:, 0], xy[:, 1], gamma, n, -0.3))
+    np.testing.assert_array_equal(fused, explicit)
+    assert (fused > 0).sum() > 50

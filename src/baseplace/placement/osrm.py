@@ -19,8 +19,8 @@ from numpy.typing import NDArray
 
 from baseplace.geometry.poses import FloatArray
 from baseplace.geometry.surface_poses import plane_base_poses, plane_frame
-from baseplace.reachability.rmap import ReachabilityQuery, inverse_reachability
-from baseplace.terrain.segmentation import Segmentation
+from baseplace.reachability.rmap import ReachabilityMap, ReachabilityQuery, inverse_reachability
+from baseplace.terrain.segmentation import PlanarRegion, Segmentation
 
 
 @dataclass(frozen=True)
@@ -83,6 +83,23 @@ class OSRM:
         return out
 
 
+def footprint_kernels(outline: FloatArray, gammas: FloatArray, resolution: float) -> list[NDArray[np.uint8]]:
+    """Erosion kernels of the footprint at every orientation (cached: they depend on nothing else)."""
+    key = (
+        np.asarray(outline, dtype=float).tobytes(),
+        np.asarray(gammas, dtype=float).tobytes(),
+        float(resolution),
+    )
+    if key not in _KERNELS:
+        if len(_KERNELS) > 32:
+            _KERNELS.clear()
+        _KERNELS[key] = [footprint_kernel(outline, float(g), resolution) for g in gammas]
+    return _KERNELS[key]
+
+
+_KERNELS: dict[tuple[bytes, bytes, float], list[NDArray[np.uint8]]] = {}
+
+
 def footprint_kernel(outline: FloatArray, gamma: float, resolution: float) -> NDArray[np.uint8]:
     """The footprint (K, 2) [m] rotated by gamma, rasterized as an erosion kernel in cells.
 
@@ -99,6 +116,19 @@ def footprint_kernel(outline: FloatArray, gamma: float, resolution: float) -> ND
     cv2.fillPoly(img, [poly], 1)
     img = cv2.dilate(img, np.ones((scale // 2 * 2 + 1, scale // 2 * 2 + 1), np.uint8))
     return (img.reshape(size, scale, size, scale).max(axis=(1, 3)) > 0).astype(np.uint8)
+
+
+def _plane_values(
+    query: ReachabilityQuery, targets: FloatArray, xy: FloatArray, gammas: FloatArray, region: PlanarRegion
+) -> NDArray[np.float32]:
+    """Min over targets of the IRM values of plane-constrained poses; fused when the map allows."""
+    if isinstance(query, ReachabilityMap):
+        value = np.ones(len(xy), dtype=np.float32)
+        for T in targets:
+            np.minimum(value, query.inverse_on_plane(T, xy, gammas, region.normal, region.d), out=value)
+        return value
+    poses = plane_base_poses(xy[:, 0], xy[:, 1], gammas, region.normal, region.d)
+    return inverse_reachability(query, targets, poses)
 
 
 def build_osrm(
@@ -130,20 +160,30 @@ def build_osrm(
         near &= np.hypot(X - T[0, 3], Y - T[1, 3]) <= reach
     near &= seg.labels >= 0
     fits_any = np.zeros((h, w), dtype=bool)
-    kernels = [footprint_kernel(outline, g, hmap.resolution) for g in gammas]
+    kernels = footprint_kernels(outline, gammas, hmap.resolution)
+    distinct: dict[bytes, int] = {}  # a disc footprint has one kernel for all orientations
+    kernel_of = [distinct.setdefault(k.tobytes() + bytes(k.shape), i) for i, k in enumerate(kernels)]
+    pad = max(k.shape[0] for k in kernels)
     for r in seg.regions:
-        mask = (seg.labels == r.id).astype(np.uint8)
-        cand = mask.astype(bool) & near
+        cand = (seg.labels == r.id) & near
         if not cand.any():
             continue
         rows, cols = np.nonzero(cand)
-        fits = np.stack([cv2.erode(mask, k, borderValue=0)[rows, cols] > 0 for k in kernels], axis=1)
+        # Erode only the window around the candidate cells (plus the kernel's reach).
+        r0, r1 = max(rows.min() - pad, 0), min(rows.max() + pad + 1, h)
+        c0, c1 = max(cols.min() - pad, 0), min(cols.max() + pad + 1, w)
+        mask = (seg.labels[r0:r1, c0:c1] == r.id).astype(np.uint8)
+        eroded = {
+            i: cv2.erode(mask, kernels[i], borderValue=0)[rows - r0, cols - c0] > 0 for i in set(kernel_of)
+        }
+        fits = np.stack([eroded[i] for i in kernel_of], axis=1)
         fits_any[rows, cols] = fits.any(axis=1)
         sel_cell, sel_gamma = np.nonzero(fits)
         if len(sel_cell) == 0:
             continue
-        poses = plane_base_poses(X[rows[sel_cell], cols[sel_cell]], Y[rows[sel_cell], cols[sel_cell]],
-                                 gammas[sel_gamma], r.normal, r.d)  # fmt: skip
-        values[rows[sel_cell], cols[sel_cell], sel_gamma] = inverse_reachability(query, targets, poses)
+        xy = np.c_[X[rows[sel_cell], cols[sel_cell]], Y[rows[sel_cell], cols[sel_cell]]]
+        values[rows[sel_cell], cols[sel_cell], sel_gamma] = _plane_values(
+            query, targets, xy, gammas[sel_gamma], r
+        )
     build_ms = (time.perf_counter() - start) * 1e3
     return OSRM(seg, values, gammas, np.asarray(targets, dtype=float), near, reach, fits_any, build_ms)

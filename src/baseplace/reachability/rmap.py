@@ -143,6 +143,34 @@ class ReachabilityMap:
         _lookup_batch(target[0], bases, True, *self.grid.params, offset, blocks, out)
         return out
 
+    def inverse_on_plane(
+        self, T_world_target: ArrayLike, xy: ArrayLike, gamma: ArrayLike, normal: ArrayLike, d: float
+    ) -> NDArray[np.float32]:
+        """:meth:`inverse` for plane-constrained base poses (seed 000 III-A), without building them.
+
+        Args:
+            T_world_target: (4, 4) world target.
+            xy: (N, 2) base positions [m]; z follows the plane.
+            gamma: (N,) rotations about the plane normal [rad].
+            normal: (3,) upward plane normal.
+            d: offset of the plane ``n . p + d = 0`` [m].
+
+        Returns:
+            (N,) the same values as ``inverse(T_world_target, plane_base_poses(...))``.
+        """
+        from baseplace.geometry.surface_poses import plane_frame
+
+        target = _poses(T_world_target, "T_world_target")[0]
+        R0 = plane_frame(normal)
+        n = R0[:, 2]
+        d_unit = float(d) / float(np.linalg.norm(np.asarray(normal, dtype=float)))
+        p = np.ascontiguousarray(np.asarray(xy, dtype=np.float64).reshape(-1, 2))
+        g = np.ascontiguousarray(np.asarray(gamma, dtype=np.float64).ravel())
+        out = np.empty(len(p), dtype=np.float32)
+        offset, blocks = self.tables
+        _lookup_plane(target, p, g, R0, n, d_unit, *self.grid.params, offset, blocks, out)
+        return out
+
 
 class ReachabilityQuery(Protocol):
     """Anything that scores world base poses for a world target: higher is more reachable."""
@@ -208,26 +236,59 @@ def _poses(T: ArrayLike, name: str) -> FloatArray:
 
 
 @nb.njit(cache=True, parallel=True)
+def _lookup_plane(
+    T_wt, xy, gamma, R0, n, d, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset, blocks, out
+):
+    n_orient = blocks.shape[1]
+    for i in nb.prange(xy.shape[0]):
+        c, s = math.cos(gamma[i]), math.sin(gamma[i])
+        B = np.empty((3, 4))
+        for a in range(3):  # R = R0 Rz(gamma): x' = c x0 + s y0, y' = -s x0 + c y0, z' = n
+            B[a, 0] = c * R0[a, 0] + s * R0[a, 1]
+            B[a, 1] = -s * R0[a, 0] + c * R0[a, 1]
+            B[a, 2] = R0[a, 2]
+        B[0, 3] = xy[i, 0]
+        B[1, 3] = xy[i, 1]
+        B[2, 3] = -(d + n[0] * xy[i, 0] + n[1] * xy[i, 1]) / n[2]
+        out[i] = _lookup_inverse(
+            T_wt, B, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset, blocks, n_orient
+        )
+
+
+@nb.njit(cache=True, inline="always")
+def _lookup_inverse(T_wt, B, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset, blocks, n_orient):
+    """Value of ``inv(B) @ T_wt`` for a base pose B (rows 0-2 of a 4x4)."""
+    R = np.empty((3, 3))
+    dx, dy, dz = T_wt[0, 3] - B[0, 3], T_wt[1, 3] - B[1, 3], T_wt[2, 3] - B[2, 3]
+    px = B[0, 0] * dx + B[1, 0] * dy + B[2, 0] * dz
+    py = B[0, 1] * dx + B[1, 1] * dy + B[2, 1] * dz
+    pz = B[0, 2] * dx + B[1, 2] * dy + B[2, 2] * dz
+    for a in range(3):
+        for b in range(3):
+            R[a, b] = B[0, a] * T_wt[0, b] + B[1, a] * T_wt[1, b] + B[2, a] * T_wt[2, b]
+    c = cell_of(R, px, py, pz, origin, voxel_size, shape, nside, n_twist, pixel_phi)
+    if c < 0:
+        return 0.0
+    row = offset[c // n_orient]
+    return 0.0 if row < 0 else blocks[row, c % n_orient]
+
+
+@nb.njit(cache=True, parallel=True)
 def _lookup_batch(T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist, pixel_phi,
                   offset, blocks, out):  # fmt: skip
     n_orient = blocks.shape[1]
     for i in nb.prange(T_wb.shape[0]):
         B = T_wb[i]
+        if invert:  # T_base_tcp = B^-1 T_wt
+            out[i] = _lookup_inverse(
+                T_wt, B, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset, blocks, n_orient
+            )
+            continue
         R = np.empty((3, 3))
-        if invert:  # T_base_tcp = B^-1 T_wt: R = B_R^T T_R, p = B_R^T (T_p - B_p)
-            dx, dy, dz = T_wt[0, 3] - B[0, 3], T_wt[1, 3] - B[1, 3], T_wt[2, 3] - B[2, 3]
-            px = B[0, 0] * dx + B[1, 0] * dy + B[2, 0] * dz
-            py = B[0, 1] * dx + B[1, 1] * dy + B[2, 1] * dz
-            pz = B[0, 2] * dx + B[1, 2] * dy + B[2, 2] * dz
-            for a in range(3):
-                for b in range(3):
-                    R[a, b] = B[0, a] * T_wt[0, b] + B[1, a] * T_wt[1, b] + B[2, a] * T_wt[2, b]
-        else:
-            px, py, pz = B[0, 3], B[1, 3], B[2, 3]
-            for a in range(3):
-                for b in range(3):
-                    R[a, b] = B[a, b]
-        c = cell_of(R, px, py, pz, origin, voxel_size, shape, nside, n_twist, pixel_phi)
+        for a in range(3):
+            for b in range(3):
+                R[a, b] = B[a, b]
+        c = cell_of(R, B[0, 3], B[1, 3], B[2, 3], origin, voxel_size, shape, nside, n_twist, pixel_phi)
         if c < 0:
             out[i] = 0.0
             continue

@@ -98,15 +98,14 @@ class SelfCollision:
         """
         if arm.name not in self._arm_data:
             arm_ids = [self.model.getJointId(j) for j in arm.joint_names]
-            objects = self.geom.geometryObjects
-
-            def group(geom_id: int) -> int:
-                supports = set(self.model.supports[objects[geom_id].parentJoint])
-                return max((i for i, j in enumerate(arm_ids) if j in supports), default=-1)
-
+            group_of_joint = {}
+            for joint in range(self.model.njoints):
+                supports = set(self.model.supports[joint])
+                group_of_joint[joint] = max((i for i, j in enumerate(arm_ids) if j in supports), default=-1)
+            group = [group_of_joint[g.parentJoint] for g in self.geom.geometryObjects]
             geom_data = pin.GeometryData(self.geom)
             for k, pair in enumerate(self.geom.collisionPairs):
-                if group(pair.first) == group(pair.second):
+                if group[pair.first] == group[pair.second]:
                     geom_data.deactivateCollisionPair(k)
             self._arm_data[arm.name] = geom_data
         return self._arm_data[arm.name]

@@ -63,6 +63,9 @@ class Environment:
                 self.geom.addCollisionPair(pin.CollisionPair(k, self.env_id))
         self.data = self.model.createData()
         self.geom_data = pin.GeometryData(self.geom)
+        if self._self is not None:  # build the arm-pruned pair tables now, not in the first query
+            for arm_name in robot.spec.arms:
+                self._self.colliding_arm(robot.arm(arm_name), robot.arm(arm_name).lower)
         ref = self.model.createData()
         pin.framesForwardKinematics(self.model, ref, robot.q_reference)
         self._T_root_base = ref.oMf[self.model.getFrameId(robot.spec.base_frame)]
@@ -77,6 +80,9 @@ class Environment:
         q = np.asarray(q_full, dtype=float)
         if self._self is not None and self._self.colliding(q):
             return True
+        return self._touches_obstacles(q, T_world_base)
+
+    def _touches_obstacles(self, q: NDArray[np.float64], T_world_base: ArrayLike) -> bool:
         if self.env_id is None:
             return False
         T = np.asarray(T_world_base, dtype=float)
@@ -87,8 +93,14 @@ class Environment:
         return bool(pin.computeCollisions(self.model, self.data, self.geom, self.geom_data, q, True))
 
     def colliding_arm(self, arm: Arm, q_arm: ArrayLike, T_world_base: ArrayLike) -> bool:
-        """:meth:`colliding` for arm joint values (n,), other joints at their reference values."""
-        return self.colliding(arm.to_pinocchio(q_arm, self.robot.q_reference), T_world_base)
+        """:meth:`colliding` for arm joint values (n,), other joints at their reference values.
+
+        Self-collision uses only the pairs the arm can move relative to each other (exact here,
+        since every other joint stays at its reference value).
+        """
+        if self._self is not None and self._self.colliding_arm(arm, q_arm)[0]:
+            return True
+        return self._touches_obstacles(arm.to_pinocchio(q_arm, self.robot.q_reference), T_world_base)
 
 
 def points_of(voxels: VoxelMap) -> NDArray[np.float64]:
