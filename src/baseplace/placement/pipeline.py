@@ -87,6 +87,7 @@ def place(
     settings: PlaceSettings | None = None,
     rng: np.random.Generator | None = None,
     terrain: Terrain | None = None,
+    environments: dict[str, Environment] | None = None,
 ) -> PlacementResult:
     """Find verified base placements from which the map's arm reaches every target.
 
@@ -98,6 +99,8 @@ def place(
         settings: search settings.
         rng: randomness (default: seed 0).
         terrain: a segmentation of the same cloud to reuse (skips segmentation).
+        environments: a cache of collision environments for this terrain, filled on first use
+            (repeated queries in one scene then skip building the obstacle OcTree).
     """
     s = settings or PlaceSettings()
     rng = rng or np.random.default_rng(0)
@@ -123,7 +126,11 @@ def place(
             f"(bounding radius {size:.2f} m)"
         )
     t2 = time.perf_counter()
-    env = Environment(robot, _obstacles(terrain, seg, s))
+    key = "floor" if s.strategy == "orm" else "regions"
+    cache = environments if environments is not None else {}
+    if key not in cache:
+        cache[key] = Environment(robot, _obstacles(terrain, seg, s))
+    env = cache[key]
     arm = robot.arm(rmap.info.arm)
     verifier = Verifier(arm, DampedLeastSquaresIK(arm), env, T_targets,
                         {r.id: terrain.graph.nodes[r.id]["polygon"] for r in seg.regions}, outline)  # fmt: skip

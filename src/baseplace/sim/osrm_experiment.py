@@ -1,0 +1,209 @@
+"""Seed 000's placement experiments (Tables I and II, Fig. 5) on generated scenes.
+
+For each scene class (flat, and {small, medium, large} x {2, 4} planes), scenes are generated
+with a box of objects; grasp candidates are top-down poses on the objects. Ground truth, as in
+seed 000 VI: a grasp is *reachable* if IK solves it from some base pose on a grid around it that
+stands on a true surface with its footprint clear of other planes and the box (the true scene,
+not the segmentation, and not the reachability map). For every reachable grasp each strategy
+runs Algorithm 2 on the noisy cloud; reported: success %, t_RM (OSRM), t_a (all queries), t_s
+(successful queries) and the failure reasons.
+
+Status: the runner and its ground-truth oracle are tested; the experiment's grasp definition is
+still being fitted to TIAGo (its hand reaches ~0.2 m past ``arm_tool_link``), so no table has been
+published from it yet.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import shapely
+from shapely.geometry import Polygon
+
+from baseplace.errors import BaseplaceError
+from baseplace.geometry.poses import FloatArray, invert_transforms, pose_from_xyz_rpy
+from baseplace.geometry.surface_poses import plane_base_poses
+from baseplace.placement.pipeline import PlaceSettings, place
+from baseplace.reachability.rmap import ReachabilityMap
+from baseplace.robots.ik import DampedLeastSquaresIK
+from baseplace.robots.model import Robot
+from baseplace.sim.scenes import Scene, SceneSettings, generate_scene
+from baseplace.terrain.pipeline import terrain_from_points
+
+SCENE_CLASSES = (
+    ("flat", 0),
+    ("small", 2),
+    ("small", 4),
+    ("medium", 2),
+    ("medium", 4),
+    ("large", 2),
+    ("large", 4),
+)
+PAPER = {  # seed 000 Tables I and II: success rate [%]
+    ("flat", 0): {"orm": 89.0, "TO": 87.1, "MR": 97.5, "MRTO": 94.6},
+    ("small", 2): {"TO": 72.7, "MR": 87.8, "MRTO": 84.1}, ("small", 4): {"TO": 55.8, "MR": 77.9, "MRTO": 80.4},
+    ("medium", 2): {"TO": 74.1, "MR": 88.5, "MRTO": 87.0}, ("medium", 4): {"TO": 64.6, "MR": 86.1, "MRTO": 81.8},
+    ("large", 2): {"TO": 67.7, "MR": 85.8, "MRTO": 80.3}, ("large", 4): {"TO": 61.6, "MR": 82.3, "MRTO": 80.7},
+}  # fmt: skip
+
+
+def grasp_candidates(
+    scene: Scene, rng: np.random.Generator, count: int, clearance: tuple[float, float] = (0.05, 0.25)
+) -> FloatArray:
+    """(count, 4, 4) top-down pre-grasps above the scene's objects: random yaw, tilt up to 20 deg.
+
+    The TCP stands ``clearance`` above the box rim, over an object: a TIAGo-sized arm cannot reach
+    into a 0.3 m box on the floor (seed 000's ARMAR-6 is a much larger robot).
+    """
+    if not scene.objects:
+        return np.zeros((0, 4, 4))
+    out = np.empty((count, 4, 4))
+    for k in range(count):
+        obj = scene.objects[int(rng.integers(len(scene.objects)))]
+        offset = rng.uniform(-0.5, 0.5, 2) * obj.radius
+        rim = scene.box.size[2] if scene.box is not None else obj.top
+        z = rim + rng.uniform(*clearance)
+        tilt = rng.uniform(0.0, math.radians(20))
+        out[k] = pose_from_xyz_rpy([obj.center[0] + offset[0], obj.center[1] + offset[1], z,
+                                    tilt, math.pi / 2, rng.uniform(-math.pi, math.pi)])  # fmt: skip
+    return out
+
+
+@dataclass
+class _Tally:
+    """Per strategy: queries, successes, timings [ms] and failure reasons."""
+
+    n: int = 0
+    ok: int = 0
+    t_rm: list[float] = field(default_factory=list)
+    t_a: list[float] = field(default_factory=list)
+    t_s: list[float] = field(default_factory=list)
+    failures: Counter[str] = field(default_factory=Counter)
+
+
+@dataclass(frozen=True)
+class GroundTruth:
+    """IK over a grid of valid base poses on the true surfaces.
+
+    Attributes:
+        grid: spacing of base positions [m].
+        orientations: base headings per position.
+        restarts: IK restarts per pose.
+    """
+
+    grid: float = 0.1
+    orientations: int = 12
+    restarts: int = 4
+
+    def reachable(self, robot: Robot, rmap: ReachabilityMap, scene: Scene, grasp: FloatArray,
+                  rng: np.random.Generator) -> bool:  # fmt: skip
+        """True if IK reaches ``grasp`` from some valid base pose (closest poses first)."""
+        arm = robot.arm(rmap.info.arm)
+        reach = rmap.horizontal_reach
+        g = np.arange(-reach, reach + 1e-9, self.grid)
+        X, Y = np.meshgrid(grasp[0, 3] + g, grasp[1, 3] + g)
+        xy = np.c_[X.ravel(), Y.ravel()]
+        xy = xy[np.hypot(xy[:, 0] - grasp[0, 3], xy[:, 1] - grasp[1, 3]) <= reach]
+        xy = xy[np.argsort(np.hypot(xy[:, 0] - grasp[0, 3], xy[:, 1] - grasp[1, 3]))]
+        ids = scene.surface_id(xy)
+        radius = robot.spec.footprint_bounding_radius
+        points = shapely.points(xy)
+        valid = np.zeros(len(xy), dtype=bool)
+        others = [Polygon(p.polygon) for p in scene.planes[1:]]
+        if scene.box is not None:
+            others.append(Polygon(scene.box.polygon))
+        for plane in scene.planes:
+            sel = ids == plane.id
+            if plane.id == 0:  # the floor: clear of every plane and the box
+                ok = np.ones(sel.sum(), dtype=bool)
+                for poly in others:
+                    ok &= shapely.distance(poly, points[sel]) > radius
+            else:
+                ok = shapely.distance(Polygon(plane.polygon).exterior, points[sel]) >= radius
+            valid[np.flatnonzero(sel)[ok]] = True
+        ik = DampedLeastSquaresIK(arm, restarts=self.restarts)
+        gammas = np.arange(self.orientations) * (2 * math.pi / self.orientations)
+        for start in range(0, int(valid.sum()), 24):
+            chunk = xy[valid][start : start + 24]
+            chunk_ids = ids[valid][start : start + 24]
+            poses = []
+            for (x, y), pid in zip(chunk, chunk_ids, strict=True):
+                plane = scene.planes[int(pid)]
+                poses.append(plane_base_poses(np.full(len(gammas), x), np.full(len(gammas), y), gammas,
+                                              plane.normal, plane.d))  # fmt: skip
+            T = invert_transforms(np.concatenate(poses)) @ grasp
+            _, ok = ik.solve_batch(T, rng)
+            if ok.any():
+                return True
+        return False
+
+
+def run_osrm_experiment(
+    robot: Robot,
+    rmap: ReachabilityMap,
+    scenes_per_class: int = 10,
+    grasps_per_scene: int = 50,
+    seed: int = 0,
+    classes: tuple[tuple[str, int], ...] = SCENE_CLASSES,
+    tries: int = 100,
+    progress: Any = None,
+) -> dict[str, Any]:
+    """Table I and II rows: per scene class and strategy, success and timing over reachable grasps."""
+    rows = []
+    truth = GroundTruth()
+    for class_index, (size_class, n_planes) in enumerate(classes):
+        strategies = ("orm", "TO", "MR", "MRTO") if n_planes == 0 else ("TO", "MR", "MRTO")
+        stats = {name: _Tally() for name in strategies}
+        grasps_total = reachable_total = 0
+        for k in range(scenes_per_class):
+            rng = np.random.default_rng([seed, class_index, k])
+            settings = SceneSettings(
+                size_class="small" if size_class == "flat" else size_class, n_planes=n_planes
+            )
+            scene = generate_scene(settings, rng)
+            points = scene.sample_cloud(rng)
+            terrain = terrain_from_points(points)
+            environments: dict[str, Any] = {}
+            for grasp in grasp_candidates(scene, rng, grasps_per_scene):
+                grasps_total += 1
+                if not truth.reachable(robot, rmap, scene, grasp, rng):
+                    continue
+                reachable_total += 1
+                for name in strategies:
+                    st = stats[name]
+                    st.n += 1
+                    try:
+                        res = place(robot, rmap, points, grasp, PlaceSettings(strategy=name, tries=tries),
+                                    np.random.default_rng([seed, class_index, k, st.n]), terrain=terrain,
+                                    environments=environments)  # fmt: skip
+                    except BaseplaceError as exc:  # e.g. no region in reach: a failure of that query
+                        st.failures[type(exc).__name__] += 1
+                        continue
+                    st.t_rm.append(res.timings_ms["osrm"])
+                    st.t_a.append(res.timings_ms["query"])
+                    st.failures.update(res.failures)
+                    if res.placements:
+                        st.ok += 1
+                        st.t_s.append(res.timings_ms["query"])
+            if progress is not None:
+                progress(1)
+        for name in strategies:
+            st = stats[name]
+            rows.append({
+                "scene": "flat" if n_planes == 0 else f"{size_class} {n_planes} planes",
+                "strategy": name, "scenes": scenes_per_class, "grasps": grasps_total,
+                "reachable_grasps": reachable_total,
+                "success_rate": round(100 * st.ok / st.n, 1) if st.n else None,
+                "paper_success_rate": PAPER.get((size_class, n_planes), {}).get(name),
+                "t_RM_ms": _mean_std(st.t_rm), "t_a_ms": _mean_std(st.t_a), "t_s_ms": _mean_std(st.t_s),
+                "failures": dict(st.failures),
+            })  # fmt: skip
+    return {"rows": rows, "tries": tries, "seed": seed}
+
+
+def _mean_std(values: list[float]) -> list[float] | None:
+    return [round(float(np.mean(values)), 1), round(float(np.std(values)), 1)] if values else None

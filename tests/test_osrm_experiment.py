@@ -1,0 +1,36 @@
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from baseplace.geometry.poses import pose_from_xyz_rpy
+from baseplace.reachability.build import BuildSettings, build_map
+from baseplace.robots.fk import forward_kinematics
+from baseplace.sim.osrm_experiment import GroundTruth, grasp_candidates
+from baseplace.sim.scenes import Plane, Scene, SceneSettings, generate_scene
+
+
+def test_ground_truth_oracle_accepts_fk_targets_and_rejects_unreachable(tiago):
+    rmap = build_map(tiago, None, BuildSettings(samples=300_000))
+    floor = Plane(0, "floor", (0.0, 0.0), (6.0, 6.0), 0.0, 0.0, 0.0, 0.0)
+    scene = Scene(SceneSettings(n_planes=0, extent=(6.0, 6.0), with_box=False), (floor,))
+    arm = tiago.arm()
+    rng = np.random.default_rng(3)
+    # FK of a configuration from a base at (0.2, -0.1), heading 60 deg: reachable, so the grid search finds some pose.
+    T_world_base = pose_from_xyz_rpy([0.2, -0.1, 0.0, 0.0, 0.0, math.radians(60)])
+    q = np.array([0.2, 0.3, 0.2, -1.0, 1.5, 0.5, 0.3, 0.2])
+    grasp = T_world_base @ forward_kinematics(arm, q)
+    truth = GroundTruth()
+    assert truth.reachable(tiago, rmap, scene, grasp, rng)
+    assert not truth.reachable(tiago, rmap, scene, pose_from_xyz_rpy([0.0, 0.0, 2.5, 0.0, 0.0, 0.0]), rng)
+
+
+def test_grasp_candidates_lie_above_the_objects():
+    rng = np.random.default_rng(1)
+    scene = generate_scene(SceneSettings(n_planes=0), rng)
+    grasps = grasp_candidates(scene, rng, 20)
+    assert grasps.shape == (20, 4, 4)
+    assert np.all(grasps[:, 2, 3] >= scene.box.size[2])  # above the rim
+    # top-down with at most 20 deg tilt: the approach (x) axis points down
+    assert np.all(grasps[:, 2, 0] <= -math.cos(math.radians(20)) + 1e-9)
