@@ -3,6 +3,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from baseplace.geometry.poses import pose_from_xyz_rpy
 from baseplace.reachability.build import BuildSettings, build_map
@@ -28,9 +29,12 @@ def test_ground_truth_oracle_accepts_fk_targets_and_rejects_unreachable(tiago):
 
 def test_grasp_candidates_lie_above_the_objects():
     rng = np.random.default_rng(1)
-    scene = generate_scene(SceneSettings(n_planes=0), rng)
-    grasps = grasp_candidates(scene, rng, 20)
+    scene = generate_scene(SceneSettings(n_planes=0, box_elevation=0.5), rng)
+    assert min(o.bottom for o in scene.objects) == pytest.approx(0.5 + scene.box.wall)
+    grasps, spheres = grasp_candidates(scene, rng, 20)
+    assert len(spheres) == 20 and all(r > 0.03 for _, r in spheres)
     assert grasps.shape == (20, 4, 4)
-    assert np.all(grasps[:, 2, 3] >= scene.box.size[2])  # above the rim
+    tops = np.array([o.top for o in scene.objects])
+    assert np.all(grasps[:, 2, 3] > tops.min() + 0.1)  # the TCP sits 0.151 m back along the approach
     # top-down with at most 20 deg tilt: the approach (x) axis points down
     assert np.all(grasps[:, 2, 0] <= -math.cos(math.radians(20)) + 1e-9)

@@ -88,6 +88,7 @@ def place(
     rng: np.random.Generator | None = None,
     terrain: Terrain | None = None,
     environments: dict[str, Environment] | None = None,
+    ignore: list[tuple[FloatArray, float]] | None = None,
 ) -> PlacementResult:
     """Find verified base placements from which the map's arm reaches every target.
 
@@ -101,6 +102,8 @@ def place(
         terrain: a segmentation of the same cloud to reuse (skips segmentation).
         environments: a cache of collision environments for this terrain, filled on first use
             (repeated queries in one scene then skip building the obstacle OcTree).
+        ignore: spheres (centre (3,), radius [m]) whose obstacle voxels the robot may touch: the
+            object being grasped, which the closing hand surrounds (an allowed collision).
     """
     s = settings or PlaceSettings()
     rng = rng or np.random.default_rng(0)
@@ -127,10 +130,18 @@ def place(
         )
     t2 = time.perf_counter()
     key = "floor" if s.strategy == "orm" else "regions"
-    cache = environments if environments is not None else {}
-    if key not in cache:
-        cache[key] = Environment(robot, _obstacles(terrain, seg, s))
-    env = cache[key]
+    if ignore:  # obstacles depend on the grasped object: no reuse across queries
+        obstacles = _obstacles(terrain, seg, s)
+        centres = obstacles.centres
+        allowed = np.zeros(len(centres), dtype=bool)
+        for centre, radius in ignore:
+            allowed |= np.linalg.norm(centres - np.asarray(centre, dtype=float), axis=1) <= radius
+        env = Environment(robot, obstacles.without(allowed))
+    else:
+        cache = environments if environments is not None else {}
+        if key not in cache:
+            cache[key] = Environment(robot, _obstacles(terrain, seg, s))
+        env = cache[key]
     arm = robot.arm(rmap.info.arm)
     verifier = Verifier(arm, DampedLeastSquaresIK(arm), env, T_targets,
                         {r.id: terrain.graph.nodes[r.id]["polygon"] for r in seg.regions}, outline)  # fmt: skip

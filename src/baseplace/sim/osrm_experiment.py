@@ -52,25 +52,31 @@ PAPER = {  # seed 000 Tables I and II: success rate [%]
 
 
 def grasp_candidates(
-    scene: Scene, rng: np.random.Generator, count: int, clearance: tuple[float, float] = (0.05, 0.25)
-) -> FloatArray:
-    """(count, 4, 4) top-down pre-grasps above the scene's objects: random yaw, tilt up to 20 deg.
+    scene: Scene, rng: np.random.Generator, count: int, tool_offset: float = 0.151
+) -> tuple[FloatArray, list[tuple[FloatArray, float]]]:
+    """(count, 4, 4) top-down grasps on the scene's objects: random yaw and a tilt up to 20 deg.
 
-    The TCP stands ``clearance`` above the box rim, over an object: a TIAGo-sized arm cannot reach
-    into a 0.3 m box on the floor (seed 000's ARMAR-6 is a much larger robot).
+    The hand's grasp point is 1-3 cm below an object's top, within half its radius of its axis;
+    the TCP stands ``tool_offset`` behind it along the approach (x) axis (TIAGo:
+    ``hand_grasping_frame`` is 0.151 m from ``arm_tool_link``). Also returns, per grasp, the sphere
+    around the grasped object that the hand may touch.
     """
     if not scene.objects:
-        return np.zeros((0, 4, 4))
+        return np.zeros((0, 4, 4)), []
     out = np.empty((count, 4, 4))
+    spheres: list[tuple[FloatArray, float]] = []
     for k in range(count):
         obj = scene.objects[int(rng.integers(len(scene.objects)))]
         offset = rng.uniform(-0.5, 0.5, 2) * obj.radius
-        rim = scene.box.size[2] if scene.box is not None else obj.top
-        z = rim + rng.uniform(*clearance)
+        grip = np.array(
+            [obj.center[0] + offset[0], obj.center[1] + offset[1], obj.top - rng.uniform(0.01, 0.03)]
+        )
         tilt = rng.uniform(0.0, math.radians(20))
-        out[k] = pose_from_xyz_rpy([obj.center[0] + offset[0], obj.center[1] + offset[1], z,
-                                    tilt, math.pi / 2, rng.uniform(-math.pi, math.pi)])  # fmt: skip
-    return out
+        T = pose_from_xyz_rpy([0.0, 0.0, 0.0, tilt, math.pi / 2, rng.uniform(-math.pi, math.pi)])
+        T[:3, 3] = grip - tool_offset * T[:3, 0]  # back off along the approach axis
+        out[k] = T
+        spheres.append((np.asarray(obj.center, dtype=float), math.hypot(obj.radius, obj.size[2] / 2) + 0.03))
+    return out, spheres
 
 
 @dataclass
@@ -150,9 +156,16 @@ def run_osrm_experiment(
     seed: int = 0,
     classes: tuple[tuple[str, int], ...] = SCENE_CLASSES,
     tries: int = 100,
+    box_elevation: float = 0.5,
+    box_height: float = 0.12,
     progress: Any = None,
 ) -> dict[str, Any]:
-    """Table I and II rows: per scene class and strategy, success and timing over reachable grasps."""
+    """Table I and II rows: per scene class and strategy, success and timing over reachable grasps.
+
+    ``box_elevation`` raises the box on a pedestal and ``box_height`` makes it a tray: seed 000's
+    ARMAR-6 reaches into a box on the floor; a TIAGo-sized arm (and its 0.15 m hand) needs the
+    objects at about table height and walls its forearm can clear for the same task.
+    """
     rows = []
     truth = GroundTruth()
     for class_index, (size_class, n_planes) in enumerate(classes):
@@ -162,13 +175,17 @@ def run_osrm_experiment(
         for k in range(scenes_per_class):
             rng = np.random.default_rng([seed, class_index, k])
             settings = SceneSettings(
-                size_class="small" if size_class == "flat" else size_class, n_planes=n_planes
+                size_class="small" if size_class == "flat" else size_class,
+                n_planes=n_planes,
+                box_elevation=box_elevation,
+                box_height=box_height,
             )
             scene = generate_scene(settings, rng)
             points = scene.sample_cloud(rng)
             terrain = terrain_from_points(points)
             environments: dict[str, Any] = {}
-            for grasp in grasp_candidates(scene, rng, grasps_per_scene):
+            grasps, spheres = grasp_candidates(scene, rng, grasps_per_scene)
+            for grasp, sphere in zip(grasps, spheres, strict=True):
                 grasps_total += 1
                 if not truth.reachable(robot, rmap, scene, grasp, rng):
                     continue
@@ -179,7 +196,7 @@ def run_osrm_experiment(
                     try:
                         res = place(robot, rmap, points, grasp, PlaceSettings(strategy=name, tries=tries),
                                     np.random.default_rng([seed, class_index, k, st.n]), terrain=terrain,
-                                    environments=environments)  # fmt: skip
+                                    environments=environments, ignore=[sphere])  # fmt: skip
                     except BaseplaceError as exc:  # e.g. no region in reach: a failure of that query
                         st.failures[type(exc).__name__] += 1
                         continue

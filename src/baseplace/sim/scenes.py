@@ -64,6 +64,8 @@ class SceneSettings:
         sigma: standard deviation [m] of the Gaussian noise added to cloud z (seed 000: 25 mm).
         spacing: cloud sampling distance [m] on surfaces and walls.
         with_box: add the box of objects.
+        box_elevation: height of a solid pedestal under the box [m] (0: on the floor).
+        box_height: outer height of the box [m] (default 0.3).
         platform_height: range [m] of the lowest corner of a raised (non-ramp) plane.
         clearance: smallest xy gap [m] between footprints, and between a footprint and the
             scene border.
@@ -76,6 +78,8 @@ class SceneSettings:
     sigma: float = 0.025
     spacing: float = 0.0125
     with_box: bool = True
+    box_elevation: float = 0.0
+    box_height: float = BOX_SIZE[2]
     platform_height: tuple[float, float] = (0.1, 0.3)
     clearance: float = 0.1
 
@@ -89,6 +93,10 @@ class SceneSettings:
             object.__setattr__(self, name, _pair(getattr(self, name), name))
         if min(self.extent) <= 0:
             raise InputError(f"extent must be positive (x, y) in metres, got {self.extent}")
+        if not (0.0 <= self.box_elevation <= 2.0):
+            raise InputError(f"box_elevation must be between 0 and 2 m, got {self.box_elevation}")
+        if not (0.05 <= self.box_height <= 1.0):
+            raise InputError(f"box_height must be between 0.05 and 1 m, got {self.box_height}")
         lo, hi = self.tilt_deg
         if not 0.0 <= lo <= hi < 60.0:
             raise InputError(f"tilt_deg must be a range 0 <= low <= high < 60 degrees, got {self.tilt_deg}")
@@ -211,19 +219,21 @@ class Plane:
 
 @dataclass(frozen=True)
 class Box:
-    """An open box standing on the floor; its bottom is as thick as its walls.
+    """An open box on the floor, or on a solid pedestal; its bottom is as thick as its walls.
 
     Attributes:
         center: footprint centre (x, y) [m], world frame.
         yaw: rotation about world z [rad].
         size: outer (length, width, height) [m].
         wall: wall and bottom thickness [m].
+        elevation: height of the pedestal the box stands on [m] (0: on the floor).
     """
 
     center: tuple[float, float]
     yaw: float
     size: tuple[float, float, float] = BOX_SIZE
     wall: float = BOX_WALL
+    elevation: float = 0.0
 
     @property
     def inner_size(self) -> tuple[float, float]:
@@ -247,7 +257,7 @@ class Box:
     def top(self, xy: ArrayLike) -> FloatArray:
         """Top of the box material (N,) [m]: the rim height on the walls, the bottom inside."""
         inner = _in_rectangle(_as_xy(xy), self.center, self.inner_size, self.yaw)
-        return np.where(inner, self.wall, self.size[2])
+        return self.elevation + np.where(inner, self.wall, self.size[2])
 
 
 @dataclass(frozen=True)
@@ -397,10 +407,10 @@ class Scene:
             box = self.box
 
             def rim(p: FloatArray) -> FloatArray:
-                return np.full(len(p), box.size[2])
+                return np.full(len(p), box.elevation + box.size[2])
 
-            yield from _polygon_walls(rng, box.polygon, 0.0, rim, spacing)
-            yield from _polygon_walls(rng, box.inner_polygon, box.wall, rim, spacing)
+            yield from _polygon_walls(rng, box.polygon, 0.0, rim, spacing)  # pedestal and outer walls
+            yield from _polygon_walls(rng, box.inner_polygon, box.elevation + box.wall, rim, spacing)
         for obj in self.objects:
             top = obj.top
 
@@ -529,7 +539,9 @@ def _objects(rng: np.random.Generator, box: Box) -> tuple[SceneObject, ...]:
                 math.hypot(x - o.center[0], y - o.center[1]) < probe.radius + o.radius + gap for o in objects
             ):
                 continue
-            objects.append(SceneObject(shape, (float(x), float(y), box.wall + size[2] / 2), yaw, size))
+            objects.append(
+                SceneObject(shape, (float(x), float(y), box.elevation + box.wall + size[2] / 2), yaw, size)
+            )
             if len(objects) == count:
                 return tuple(objects)
     raise RuntimeError("could not place the objects in the box")  # the sizes above always fit
@@ -589,7 +601,9 @@ def generate_scene(settings: SceneSettings, rng: np.random.Generator) -> Scene:
             yaw = float(rng.uniform(-np.pi, np.pi))
             center = _place(rng, s, BOX_SIZE, yaw, placed)
             if center is not None:
-                box = Box(center, yaw)
+                box = Box(
+                    center, yaw, size=(BOX_SIZE[0], BOX_SIZE[1], s.box_height), elevation=s.box_elevation
+                )
                 return Scene(s, tuple(planes), box, _objects(rng, box))
         box_failed = True
     lo, hi = SIZE_CLASSES[s.size_class]
@@ -736,6 +750,7 @@ def load_scene(truth_path: str | Path) -> Scene:
             _number(raw_box, "yaw", "box"),
             _triple(_get(raw_box, "size", "box"), "box.size"),
             _number(raw_box, "wall", "box"),
+            _number(raw_box, "elevation", "box") if "elevation" in raw_box else 0.0,
         )
     objects = []
     for k, o in enumerate(_list(doc, "objects")):
