@@ -8,7 +8,14 @@ from pathlib import Path
 
 HERE = Path(__file__).parent
 
-for script in ["bench_build.py", "bench_ik.py", "bench_irm.py", "bench_accuracy.py", "bench_segmentation.py", "bench_placement.py"]:
+for script in [
+    "bench_build.py",
+    "bench_ik.py",
+    "bench_irm.py",
+    "bench_accuracy.py",
+    "bench_segmentation.py",
+    "bench_placement.py",
+]:
     print(f"== {script}", flush=True)
     subprocess.run([sys.executable, str(HERE / script)], check=True, cwd=HERE)
 subprocess.run(
