@@ -58,16 +58,27 @@ def _emit(args: argparse.Namespace, obj: dict[str, Any], text: str) -> None:
 
 
 def _progress(args: argparse.Namespace, total: int, desc: str) -> tuple[Callable[[int], None] | None, Any]:
+    """A progress callback for long steps; the bar appears on the first update (silent with --json)."""
     if args.json:
         return None, None
     from tqdm import tqdm
 
-    bar = tqdm(total=total, desc=desc, unit="samples", unit_scale=True, file=sys.stderr, leave=False)
+    class _LazyBar:
+        bar: Any = None
 
-    def update(done: int) -> None:
-        bar.update(done - bar.n)
+        def update(self, done: int) -> None:
+            if self.bar is None:
+                self.bar = tqdm(
+                    total=total, desc=desc, unit="samples", unit_scale=True, file=sys.stderr, leave=False
+                )
+            self.bar.update(done - self.bar.n)
 
-    return update, bar
+        def close(self) -> None:
+            if self.bar is not None:
+                self.bar.close()
+
+    lazy = _LazyBar()
+    return lazy.update, lazy
 
 
 def _set_workers(workers: int | None) -> None:
