@@ -38,3 +38,31 @@ def test_grasp_candidates_lie_above_the_objects():
     assert np.all(grasps[:, 2, 3] > tops.min() + 0.1)  # the TCP sits 0.151 m back along the approach
     # top-down with at most 20 deg tilt: the approach (x) axis points down
     assert np.all(grasps[:, 2, 0] <= -math.cos(math.radians(20)) + 1e-9)
+
+
+def test_hand_filter_rejects_a_hand_sunk_into_a_slab(tiago):
+    import coal
+
+    from baseplace.sim.osrm_experiment import HandFilter
+
+    xs, ys = np.meshgrid(np.arange(-0.5, 0.5, 0.02), np.arange(-0.5, 0.5, 0.02))
+    slab = coal.makeOctree(np.c_[xs.ravel(), ys.ravel(), np.full(xs.size, 0.44)], 0.025)
+    hand = HandFilter(tiago)
+    assert hand.clear(pose_from_xyz_rpy([0, 0, 0.80, 0, math.pi / 2, 0]), slab)  # high above: clear
+    assert not hand.clear(pose_from_xyz_rpy([0, 0, 0.50, 0, math.pi / 2, 0]), slab)  # fingers in the slab
+
+
+def test_experiment_smoke_flat_scene(tiago):
+    from baseplace.sim.osrm_experiment import run_osrm_experiment
+
+    rmap = build_map(tiago, None, BuildSettings(samples=10_000_000, seed=2))
+    result = run_osrm_experiment(
+        tiago, rmap, scenes_per_class=1, grasps_per_scene=3, classes=(("flat", 0),), tries=60
+    )
+    rows = {r["strategy"]: r for r in result["rows"]}
+    assert set(rows) == {"orm", "TO", "MR", "MRTO"}
+    for r in rows.values():
+        assert r["grasps"] == 3 and 0 < r["reachable_grasps"] <= 3
+        assert 0.0 <= r["success_rate"] <= 100.0
+        assert set(r["failures"]) <= {"no_ik", "collision", "footprint", "exhausted"}
+    assert rows["MR"]["success_rate"] > 0  # hand-feasible grasps on a flat scene are placeable

@@ -399,6 +399,57 @@ def cmd_place(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_experiment_osrm(args: argparse.Namespace) -> int:
+    """Seed 000 Tables I and II on generated scenes."""
+    from baseplace.demo import cached_map
+    from baseplace.reachability.build import BuildSettings
+    from baseplace.reachability.storage import load_map
+    from baseplace.robots.model import Robot
+    from baseplace.sim.osrm_experiment import SCENE_CLASSES, run_osrm_experiment
+
+    if args.scenes < 1 or args.grasps < 1:
+        raise InputError(f"--scenes and --grasps must be >= 1, got {args.scenes} and {args.grasps}")
+    out = Path(args.out) if args.out else None
+    if out is not None and not (out.parent if str(out.parent) else Path(".")).is_dir():
+        raise InputError(f"--out directory {out.parent} does not exist")
+    robot = Robot(args.robot)
+    rmap = load_map(args.map, robot) if args.map else cached_map(robot, BuildSettings())[0]
+    classes = SCENE_CLASSES if not args.flat_only else SCENE_CLASSES[:1]
+    update, bar = _progress(args, args.scenes * len(classes), "osrm experiment")
+    counter = [0]
+
+    def step(k: int) -> None:
+        counter[0] += k
+        if update is not None:
+            update(counter[0])
+
+    try:
+        result = run_osrm_experiment(robot, rmap, args.scenes, args.grasps, args.seed, classes, args.tries,
+                                     progress=step)  # fmt: skip
+    finally:
+        if bar is not None:
+            bar.close()
+    if out is not None:
+        from baseplace.viz.experiments import plot_failure_rates
+
+        plot_failure_rates(result["rows"], out)
+        result["png"] = str(out)
+    lines = [
+        f"{'scene':<16} {'strategy':<8} {'reachable':>9} {'success':>8} {'paper':>6} {'t_RM ms':>9} {'t_a ms':>9} {'t_s ms':>9}"
+    ]
+    for r in result["rows"]:
+
+        def f(v: Any) -> str:
+            return "-" if v is None else f"{v[0]:.0f}±{v[1]:.0f}"
+
+        ok = "-" if r["success_rate"] is None else f"{r['success_rate']:.1f}%"
+        paper = "-" if r["paper_success_rate"] is None else f"{r['paper_success_rate']:.1f}"
+        lines.append(f"{r['scene']:<16} {r['strategy']:<8} {r['reachable_grasps']:>9} {ok:>8} {paper:>6} "
+                     f"{f(r['t_RM_ms']):>9} {f(r['t_a_ms']):>9} {f(r['t_s_ms']):>9}")  # fmt: skip
+    _emit(args, result, "\n".join(lines))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``baseplace`` command."""
     parser = _Parser(prog="baseplace", description="Where should a mobile manipulator stand?")
@@ -499,6 +550,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     p.add_argument("--scenes", type=int, default=10, help="scenes per class and plane count (default 10)")
     p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
+
+    p = exp_sub.add_parser("osrm", help="placement success and timing, seed 000 Tables I and II",
+                           description="Flat and {small, medium, large} x {2, 4} plane scenes with a box "
+                           "of objects; success over grasps reachable by IK from some valid pose.")  # fmt: skip
+    p.set_defaults(func=cmd_experiment_osrm)
+    p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
+    p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
+    p.add_argument("--map", default=None, help="reachability map (default: the cached default map)")
+    p.add_argument("--scenes", type=int, default=10, help="scenes per class (default 10)")
+    p.add_argument("--grasps", type=int, default=50, help="grasp candidates per scene (default 50)")
+    p.add_argument("--tries", type=int, default=100, help="N: candidates per query (default 100)")
+    p.add_argument("--flat-only", action="store_true", help="Table I only")
+    p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
+    p.add_argument("--out", default=None, help="PNG of the failure reasons (Fig. 5)")
 
     p = command("demo", "the main job on built-in defaults (writes out/demo.json and a PNG)", cmd_demo)
     p.add_argument("--out", default="out", help="output directory (default: out)")

@@ -15,12 +15,15 @@ published from it yet.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any
 
+import coal
 import numpy as np
+import pinocchio as pin
 import shapely
 from shapely.geometry import Polygon
 
@@ -29,10 +32,12 @@ from baseplace.geometry.poses import FloatArray, invert_transforms, pose_from_xy
 from baseplace.geometry.surface_poses import plane_base_poses
 from baseplace.placement.pipeline import PlaceSettings, place
 from baseplace.reachability.rmap import ReachabilityMap
+from baseplace.robots.collision import load_collision_model
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Robot
 from baseplace.sim.scenes import Scene, SceneSettings, generate_scene
 from baseplace.terrain.pipeline import terrain_from_points
+from baseplace.terrain.voxels import VoxelMap
 
 SCENE_CLASSES = (
     ("flat", 0),
@@ -52,21 +57,43 @@ PAPER = {  # seed 000 Tables I and II: success rate [%]
 
 
 def grasp_candidates(
-    scene: Scene, rng: np.random.Generator, count: int, tool_offset: float = 0.151
+    scene: Scene,
+    rng: np.random.Generator,
+    count: int,
+    tool_offset: float = 0.151,
+    hand: HandFilter | None = None,
+    max_draws: int = 60,
 ) -> tuple[FloatArray, list[tuple[FloatArray, float]]]:
-    """(count, 4, 4) top-down grasps on the scene's objects: random yaw and a tilt up to 20 deg.
+    """Top-down grasps on the scene's objects: random yaw and a tilt up to 20 deg.
 
     The hand's grasp point is 1-3 cm below an object's top, within half its radius of its axis;
     the TCP stands ``tool_offset`` behind it along the approach (x) axis (TIAGo:
-    ``hand_grasping_frame`` is 0.151 m from ``arm_tool_link``). Also returns, per grasp, the sphere
-    around the grasped object that the hand may touch.
+    ``hand_grasping_frame`` is 0.151 m from ``arm_tool_link``). With ``hand``, only grasps whose
+    hand is clear of the noise-free scene (less the grasped object) are kept, as a grasp planner
+    would deliver them; at most ``max_draws`` draws per grasp.
+
+    Returns:
+        (K, 4, 4) grasps, K <= count, and per grasp the sphere around the grasped object that the
+        hand may touch.
     """
     if not scene.objects:
         return np.zeros((0, 4, 4)), []
-    out = np.empty((count, 4, 4))
+    spheres_of = [
+        (np.asarray(o.center, dtype=float), math.hypot(o.radius, o.size[2] / 2) + 0.03) for o in scene.objects
+    ]
+    octrees: dict[int, coal.OcTree] = {}
+    if hand is not None:
+        clean = VoxelMap.from_points(scene.sample_cloud(np.random.default_rng(0), sigma=0.0), 0.025)
+        for i, (centre, radius) in enumerate(spheres_of):
+            keep = clean.without(np.linalg.norm(clean.centres - centre, axis=1) <= radius)
+            octrees[i] = coal.makeOctree(np.ascontiguousarray(keep.centres), keep.resolution)
+    grasps: list[FloatArray] = []
     spheres: list[tuple[FloatArray, float]] = []
-    for k in range(count):
-        obj = scene.objects[int(rng.integers(len(scene.objects)))]
+    for _ in range(count * max_draws):
+        if len(grasps) == count:
+            break
+        i = int(rng.integers(len(scene.objects)))
+        obj = scene.objects[i]
         offset = rng.uniform(-0.5, 0.5, 2) * obj.radius
         grip = np.array(
             [obj.center[0] + offset[0], obj.center[1] + offset[1], obj.top - rng.uniform(0.01, 0.03)]
@@ -74,9 +101,52 @@ def grasp_candidates(
         tilt = rng.uniform(0.0, math.radians(20))
         T = pose_from_xyz_rpy([0.0, 0.0, 0.0, tilt, math.pi / 2, rng.uniform(-math.pi, math.pi)])
         T[:3, 3] = grip - tool_offset * T[:3, 0]  # back off along the approach axis
-        out[k] = T
-        spheres.append((np.asarray(obj.center, dtype=float), math.hypot(obj.radius, obj.size[2] / 2) + 0.03))
-    return out, spheres
+        if hand is not None and not hand.clear(T, octrees[i]):
+            continue
+        grasps.append(T)
+        spheres.append(spheres_of[i])
+    return (np.stack(grasps) if grasps else np.zeros((0, 4, 4))), spheres
+
+
+class HandFilter:
+    """Keeps grasps the hand alone can take: its collision geometry at the grasp pose, clear of the scene.
+
+    Seed 000's grasp candidates come from a grasp planner, so the hand fits around the object; random
+    grasp poses need this check (the open hand must not sink into the box bottom or the neighbours).
+    The hand is every collision geometry that no arm joint moves relative to the TCP.
+
+    Args:
+        robot: the robot.
+        arm_name: the arm whose hand is checked.
+    """
+
+    def __init__(self, robot: Robot, arm_name: str | None = None) -> None:
+        arm = robot.arm(arm_name)
+        geom = load_collision_model(robot)
+        model, data = robot.model, robot.model.createData()
+        q = robot.q_reference
+        pin.framesForwardKinematics(model, data, q)
+        gdata = pin.GeometryData(geom)
+        pin.updateGeometryPlacements(model, data, geom, gdata, q)
+        last = model.getJointId(arm.joint_names[-1])
+        T_tcp_world = data.oMf[model.getFrameId(arm.tcp_frame)].inverse()
+        self.parts = [
+            (obj.geometry, (T_tcp_world * gdata.oMg[k]).homogeneous)
+            for k, obj in enumerate(geom.geometryObjects)
+            if last in set(model.supports[obj.parentJoint])
+        ]
+
+    def clear(self, T_world_tcp: FloatArray, obstacles: coal.OcTree) -> bool:
+        """True if no hand geometry at ``T_world_tcp`` (4, 4) touches ``obstacles``."""
+        request, identity = coal.CollisionRequest(), coal.Transform3s()
+        for geometry, T_tcp_geom in self.parts:
+            T = T_world_tcp @ T_tcp_geom
+            result = coal.CollisionResult()
+            if coal.collide(
+                geometry, coal.Transform3s(T[:3, :3], T[:3, 3]), obstacles, identity, request, result
+            ):
+                return False
+        return True
 
 
 @dataclass
@@ -168,6 +238,7 @@ def run_osrm_experiment(
     """
     rows = []
     truth = GroundTruth()
+    hand = HandFilter(robot, rmap.info.arm)
     for class_index, (size_class, n_planes) in enumerate(classes):
         strategies = ("orm", "TO", "MR", "MRTO") if n_planes == 0 else ("TO", "MR", "MRTO")
         stats = {name: _Tally() for name in strategies}
@@ -181,10 +252,15 @@ def run_osrm_experiment(
                 box_height=box_height,
             )
             scene = generate_scene(settings, rng)
+            # Seed 000 VI adds the noise to the height map: the segmentation sees the noisy cloud,
+            # the collision voxels (its OctoMap) come from the clean one.
             points = scene.sample_cloud(rng)
-            terrain = terrain_from_points(points)
+            clean = VoxelMap.from_points(
+                scene.sample_cloud(np.random.default_rng([seed, class_index, k, 1]), sigma=0.0)
+            )
+            terrain = dataclasses.replace(terrain_from_points(points), voxels=clean)
             environments: dict[str, Any] = {}
-            grasps, spheres = grasp_candidates(scene, rng, grasps_per_scene)
+            grasps, spheres = grasp_candidates(scene, rng, grasps_per_scene, hand=hand)
             for grasp, sphere in zip(grasps, spheres, strict=True):
                 grasps_total += 1
                 if not truth.reachable(robot, rmap, scene, grasp, rng):
