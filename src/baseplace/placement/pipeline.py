@@ -116,7 +116,7 @@ def place(
     seg = terrain.segmentation
     t1 = time.perf_counter()
     outline = footprint_outline(robot.spec.footprint_radius, robot.spec.footprint_polygon)
-    _check_targets(seg, T_targets, rmap.horizontal_reach)
+    _check_targets(seg, T_targets)
     osrm = build_osrm(seg, rmap, T_targets, outline, rmap.horizontal_reach, s.n_orientations)
     if not osrm.near.any():
         raise InputError(
@@ -177,16 +177,14 @@ def _obstacles(terrain: Terrain, seg: Segmentation, s: PlaceSettings) -> VoxelMa
     return terrain.voxels.without(np.abs(z) <= s.support_dist)
 
 
-def _check_targets(seg: Segmentation, targets: FloatArray, reach: float) -> None:
-    """Targets inside an obstacle or far from every region get a clear message."""
-    hmap = seg.hmap
-    row, col, inside = hmap.cell_of(targets[:, :2, 3])
+def _check_targets(seg: Segmentation, targets: FloatArray) -> None:
+    """A target below the surface of the region under it lies inside an obstacle: say so."""
+    row, col, inside = seg.hmap.cell_of(targets[:, :2, 3])
     for k, T in enumerate(targets):
         if not inside[k]:
             continue
-        top = hmap.raw[row[k], col[k]]
-        label = seg.labels[row[k], col[k]]
-        if np.isfinite(top) and label >= 0:
+        label = seg.labels[row[k], col[k]]  # labelled cells always have data
+        if label >= 0:
             region = seg.regions[int(label)]
             below = float(region.height_at(T[None, :2, 3])[0])
             if T[2, 3] < below - 0.05:

@@ -266,6 +266,16 @@ def _lookup_inverse(T_wt, B, origin, voxel_size, shape, nside, n_twist, pixel_ph
     for a in range(3):
         for b in range(3):
             R[a, b] = B[0, a] * T_wt[0, b] + B[1, a] * T_wt[1, b] + B[2, a] * T_wt[2, b]
+    return _table_value(
+        R, px, py, pz, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset, blocks, n_orient
+    )
+
+
+@nb.njit(cache=True, inline="always")
+def _table_value(
+    R, px, py, pz, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset, blocks, n_orient
+):
+    """Reachability index of the pose (R, p) from the dense lookup tables, 0 where not reached."""
     c = cell_of(R, px, py, pz, origin, voxel_size, shape, nside, n_twist, pixel_phi)
     if c < 0:
         return 0.0
@@ -284,16 +294,10 @@ def _lookup_batch(T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist,
                 T_wt, B, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset, blocks, n_orient
             )
             continue
-        R = np.empty((3, 3))
-        for a in range(3):
-            for b in range(3):
-                R[a, b] = B[a, b]
-        c = cell_of(R, B[0, 3], B[1, 3], B[2, 3], origin, voxel_size, shape, nside, n_twist, pixel_phi)
-        if c < 0:
-            out[i] = 0.0
-            continue
-        row = offset[c // n_orient]
-        out[i] = 0.0 if row < 0 else blocks[row, c % n_orient]
+        out[i] = _table_value(
+            B[:3, :3], B[0, 3], B[1, 3], B[2, 3], origin, voxel_size, shape, nside, n_twist, pixel_phi,
+            offset, blocks, n_orient,
+        )  # fmt: skip
 
 
 def reach_bounds(placements: FloatArray, axes: FloatArray, kinds: NDArray[np.int64],

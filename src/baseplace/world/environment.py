@@ -101,8 +101,3 @@ class Environment:
         if self._self is not None and self._self.colliding_arm(arm, q_arm)[0]:
             return True
         return self._touches_obstacles(arm.to_pinocchio(q_arm, self.robot.q_reference), T_world_base)
-
-
-def points_of(voxels: VoxelMap) -> NDArray[np.float64]:
-    """Voxel centres (M, 3), for plotting."""
-    return voxels.centres
