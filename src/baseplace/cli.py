@@ -81,6 +81,29 @@ def _progress(args: argparse.Namespace, total: int, desc: str) -> tuple[Callable
     return lazy.update, lazy
 
 
+def _out_path(text: str | None) -> Path | None:
+    """The ``--out`` path, or None; its directory must exist (checked before any work is done)."""
+    if text is None:
+        return None
+    out = Path(text)
+    if not (out.parent if str(out.parent) else Path(".")).is_dir():
+        raise InputError(f"--out directory {out.parent} does not exist")
+    return out
+
+
+def _step_progress(update: Callable[[int], None] | None) -> Callable[[int], None]:
+    """Turn an absolute-progress callback into one that is told how many steps just finished."""
+    done = 0
+
+    def step(k: int) -> None:
+        nonlocal done
+        done += k
+        if update is not None:
+            update(done)
+
+    return step
+
+
 def _set_workers(workers: int | None) -> None:
     if workers is None:
         return
@@ -128,9 +151,8 @@ def cmd_build_map(args: argparse.Namespace) -> int:
     from baseplace.robots.model import Robot
 
     _set_workers(args.workers)
-    out = Path(args.out)
-    if not (out.parent if str(out.parent) else Path(".")).is_dir():
-        raise InputError(f"--out directory {out.parent} does not exist")
+    out = _out_path(args.out)
+    assert out is not None  # --out is required
     settings = BuildSettings(
         samples=args.samples, seed=args.seed, voxel_size=args.voxel_size,
         orientation_resolution=args.orientation_resolution,
@@ -247,9 +269,7 @@ def cmd_segment(args: argparse.Namespace) -> int:
     cloud = load_cloud(args.cloud)
     if args.transform is not None:
         cloud = cloud.transformed(load_transform(args.transform))
-    out = Path(args.out) if args.out else None
-    if out is not None and not (out.parent if str(out.parent) else Path(".")).is_dir():
-        raise InputError(f"--out directory {out.parent} does not exist")
+    out = _out_path(args.out)
     terrain = terrain_from_points(cloud.points, args.algorithm, args.resolution)
     result = terrain_json(terrain)
     result["cloud"] = {"path": str(args.cloud), "points": len(cloud.points)}
@@ -300,12 +320,7 @@ def cmd_experiment_segmentation(args: argparse.Namespace) -> int:
         raise InputError(f"--scenes must be at least 1, got {args.scenes}")
     total = args.scenes * 6
     update, bar = _progress(args, total, "segmentation experiment")
-    counter = [0]
-
-    def step(k: int) -> None:
-        counter[0] += k
-        if update is not None:
-            update(counter[0])
+    step = _step_progress(update)
 
     try:
         result = run_segmentation_experiment(args.scenes, args.seed, progress=step)
@@ -337,9 +352,7 @@ def cmd_place(args: argparse.Namespace) -> int:
         raise InputError('give at least one --target "x y z roll pitch yaw"')
     targets = np.stack([parse_pose6(t) for t in args.target])
     settings = PlaceSettings(strategy=args.strategy, placements=args.placements, tries=args.tries)
-    out = Path(args.out) if args.out else None
-    if out is not None and not (out.parent if str(out.parent) else Path(".")).is_dir():
-        raise InputError(f"--out directory {out.parent} does not exist")
+    out = _out_path(args.out)
     robot = Robot(args.robot)
     cloud = load_cloud(args.cloud)
     if args.transform is not None:
@@ -409,19 +422,12 @@ def cmd_experiment_osrm(args: argparse.Namespace) -> int:
 
     if args.scenes < 1 or args.grasps < 1:
         raise InputError(f"--scenes and --grasps must be >= 1, got {args.scenes} and {args.grasps}")
-    out = Path(args.out) if args.out else None
-    if out is not None and not (out.parent if str(out.parent) else Path(".")).is_dir():
-        raise InputError(f"--out directory {out.parent} does not exist")
+    out = _out_path(args.out)
     robot = Robot(args.robot)
     rmap = load_map(args.map, robot) if args.map else cached_map(robot, BuildSettings())[0]
     classes = SCENE_CLASSES if not args.flat_only else SCENE_CLASSES[:1]
     update, bar = _progress(args, args.scenes * len(classes), "osrm experiment")
-    counter = [0]
-
-    def step(k: int) -> None:
-        counter[0] += k
-        if update is not None:
-            update(counter[0])
+    step = _step_progress(update)
 
     try:
         result = run_osrm_experiment(robot, rmap, args.scenes, args.grasps, args.seed, classes, args.tries,
@@ -457,9 +463,13 @@ def build_parser() -> argparse.ArgumentParser:
     sub.required = True
 
     def command(
-        name: str, help_text: str, func: Callable[[argparse.Namespace], int]
+        name: str,
+        help_text: str,
+        func: Callable[[argparse.Namespace], int],
+        parent: Any = sub,
+        description: str | None = None,
     ) -> argparse.ArgumentParser:
-        p = sub.add_parser(name, help=help_text, description=help_text)
+        p = parent.add_parser(name, help=help_text, description=description or help_text)
         p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
         p.set_defaults(func=func)
         return p
@@ -523,11 +533,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     scene_sub = scene.add_subparsers(dest="scene_command", metavar="SUBCOMMAND", parser_class=_Parser)
     scene_sub.required = True
-    p = scene_sub.add_parser("generate", help="write a random scene's cloud and ground truth",
-                             description="A floor, inclined planes of a size class and a box with objects "
-                             "(seed 000 VI), with Gaussian height noise.")  # fmt: skip
-    p.set_defaults(func=cmd_scene_generate)
-    p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
+    p = command("generate", "write a random scene's cloud and ground truth", cmd_scene_generate, scene_sub,
+                "A floor, inclined planes of a size class and a box with objects (seed 000 VI), "
+                "with Gaussian height noise.")  # fmt: skip
     p.add_argument("--size-class", default="small", choices=["small", "medium", "large"],
                    help="plane sides 1-1.5, 1.5-2 or 2-2.5 m (default small)")  # fmt: skip
     p.add_argument("--planes", type=_nonneg_int, default=2, help="number of inclined planes (default 2)")
@@ -543,19 +551,16 @@ def build_parser() -> argparse.ArgumentParser:
     )
     exp_sub = experiment.add_subparsers(dest="experiment", metavar="EXPERIMENT", parser_class=_Parser)
     exp_sub.required = True
-    p = exp_sub.add_parser("segmentation", help="segmentation accuracy, baseline vs robust (seed 000 VI)",
-                           description="Scenes per size class x {2, 4} planes, sigma 25 mm; share of "
-                           "cells on their true plane and normal error.")  # fmt: skip
-    p.set_defaults(func=cmd_experiment_segmentation)
-    p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
+    p = command("segmentation", "segmentation accuracy, baseline vs robust (seed 000 VI)",
+                cmd_experiment_segmentation, exp_sub,
+                "Scenes per size class x {2, 4} planes, sigma 25 mm; share of cells on their true plane "
+                "and normal error.")  # fmt: skip
     p.add_argument("--scenes", type=int, default=10, help="scenes per class and plane count (default 10)")
     p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
 
-    p = exp_sub.add_parser("osrm", help="placement success and timing, seed 000 Tables I and II",
-                           description="Flat and {small, medium, large} x {2, 4} plane scenes with a box "
-                           "of objects; success over grasps reachable by IK from some valid pose.")  # fmt: skip
-    p.set_defaults(func=cmd_experiment_osrm)
-    p.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
+    p = command("osrm", "placement success and timing, seed 000 Tables I and II", cmd_experiment_osrm, exp_sub,
+                "Flat and {small, medium, large} x {2, 4} plane scenes with a box of objects; success "
+                "over grasps reachable by IK from some valid pose.")  # fmt: skip
     p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
     p.add_argument("--map", default=None, help="reachability map (default: the cached default map)")
     p.add_argument("--scenes", type=int, default=10, help="scenes per class (default 10)")
