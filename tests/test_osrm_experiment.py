@@ -38,6 +38,7 @@ def test_grasp_candidates_lie_above_the_objects():
     assert np.all(grasps[:, 2, 3] > tops.min() + 0.1)  # the TCP sits 0.151 m back along the approach
     # top-down with at most 20 deg tilt: the approach (x) axis points down
     assert np.all(grasps[:, 2, 0] <= -math.cos(math.radians(20)) + 1e-9)
+    assert grasps[:, 2, 0].max() > -math.cos(math.radians(5))  # some are tilted, not all straight down
 
 
 def test_hand_filter_rejects_a_hand_sunk_into_a_slab(tiago):

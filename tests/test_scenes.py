@@ -292,6 +292,8 @@ def test_unreadable_truth_files(tmp_path):
         {"tilt_deg": (15.0, 5.0)},
         {"sigma": -0.1},
         {"spacing": 0.0},
+        {"object_height": (0.2, 0.1)},
+        {"box_near": 0.05},
     ],
 )
 def test_bad_settings(kwargs):
@@ -311,3 +313,14 @@ def test_impossible_requests():
         scene_of(SceneSettings(n_planes=0, extent=(0.5, 0.5)))
     with pytest.raises(InputError, match="too steep"):
         scene_of(SceneSettings(size_class="large", tilt_deg=(40.0, 50.0)))
+
+
+def test_object_heights_and_a_box_beside_the_planes():
+    settings = SceneSettings(size_class="medium", n_planes=2, extent=(7.0, 7.0), box_near=0.3,
+                             object_height=(0.15, 0.25))  # fmt: skip
+    for k in range(5):
+        scene = scene_of(settings, seed=k)
+        assert all(0.15 <= o.size[2] <= 0.25 for o in scene.objects)
+        box = shapely.Polygon(scene.box.polygon)
+        gaps = [box.distance(shapely.Polygon(p.polygon)) for p in scene.planes[1:]]
+        assert settings.clearance <= min(gaps) <= 0.3 + 1e-9

@@ -64,7 +64,7 @@ def grasp_candidates(
     hand: HandFilter | None = None,
     max_draws: int = 60,
 ) -> tuple[FloatArray, list[tuple[FloatArray, float]]]:
-    """Top-down grasps on the scene's objects: random yaw and a tilt up to 20 deg.
+    """Top-down grasps on the scene's objects: approach tilted up to 20 deg, random roll about it.
 
     The hand's grasp point is 1-3 cm below an object's top, within half its radius of its axis;
     the TCP stands ``tool_offset`` behind it along the approach (x) axis (TIAGo:
@@ -98,8 +98,10 @@ def grasp_candidates(
         grip = np.array(
             [obj.center[0] + offset[0], obj.center[1] + offset[1], obj.top - rng.uniform(0.01, 0.03)]
         )
+        # x (the approach) points down, tilted up to 20 deg towards a random heading; random roll about it
         tilt = rng.uniform(0.0, math.radians(20))
-        T = pose_from_xyz_rpy([0.0, 0.0, 0.0, tilt, math.pi / 2, rng.uniform(-math.pi, math.pi)])
+        roll, heading = rng.uniform(-math.pi, math.pi, 2)
+        T = pose_from_xyz_rpy([0.0, 0.0, 0.0, roll, math.pi / 2 - tilt, heading])
         T[:3, 3] = grip - tool_offset * T[:3, 0]  # back off along the approach axis
         if hand is not None and not hand.clear(T, octrees[i]):
             continue
@@ -228,6 +230,9 @@ def run_osrm_experiment(
     tries: int = 100,
     box_elevation: float = 0.5,
     box_height: float = 0.12,
+    object_height: tuple[float, float] = (0.15, 0.25),
+    extent: tuple[float, float] = (7.0, 7.0),
+    box_near: float = 0.3,
     progress: Any = None,
 ) -> dict[str, Any]:
     """Table I and II rows: per scene class and strategy, success and timing over reachable grasps.
@@ -235,6 +240,10 @@ def run_osrm_experiment(
     ``box_elevation`` raises the box on a pedestal and ``box_height`` makes it a tray: seed 000's
     ARMAR-6 reaches into a box on the floor; a TIAGo-sized arm (and its 0.15 m hand) needs the
     objects at about table height and walls its forearm can clear for the same task.
+    ``object_height`` makes the objects bottle-sized: the open Hey5 fingers reach 9 cm past the
+    grasp point, so a top-down grasp on a 4-10 cm object would put them through the box bottom.
+    ``extent`` and ``box_near`` crowd the planes around the box, as in seed 000's Fig. 5 scenes,
+    so that they take away places to stand on the floor (7 m x 7 m holds four large planes).
     """
     rows = []
     truth = GroundTruth()
@@ -250,6 +259,9 @@ def run_osrm_experiment(
                 n_planes=n_planes,
                 box_elevation=box_elevation,
                 box_height=box_height,
+                object_height=object_height,
+                extent=extent,
+                box_near=box_near,
             )
             scene = generate_scene(settings, rng)
             # Seed 000 VI adds the noise to the height map: the segmentation sees the noisy cloud,

@@ -66,6 +66,11 @@ class SceneSettings:
         with_box: add the box of objects.
         box_elevation: height of a solid pedestal under the box [m] (0: on the floor).
         box_height: outer height of the box [m] (default 0.3).
+        object_height: range [m] of the objects' heights; None: cubes are cubes and cylinders are
+            4-10 cm tall. Given, every object's height is drawn from it (cubes become square
+            prisms): tall objects leave room under a hand whose open fingers reach past the grasp.
+        box_near: the box stands at most this far [m] from an inclined plane (None: anywhere),
+            so that the planes crowd the places to stand and grasp from.
         platform_height: range [m] of the lowest corner of a raised (non-ramp) plane.
         clearance: smallest xy gap [m] between footprints, and between a footprint and the
             scene border.
@@ -80,6 +85,8 @@ class SceneSettings:
     with_box: bool = True
     box_elevation: float = 0.0
     box_height: float = BOX_SIZE[2]
+    object_height: tuple[float, float] | None = None
+    box_near: float | None = None
     platform_height: tuple[float, float] = (0.1, 0.3)
     clearance: float = 0.1
 
@@ -97,6 +104,19 @@ class SceneSettings:
             raise InputError(f"box_elevation must be between 0 and 2 m, got {self.box_elevation}")
         if not (0.05 <= self.box_height <= 1.0):
             raise InputError(f"box_height must be between 0.05 and 1 m, got {self.box_height}")
+        if self.box_near is not None and not (
+            math.isfinite(self.box_near) and self.box_near >= self.clearance
+        ):
+            raise InputError(
+                f"box_near must be a distance >= clearance ({self.clearance} m), got {self.box_near}"
+            )
+        if self.object_height is not None:
+            object.__setattr__(self, "object_height", _pair(self.object_height, "object_height"))
+            lo, hi = self.object_height
+            if not 0.01 <= lo <= hi <= 1.0:
+                raise InputError(
+                    f"object_height must be 0.01 <= low <= high <= 1 m, got {self.object_height}"
+                )
         lo, hi = self.tilt_deg
         if not 0.0 <= lo <= hi < 60.0:
             raise InputError(f"tilt_deg must be a range 0 <= low <= high < 60 degrees, got {self.tilt_deg}")
@@ -502,8 +522,12 @@ def _place(
     size: tuple[float, ...],
     yaw: float,
     placed: list[shapely.Polygon],
+    within: float | None = None,
 ) -> tuple[float, float] | None:
-    """A random centre keeping the rotated rectangle inside the scene and clear of ``placed``."""
+    """A random centre keeping the rotated rectangle inside the scene and clear of ``placed``.
+
+    With ``within``, the rectangle must also come that close [m] to one of ``placed``.
+    """
     c, sn = abs(math.cos(yaw)), abs(math.sin(yaw))
     hx = (c * size[0] + sn * size[1]) / 2 + s.clearance
     hy = (sn * size[0] + c * size[1]) / 2 + s.clearance
@@ -512,14 +536,20 @@ def _place(
         return None
     center = (float(rng.uniform(-ex, ex)), float(rng.uniform(-ey, ey)))
     poly = shapely.Polygon(_rectangle(center, size, yaw))
-    if any(poly.distance(other) < s.clearance for other in placed):
+    gaps = [poly.distance(other) for other in placed]
+    if any(g < s.clearance for g in gaps) or (within is not None and gaps and min(gaps) > within):
         return None
     placed.append(poly)
     return center
 
 
-def _objects(rng: np.random.Generator, box: Box) -> tuple[SceneObject, ...]:
-    """3-6 cubes and cylinders resting on the box bottom, their enclosing circles apart."""
+def _objects(
+    rng: np.random.Generator, box: Box, height: tuple[float, float] | None = None
+) -> tuple[SceneObject, ...]:
+    """3-6 cubes and cylinders resting on the box bottom, their enclosing circles apart.
+
+    With ``height``, every object's height is drawn from that range (cubes become square prisms).
+    """
     count = int(rng.integers(OBJECT_COUNT[0], OBJECT_COUNT[1] + 1))
     gap = 0.005
     for _ in range(LAYOUT_ATTEMPTS):
@@ -527,7 +557,9 @@ def _objects(rng: np.random.Generator, box: Box) -> tuple[SceneObject, ...]:
         for _ in range(PLACE_TRIES):
             shape = OBJECT_SHAPES[int(rng.integers(2))]
             w, h = (float(v) for v in rng.uniform(*OBJECT_SIZE, 2))
-            size = (w, w, w) if shape == "cube" else (w, w, h)
+            if height is not None:
+                h = float(rng.uniform(*height))
+            size = (w, w, w) if shape == "cube" and height is None else (w, w, h)
             yaw = float(rng.uniform(-np.pi, np.pi))
             probe = SceneObject(shape, (0.0, 0.0, 0.0), yaw, size)
             mx = box.inner_size[0] / 2 - probe.radius - gap
@@ -599,12 +631,12 @@ def generate_scene(settings: SceneSettings, rng: np.random.Generator) -> Scene:
             return Scene(s, tuple(planes))
         for _ in range(PLACE_TRIES):
             yaw = float(rng.uniform(-np.pi, np.pi))
-            center = _place(rng, s, BOX_SIZE, yaw, placed)
+            center = _place(rng, s, BOX_SIZE, yaw, placed, s.box_near)
             if center is not None:
                 box = Box(
                     center, yaw, size=(BOX_SIZE[0], BOX_SIZE[1], s.box_height), elevation=s.box_elevation
                 )
-                return Scene(s, tuple(planes), box, _objects(rng, box))
+                return Scene(s, tuple(planes), box, _objects(rng, box, s.object_height))
         box_failed = True
     lo, hi = SIZE_CLASSES[s.size_class]
     planes_text = f"{s.n_planes} {s.size_class} planes ({lo:g}-{hi:g} m sides, {s.clearance:g} m apart)"
