@@ -1,0 +1,1 @@
+"""Task-planning attachments (seed 002, section III-C)."""
