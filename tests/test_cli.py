@@ -295,3 +295,66 @@ def test_place_command(tmp_path):
     assert_one_line_error(run("place", "--robot", "pr2", "--cloud", str(cloud), "--target", target, "--map",
                               str(map_file)), 2, "built for robot 'tiago'")  # fmt: skip
     assert_one_line_error(run("place", "--cloud", str(cloud), "--map", str(map_file)), 2, "--target")
+
+
+@pytest.fixture(scope="module")
+def surface_cli(tmp_path_factory):
+    """Runs the CLI with its own cache, so that the small maps of these tests stay out of the user's."""
+    import os
+
+    cache = tmp_path_factory.mktemp("surface") / "kernels"
+
+    def call(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, "-m", "baseplace.cli", *args], capture_output=True, text=True,
+                              stdin=subprocess.DEVNULL, timeout=600,
+                              env={**os.environ, "BASEPLACE_CACHE": str(cache)})  # fmt: skip
+
+    return call
+
+
+def test_surface_map_and_sample_commands(surface_cli, tmp_path):
+    smap = tmp_path / "table.smap"
+    common = ("--robot", "tiago", "--samples", "3e5", "--height", "0.7", "--resolution", "0.1",
+              "--orientations", "8")  # fmt: skip
+    proc = surface_cli(
+        "surface-map", *common, "--polygon", "0,0;1.2,0;1.2,0.6;0,0.6", "--out", str(smap), "--json"
+    )
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout)
+    assert out["file_bytes"] == smap.stat().st_size and out["nonzero_poses"] > 0 and 0 < out["max"] <= 1
+    assert out["arms"] == ["arm"] and out["orientations"] == 8
+    proc = surface_cli("surface-sample", "--map", str(smap), "--n", "3", "--candidates", "5", "--json")
+    assert proc.returncode == 0, proc.stderr
+    poses = json.loads(proc.stdout)["poses"]
+    assert len(poses) == 3 and all(p["reachability"] > 0 for p in poses)
+    # an occupancy grid with no free cell excludes every pose
+    (tmp_path / "full.pgm").write_bytes(b"P5 20 20 255\n" + bytes(400))
+    (tmp_path / "full.yaml").write_text("image: full.pgm\nresolution: 0.5\norigin: [-5, -5, 0]\nnegate: 0\n"
+                                        "occupied_thresh: 0.65\nfree_thresh: 0.196\n")  # fmt: skip
+    proc = surface_cli("surface-sample", "--map", str(smap), "--occupancy", str(tmp_path / "full.yaml"))
+    assert_one_line_error(proc, 2, "leaves no free pose")
+    bad = tmp_path / "bad.smap"
+    proc = surface_cli("surface-map", *common, "--polygon", "0,0;1,1;1,0;0,1", "--out", str(bad))
+    assert_one_line_error(proc, 2, "not simple")
+    proc = surface_cli(
+        "surface-map", *common, "--arms", "left", "--polygon", "0,0;1,0;1,1", "--out", str(bad)
+    )
+    assert_one_line_error(proc, 2, "unknown arm 'left'", "valid: any, arm, both")
+    proc = surface_cli(
+        "surface-map", *common, "--arms", "both", "--polygon", "0,0;1,0;1,1", "--out", str(bad)
+    )
+    assert_one_line_error(proc, 2, "needs two arms")
+    assert not bad.exists()
+
+
+def test_occupancy_command_prints_map_server_values():
+    from conftest import SHARED
+    from test_occupancy import EXPECTED
+
+    proc = run("occupancy", str(SHARED / "maps" / "nav2_testmap" / "testmap.yaml"), "--json")
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout)
+    assert (out["width"], out["height"], out["resolution"], out["origin"]) == (10, 10, 0.1, [2.0, 3.0, 1.0])
+    assert out["data"] == EXPECTED.ravel().tolist()
+    proc = run("occupancy", str(SHARED / "maps" / "missing.yaml"))
+    assert_one_line_error(proc, 2, "missing.yaml")

@@ -456,6 +456,113 @@ def cmd_experiment_osrm(args: argparse.Namespace) -> int:
     return 0
 
 
+def _surface_arms(robot: Any, arms: str) -> tuple[list[str], str]:
+    """The arms of ``--arms`` and how they combine: any/both over every arm, or one arm by name."""
+    from baseplace.errors import unknown
+
+    names = list(robot.spec.arms)
+    if arms in ("any", "both"):
+        if arms == "both" and len(names) < 2:
+            raise InputError(
+                f"--arms both needs two arms; {robot.name} has one ({names[0]}): use any or {names[0]}"
+            )
+        return names, arms
+    if arms not in names:
+        raise unknown("arm", arms, ["any", "both", *names], robot.name)
+    return [arms], "any"
+
+
+def cmd_surface_map(args: argparse.Namespace) -> int:
+    """Seed 002: the inverse surface reachability map of a polygonal working surface."""
+    import time
+
+    from baseplace.demo import cached_map
+    from baseplace.placement.surface_map import build_surface_map, parse_polygon
+    from baseplace.placement.surface_storage import save_surface_map
+    from baseplace.reachability.build import BuildSettings
+    from baseplace.robots.model import Robot
+
+    out, png = _out_path(args.out), _out_path(args.png)
+    assert out is not None
+    polygon = parse_polygon(args.polygon)
+    robot = Robot(args.robot)
+    arms, combine = _surface_arms(robot, args.arms)
+    settings = BuildSettings(samples=args.samples)
+    update, bar = _progress(args, settings.samples, "reachability map")
+    try:
+        rmaps = {arm: cached_map(robot, settings, arm, update)[0] for arm in arms}
+    finally:
+        if bar is not None:
+            bar.close()
+    for rmap in rmaps.values():
+        _ = rmap.tables  # the dense lookup of the reachability map is built once, outside the timing
+    t0 = time.perf_counter()
+    smap = build_surface_map(robot, rmaps, polygon, args.height, args.resolution, args.orientations, combine)
+    build_ms = (time.perf_counter() - t0) * 1e3
+    size = save_surface_map(smap, out)
+    obj = {**smap.summary(), "out": str(out), "file_bytes": size, "build_ms": round(build_ms, 2)}
+    if png is not None:
+        from baseplace.viz.surface import plot_surface_map
+
+        plot_surface_map(smap, png)
+        obj["png"] = str(png)
+    text = (
+        f"surface map of {len(polygon)}-gon at {args.height} m for {robot.name} arms {'+'.join(arms)} ({combine}): "
+        f"{obj['nonzero_poses']} poses with R_S > 0, max R_S {obj['max']:.2f}, built in {build_ms:.1f} ms\n"
+        f"wrote {out} ({size / 1e3:.1f} kB)" + (f" and {png}" if png is not None else "")
+    )
+    _emit(args, obj, text)
+    return 0
+
+
+def cmd_surface_sample(args: argparse.Namespace) -> int:
+    """Seed 002 III-B: good, spread-out base poses sampled from a surface map."""
+    from baseplace.placement.surface_sampling import SurfaceSampler
+    from baseplace.placement.surface_storage import load_surface_map
+    from baseplace.robots.model import Robot
+
+    if args.n < 1 or args.candidates < 1:
+        raise InputError(f"--n and --candidates must be >= 1, got {args.n} and {args.candidates}")
+    smap = load_surface_map(args.map)
+    robot = Robot(args.robot or smap.robot)
+    occupancy = None
+    if args.occupancy is not None:
+        from baseplace.world.occupancy import load_occupancy
+
+        occupancy = load_occupancy(args.occupancy)
+    sampler = SurfaceSampler(smap, robot, occupancy, args.candidates, discounted=not args.no_discount)
+    rng = np.random.default_rng(args.seed)
+    samples = [sampler.sample(rng) for _ in range(args.n)]
+    poses = [
+        {"x": round(s.x, 4), "y": round(s.y, 4), "theta": round(s.theta, 4),
+         "reachability": round(s.reachability, 4), "score": round(s.score, 4)}
+        for s in samples
+    ]  # fmt: skip
+    obj = {"map": str(args.map), "robot": robot.name, "occupancy": args.occupancy, "poses": poses}
+    lines = [f"{'x':>7} {'y':>7} {'theta':>7} {'R_S':>6} {'score':>6}"]
+    lines += [
+        f"{p['x']:7.3f} {p['y']:7.3f} {p['theta']:7.3f} {p['reachability']:6.3f} {p['score']:6.3f}"
+        for p in poses
+    ]
+    _emit(args, obj, "\n".join(lines))
+    return 0
+
+
+def cmd_occupancy(args: argparse.Namespace) -> int:
+    """An occupancy grid in map_server format, as map_server reads it."""
+    from baseplace.world.occupancy import load_occupancy
+
+    grid = load_occupancy(args.map)
+    values = grid.data
+    text = (
+        f"{grid.width} x {grid.height} cells of {grid.resolution} m, origin {list(grid.origin)}: "
+        f"{int((values == 0).sum())} free, {int((values == 100).sum())} occupied, {int((values < 0).sum())} unknown, "
+        f"{int(((values > 0) & (values < 100)).sum())} in between"
+    )
+    _emit(args, grid.to_json(), text)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``baseplace`` command."""
     parser = _Parser(prog="baseplace", description="Where should a mobile manipulator stand?")
@@ -518,6 +625,33 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
     p.add_argument("--out", default=None, help="PNG: OSRM over the scene with the placements (Fig. 2b)")
+
+    p = command("surface-map", "where to stand to work on a whole table or shelf (seed 002)", cmd_surface_map)
+    p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
+    p.add_argument("--arms", default="any",
+                   help="any (either arm), both (both arms) or one arm's name (default: any)")  # fmt: skip
+    p.add_argument("--polygon", required=True, help='the surface outline "x1,y1;x2,y2;..." [m]')
+    p.add_argument("--height", type=float, required=True, help="surface height above the floor [m]")
+    p.add_argument("--resolution", type=float, default=0.05, help="grid spacing [m] (default 0.05)")
+    p.add_argument("--orientations", type=int, default=16, help="base headings (default 16)")
+    p.add_argument("--out", required=True, help="surface map file (.smap, sparse HDF5)")
+    p.add_argument("--png", default=None, help="PNG of R_S over the floor around the surface")
+    p.add_argument("--samples", type=_count, default=50_000_000,
+                   help="samples of the cached reachability maps, built once per arm (default 5e7)")  # fmt: skip
+
+    p = command("surface-sample", "sample good, spread-out base poses from a surface map (seed 002)",
+                cmd_surface_sample)  # fmt: skip
+    p.add_argument("--map", required=True, help="surface map from surface-map")
+    p.add_argument("--n", type=int, default=5, help="poses to sample (default 5)")
+    p.add_argument("--occupancy", default=None, help="operational area: map_server YAML (free cells only)")
+    p.add_argument("--candidates", type=int, default=40, help="N: best of N valid candidates (default 40)")
+    p.add_argument("--no-discount", action="store_true", help="do not spread consecutive poses (eq. 3)")
+    p.add_argument("--robot", default=None, help="robot file for custom robots (default: the map's robot)")
+    p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
+
+    p = command("occupancy", "read an occupancy grid (ROS map_server YAML + image) as map_server does",
+                cmd_occupancy)  # fmt: skip
+    p.add_argument("map", help="map YAML file")
 
     p = command("segment", "planar regions, polygons and region graph of a point cloud", cmd_segment)
     p.add_argument("cloud", help="point cloud: .pcd, .ply, .bt (OctoMap), .npy, .xyz")
