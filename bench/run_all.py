@@ -15,6 +15,7 @@ for script in [
     "bench_accuracy.py",
     "bench_segmentation.py",
     "bench_placement.py",
+    "bench_surface_map.py",
 ]:
     print(f"== {script}", flush=True)
     subprocess.run([sys.executable, str(HERE / script)], check=True, cwd=HERE)
