@@ -1,0 +1,1 @@
+"""Navigation across planar regions (seed 000, section V)."""
