@@ -278,6 +278,19 @@ def test_place_command(tmp_path):
     assert set(out["timings_ms"]) >= {"segmentation", "osrm", "query", "total"}
     assert len(placement["joints"]) == 1 and "arm_1_joint" in placement["joints"][0]
     assert png.stat().st_size > 5000
+    # With --start, every placement comes with a collision-free path from the start to it.
+    proc = run("place", "--cloud", str(cloud), "--target", target, "--map", str(map_file), "--tries", "200",
+               "--start", "-2 -2 0", "--planner", "regions", "--json")  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout)
+    route = out["placements"][0]["path"]
+    assert (
+        route["poses"][0] == [-2.0, -2.0, 0.0] and route["length"] > 3.0 and "navigation" in out["timings_ms"]
+    )
+    end = route["poses"][-1]
+    assert end[:2] == pytest.approx([out["placements"][0]["x"], out["placements"][0]["y"]], abs=1e-3)
+    assert_one_line_error(run("place", "--cloud", str(cloud), "--target", target, "--map", str(map_file),
+                              "--start", "9 9 0"), 2, "--start", "outside the scanned area")  # fmt: skip
     # Unreachable (3.5 m up): exit 3 with the failure counts.
     proc = run(
         "place",
@@ -358,3 +371,33 @@ def test_occupancy_command_prints_map_server_values():
     assert out["data"] == EXPECTED.ravel().tolist()
     proc = run("occupancy", str(SHARED / "maps" / "missing.yaml"))
     assert_one_line_error(proc, 2, "missing.yaml")
+
+
+def test_navigate_command(tmp_path):
+    from test_navigation import _ramp_scene
+
+    cloud = tmp_path / "ramp.npy"
+    np.save(cloud, _ramp_scene(with_object=True).sample_cloud(np.random.default_rng(0)))
+    png = tmp_path / "path.png"
+    proc = run("navigate", "--cloud", str(cloud), "--start", "-2 0.6 0", "--goal", "1.7 0.6 0", "--planner",
+               "regions", "--out", str(png), "--json")  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout)
+    assert out["poses"][0][:2] == [-2.0, 0.6] and out["poses"][-1][:2] == [1.7, 0.6]
+    assert len(out["regions"]) == 2 and out["length"] > 3.7 and png.stat().st_size > 10_000
+    proc = run(
+        "navigate",
+        "--cloud",
+        str(cloud),
+        "--start",
+        "-2 -1.9 0",
+        "--goal",
+        "0.5 -1.9 0",
+        "--time-limit",
+        "0.3",
+    )
+    assert_one_line_error(proc, 3, "no path")
+    proc = run("navigate", "--cloud", str(cloud), "--start", "-0.7 -1.9 0", "--goal", "0.5 -1.9 0")
+    assert_one_line_error(proc, 2, "start", "in collision")
+    proc = run("navigate", "--cloud", str(cloud), "--start", "0.7 0.6 0", "--goal", "-2 0.6 0")
+    assert_one_line_error(proc, 2, "off every surface")

@@ -366,10 +366,22 @@ def cmd_place(args: argparse.Namespace) -> int:
         finally:
             if bar is not None:
                 bar.close()
-    result = place(robot, rmap, cloud.points, targets, settings, np.random.default_rng(args.seed))
+    terrain = navmap = start = None
+    if args.start is not None:
+        from baseplace.navigation.navmap import navigation_map
+        from baseplace.terrain.pipeline import terrain_from_points
+
+        start = _base_xyyaw(args.start)
+        terrain = terrain_from_points(cloud.points)
+        navmap = navigation_map(terrain, robot.spec.footprint_bounding_radius)
+        navmap.check_pose("--start", start[:2])
+    result = place(
+        robot, rmap, cloud.points, targets, settings, np.random.default_rng(args.seed), terrain=terrain
+    )
     arm = robot.arm(rmap.info.arm)
+    kept, routes = _routes(result.placements, navmap, start, args.planner, args.seed, result.failures)
     placements = []
-    for p in result.placements:
+    for p, route in zip(kept, routes, strict=True):
         T = p.T_world_base
         placements.append({
             "base_pose": np.round(T, 6).tolist(), "x": round(float(T[0, 3]), 4), "y": round(float(T[1, 3]), 4),
@@ -378,6 +390,9 @@ def cmd_place(args: argparse.Namespace) -> int:
             "region": p.region, "reachability": round(p.reachability, 5),
             "joints": [dict(zip(p.joint_names, np.round(q, 6).tolist(), strict=True)) for q in p.joints],
         })  # fmt: skip
+        if route is not None:
+            placements[-1]["path"] = {"poses": np.round(route.poses, 4).tolist(), "length": round(route.length, 3),
+                                      "planner": route.planner, "time_ms": round(route.time_ms, 1)}  # fmt: skip
     obj = {
         "robot": {"name": robot.name, "urdf": str(robot.spec.urdf), "base_frame": robot.spec.base_frame,
                   "tcp_frames": {a: s.tcp_frame for a, s in robot.spec.arms.items()}, "arm": arm.name},
@@ -385,7 +400,7 @@ def cmd_place(args: argparse.Namespace) -> int:
         "placements": placements,
         "tries": result.tries,
         "failures": dict(result.failures),
-        "timings_ms": {k: round(v, 2) for k, v in result.timings_ms.items()},
+        "timings_ms": {k: round(v, 2) for k, v in _place_timings(result.timings_ms, terrain, routes).items()},
         "regions": len(result.terrain.segmentation.regions),
     }  # fmt: skip
     if out is not None:
@@ -393,9 +408,15 @@ def cmd_place(args: argparse.Namespace) -> int:
         from baseplace.viz.placement import plot_placement
 
         outline = footprint_outline(robot.spec.footprint_radius, robot.spec.footprint_polygon)
-        plot_placement(result.osrm, result.placements, outline, out,
-                       f"{robot.name}, {args.strategy}: {len(placements)} placement(s) in {result.tries} tries")  # fmt: skip
+        plot_placement(result.osrm, kept, outline, out,
+                       f"{robot.name}, {args.strategy}: {len(placements)} placement(s) in {result.tries} tries",
+                       [r.poses for r in routes if r is not None])  # fmt: skip
         obj["png"] = str(out)
+    if not placements and result.placements:
+        raise NothingFoundError(
+            f"none of the {len(result.placements)} verified placement(s) can be driven to from --start "
+            f"{args.start} ({args.planner} planner); ask for more with --placements"
+        )
     if not placements:
         raise NothingFoundError(
             f"no verified placement in {result.tries} tries with {args.strategy} "
@@ -409,6 +430,104 @@ def cmd_place(args: argparse.Namespace) -> int:
     if out is not None:
         lines.append(f"wrote {out}")
     _emit(args, obj, "\n".join(lines))
+    return 0
+
+
+def _place_timings(timings: dict[str, float], terrain: Any, routes: list[Any]) -> dict[str, float]:
+    """Placement timings [ms], with the segmentation and path planning done for --start."""
+    out = dict(timings)
+    if terrain is not None:
+        out["segmentation"] = terrain.timings_ms["total"]
+        out["navigation"] = sum(r.time_ms for r in routes)
+        out["total"] = timings["total"] + out["segmentation"] + out["navigation"]
+    return out
+
+
+def _base_xyyaw(text: str) -> np.ndarray:
+    from baseplace.geometry.poses import parse_base_pose
+
+    p = parse_base_pose(text)
+    return np.array([p.x, p.y, p.yaw])
+
+
+def _routes(
+    placements: list[Any], navmap: Any, start: Any, planner: str, seed: int, failures: Any
+) -> tuple[list[Any], list[Any]]:
+    """The placements the base can drive to from ``start``, with their paths (all, without a start)."""
+    if navmap is None:
+        return placements, [None] * len(placements)
+    from baseplace.navigation.planners import plan_path
+
+    kept, routes = [], []
+    for p in placements:
+        T = p.T_world_base
+        try:
+            route = plan_path(navmap, start, np.array([T[0, 3], T[1, 3], p.yaw]), planner, seed=seed)
+        except BaseplaceError:
+            failures["no_path"] += 1
+            continue
+        kept.append(p)
+        routes.append(route)
+    return kept, routes
+
+
+def cmd_navigate(args: argparse.Namespace) -> int:
+    """Seed 000 V: a base path across the planar regions of a scanned scene."""
+    from baseplace.navigation.navmap import navigation_map
+    from baseplace.navigation.planners import plan_path
+    from baseplace.robots.model import Robot
+    from baseplace.terrain.io import load_cloud, load_transform
+    from baseplace.terrain.pipeline import terrain_from_points
+
+    out = _out_path(args.out)
+    start, goal = _base_xyyaw(args.start), _base_xyyaw(args.goal)
+    robot = Robot(args.robot)
+    cloud = load_cloud(args.cloud)
+    if args.transform is not None:
+        cloud = cloud.transformed(load_transform(args.transform))
+    terrain = terrain_from_points(cloud.points)
+    navmap = navigation_map(terrain, robot.spec.footprint_bounding_radius)
+    path = plan_path(navmap, start, goal, args.planner, args.time_limit, args.seed)
+    obj = {
+        "robot": robot.name, "planner": path.planner, "start": start.tolist(), "goal": goal.tolist(),
+        "poses": np.round(path.poses, 4).tolist(), "length": round(path.length, 3),
+        "regions": list(path.regions), "time_ms": round(path.time_ms, 1),
+        "footprint_radius": navmap.radius, "timings_ms": {k: round(v, 1) for k, v in terrain.timings_ms.items()},
+    }  # fmt: skip
+    if out is not None:
+        from baseplace.viz.navigation import plot_navigation
+
+        plot_navigation(navmap, [path], start, goal, out)
+        obj["png"] = str(out)
+    text = (f"{path.planner} path of {path.length:.2f} m through regions {list(path.regions)} "
+            f"in {path.time_ms:.0f} ms, {len(path.poses)} poses") + (f"\nwrote {out}" if out else "")  # fmt: skip
+    _emit(args, obj, text)
+    return 0
+
+
+def cmd_experiment_navigation(args: argparse.Namespace) -> int:
+    """RRTConnect vs the region-graph planner on generated multi-level scenes."""
+    from baseplace.sim.navigation_experiment import CLASSES, run_navigation_experiment
+
+    if args.scenes < 1 or args.pairs < 1:
+        raise InputError(f"--scenes and --pairs must be >= 1, got {args.scenes} and {args.pairs}")
+    update, bar = _progress(args, args.scenes * len(CLASSES), "navigation experiment")
+    try:
+        result = run_navigation_experiment(
+            args.scenes, args.pairs, args.seed, progress=_step_progress(update)
+        )
+    finally:
+        if bar is not None:
+            bar.close()
+    lines = [f"{'scene':<16} {'planner':<8} {'pairs':>5} {'success':>8} {'false':>5} {'length m':>8} "
+             f"{'time ms':>8} {'steps':>5}"]  # fmt: skip
+    for r in result["rows"]:
+        ok = "-" if r["success_rate"] is None else f"{r['success_rate']:.1f}%"
+        length = "-" if r["mean_length_m"] is None else f"{r['mean_length_m']:.2f}"
+        ms = "-" if r["median_time_ms"] is None else f"{r['median_time_ms']:.0f}"
+        lines.append(f"{r['scene']:<16} {r['planner']:<8} {r['pairs']:>5} {ok:>8} {r['paths_to_unreachable_goals']:>5} "
+                     f"{length:>8} {ms:>8} {r['paths_crossing_a_step']:>5}")  # fmt: skip
+    _emit(args, result, "\n".join(lines))
     return 0
 
 
@@ -625,6 +744,29 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
     p.add_argument("--out", default=None, help="PNG: OSRM over the scene with the placements (Fig. 2b)")
+    p.add_argument(
+        "--start", default=None, help='current base pose "x y yaw": also plan a path to each placement'
+    )
+    p.add_argument("--planner", default="rrt", choices=["rrt", "regions"],
+                   help="path planner with --start: OMPL RRTConnect or the region graph (default rrt)")  # fmt: skip
+
+    p = command(
+        "navigate", "a base path across the planar regions of a scanned scene (seed 000 V)", cmd_navigate
+    )
+    p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
+    p.add_argument(
+        "--cloud", required=True, help="scene cloud: .pcd, .ply, .bt, .npy, .xyz (z up, or --transform)"
+    )
+    p.add_argument(
+        "--transform", default=None, help='world_T_sensor file, or the sensor-frame up vector "ux uy uz"'
+    )
+    p.add_argument("--start", required=True, help='start base pose "x y yaw" [m, rad]')
+    p.add_argument("--goal", required=True, help='goal base pose "x y yaw" [m, rad]')
+    p.add_argument("--planner", default="rrt", choices=["rrt", "regions"],
+                   help="OMPL RRTConnect (seed 000) or the region-graph planner (default rrt)")  # fmt: skip
+    p.add_argument("--time-limit", type=float, default=2.0, help="RRT planning time limit [s] (default 2)")
+    p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
+    p.add_argument("--out", default=None, help="PNG of the path over regions and obstacles (as Fig. 4)")
 
     p = command("surface-map", "where to stand to work on a whole table or shelf (seed 002)", cmd_surface_map)
     p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
@@ -690,6 +832,14 @@ def build_parser() -> argparse.ArgumentParser:
                 "Scenes per size class x {2, 4} planes, sigma 25 mm; share of cells on their true plane "
                 "and normal error.")  # fmt: skip
     p.add_argument("--scenes", type=int, default=10, help="scenes per class and plane count (default 10)")
+    p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
+
+    p = command("navigation", "RRTConnect vs region-graph paths on multi-level scenes (seed 000 V)",
+                cmd_experiment_navigation, exp_sub,
+                "{small, medium, large} x {2, 4} plane scenes; success, path length, time and ledge crossings "
+                "checked against the true height field.")  # fmt: skip
+    p.add_argument("--scenes", type=int, default=5, help="scenes per class (default 5)")
+    p.add_argument("--pairs", type=int, default=12, help="start/goal pairs per scene (default 12)")
     p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
 
     p = command("osrm", "placement success and timing, seed 000 Tables I and II", cmd_experiment_osrm, exp_sub,

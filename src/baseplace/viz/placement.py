@@ -16,9 +16,17 @@ from baseplace.placement.verify import Placement
 
 
 def plot_placement(
-    osrm: OSRM, placements: list[Placement], outline: np.ndarray, path: Path, title: str
+    osrm: OSRM,
+    placements: list[Placement],
+    outline: np.ndarray,
+    path: Path,
+    title: str,
+    routes: list[np.ndarray] | None = None,
 ) -> None:
-    """Write a PNG: regions in grey, non-planar black, OSRM heat map, targets and footprints."""
+    """Write a PNG: regions in grey, non-planar black, OSRM heat map, targets, footprints and routes.
+
+    ``routes`` are base paths (N, 3) (x, y, yaw) drawn in orange, as seed 000 Fig. 4.
+    """
     seg = osrm.seg
     hmap = seg.hmap
     h, w = hmap.shape
@@ -42,6 +50,9 @@ def plot_placement(
         ax.add_patch(PatchPolygon(pts, closed=True, fill=False, edgecolor="white", linewidth=1.8))
         ax.arrow(T[0, 3], T[1, 3], 0.3 * T[0, 0], 0.3 * T[1, 0], color="white", width=0.015,
                  length_includes_head=True)  # fmt: skip
+    for route in routes or []:
+        ax.plot(route[:, 0], route[:, 1], color="orange", linewidth=2.0)
+        ax.plot(route[0, 0], route[0, 1], marker="o", color="orange", markersize=7)
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_title(title, fontsize=9)
