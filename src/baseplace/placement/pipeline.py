@@ -26,7 +26,7 @@ from baseplace.terrain.pipeline import Terrain, terrain_from_points
 from baseplace.terrain.polygons import footprint_outline
 from baseplace.terrain.segmentation import Segmentation
 from baseplace.terrain.voxels import VoxelMap
-from baseplace.world.environment import Environment, obstacle_voxels
+from baseplace.world.environment import SUPPORT_DIST, Environment, obstacle_voxels
 
 
 @dataclass(frozen=True)
@@ -48,7 +48,7 @@ class PlaceSettings:
     tries: int = 100
     n_orientations: int = 36
     gamma_max: float = math.pi / 4
-    support_dist: float = 0.08
+    support_dist: float = SUPPORT_DIST
     resolution: float = 0.05
 
     def __post_init__(self) -> None:

@@ -19,8 +19,11 @@ from baseplace.robots.model import Arm, Robot
 from baseplace.terrain.segmentation import Segmentation
 from baseplace.terrain.voxels import VoxelMap
 
+SUPPORT_DIST = 0.1
+"""Voxels this close [m] to their region's plane are support: 4 sigma of seed 000's 25 mm noise."""
 
-def obstacle_voxels(voxels: VoxelMap, seg: Segmentation, support_dist: float = 0.08) -> VoxelMap:
+
+def obstacle_voxels(voxels: VoxelMap, seg: Segmentation, support_dist: float = SUPPORT_DIST) -> VoxelMap:
     """The voxels that are obstacles: all but those lying on the plane of their cell's region."""
     centres = voxels.centres
     region = seg.region_at(centres[:, :2])
