@@ -15,6 +15,7 @@ obstacle in the map).
 
 from __future__ import annotations
 
+import dataclasses
 import gc
 import itertools
 import math
@@ -88,9 +89,10 @@ def plan_path(
     ms = (time.perf_counter() - t0) * 1e3
     if poses is None:
         raise NothingFoundError(f"no path from start to goal ({planner} planner, {ms:.0f} ms)")
-    ids = navmap.seg.region_at(poses[:, :2])
-    passed = tuple(int(k) for k, _ in itertools.groupby(ids) if k >= 0)
-    return Path(poses, planner, ms, passed)
+    path = Path(poses, planner, ms, ())
+    ids = navmap.seg.region_at(path.dense(navmap.seg.hmap.resolution / 2))
+    passed = tuple(int(k) for k, _ in itertools.groupby(ids[ids >= 0]))
+    return dataclasses.replace(path, regions=passed)
 
 
 def _rrt(
