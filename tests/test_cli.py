@@ -152,34 +152,40 @@ def test_build_map_bad_input(tmp_path):
     assert_one_line_error(run("frobnicate"), 2, "invalid choice")
 
 
-def test_demo_writes_a_verified_pose(tmp_path, monkeypatch):
+def test_demo_places_on_the_platform_and_drives_up_the_ramp(tmp_path):
     import numpy as np
     import pinocchio as pin
 
-    from baseplace.geometry.poses import BasePose, parse_pose6
+    from baseplace.geometry.poses import parse_pose6
     from baseplace.robots.model import Robot
 
     env_cache = tmp_path / "cache"
     proc = subprocess.run(
-        [sys.executable, "-m", "baseplace.cli", "demo", "--samples", "3e6", "--out", str(tmp_path / "out"), "--json"],
+        [sys.executable, "-m", "baseplace.cli", "demo", "--samples", "1e7", "--out", str(tmp_path / "out"), "--json"],
         capture_output=True, text=True, stdin=subprocess.DEVNULL, timeout=600,
         env={**__import__("os").environ, "BASEPLACE_CACHE": str(env_cache)},
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     result = json.loads(proc.stdout)
-    assert (tmp_path / "out" / "demo.json").is_file() and (
-        tmp_path / "out" / "demo_irm.png"
-    ).stat().st_size > 10_000
-    best = result["best"]
-    # Oracle: pinocchio FK of the reported joints, placed at the reported base pose, hits the target.
+    assert json.loads((tmp_path / "out" / "demo.json").read_text()) == result
+    assert (tmp_path / "out" / "demo.png").stat().st_size > 10_000
+    p = result["placement"]
+    # On the platform (the generator's truth: 0.3 m high, x 0.3..2.9, y -1.3..1.3), level.
+    assert p["z"] == pytest.approx(0.3, abs=0.03) and 0.3 < p["x"] < 2.9 and abs(p["y"]) < 1.3
+    # Oracle: pinocchio FK of the reported joints, at the reported base pose, hits the target.
     robot = Robot("tiago")
     arm = robot.arm()
-    q = arm.to_pinocchio([best["joints"][j] for j in arm.joint_names], robot.q_reference)
+    q = arm.to_pinocchio([p["joints"][j] for j in arm.joint_names], robot.q_reference)
     data = robot.model.createData()
     pin.framesForwardKinematics(robot.model, data, q)
     T_base_tcp = data.oMf[robot.model.getFrameId(arm.tcp_frame)].homogeneous  # base_footprint is the root
-    T_world_tcp = BasePose(best["x"], best["y"], best["yaw"]).matrix() @ T_base_tcp
+    T_world_tcp = np.asarray(p["base_pose"]) @ T_base_tcp
     np.testing.assert_allclose(T_world_tcp[:3, 3], parse_pose6(result["target"])[:3, 3], atol=2e-4)
+    # The path starts at the start on the floor, ends at the placement and goes up the ramp.
+    route = result["path"]
+    assert route["poses"][0][:2] == [-3.5, 0.0]
+    assert route["poses"][-1][:2] == pytest.approx([p["x"], p["y"]], abs=1e-3)
+    assert len(route["regions"]) == 3 and route["regions"][-1] == p["region"]
 
 
 def test_scene_generate_and_segment(tmp_path):

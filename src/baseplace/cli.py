@@ -238,7 +238,7 @@ def cmd_reach(args: argparse.Namespace) -> int:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    """Run the demo."""
+    """Run the demo: segmentation, OSRM, a verified placement on a platform and the path up its ramp."""
     from baseplace.demo import run_demo
 
     update, bar = _progress(args, args.samples, "default TIAGo map (first run only)")
@@ -247,15 +247,15 @@ def cmd_demo(args: argparse.Namespace) -> int:
     finally:
         if bar is not None:
             bar.close()
-    best = result["best"]
-    if best is None:
-        raise NothingFoundError("the demo found no IK-verified base pose for its target")
+    p, route, t = result["placement"], result["path"], result["timings_ms"]
     text = (
-        f"map {result['map']['path']} ({'built' if result['map']['built_now'] else 'cached'}, "
-        f"{result['map']['cells_reached']} cells)\n"
-        f"{result['base_poses_evaluated']} base poses scored in {result['timings_s']['irm_query'] * 1e3:.1f} ms\n"
-        f"best verified base pose x={best['x']:.2f} y={best['y']:.2f} yaw={best['yaw']:.2f} "
-        f"(reachability {best['reachability']:.3f})\nwrote {args.out}/demo.json and {result['png']}"
+        f"map {result['map']['path']} ({'built' if result['map']['built_now'] else 'cached'})\n"
+        f"{result['regions']} planar regions; verified placement on region {p['region']} "
+        f"(tilt {p['region_tilt_deg']:.1f} deg): x={p['x']:.2f} y={p['y']:.2f} z={p['z']:.2f} yaw={p['yaw']:.2f}\n"
+        f"path from {result['start']}: {route['length']:.2f} m through regions {route['regions']}\n"
+        f"segmentation {t['segmentation']:.0f} ms, OSRM {t['osrm']:.0f} ms, query {t['query']:.0f} ms, "
+        f"path {t['path']:.0f} ms, total {t['total'] / 1e3:.1f} s\n"
+        f"wrote {args.out}/demo.json and {result['png']}"
     )
     _emit(args, result, text)
     return 0
