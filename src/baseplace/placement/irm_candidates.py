@@ -1,0 +1,164 @@
+"""IRM-verified base-placement candidates: seed 004's stated future work, on its interface.
+
+Base poses around the object are ranked by a reachability map (the inverse reachability of a set
+of grasp poses) and verified, best first, with the shared IK + collision
+:class:`~baseplace.placement.verify.Verifier`; they come back as the same
+:class:`~baseplace.placement.candidates.RadialCandidate` type as the radial method, so both feed
+:func:`~baseplace.placement.candidates.pickup` and can be compared.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from baseplace.errors import InputError
+from baseplace.geometry.poses import BasePose, FloatArray, pose_from_xyz_rpy
+from baseplace.placement.candidates import RadialCandidate, _object, occupancy_risk
+from baseplace.placement.verify import Candidate, Verifier
+from baseplace.reachability.rmap import ReachabilityMap
+from baseplace.robots.ik import DampedLeastSquaresIK
+from baseplace.robots.model import Robot
+from baseplace.terrain.polygons import footprint_outline
+from baseplace.terrain.voxels import VoxelMap
+from baseplace.world.environment import Environment
+from baseplace.world.occupancy import OccupancyGrid
+
+
+def grasp_poses(p_o: ArrayLike, n: int = 8, top_down: bool = False, standoff: float = 0.0) -> FloatArray:
+    """World TCP poses (K, 4, 4) grasping an object at ``p_o`` (3,) [m] from ``n`` directions.
+
+    Side grasps put the TCP x axis (the approach axis of TIAGo's ``arm_tool_link`` and PR2's
+    ``*_gripper_tool_frame``) horizontal, pointing at the object from yaw ``k 2 pi / n``; with
+    ``top_down`` another ``n`` poses point x straight down, rotated by the same yaws (K = 2 n).
+    The TCP stands ``standoff`` [m] back from the object along x: TIAGo's TCP is the wrist flange,
+    and its hand grasps 0.15 m ahead of it (``hand_grasping_frame``).
+    """
+    p = _object(p_o, "a grasp pose")
+    if n < 1:
+        raise InputError(f"need n >= 1 grasp directions, got {n}")
+    if not (math.isfinite(standoff) and standoff >= 0):
+        raise InputError(f"standoff must be a finite distance >= 0 m, got {standoff}")
+    yaws = np.arange(n) * (2.0 * math.pi / n)
+    pitches = [0.0, math.pi / 2] if top_down else [0.0]
+    rows = [[*p, 0.0, pitch, yaw] for pitch in pitches for yaw in yaws]
+    T = pose_from_xyz_rpy(np.array(rows))
+    T[:, :3, 3] -= standoff * T[:, :3, 0]
+    return T
+
+
+@dataclass(frozen=True)
+class IrmSettings:
+    """How :func:`irm_candidates` searches (the seed's future work: reachability maps).
+
+    Attributes:
+        resolution: spacing of the base positions around the object [m] (the map's voxel size).
+        n_yaw: base headings per position, spaced by ``2 pi / n_yaw``.
+        count: verified candidates to return at most (M).
+        max_checks: verifier calls at most (IK + collision, ~10 ms each when IK fails).
+        separation: returned candidates are at least this far apart [m], so that one blocked
+            approach does not take all of them.
+        unknown_is_risk: unknown grid cells count as occupied (as :class:`RadialSettings`).
+    """
+
+    resolution: float = 0.05
+    n_yaw: int = 36
+    count: int = 8
+    max_checks: int = 300
+    separation: float = 0.2
+    unknown_is_risk: bool = True
+
+    def __post_init__(self) -> None:
+        if not (self.resolution > 0 and self.n_yaw >= 1 and self.count >= 1 and self.max_checks >= 1):
+            raise InputError("need resolution > 0 m and n_yaw, count, max_checks >= 1")
+        if not self.separation >= 0:
+            raise InputError(f"separation must be >= 0 m, got {self.separation}")
+
+
+def irm_candidates(
+    robot: Robot,
+    rmap: ReachabilityMap,
+    p_o: ArrayLike,
+    grasps: ArrayLike,
+    environment: Environment | None = None,
+    occupancy: OccupancyGrid | None = None,
+    settings: IrmSettings | None = None,
+    rng: np.random.Generator | None = None,
+) -> list[RadialCandidate]:
+    """Base placements ranked by inverse reachability and verified by IK + collision.
+
+    Base poses on an xy grid (``resolution``) within the map's horizontal reach of the object,
+    outside the footprint radius, times ``n_yaw`` headings, are scored by the best reachability
+    of any grasp (``rmap.inverse``); poses whose footprint disc risks collision on the grid
+    (:func:`occupancy_risk`) are dropped. From the best score down, each pose's grasps are tried
+    in order of their value with the shared :class:`~baseplace.placement.verify.Verifier`, until
+    ``count`` poses passed or ``max_checks`` checks were spent.
+
+    Args:
+        robot: the robot.
+        rmap: its reachability map (of the arm used).
+        p_o: (3,) object position in the map frame [m].
+        grasps: (K, 4, 4) alternative world TCP poses, e.g. :func:`grasp_poses`; one must be reached.
+        environment: obstacle collision checker; remove the object's own voxels first (the closing
+            hand surrounds it). Default: self-collision only.
+        occupancy: occupancy grid for the footprint test, or None.
+        settings: search settings.
+        rng: randomness for IK restarts (default: seed 0).
+
+    Returns:
+        Verified candidates, best reachability first (possibly empty); each carries the grasp
+        index and the joint values the verifier found.
+    """
+    s = settings or IrmSettings()
+    rng = rng if rng is not None else np.random.default_rng(0)
+    p = _object(p_o, "a grasp search")
+    G = np.asarray(grasps, dtype=float).reshape(-1, 4, 4)
+    if len(G) == 0:
+        raise InputError("need at least one grasp pose (K, 4, 4), got none")
+    if not np.all(np.isfinite(G)):
+        raise InputError("grasp poses contain NaN or infinity")
+    radius = robot.spec.footprint_bounding_radius
+    reach = rmap.horizontal_reach
+    axis = np.arange(-math.floor(reach / s.resolution), math.floor(reach / s.resolution) + 1) * s.resolution
+    X, Y = np.meshgrid(axis, axis, indexing="ij")
+    offsets = np.stack([X.ravel(), Y.ravel()], axis=1)
+    dist = np.hypot(offsets[:, 0], offsets[:, 1])
+    xy = p[:2] + offsets[(dist > radius) & (dist <= reach)]
+    if occupancy is not None:
+        xy = xy[~occupancy_risk(occupancy, xy, radius, s.unknown_is_risk)]
+    yaws = np.arange(s.n_yaw) * (2.0 * math.pi / s.n_yaw)
+    yaws = (yaws + math.pi) % (2.0 * math.pi) - math.pi
+    poses = np.column_stack([np.repeat(xy, s.n_yaw, axis=0), np.tile(yaws, len(xy))])
+    T = BasePose.batch_matrix(poses)
+    values = np.stack([rmap.inverse(g, T) for g in G]) if len(T) else np.zeros((len(G), 0))
+    best = values.max(axis=0)
+
+    arm = robot.arm(rmap.info.arm)
+    env = environment
+    if env is None:  # self-collision only
+        env = Environment(robot, VoxelMap(0.025, np.zeros((0, 3), dtype=np.int64)))
+    ik = DampedLeastSquaresIK(arm)
+    outline = footprint_outline(robot.spec.footprint_radius, robot.spec.footprint_polygon)
+    verifiers = [Verifier(arm, ik, env, g[None], {}, outline) for g in G]
+    found: list[RadialCandidate] = []
+    checks = 0
+    for i in np.argsort(-best, kind="stable"):
+        if best[i] <= 0 or checks >= s.max_checks or len(found) >= s.count:
+            break
+        if any(math.dist(poses[i, :2], c.xy) < s.separation for c in found):
+            continue
+        for k in np.argsort(-values[:, i], kind="stable"):
+            if values[k, i] <= 0 or checks >= s.max_checks:
+                break
+            checks += 1
+            placement = verifiers[k].check(Candidate(T[i], -1, float(values[k, i])), rng)
+            if placement is not None:
+                pose = BasePose(float(poses[i, 0]), float(poses[i, 1]), float(poses[i, 2]))
+                found.append(RadialCandidate(pose, float(math.dist(poses[i, :2], p[:2])), -1, "irm",
+                                             float(values[k, i]), int(k), placement.joints[0],
+                                             placement.joint_names))  # fmt: skip
+                break
+    return found
