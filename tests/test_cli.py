@@ -407,3 +407,66 @@ def test_navigate_command(tmp_path):
     assert_one_line_error(proc, 2, "start", "in collision")
     proc = run("navigate", "--cloud", str(cloud), "--start", "0.7 0.6 0", "--goal", "-2 0.6 0")
     assert_one_line_error(proc, 2, "off every surface")
+
+
+@pytest.fixture(scope="module")
+def tiago_map_file(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("tiago") / "tiago.rmap"
+    assert run("build-map", "--samples", "5e6", "--seed", "4", "--out", str(path)).returncode == 0
+    return path
+
+
+def test_candidates_command_on_a_real_map(tiago_map_file, tmp_path):
+    import pinocchio as pin
+
+    from baseplace.geometry.poses import BasePose
+    from baseplace.robots.model import Robot
+    from baseplace.world.occupancy import load_occupancy
+    from conftest import SHARED
+
+    yaml = SHARED / "maps" / "tb3_sandbox.yaml"
+    png = tmp_path / "cand.png"
+    proc = run("candidates", "--occupancy", str(yaml), "--object", "-1.025 -0.775 0.6", "--robot-pose",
+               "-1.875 0.075 0", "--map", str(tiago_map_file), "--png", str(png), "--json")  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout)
+    assert out["candidates"] and png.stat().st_size > 10_000 and out["path"] is not None
+    grid = load_occupancy(yaml)
+    occupied = grid.cell_to_world(np.argwhere(grid.data == 100)[:, ::-1])
+    robot = Robot("tiago")
+    arm = robot.arm()
+    data = robot.model.createData()
+    costs = [c["motion_cost"] for c in out["candidates"]]
+    assert costs == sorted(costs)
+    for c in out["candidates"]:
+        # in free space with r_r clearance from every occupied cell (brute force over cell squares)
+        gap = np.abs(occupied - [c["x"], c["y"]]) - grid.resolution / 2
+        assert np.hypot(*np.maximum(gap, 0.0).T).min() >= out["settings"]["r_r"] - 1e-9
+        # pinocchio FK of the verified joints reaches the reported grasp
+        q = arm.to_pinocchio([c["joints"][j] for j in arm.joint_names], robot.q_reference)
+        pin.framesForwardKinematics(robot.model, data, q)
+        T = (
+            BasePose(c["x"], c["y"], c["yaw"]).matrix()
+            @ data.oMf[robot.model.getFrameId(arm.tcp_frame)].homogeneous
+        )
+        np.testing.assert_allclose(T[:3, 3], np.asarray(c["grasp"])[:3, 3], atol=2e-4)
+
+
+def test_candidates_bad_input(tiago_map_file, tmp_path):
+    from conftest import SHARED
+
+    yaml = str(SHARED / "maps" / "tb3_sandbox.yaml")
+    common = ("--map", str(tiago_map_file))
+    assert_one_line_error(run("candidates", "--occupancy", yaml, "--object", "30 0 0.6", *common), 2,
+                          "outside the occupancy grid")  # fmt: skip
+    assert_one_line_error(run("candidates", "--occupancy", yaml, "--object", "-9 -9 0.6", *common), 2,
+                          "inside an obstacle")  # fmt: skip
+    assert_one_line_error(run("candidates", "--occupancy", yaml, "--object", "1 2", *common), 2, "x y z")
+    (tmp_path / "bad.pgm").write_bytes(b"P5 10 10 255\n" + b"\x00" * 7)  # truncated pixels
+    (tmp_path / "bad.yaml").write_text("image: bad.pgm\nresolution: 0.05\norigin: [0, 0, 0]\nnegate: 0\n"
+                                       "occupied_thresh: 0.65\nfree_thresh: 0.196\n")  # fmt: skip
+    assert_one_line_error(run("candidates", "--occupancy", str(tmp_path / "bad.yaml"), "--object", "0 0 0.6",
+                              *common), 2, "bad.pgm")  # fmt: skip
+    (tmp_path / "short.yaml").write_text("image: bad.pgm\nresolution: 0.05\n")
+    assert_one_line_error(run("candidates", "--occupancy", str(tmp_path / "short.yaml"), "--object", "0 0 0.6",
+                              *common), 2, "origin")  # fmt: skip

@@ -471,6 +471,141 @@ def _routes(
     return kept, routes
 
 
+def cmd_candidates(args: argparse.Namespace) -> int:
+    """Seed 004: base placement candidates from an object position, a cloud and an occupancy grid."""
+    from baseplace.demo import cached_map
+    from baseplace.geometry.poses import BasePose
+    from baseplace.placement.candidates import RadialSettings, motion_costs, radial_search
+    from baseplace.placement.irm_candidates import (
+        IrmSettings,
+        grasp_poses,
+        grasp_standoff,
+        irm_candidates,
+        verify_candidates,
+    )
+    from baseplace.reachability.build import BuildSettings
+    from baseplace.reachability.storage import load_map
+    from baseplace.robots.model import Robot
+    from baseplace.terrain.voxels import VoxelMap
+    from baseplace.world.environment import Environment
+    from baseplace.world.gridnav import GridNavigator
+    from baseplace.world.occupancy import load_occupancy
+
+    out = _out_path(args.png)
+    p_o = _parse_xyz(args.object, "--object")
+    robot_pose = _base_xyyaw(args.robot_pose) if args.robot_pose is not None else None
+    grid = load_occupancy(args.occupancy)
+    robot = Robot(args.robot)
+    rmap = (
+        load_map(args.map, robot, args.arm) if args.map else cached_map(robot, BuildSettings(), args.arm)[0]
+    )
+    settings = RadialSettings.for_robot(robot, rmap)
+    _check_object(grid, p_o, settings.d_max)
+    points = None
+    if args.cloud is not None:
+        from baseplace.terrain.io import load_cloud, load_transform
+
+        cloud = load_cloud(args.cloud)
+        if args.transform is not None:
+            cloud = cloud.transformed(load_transform(args.transform))
+        points = cloud.points
+    # the shared verification: IK for one of the grasps, whole robot against the cloud's voxels
+    # (less the object's own, which the closing hand surrounds)
+    voxels = VoxelMap(0.025, np.zeros((0, 3), dtype=np.int64))
+    if points is not None:
+        voxels = VoxelMap.from_points(points)
+        voxels = voxels.without(np.linalg.norm(voxels.centres - p_o, axis=1) <= 0.12)
+    environment = Environment(robot, voxels)
+    standoff = grasp_standoff(robot) if args.standoff is None else args.standoff
+    grasps = grasp_poses(p_o, n=16, top_down=True, standoff=standoff)
+    rng = np.random.default_rng(args.seed)
+    rejected: list[tuple[tuple[float, float], str]] = []
+    if args.method == "radial":
+        search = radial_search(p_o, settings, points, grid)
+        rejected += [(r.xy, str(r.reason)) for r in search.rejected]
+        verified, failed = verify_candidates(
+            robot, rmap.info.arm, search.candidates, grasps, environment, rng
+        )
+        rejected += [((c.pose.x, c.pose.y), why) for c, why in failed]
+    else:
+        verified = irm_candidates(robot, rmap, p_o, grasps, environment, grid, IrmSettings(), rng)
+    start = robot_pose if robot_pose is not None else np.r_[p_o[:2], 0.0]
+    costs = motion_costs(verified, p_o, BasePose(*start)) if verified else np.zeros(0)
+    order = np.argsort(costs, kind="stable")
+    ranked = [verified[i] for i in order]
+    route = None
+    if robot_pose is not None and ranked:
+        navigator = GridNavigator(grid, settings.r_r)
+        for c in ranked:  # the pickup loop: the first candidate the planner reaches
+            try:
+                route = navigator(BasePose(*robot_pose), c.pose)
+            except InputError:
+                route = None
+            if route is not None:
+                break
+    rows = [
+        {"x": round(c.pose.x, 4), "y": round(c.pose.y, 4), "yaw": round(c.pose.yaw, 4),
+         "distance": round(c.distance, 4), "motion_cost": round(float(costs[i]), 4), "method": c.method,
+         "reachability": round(c.reachability, 5), "grasp": grasps[c.grasp].round(5).tolist(),
+         "joints": dict(zip(c.joint_names, np.round(c.joints, 6).tolist(), strict=True)) if c.joints is not None else {}}
+        for i, c in zip(order, ranked, strict=True)
+    ]  # fmt: skip
+    obj: dict[str, Any] = {
+        "method": args.method, "robot": robot.name, "object": p_o.tolist(), "occupancy": args.occupancy,
+        "robot_pose": None if robot_pose is None else robot_pose.tolist(), "candidates": rows,
+        "rejected": [{"x": round(xy[0], 4), "y": round(xy[1], 4), "reason": why} for xy, why in rejected],
+        "path": None if route is None else np.round(route, 4).tolist(),
+        "settings": {"r_r": settings.r_r, "d_min": settings.d_min, "d_max": round(settings.d_max, 4),
+                     "theta": round(settings.theta, 5), "k_obs": settings.k_obs, "grasp_standoff": standoff},
+    }  # fmt: skip
+    if out is not None:
+        from baseplace.viz.candidates import plot_candidates
+
+        plot_candidates(grid, p_o, ranked, rejected, out, robot_pose, route,
+                        f"{args.method} candidates for {robot.name}: {len(ranked)} verified, {len(rejected)} rejected")  # fmt: skip
+        obj["png"] = str(out)
+    if not ranked:
+        raise NothingFoundError(
+            f"no verified candidate ({args.method}); {len(rejected)} positions rejected "
+            f"({', '.join(sorted({why for _, why in rejected})) or 'none tried'})"
+        )
+    lines = [f"{len(ranked)} verified {args.method} candidate(s), best first (motion cost):"]
+    lines += [
+        f"  x={r['x']:.3f} y={r['y']:.3f} yaw={r['yaw']:.3f} cost {r['motion_cost']:.2f} m" for r in rows
+    ]
+    _emit(args, obj, "\n".join(lines))
+    return 0
+
+
+def _parse_xyz(text: str, what: str) -> np.ndarray:
+    try:
+        values = [float(v) for v in text.replace(",", " ").split()]
+    except ValueError:
+        raise InputError(f'{what} must be "x y z" in metres, got {text!r}') from None
+    if len(values) != 3 or not all(math.isfinite(v) for v in values):
+        raise InputError(f'{what} must be 3 finite numbers "x y z" [m], got {text!r}')
+    return np.array(values)
+
+
+def _check_object(grid: Any, p_o: np.ndarray, reach: float) -> None:
+    """Clear errors for an object outside the map or buried in an obstacle (no free cell in reach)."""
+    from scipy import ndimage
+
+    x, y = float(p_o[0]), float(p_o[1])
+    if not grid.inside(p_o[None, :2])[0]:
+        raise InputError(f"--object ({x:.2f}, {y:.2f}) lies outside the occupancy grid {grid.source}")
+    free = (grid.data >= 0) & (grid.data < 50)
+    if not free.any():
+        raise InputError(f"the occupancy grid {grid.source} has no free cell")
+    gap = ndimage.distance_transform_edt(~free) * grid.resolution
+    col, row = grid.world_to_cell(p_o[None, :2])[0]
+    if gap[row, col] > reach:
+        raise InputError(
+            f"--object ({x:.2f}, {y:.2f}) lies inside an obstacle or unknown space: the nearest free cell is {gap[row, col]:.2f} m "
+            f"away, beyond the arm's reach ({reach:.2f} m)"
+        )
+
+
 def cmd_navigate(args: argparse.Namespace) -> int:
     """Seed 000 V: a base path across the planar regions of a scanned scene."""
     from baseplace.navigation.navmap import navigation_map
@@ -749,6 +884,24 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--planner", default="rrt", choices=["rrt", "regions"],
                    help="path planner with --start: OMPL RRTConnect or the region graph (default rrt)")  # fmt: skip
+
+    p = command("candidates", "base placement candidates around an object (seed 004)", cmd_candidates)
+    p.add_argument("--occupancy", required=True, help="occupancy grid: map_server YAML")
+    p.add_argument("--object", required=True, help='object position "x y z" in the map frame [m]')
+    p.add_argument("--cloud", default=None, help="RGB-D cloud in the map frame (.pcd, .ply, .npy, ...)")
+    p.add_argument("--transform", default=None, help="world_T_sensor file or up vector for --cloud")
+    p.add_argument(
+        "--robot-pose", default=None, help='robot pose "x y yaw": rank by motion cost, plan a path'
+    )
+    p.add_argument("--method", default="radial", choices=["radial", "irm"],
+                   help="radial (seed 004 Algorithm 1) or irm (reachability map); both verified (default radial)")  # fmt: skip
+    p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
+    p.add_argument("--arm", default=None, help="arm (default: the robot's default arm)")
+    p.add_argument("--map", default=None, help="reachability map (default: the cached default map)")
+    p.add_argument("--standoff", type=float, default=None,
+                   help="TCP distance behind the grasp point [m] (default: 0.15 for TIAGo, else 0)")  # fmt: skip
+    p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
+    p.add_argument("--png", default=None, help="PNG of the candidates over the grid (as seed 004 Fig. 2)")
 
     p = command(
         "navigate", "a base path across the planar regions of a scanned scene (seed 000 V)", cmd_navigate

@@ -9,6 +9,7 @@ of grasp poses) and verified, best first, with the shared IK + collision
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -162,3 +163,48 @@ def irm_candidates(
                                              placement.joint_names))  # fmt: skip
                 break
     return found
+
+
+def grasp_standoff(robot: Robot) -> float:
+    """How far [m] behind the grasp point the arm's TCP frame sits, for :func:`grasp_poses`.
+
+    TIAGo's ``arm_tool_link`` is the wrist flange, 0.151 m behind ``hand_grasping_frame``; PR2's
+    ``*_gripper_tool_frame`` is between the fingertips already. Custom robots: 0.
+    """
+    return 0.15 if robot.name in ("tiago", "tiago_dual") else 0.0
+
+
+def verify_candidates(
+    robot: Robot,
+    arm_name: str | None,
+    candidates: list[RadialCandidate],
+    grasps: ArrayLike,
+    environment: Environment,
+    rng: np.random.Generator,
+) -> tuple[list[RadialCandidate], list[tuple[RadialCandidate, str]]]:
+    """Run the shared verification on candidates of any method: IK for one of the grasps + collision.
+
+    Returns:
+        (verified candidates carrying their grasp index and joints, rejected ones with the
+        verifier's reason "no_ik" or "collision").
+    """
+    G = np.asarray(grasps, dtype=float).reshape(-1, 4, 4)
+    arm = robot.arm(arm_name)
+    ik = DampedLeastSquaresIK(arm)
+    outline = footprint_outline(robot.spec.footprint_radius, robot.spec.footprint_polygon)
+    verifiers = [Verifier(arm, ik, environment, g[None], {}, outline) for g in G]
+    verified: list[RadialCandidate] = []
+    rejected: list[tuple[RadialCandidate, str]] = []
+    for c in candidates:
+        reasons: list[str] = []
+        for k, verifier in enumerate(verifiers):
+            placement = verifier.check(Candidate(c.T_world_base, -1, c.reachability), rng)
+            if placement is not None:
+                verified.append(dataclasses.replace(c, grasp=k, joints=placement.joints[0],
+                                                    joint_names=placement.joint_names))  # fmt: skip
+                break
+            reasons.extend(verifier.failures.elements())
+            verifier.failures.clear()
+        else:
+            rejected.append((c, "collision" if "collision" in reasons else "no_ik"))
+    return verified, rejected
