@@ -36,11 +36,16 @@ def map_file(tmp_path_factory) -> Path:
     return path
 
 
-def test_help_lists_every_command():
+COMMANDS = ("robots", "build-map", "reach", "place", "candidates", "navigate", "surface-map", "surface-sample",
+            "occupancy", "segment", "scene", "experiment", "demo")  # fmt: skip
+
+
+def test_help_lists_every_command_on_one_line():
     proc = run("--help")
     assert proc.returncode == 0
-    for command in ("robots", "build-map", "reach", "demo"):
-        assert command in proc.stdout
+    lines = proc.stdout.splitlines()
+    for command in COMMANDS:  # the name and its help text on the same line
+        assert any(line.split()[:1] == [command] and len(line.split()) > 2 for line in lines), command
 
 
 def test_robots_json():

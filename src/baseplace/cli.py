@@ -29,6 +29,18 @@ class _Parser(argparse.ArgumentParser):
         raise SystemExit(2)
 
 
+class _Formatter(argparse.HelpFormatter):
+    """One line per command in ``baseplace --help``: wide, and room for the longest command name."""
+
+    def __init__(self, prog: str) -> None:
+        super().__init__(prog, max_help_position=30, width=110)
+
+    def add_argument(self, action: argparse.Action) -> None:
+        super().add_argument(action)
+        if isinstance(action, argparse._SubParsersAction):  # argparse measures subcommands one indent short
+            self._action_max_length += 2
+
+
 def _count(text: str) -> int:
     """Parse sample counts such as 5e7 or 50000000."""
     try:
@@ -819,7 +831,11 @@ def cmd_occupancy(args: argparse.Namespace) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``baseplace`` command."""
-    parser = _Parser(prog="baseplace", description="Where should a mobile manipulator stand?")
+    parser = _Parser(
+        prog="baseplace",
+        description="Where should a mobile manipulator stand?",
+        formatter_class=_Formatter,
+    )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
 
@@ -850,7 +866,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--self-collision", action="store_true", help="drop self-colliding samples (slow)")
     p.add_argument("--manipulability", action="store_true", help="store the best manipulability per cell")
 
-    p = command("reach", "reachability of a TCP target from base poses (inverse lookup)", cmd_reach)
+    p = command("reach", "reachability of TCP targets from base poses (IRM lookup)", cmd_reach)
     p.add_argument("--map", required=True, help="map file from build-map")
     p.add_argument("--robot", default=None, help="check the map was built for this robot")
     p.add_argument("--target", help='world TCP pose "x y z roll pitch yaw" [m, rad]')
@@ -944,7 +960,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--robot", default=None, help="robot file for custom robots (default: the map's robot)")
     p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
 
-    p = command("occupancy", "read an occupancy grid (ROS map_server YAML + image) as map_server does",
+    p = command("occupancy", "read an occupancy grid (map_server YAML + image) as nav2 does",
                 cmd_occupancy)  # fmt: skip
     p.add_argument("map", help="map YAML file")
 
@@ -1007,7 +1023,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
     p.add_argument("--out", default=None, help="PNG of the failure reasons (Fig. 5)")
 
-    p = command("demo", "the main job on built-in defaults (writes out/demo.json and a PNG)", cmd_demo)
+    p = command("demo", "the main job on built-in defaults: out/demo.json and out/demo.png", cmd_demo)
     p.add_argument("--out", default="out", help="output directory (default: out)")
     p.add_argument("--samples", type=_count, default=50_000_000, help="samples of the cached map")
     p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
