@@ -475,3 +475,18 @@ def test_candidates_bad_input(tiago_map_file, tmp_path):
     (tmp_path / "short.yaml").write_text("image: bad.pgm\nresolution: 0.05\n")
     assert_one_line_error(run("candidates", "--occupancy", str(tmp_path / "short.yaml"), "--object", "0 0 0.6",
                               *common), 2, "origin")  # fmt: skip
+
+
+def test_build_map_with_a_local_cluster_and_a_bad_scheduler(tmp_path):
+    from baseplace.reachability.storage import load_map
+
+    args = ("build-map", "--robot", str(DATA / "planar3.toml"), "--samples", "3e6", "--seed", "5")
+    assert run(*args, "--out", str(tmp_path / "one.rmap")).returncode == 0
+    proc = run(*args, "--out", str(tmp_path / "two.rmap"), "--scheduler", "local", "--workers", "2", "--json")
+    assert proc.returncode == 0, proc.stderr
+    one, two = load_map(tmp_path / "one.rmap"), load_map(tmp_path / "two.rmap")
+    np.testing.assert_array_equal(one.cells, two.cells)
+    np.testing.assert_array_equal(one.counts, two.counts)
+    proc = run(*args, "--out", str(tmp_path / "x.rmap"), "--scheduler", "tcp://127.0.0.1:9")
+    assert_one_line_error(proc, 2, "cannot connect to dask scheduler", "127.0.0.1:9")
+    assert not (tmp_path / "x.rmap").exists() and not (tmp_path / "x.rmap.partial").exists()

@@ -20,6 +20,8 @@ import numpy as np
 
 from baseplace.errors import BaseplaceError, InputError, NothingFoundError
 
+DEFAULT_CHECKPOINT_EVERY = 50_000_000  # baseplace.reachability.build's, without importing numba for --help
+
 
 class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors and exit code 2."""
@@ -159,10 +161,12 @@ def cmd_robots(args: argparse.Namespace) -> int:
 def cmd_build_map(args: argparse.Namespace) -> int:
     """Build a map and save it."""
     from baseplace.reachability.build import BuildSettings, build_map
+    from baseplace.reachability.checkpoint import default_checkpoint_path
     from baseplace.reachability.storage import save_map
     from baseplace.robots.model import Robot
 
-    _set_workers(args.workers)
+    if args.scheduler is None:
+        _set_workers(args.workers)
     out = _out_path(args.out)
     assert out is not None  # --out is required
     settings = BuildSettings(
@@ -172,9 +176,26 @@ def cmd_build_map(args: argparse.Namespace) -> int:
     )  # fmt: skip
     robot = Robot(args.robot)
     robot.arm(args.arm)  # validate before spending time
+    checkpoint = None if args.no_resume else default_checkpoint_path(out)
+    if checkpoint is not None and checkpoint.exists() and not args.json:
+        sys.stderr.write(f"resuming from checkpoint {checkpoint}\n")
     update, bar = _progress(args, settings.samples, f"build-map {robot.name}")
     try:
-        rmap = build_map(robot, args.arm, settings, update)
+        if args.scheduler is not None:
+            from baseplace.reachability.distributed import build_map_distributed, connect
+
+            with connect(args.scheduler, n_workers=args.workers) as client:
+                rmap = build_map_distributed(args.robot, args.arm, settings, client, update, checkpoint,
+                                             args.checkpoint_every)  # fmt: skip
+        else:
+            rmap = build_map(robot, args.arm, settings, update, checkpoint, args.checkpoint_every)
+    except KeyboardInterrupt:
+        if checkpoint is None or not checkpoint.exists():
+            raise
+        sys.stderr.write(
+            f"error: interrupted; progress saved in {checkpoint}: rerun the same command to resume\n"
+        )
+        return 130
     finally:
         if bar is not None:
             bar.close()
@@ -859,12 +880,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--samples", type=_count, default=50_000_000, help="joint samples, e.g. 5e7 (default)")
     p.add_argument("--out", required=True, help="output map file (.rmap, HDF5)")
     p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
-    p.add_argument("--workers", type=int, default=None, help="threads (default: all cores)")
+    p.add_argument("--workers", type=int, default=None,
+                   help="threads, or worker processes with --scheduler local (default: all cores)")  # fmt: skip
     p.add_argument("--voxel-size", type=float, default=0.05, help="position resolution [m] (default 0.05)")
     p.add_argument("--orientation-resolution", type=float, default=0.8,
                    help="largest orientation bin [rad] (default 0.8)")  # fmt: skip
     p.add_argument("--self-collision", action="store_true", help="drop self-colliding samples (slow)")
     p.add_argument("--manipulability", action="store_true", help="store the best manipulability per cell")
+    p.add_argument("--scheduler", default=None,
+                   help='dask scheduler "tcp://host:port" or "local" (local worker processes); '
+                        "default: this process, all cores")  # fmt: skip
+    p.add_argument("--checkpoint-every", type=_count, default=DEFAULT_CHECKPOINT_EVERY,
+                   help="save progress to OUT.partial every N samples (default 5e7; also on Ctrl-C)")  # fmt: skip
+    p.add_argument("--no-resume", action="store_true", help="ignore and write no OUT.partial checkpoint")
 
     p = command("reach", "reachability of TCP targets from base poses (IRM lookup)", cmd_reach)
     p.add_argument("--map", required=True, help="map file from build-map")
