@@ -54,12 +54,11 @@ def test_hand_filter_rejects_a_hand_sunk_into_a_slab(tiago):
 
 
 def test_experiment_smoke_flat_scene(tiago):
-    from baseplace.sim.osrm_experiment import run_osrm_experiment
+    from baseplace.sim.osrm_experiment import ExperimentSettings, run_osrm_experiment
 
-    rmap = build_map(tiago, None, BuildSettings(samples=10_000_000, seed=2))
-    result = run_osrm_experiment(
-        tiago, rmap, scenes_per_class=1, grasps_per_scene=3, classes=(("flat", 0),), tries=60
-    )
+    rmap = build_map(tiago, None, BuildSettings(samples=5_000_000, seed=2))
+    settings = ExperimentSettings(grasps_per_scene=3, tries=60)
+    result = run_osrm_experiment(tiago, rmap, 1, settings, classes=(("flat", 0),))
     rows = {r["strategy"]: r for r in result["rows"]}
     assert set(rows) == {"orm", "TO", "MR", "MRTO"}
     for r in rows.values():
@@ -67,3 +66,20 @@ def test_experiment_smoke_flat_scene(tiago):
         assert 0.0 <= r["success_rate"] <= 100.0
         assert set(r["failures"]) <= {"no_ik", "collision", "footprint", "exhausted"}
     assert rows["MR"]["success_rate"] > 0  # hand-feasible grasps on a flat scene are placeable
+
+
+@pytest.mark.slow  # ~75 s: a cluster start and two workers loading TIAGo; run with -m slow
+def test_experiment_scenes_on_a_two_worker_cluster_match_a_local_run(tiago, tiago_map):
+    from baseplace.reachability.distributed import connect
+    from baseplace.sim.osrm_experiment import ExperimentSettings, run_osrm_experiment
+
+    settings = ExperimentSettings(grasps_per_scene=2, tries=30)
+    classes = (("flat", 0),)
+    local = run_osrm_experiment(tiago, tiago_map, 2, settings, classes)
+    with connect("local", n_workers=2) as client:
+        remote = run_osrm_experiment(
+            tiago, tiago_map, 2, settings, classes, client=client, robot_spec="tiago"
+        )
+    for a, b in zip(local["rows"], remote["rows"], strict=True):
+        for key in ("strategy", "grasps", "reachable_grasps", "success_rate", "failures"):
+            assert a[key] == b[key], key

@@ -705,7 +705,7 @@ def cmd_experiment_osrm(args: argparse.Namespace) -> int:
     from baseplace.reachability.build import BuildSettings
     from baseplace.reachability.storage import load_map
     from baseplace.robots.model import Robot
-    from baseplace.sim.osrm_experiment import SCENE_CLASSES, run_osrm_experiment
+    from baseplace.sim.osrm_experiment import SCENE_CLASSES, ExperimentSettings, run_osrm_experiment
 
     if args.scenes < 1 or args.grasps < 1:
         raise InputError(f"--scenes and --grasps must be >= 1, got {args.scenes} and {args.grasps}")
@@ -717,8 +717,16 @@ def cmd_experiment_osrm(args: argparse.Namespace) -> int:
     step = _step_progress(update)
 
     try:
-        result = run_osrm_experiment(robot, rmap, args.scenes, args.grasps, args.seed, classes, args.tries,
-                                     progress=step)  # fmt: skip
+        settings = ExperimentSettings(grasps_per_scene=args.grasps, seed=args.seed, tries=args.tries)
+        if args.scheduler is None:
+            result = run_osrm_experiment(robot, rmap, args.scenes, settings, classes, step)
+        else:
+            from baseplace.reachability.distributed import connect
+
+            with connect(args.scheduler) as client:
+                result = run_osrm_experiment(
+                    robot, rmap, args.scenes, settings, classes, step, client, args.robot
+                )
     finally:
         if bar is not None:
             bar.close()
@@ -1048,6 +1056,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--grasps", type=int, default=50, help="grasp candidates per scene (default 50)")
     p.add_argument("--tries", type=int, default=100, help="N: candidates per query (default 100)")
     p.add_argument("--flat-only", action="store_true", help="Table I only")
+    p.add_argument("--scheduler", default=None,
+                   help='run scenes on a dask cluster: "tcp://host:port" or "local" (default: this process)')  # fmt: skip
     p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
     p.add_argument("--out", default=None, help="PNG of the failure reasons (Fig. 5)")
 

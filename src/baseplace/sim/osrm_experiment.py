@@ -162,6 +162,15 @@ class _Tally:
     t_s: list[float] = field(default_factory=list)
     failures: Counter[str] = field(default_factory=Counter)
 
+    def merge(self, other: _Tally) -> None:
+        """Add another scene's tally to this one."""
+        self.n += other.n
+        self.ok += other.ok
+        self.t_rm += other.t_rm
+        self.t_a += other.t_a
+        self.t_s += other.t_s
+        self.failures.update(other.failures)
+
 
 @dataclass(frozen=True)
 class GroundTruth:
@@ -220,84 +229,128 @@ class GroundTruth:
         return False
 
 
+@dataclass(frozen=True)
+class ExperimentSettings:
+    """The scene and query settings of the OSRM experiment (see :func:`run_osrm_experiment`)."""
+
+    grasps_per_scene: int = 50
+    seed: int = 0
+    tries: int = 100
+    box_elevation: float = 0.5
+    box_height: float = 0.12
+    object_height: tuple[float, float] = (0.15, 0.25)
+    extent: tuple[float, float] = (7.0, 7.0)
+    box_near: float = 0.3
+
+
+def strategies_for(n_planes: int) -> tuple[str, ...]:
+    """Table I (flat) compares the ORM baseline too; Table II only the OSRM strategies."""
+    return ("orm", "TO", "MR", "MRTO") if n_planes == 0 else ("TO", "MR", "MRTO")
+
+
+def osrm_scene(
+    robot: Robot | str, rmap: ReachabilityMap, class_index: int, k: int, s: ExperimentSettings,
+    classes: tuple[tuple[str, int], ...] = SCENE_CLASSES,
+) -> tuple[int, int, dict[str, _Tally]]:  # fmt: skip
+    """One scene of the experiment: (grasp candidates, reachable grasps, tallies per strategy).
+
+    Deterministic in (seed, class_index, k), so scenes can run anywhere (``robot`` may be given by
+    name or robot-file path, for dask workers).
+    """
+    robot = Robot(robot) if isinstance(robot, str) else robot
+    size_class, n_planes = classes[class_index]
+    stats = {name: _Tally() for name in strategies_for(n_planes)}
+    rng = np.random.default_rng([s.seed, class_index, k])
+    settings = SceneSettings(
+        size_class="small" if size_class == "flat" else size_class, n_planes=n_planes,
+        box_elevation=s.box_elevation, box_height=s.box_height, object_height=s.object_height,
+        extent=s.extent, box_near=s.box_near,
+    )  # fmt: skip
+    scene = generate_scene(settings, rng)
+    # Seed 000 VI adds the noise to the height map: the segmentation sees the noisy cloud, the
+    # collision voxels (its OctoMap) come from the clean one.
+    points = scene.sample_cloud(rng)
+    clean = VoxelMap.from_points(
+        scene.sample_cloud(np.random.default_rng([s.seed, class_index, k, 1]), sigma=0.0)
+    )
+    terrain = dataclasses.replace(terrain_from_points(points), voxels=clean)
+    environments: dict[str, Any] = {}
+    grasps, spheres = grasp_candidates(scene, rng, s.grasps_per_scene, hand=HandFilter(robot, rmap.info.arm))
+    truth = GroundTruth()
+    reachable = 0
+    for grasp, sphere in zip(grasps, spheres, strict=True):
+        if not truth.reachable(robot, rmap, scene, grasp, rng):
+            continue
+        reachable += 1
+        for name, st in stats.items():
+            st.n += 1
+            try:
+                res = place(robot, rmap, points, grasp, PlaceSettings(strategy=name, tries=s.tries),
+                            np.random.default_rng([s.seed, class_index, k, reachable, len(name)]), terrain=terrain,
+                            environments=environments, ignore=[sphere])  # fmt: skip
+            except BaseplaceError as exc:  # e.g. no region in reach: a failure of that query
+                st.failures[type(exc).__name__] += 1
+                continue
+            st.t_rm.append(res.timings_ms["osrm"])
+            st.t_a.append(res.timings_ms["query"])
+            st.failures.update(res.failures)
+            if res.placements:
+                st.ok += 1
+                st.t_s.append(res.timings_ms["query"])
+    return len(grasps), reachable, stats
+
+
 def run_osrm_experiment(
     robot: Robot,
     rmap: ReachabilityMap,
     scenes_per_class: int = 10,
-    grasps_per_scene: int = 50,
-    seed: int = 0,
+    settings: ExperimentSettings | None = None,
     classes: tuple[tuple[str, int], ...] = SCENE_CLASSES,
-    tries: int = 100,
-    box_elevation: float = 0.5,
-    box_height: float = 0.12,
-    object_height: tuple[float, float] = (0.15, 0.25),
-    extent: tuple[float, float] = (7.0, 7.0),
-    box_near: float = 0.3,
     progress: Any = None,
+    client: Any = None,
+    robot_spec: str | None = None,
 ) -> dict[str, Any]:
     """Table I and II rows: per scene class and strategy, success and timing over reachable grasps.
 
-    ``box_elevation`` raises the box on a pedestal and ``box_height`` makes it a tray: seed 000's
+    The box stands on a pedestal (``box_elevation``) and is a tray (``box_height``): seed 000's
     ARMAR-6 reaches into a box on the floor; a TIAGo-sized arm (and its 0.15 m hand) needs the
     objects at about table height and walls its forearm can clear for the same task.
     ``object_height`` makes the objects bottle-sized: the open Hey5 fingers reach 9 cm past the
     grasp point, so a top-down grasp on a 4-10 cm object would put them through the box bottom.
     ``extent`` and ``box_near`` crowd the planes around the box, as in seed 000's Fig. 5 scenes,
     so that they take away places to stand on the floor (7 m x 7 m holds four large planes).
+
+    With a dask ``client``, scenes run as tasks on its workers, which load the robot from
+    ``robot_spec`` (a built-in name or a robot-file path they can read; default the robot's name);
+    the rows are the same as a local run's, timings aside.
     """
-    rows = []
-    truth = GroundTruth()
-    hand = HandFilter(robot, rmap.info.arm)
-    for class_index, (size_class, n_planes) in enumerate(classes):
-        strategies = ("orm", "TO", "MR", "MRTO") if n_planes == 0 else ("TO", "MR", "MRTO")
-        stats = {name: _Tally() for name in strategies}
-        grasps_total = reachable_total = 0
-        for k in range(scenes_per_class):
-            rng = np.random.default_rng([seed, class_index, k])
-            settings = SceneSettings(
-                size_class="small" if size_class == "flat" else size_class,
-                n_planes=n_planes,
-                box_elevation=box_elevation,
-                box_height=box_height,
-                object_height=object_height,
-                extent=extent,
-                box_near=box_near,
-            )
-            scene = generate_scene(settings, rng)
-            # Seed 000 VI adds the noise to the height map: the segmentation sees the noisy cloud,
-            # the collision voxels (its OctoMap) come from the clean one.
-            points = scene.sample_cloud(rng)
-            clean = VoxelMap.from_points(
-                scene.sample_cloud(np.random.default_rng([seed, class_index, k, 1]), sigma=0.0)
-            )
-            terrain = dataclasses.replace(terrain_from_points(points), voxels=clean)
-            environments: dict[str, Any] = {}
-            grasps, spheres = grasp_candidates(scene, rng, grasps_per_scene, hand=hand)
-            for grasp, sphere in zip(grasps, spheres, strict=True):
-                grasps_total += 1
-                if not truth.reachable(robot, rmap, scene, grasp, rng):
-                    continue
-                reachable_total += 1
-                for name in strategies:
-                    st = stats[name]
-                    st.n += 1
-                    try:
-                        res = place(robot, rmap, points, grasp, PlaceSettings(strategy=name, tries=tries),
-                                    np.random.default_rng([seed, class_index, k, st.n]), terrain=terrain,
-                                    environments=environments, ignore=[sphere])  # fmt: skip
-                    except BaseplaceError as exc:  # e.g. no region in reach: a failure of that query
-                        st.failures[type(exc).__name__] += 1
-                        continue
-                    st.t_rm.append(res.timings_ms["osrm"])
-                    st.t_a.append(res.timings_ms["query"])
-                    st.failures.update(res.failures)
-                    if res.placements:
-                        st.ok += 1
-                        st.t_s.append(res.timings_ms["query"])
+    s = settings or ExperimentSettings()
+    jobs = [(c, k) for c in range(len(classes)) for k in range(scenes_per_class)]
+    if client is None:
+        results = []
+        for c, k in jobs:
+            results.append(osrm_scene(robot, rmap, c, k, s, classes))
             if progress is not None:
                 progress(1)
-        for name in strategies:
-            st = stats[name]
+    else:
+        from distributed import as_completed
+
+        spec = robot_spec or robot.name
+        remote_map = client.scatter(rmap, broadcast=True)
+        futures = [client.submit(osrm_scene, spec, remote_map, c, k, s, classes, pure=False) for c, k in jobs]
+        for _ in as_completed(futures):
+            if progress is not None:
+                progress(1)
+        results = client.gather(futures)
+    rows = []
+    for c, (size_class, n_planes) in enumerate(classes):
+        mine = [r for (cj, _), r in zip(jobs, results, strict=True) if cj == c]
+        grasps_total = sum(r[0] for r in mine)
+        reachable_total = sum(r[1] for r in mine)
+        for name in strategies_for(n_planes):
+            st = _Tally()
+            for r in mine:
+                st.merge(r[2][name])
             rows.append({
                 "scene": "flat" if n_planes == 0 else f"{size_class} {n_planes} planes",
                 "strategy": name, "scenes": scenes_per_class, "grasps": grasps_total,
@@ -307,7 +360,7 @@ def run_osrm_experiment(
                 "t_RM_ms": _mean_std(st.t_rm), "t_a_ms": _mean_std(st.t_a), "t_s_ms": _mean_std(st.t_s),
                 "failures": dict(st.failures),
             })  # fmt: skip
-    return {"rows": rows, "tries": tries, "seed": seed}
+    return {"rows": rows, "tries": s.tries, "seed": s.seed, "settings": dataclasses.asdict(s)}
 
 
 def _mean_std(values: list[float]) -> list[float] | None:
