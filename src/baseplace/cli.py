@@ -294,6 +294,16 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_view(args: argparse.Namespace) -> int:
+    """Serve the interactive 3D viewer of a result (the demo's by default) until Ctrl-C."""
+    from baseplace.viz.viewer import serve
+
+    if not (0 <= args.port <= 65535):
+        raise InputError(f"--port must be between 0 and 65535, got {args.port}")
+    serve(Path(args.result) if args.result else None, host=args.host, port=args.port, block=True)
+    return 0
+
+
 def cmd_segment(args: argparse.Namespace) -> int:
     """Segment a cloud into planar regions."""
     from baseplace.terrain.io import load_cloud, load_transform
@@ -1117,6 +1127,15 @@ def build_parser() -> argparse.ArgumentParser:
                    help='run scenes on a dask cluster: "tcp://host:port" or "local" (default: this process)')  # fmt: skip
     p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
     p.add_argument("--out", default=None, help="PNG of the failure reasons (Fig. 5)")
+
+    p = command("view", "interactive 3D viewer of a result in the browser (viser)", cmd_view)
+    p.add_argument(
+        "result", nargs="?", default=None, help="result JSON with view data (default: out/demo.json)"
+    )
+    p.add_argument("--port", type=int, default=8080, help="port (default 8080; 0: any free port)")
+    p.add_argument(
+        "--host", default="127.0.0.1", help="address to bind (default 127.0.0.1: this machine only)"
+    )
 
     p = command("demo", "the main job on built-in defaults: out/demo.json and out/demo.png", cmd_demo)
     p.add_argument("--out", default="out", help="output directory (default: out)")

@@ -138,6 +138,10 @@ def run_demo(
                        "total": round((time.perf_counter() - t0) * 1e3, 1)},
         "png": str(png),
     }  # fmt: skip
+    from baseplace.viz.viewer import save_view_data, view_data_from
+
+    save_view_data(out_dir / "demo_view.npz", view_data_from(terrain, result.osrm, points, robot.name))
+    obj["view_data"] = "demo_view.npz"  # for `baseplace view`, relative to the JSON
     with atomic_write(out_dir / "demo.json", "demo result") as tmp:
         tmp.write_text(json.dumps(obj, indent=2))
     return obj

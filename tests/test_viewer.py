@@ -1,0 +1,255 @@
+"""The 3D viewer: view data files, result parsing, and the served page rendered by headless Chromium."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import socket
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from baseplace.demo import DEMO_TARGET, demo_scene
+from baseplace.errors import InputError
+from baseplace.geometry.poses import parse_pose6
+from baseplace.placement.osrm import build_osrm
+from baseplace.robots.spec import load_spec
+from baseplace.terrain.pipeline import terrain_from_points
+from baseplace.terrain.polygons import footprint_outline
+from baseplace.viz import viewer
+from baseplace.viz.viewer import (
+    DEFAULT_RESULT,
+    ViewData,
+    load_view_data,
+    read_result,
+    save_view_data,
+    serve,
+    view_data_from,
+)
+
+ROOT = Path(__file__).resolve().parents[1]
+SCREENSHOT_COPY = ROOT / "docs" / "img" / "viewer.png"
+# WebGL through ANGLE on Mesa's llvmpipe (EGL, no display needed): about 3x faster than ANGLE's
+# SwiftShader here, whose environment-map prefiltering alone takes ~25 s. Chromium falls back to
+# SwiftShader (allowed by the last flag) where Mesa's EGL is missing.
+CHROMIUM_FLAGS = [
+    "--headless=new",
+    "--no-sandbox",
+    "--use-angle=gl-egl",
+    "--ignore-gpu-blocklist",
+    "--enable-unsafe-swiftshader",
+    "--hide-scrollbars",
+    "--window-size=1280,800",
+]
+# The placement the test scene shows: TIAGo on the demo's platform, facing the target.
+BASE_POSE = [[0.866025, 0.5, 0.0, 1.275], [-0.5, 0.866025, 0.0, 0.375], [0.0, 0.0, 1.0, 0.3], [0, 0, 0, 1]]
+JOINTS = {"torso_lift_joint": 0.35, "arm_1_joint": 0.91, "arm_2_joint": 0.19, "arm_3_joint": -0.24,
+          "arm_4_joint": 1.92, "arm_5_joint": -0.54, "arm_6_joint": -0.28, "arm_7_joint": -0.58}  # fmt: skip
+
+
+def chromium() -> str:
+    for name in ("chromium", "chromium-browser"):
+        path = shutil.which(name)
+        if path:
+            return path
+    pytest.fail(
+        "headless Chromium is needed to render the viewer; install the Debian `chromium` package "
+        "(sudo apt-get install chromium)"
+    )
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def write_result(directory: Path, data: ViewData, **extra) -> Path:
+    save_view_data(directory / "scene_view.npz", data)
+    obj = {
+        "robot": "tiago",
+        "target": DEMO_TARGET,
+        "placement": {"base_pose": BASE_POSE, "joints": JOINTS},
+        "path": {"poses": [[-3.5, 0.0, 0.0], [-1.0, 0.2, 0.1], [1.275, 0.375, -0.5236]]},
+        "view_data": "scene_view.npz",
+        **extra,
+    }
+    path = directory / "result.json"
+    path.write_text(json.dumps(obj))
+    return path
+
+
+@pytest.fixture(scope="module")
+def scene_data(tiago, tiago_map) -> ViewData:
+    """The demo's scene (floor, ramp, platform) with a real OSRM from the small session map."""
+    points = demo_scene().sample_cloud(np.random.default_rng(0), spacing=0.025)
+    terrain = terrain_from_points(points)
+    outline = footprint_outline(tiago.spec.footprint_radius, tiago.spec.footprint_polygon)
+    target = parse_pose6(DEMO_TARGET)[None]
+    osrm = build_osrm(terrain.segmentation, tiago_map, target, outline, tiago_map.horizontal_reach, 12)
+    assert (osrm.summed > 0).any()
+    return view_data_from(terrain, osrm, points, "tiago", max_points=40_000)
+
+
+def test_view_data_round_trip(scene_data, tmp_path):
+    assert len(scene_data.points) == 40_000 and scene_data.points.dtype == np.float32
+    assert scene_data.labels.dtype == np.int16 and scene_data.labels.max() == len(scene_data.planes) - 1
+    assert scene_data.osrm.max() > 0 and np.isfinite(scene_data.heights[scene_data.labels >= 0]).all()
+    path = tmp_path / "v.npz"
+    save_view_data(path, scene_data)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["v.npz"]  # no .npz.npz, no temporary left
+    back = load_view_data(path)
+    assert (
+        back.robot == "tiago"
+        and back.origin == scene_data.origin
+        and back.resolution == scene_data.resolution
+    )
+    for name in ("points", "labels", "heights", "planes", "osrm"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(scene_data, name))
+    with np.load(path, allow_pickle=False) as npz:  # nothing pickled
+        assert all(npz[k].dtype != object for k in npz.files)
+
+
+def test_view_data_errors(scene_data, tmp_path):
+    with pytest.raises(InputError, match="does not exist"):
+        load_view_data(tmp_path / "nope.npz")
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a zip file")
+    with pytest.raises(InputError, match="cannot read view data"):
+        load_view_data(bad)
+    np.savez(tmp_path / "other.npz", a=np.zeros(3))
+    with pytest.raises(InputError, match="lacks"):
+        load_view_data(tmp_path / "other.npz")
+    with pytest.raises(InputError, match="directory"):
+        save_view_data(tmp_path / "no" / "v.npz", scene_data)
+    with pytest.raises(InputError, match="same"):
+        ViewData("tiago", scene_data.points, (0.0, 0.0), 0.05, scene_data.labels, scene_data.heights,
+                 scene_data.planes, scene_data.osrm[:-1])  # fmt: skip
+
+
+def test_read_result_layouts_and_errors(scene_data, tmp_path, monkeypatch):
+    path = write_result(tmp_path, scene_data)
+    scene = read_result(path)
+    assert scene.robot == "tiago" and scene.view_data == tmp_path / "scene_view.npz"
+    assert len(scene.base_poses) == 1 and scene.joints["arm_4_joint"] == 1.92
+    assert len(scene.paths) == 1 and scene.paths[0].shape == (3, 3) and len(scene.targets) == 1
+
+    place = {"robot": {"name": "tiago"}, "targets": [DEMO_TARGET], "view_data": str(tmp_path / "scene_view.npz"),
+             "placements": [{"base_pose": BASE_POSE, "joints": [JOINTS], "path": {"poses": [[0, 0, 0], [1, 0, 0]]}},
+                            {"base_pose": BASE_POSE, "joints": [JOINTS]}]}  # fmt: skip
+    (tmp_path / "place.json").write_text(json.dumps(place))
+    scene = read_result(tmp_path / "place.json")
+    assert len(scene.base_poses) == 2 and len(scene.paths) == 1 and scene.joints == JOINTS
+
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(InputError, match=r"run `baseplace demo` first"):
+        read_result(DEFAULT_RESULT)
+    (tmp_path / "broken.json").write_text("{")
+    with pytest.raises(InputError, match="cannot read result"):
+        read_result(tmp_path / "broken.json")
+    (tmp_path / "old.json").write_text(json.dumps({"robot": "tiago", "placement": {"base_pose": BASE_POSE}}))
+    with pytest.raises(InputError, match="names no view data"):
+        read_result(tmp_path / "old.json")
+    bad_pose = dict(place, placements=[{"base_pose": [[1, 0], [0, 1]]}])
+    (tmp_path / "bad.json").write_text(json.dumps(bad_pose))
+    with pytest.raises(InputError, match=r"shape \(4, 4\)"):
+        read_result(tmp_path / "bad.json")
+    with pytest.raises(InputError, match="scene_view.npz does not exist"):
+        serve(write_result(tmp_path, scene_data, view_data="missing/scene_view.npz"), port=0, block=False)
+
+
+def test_geometry_helpers(scene_data):
+    # Heights follow the ramp's plane; quads of a region cell lie on its plane, lifted.
+    ramp = int(np.argmax(np.abs(scene_data.planes[:, 0])))
+    xy = np.array([[-1.1, 0.0], [-2.0, 0.0], [1.6, 0.0], [-4.0, 2.5], [50.0, 0.0]])
+    z = viewer.height_at(scene_data, xy)
+    n = scene_data.planes[ramp]
+    assert z[0] == pytest.approx(-(n[3] + n[0] * -1.1) / n[2], abs=1e-9)
+    assert z[1] < z[0] and z[2] == pytest.approx(0.3, abs=0.02) and abs(z[3]) < 0.02 and z[4] == 0.0
+    rows, cols = np.nonzero(scene_data.labels == ramp)
+    verts, faces = viewer.cell_quads(scene_data, rows[:5], cols[:5], 0.1)
+    assert verts.shape == (20, 3) and faces.shape == (10, 3) and faces.max() == 19
+    on_plane = -(n[3] + n[0] * verts[:, 0] + n[1] * verts[:, 1]) / n[2]
+    np.testing.assert_allclose(verts[:, 2] - 0.1, on_plane, atol=1e-5)
+    dense = viewer.densify(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]), 0.1)
+    assert len(dense) == 11 and dense[-1, 0] == 1.0
+
+
+def test_robot_meshes_and_joints():
+    spec = load_spec("tiago")
+    handler = viewer._package_handler(spec)
+    text = spec.urdf.read_text()
+    uris = {part.split('"')[0] for part in text.split('<mesh filename="')[1:]}
+    assert uris and all(Path(handler(fname=u)).is_file() for u in uris)
+    cfg = viewer.joint_configuration(spec, JOINTS, ["arm_1_joint", "head_1_joint", "wheel_left_joint"])
+    assert cfg == {"arm_1_joint": 0.91, "head_1_joint": 0.0, "wheel_left_joint": 0.0}
+
+
+def test_port_in_use(scene_data, tmp_path):
+    path = write_result(tmp_path, scene_data)
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        with pytest.raises(InputError, match=f"port {port} on 127.0.0.1 is in use"):
+            serve(path, port=port, block=False)
+    with pytest.raises(InputError, match="host"):
+        serve(path, host="no-such-host.invalid", port=0, block=False)
+
+
+def screenshot_stats(png: Path) -> tuple[float, int, float]:
+    """In the 3D area (GUI panels left out): share of non-background pixels, distinct colours, and
+    share of saturated (coloured, not grey) pixels."""
+    img = np.asarray(Image.open(png).convert("RGB")).astype(np.int16)
+    area = img[170:, :930]  # below the notification, left of the control panel
+    background = np.abs(area - 255).max(axis=2) <= 6
+    colours = len(np.unique(area.reshape(-1, 3), axis=0))
+    hi, lo = area.max(axis=2), area.min(axis=2)
+    saturated = (hi - lo) > 0.25 * np.maximum(hi, 1)
+    return float(1.0 - background.mean()), colours, float(saturated.mean())
+
+
+def run_chromium(browser: str, tmp_path: Path, name: str, *args: str) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, "HOME": str(tmp_path)}  # chromium writes caches and crash reports under HOME
+    command = [browser, *CHROMIUM_FLAGS, f"--user-data-dir={tmp_path / name}", *args]
+    return subprocess.run(command, capture_output=True, text=True, timeout=150, env=env)
+
+
+def test_viewer_renders_in_headless_chromium(scene_data, tmp_path):
+    browser = chromium()
+    path = write_result(tmp_path, scene_data)
+    port = free_port()
+    t0 = time.perf_counter()
+    server = serve(path, port=port, block=False)
+    t_serve = time.perf_counter() - t0
+    png = tmp_path / "viewer.png"
+    try:
+        assert server.get_port() == port
+        url = f"http://127.0.0.1:{port}/"
+        t1 = time.perf_counter()
+        shot = run_chromium(
+            browser, tmp_path, "shot", "--virtual-time-budget=8000", f"--screenshot={png}", url
+        )
+        t_shot = time.perf_counter() - t1
+        assert shot.returncode == 0, shot.stderr[-3000:]
+        assert png.is_file(), shot.stderr[-3000:]
+        dom = run_chromium(browser, tmp_path, "dom", "--virtual-time-budget=3000", "--dump-dom", url)
+        assert dom.returncode == 0, dom.stderr[-3000:]
+    finally:
+        server.stop()
+    # The viser client loaded: its React root and the three.js canvas of the 3D view.
+    assert 'id="root"' in dom.stdout and 'data-engine="three.js' in dom.stdout, dom.stdout[-3000:]
+    covered, colours, saturated = screenshot_stats(png)
+    print(f"serve {t_serve:.1f} s, screenshot {t_shot:.1f} s: {covered:.0%} covered, {colours} colours, "
+          f"{saturated:.0%} saturated")  # fmt: skip
+    if os.environ.get("BASEPLACE_VIEWER_SCREENSHOT"):
+        shutil.copyfile(png, os.environ["BASEPLACE_VIEWER_SCREENSHOT"])
+    # The floor's cloud and regions fill most of the view; regions, heat map and path are coloured.
+    assert covered > 0.3, f"the 3D view is mostly blank ({covered:.0%} covered); see {png}"
+    assert colours > 1000, f"the 3D view has only {colours} colours; see {png}"
+    assert saturated > 0.1, f"the 3D view is mostly grey ({saturated:.0%} coloured); see {png}"
