@@ -50,11 +50,19 @@ def plot_candidates(
     h, w = grid.data.shape
     ax.imshow(shade, origin="lower", cmap="gray", vmin=0, vmax=1, interpolation="nearest",
               extent=(0, w * grid.resolution, 0, h * grid.resolution), transform=transform)  # fmt: skip
-    colours = {"body": "red", "arm": "orange", "occupancy": "darkred", "no_ik": "magenta", "collision": "purple"}
+    colours = {
+        "body": "red",
+        "arm": "orange",
+        "occupancy": "darkred",
+        "no_ik": "magenta",
+        "collision": "purple",
+    }
     for reason in colours:
         pts = np.array([xy for xy, r in rejected if r == reason]).reshape(-1, 2)
         if len(pts):
-            ax.plot(pts[:, 0], pts[:, 1], "o", color=colours[reason], markersize=4, label=f"rejected: {reason}")
+            ax.plot(
+                pts[:, 0], pts[:, 1], "o", color=colours[reason], markersize=4, label=f"rejected: {reason}"
+            )
     for i, c in enumerate(verified):
         size = 0.25 if i == 0 else 0.15
         ax.arrow(c.pose.x, c.pose.y, size * np.cos(c.pose.yaw), size * np.sin(c.pose.yaw), color="green",
