@@ -13,7 +13,11 @@ obstacle space is rasterized on the height map's grid:
 * cells without any height data (outside the scan) are obstacles, since the robot cannot know
   there is ground there;
 * a lone obstacle voxel with no other in its 3 x 3 cells is dropped as a noise outlier: with
-  25 mm noise, a few floor points in a million land more than 8 cm off the plane.
+  25 mm noise, a few floor points in a million land more than 8 cm off the plane;
+* beyond the seed, every region cell within ``gap`` of another region that lies more than
+  ``max_step`` above or below it there is an obstacle too: the graph's edge lines come from
+  polygon sides and leave holes (corners, short stretches), and a platform lower than the
+  support band has no wall voxels, so the lines alone let paths slip over ledges.
 
 The base footprint is checked by its bounding circle against the Euclidean distance transform of
 the obstacle raster: a pose is free when the nearest obstacle cell is farther than the radius.
@@ -31,6 +35,7 @@ from scipy import ndimage
 
 from baseplace.errors import InputError
 from baseplace.geometry.poses import FloatArray
+from baseplace.terrain.graph import GraphSettings
 from baseplace.terrain.pipeline import Terrain
 from baseplace.terrain.segmentation import Segmentation
 from baseplace.world.environment import SUPPORT_DIST, obstacle_voxels
@@ -100,6 +105,8 @@ def navigation_map(
     robot_height: float = ROBOT_HEIGHT,
     min_height: float = MIN_HEIGHT,
     support_dist: float = SUPPORT_DIST,
+    max_step: float = GraphSettings().max_step,
+    gap: float = GraphSettings().gap,
 ) -> NavigationMap:
     """The obstacle space of seed 000 V for a footprint of bounding radius ``radius`` [m]."""
     if not (0.0 < radius < 5.0):
@@ -139,5 +146,37 @@ def navigation_map(
             )
             cv2.line(lines, (int(c0), int(r0)), (int(c1), int(r1)), 1, thickness=1)
     obstacles |= lines.astype(bool)
+    obstacles |= _ledges(seg, max_step, gap)
     clearance = ndimage.distance_transform_edt(~obstacles) * hmap.resolution
     return NavigationMap(seg, obstacles, clearance, float(radius), terrain.graph)
+
+
+def _ledges(seg: Segmentation, max_step: float, gap: float) -> NDArray[np.bool_]:
+    """Outermost region cells within ``gap`` of another region more than ``max_step`` above or below.
+
+    For a cell p of one region near region r, the step is the height of p on its own plane
+    against the height of r's nearest cell q on r's plane: where a ramp's low edge meets the floor
+    it is about zero, along the ramp's sides it is the side's height. Marking every such cell
+    closes the holes that a border drawn from polygon sides leaves (short stretches below
+    ``min_border_cells``, corners, low platforms whose walls fall inside the support band).
+    """
+    hmap = seg.hmap
+    X, Y = hmap.cell_centres()
+    reach = gap + hmap.resolution * 1.5
+    out = np.zeros(seg.labels.shape, dtype=bool)
+    own = np.full(seg.labels.shape, np.nan)
+    for r in seg.regions:
+        m = seg.labels == r.id
+        own[m] = r.height_at(np.c_[X[m], Y[m]])
+    labelled = seg.labels >= 0
+    # the outermost cells of every region: a ledge is marked one cell thick, on each side
+    lo = ndimage.grey_erosion(seg.labels, size=3, mode="nearest")
+    hi = ndimage.grey_dilation(seg.labels, size=3, mode="nearest")
+    outline = labelled & ((lo != seg.labels) | (hi != seg.labels))
+    for r in seg.regions:
+        dist, (qi, qj) = ndimage.distance_transform_edt(seg.labels != r.id, return_indices=True)
+        near = (dist * hmap.resolution <= reach) & outline & (seg.labels != r.id)
+        rows, cols = np.nonzero(near)
+        step = np.abs(own[rows, cols] - own[qi[rows, cols], qj[rows, cols]])
+        out[rows[step > max_step], cols[step > max_step]] = True
+    return out
