@@ -7,6 +7,7 @@ names what is wrong and, where there is a finite set, the valid choices. The CLI
 
 from __future__ import annotations
 
+import reprlib
 from collections.abc import Iterable
 
 
@@ -26,6 +27,20 @@ class NothingFoundError(BaseplaceError):
     """The computation ran but found nothing, e.g. no reachable placement (CLI exit 3)."""
 
     exit_code = 3
+
+
+def brief(value: object, limit: int = 60) -> str:
+    """``repr(value)`` cut to about ``limit`` characters, for error messages about file contents.
+
+    ``reprlib`` never expands more than a few items per level, so a YAML alias bomb (a tiny file
+    standing for a huge nested list) cannot blow up a message.
+    """
+    r = reprlib.Repr()
+    r.maxstring = r.maxother = limit
+    r.maxlist = r.maxtuple = r.maxdict = r.maxset = 6
+    r.maxlevel = 3
+    text = r.repr(value)
+    return text if len(text) <= limit + 10 else text[:limit] + "..."
 
 
 def choices(valid: Iterable[str], limit: int = 12) -> str:

@@ -61,7 +61,10 @@ def parse_polygon(text: str | ArrayLike) -> FloatArray:
         except ValueError:
             raise InputError(f'polygon must be "x1,y1;x2,y2;x3,y3;..." in metres, got {text!r}') from None
     else:
-        pts = np.asarray(text, dtype=float)
+        try:
+            pts = np.asarray(text, dtype=float)
+        except (TypeError, ValueError):
+            raise InputError("polygon must be an (N, 2) array of numbers in metres") from None
     if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 3 or not np.all(np.isfinite(pts)):
         raise InputError(f"polygon needs at least 3 finite (x, y) vertices, got {pts.tolist()}")
     centred = pts - pts.mean(axis=0)

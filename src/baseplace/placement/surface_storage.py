@@ -22,6 +22,7 @@ from baseplace.placement.surface_map import SurfaceMap
 FORMAT = "baseplace-surface-map"
 FORMAT_VERSION = 1
 SCALE = 65535
+MAX_POSES = 10**9
 
 
 def _digest(*arrays: np.ndarray) -> str:
@@ -70,19 +71,31 @@ def load_surface_map(path: str | Path) -> SurfaceMap:
             meta = json.loads(f.attrs["meta"])
             index, value = f["index"][()], f["value"][()]
             digest = str(f.attrs["sha256"])
-            shape = tuple(int(v) for v in meta["shape"])
-            values = np.zeros(int(np.prod(shape)), dtype=np.float32)
-            values[index] = value.astype(np.float32) / SCALE
+        if _digest(index, value) != digest:
+            raise InputError(f"cannot read surface map {path}: checksum mismatch, the file is corrupt")
+        shape = tuple(int(v) for v in meta["shape"])
+        if len(shape) != 3 or min(shape) < 1 or float(np.prod(shape, dtype=float)) > MAX_POSES:
+            raise ValueError("grid shape out of range")
+        values = np.zeros(int(np.prod(shape)), dtype=np.float32)
+        values[index] = value.astype(np.float32) / SCALE
+        smap = SurfaceMap(
+            values.reshape(shape), (float(meta["origin"][0]), float(meta["origin"][1])), float(meta["resolution"]),
+            np.asarray(meta["polygon"], dtype=float), float(meta["height"]), str(meta["robot"]), tuple(meta["arms"]),
+            str(meta["combine"]), None if meta["cone"] is None else float(meta["cone"]), float(meta["tcp_height"]),
+        )  # fmt: skip
     except InputError:
         raise
-    except (OSError, KeyError, ValueError, TypeError, IndexError) as exc:
+    except (
+        OSError,
+        KeyError,
+        ValueError,
+        TypeError,
+        IndexError,
+        AttributeError,
+        RecursionError,
+        MemoryError,
+    ) as exc:
         raise InputError(
             f"cannot read surface map {path}: truncated or corrupt ({type(exc).__name__})"
         ) from None
-    if _digest(index, value) != digest:
-        raise InputError(f"cannot read surface map {path}: checksum mismatch, the file is corrupt")
-    return SurfaceMap(
-        values.reshape(shape), (float(meta["origin"][0]), float(meta["origin"][1])), float(meta["resolution"]),
-        np.asarray(meta["polygon"], dtype=float), float(meta["height"]), str(meta["robot"]), tuple(meta["arms"]),
-        str(meta["combine"]), meta["cone"], float(meta["tcp_height"]),
-    )  # fmt: skip
+    return smap

@@ -86,22 +86,47 @@ def load_map(path: str | Path, robot: Robot | None = None, arm: str | None = Non
             counts = f["counts"][()]
             manip = f["manipulability"][()] if "manipulability" in f else None
             digest = str(f.attrs["sha256"])
+        arrays: list[np.ndarray] = [cells, counts] + ([manip] if manip is not None else [])
+        if _digest(*arrays) != digest:
+            raise InputError(f"cannot read map {path}: checksum mismatch, the file is corrupt")
+        info_raw["joint_names"] = tuple(info_raw["joint_names"])
+        info = MapInfo(**info_raw)
+        grid = _grid(g)
+        if (
+            cells.ndim != 1
+            or cells.shape != counts.shape
+            or (len(cells) and not 0 <= cells.min() <= cells.max() < grid.n_cells)
+        ):
+            raise ValueError("cells out of the grid")
+        rmap = ReachabilityMap(grid, cells.astype(np.int64), counts.astype(np.uint32), info, manip)
     except InputError:
         raise
-    except (OSError, KeyError, ValueError, TypeError) as exc:
+    except (OSError, KeyError, ValueError, TypeError, AttributeError, RecursionError, MemoryError) as exc:
         raise InputError(
             f"cannot read map {path}: the file is truncated or corrupt ({type(exc).__name__})"
         ) from None
-    arrays: list[np.ndarray] = [cells, counts] + ([manip] if manip is not None else [])
-    if _digest(*arrays) != digest:
-        raise InputError(f"cannot read map {path}: checksum mismatch, the file is corrupt")
-    info_raw["joint_names"] = tuple(info_raw["joint_names"])
-    info = MapInfo(**info_raw)
-    grid = SE3Grid(tuple(g["origin"]), g["voxel_size"], tuple(g["shape"]), g["nside"], g["n_twist"])
-    rmap = ReachabilityMap(grid, cells.astype(np.int64), counts.astype(np.uint32), info, manip)
     if robot is not None:
         check_map_matches(rmap, robot, arm, path)
     return rmap
+
+
+MAX_NSIDE = 64
+MAX_TWIST = 4096
+MAX_CELLS = 2**40
+
+
+def _grid(g: dict[str, object]) -> SE3Grid:
+    """The grid of a map file, with its sizes bounded before anything is allocated."""
+    nside, n_twist = int(g["nside"]), int(g["n_twist"])  # type: ignore[call-overload]
+    shape = tuple(int(v) for v in g["shape"])  # type: ignore[attr-defined]
+    if not (1 <= nside <= MAX_NSIDE and 1 <= n_twist <= MAX_TWIST and len(shape) == 3 and min(shape) >= 1):
+        raise ValueError("grid sizes out of range")
+    if float(np.prod(shape, dtype=float)) * 12 * nside * nside * n_twist > MAX_CELLS:
+        raise ValueError("grid too large")
+    origin = tuple(float(v) for v in g["origin"])  # type: ignore[attr-defined]
+    if not all(isinstance(v, (int, float)) for v in (g["voxel_size"], *g["origin"])):  # type: ignore[misc]
+        raise TypeError("grid numbers must be numbers")
+    return SE3Grid(origin, float(g["voxel_size"]), shape, nside, n_twist)  # type: ignore[arg-type]
 
 
 def check_map_matches(

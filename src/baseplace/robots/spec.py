@@ -31,7 +31,7 @@ from typing import Any
 
 import yaml
 
-from baseplace.errors import InputError, unknown
+from baseplace.errors import InputError, brief, unknown
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -228,6 +228,8 @@ def load_spec(name_or_path: str | Path) -> RobotSpec:
     except (tomllib.TOMLDecodeError, yaml.YAMLError, UnicodeDecodeError) as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise InputError(f"cannot parse robot file {path}: {first}") from None
+    except RecursionError:
+        raise InputError(f"cannot parse robot file {path}: nested too deeply") from None
     return spec_from_dict(data, path.parent, str(path))
 
 
@@ -246,6 +248,11 @@ def spec_from_dict(data: Any, root: Path, source: str = "robot spec") -> RobotSp
         if key not in data:
             raise InputError(f"{source}: missing required key {key!r}")
 
+    def text(value: Any, key: str) -> str:
+        if not isinstance(value, (str, int)) or isinstance(value, bool):
+            raise InputError(f"{source}: {key} must be a name (a string), got a {type(value).__name__}")
+        return str(value)
+
     def path_of(value: Any, key: str) -> Path:
         if not isinstance(value, str):
             raise InputError(f"{source}: {key} must be a path string")
@@ -261,11 +268,11 @@ def spec_from_dict(data: Any, root: Path, source: str = "robot spec") -> RobotSp
     arms = {}
     for arm_name, arm in arms_raw.items():
         if not isinstance(arm, dict) or "joints" not in arm or "tcp_frame" not in arm:
-            raise InputError(f"{source}: arm {arm_name!r} needs 'joints' and 'tcp_frame'")
+            raise InputError(f"{source}: arm {brief(arm_name)} needs 'joints' and 'tcp_frame'")
         joints = arm["joints"]
         if not isinstance(joints, list) or not joints or not all(isinstance(j, str) for j in joints):
-            raise InputError(f"{source}: arm {arm_name!r} joints must be a non-empty list of names")
-        arms[str(arm_name)] = ArmSpec(tuple(joints), str(arm["tcp_frame"]))
+            raise InputError(f"{source}: arm {brief(arm_name)} joints must be a non-empty list of names")
+        arms[text(arm_name, "an arm name")] = ArmSpec(tuple(joints), text(arm["tcp_frame"], "tcp_frame"))
 
     fp = data["footprint"]
     if not isinstance(fp, dict) or len(fp) != 1 or next(iter(fp)) not in ("radius", "polygon"):
@@ -276,8 +283,11 @@ def spec_from_dict(data: Any, root: Path, source: str = "robot spec") -> RobotSp
             radius = float(fp["radius"])
         else:
             polygon = tuple((float(x), float(y)) for x, y in fp["polygon"])
-        limits = {str(k): (float(v[0]), float(v[1])) for k, v in data.get("joint_limits", {}).items()}
-        reference = {str(k): float(v) for k, v in data.get("reference", {}).items()}
+        limits = {
+            text(k, "a joint name"): (float(v[0]), float(v[1]))
+            for k, v in data.get("joint_limits", {}).items()
+        }
+        reference = {text(k, "a joint name"): float(v) for k, v in data.get("reference", {}).items()}
     except (TypeError, ValueError, IndexError, AttributeError):
         raise InputError(f"{source}: footprint, joint_limits and reference must hold numbers") from None
 
@@ -285,12 +295,12 @@ def spec_from_dict(data: Any, root: Path, source: str = "robot spec") -> RobotSp
     if not isinstance(dirs, list):
         raise InputError(f"{source}: package_dirs must be a list of directories")
     return RobotSpec(
-        name=str(data["name"]),
+        name=text(data["name"], "name"),
         urdf=path_of(data["urdf"], "urdf"),
         srdf=path_of(data["srdf"], "srdf") if data.get("srdf") else None,
-        base_frame=str(data["base_frame"]),
+        base_frame=text(data["base_frame"], "base_frame"),
         arms=arms,
-        default_arm=str(data.get("default_arm", next(iter(arms)))),
+        default_arm=text(data.get("default_arm", next(iter(arms))), "default_arm"),
         footprint_radius=radius,
         footprint_polygon=polygon,
         package_dirs=tuple(path_of(d, "package_dirs entry") for d in dirs) or (root,),

@@ -21,7 +21,7 @@ from typing import BinaryIO
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from baseplace.errors import InputError, choices
+from baseplace.errors import InputError, brief, choices
 from baseplace.files import atomic_write
 
 FloatArray = NDArray[np.float64]
@@ -170,18 +170,22 @@ def load_transform(spec: str) -> FloatArray:
             (orthonormal within 1e-6, det +1), a last row other than ``0 0 0 1``, or a bad up
             vector.
     """
-    path = Path(spec.strip()).expanduser()
-    if path.is_file():
+    try:
+        path = Path(spec.strip()).expanduser()
+        is_file = path.is_file()
+    except (OSError, RuntimeError, ValueError):  # a name too long for a path, "~user" of no user, NUL
+        is_file = False
+    if is_file:
         return _read_transform_file(path)
     numbers = _floats(spec.replace(",", " ").split())
     if numbers is None:
         raise InputError(
-            f"transform {spec!r} is neither an existing file nor an up vector; give a path to a "
+            f"transform {brief(spec)} is neither an existing file nor an up vector; give a path to a "
             "4x4 matrix file (T_world_sensor) or 3 numbers 'ux uy uz'"
         )
     if len(numbers) != 3:
         raise InputError(
-            f"an up vector needs 3 numbers 'ux uy uz', got {len(numbers)} in {spec!r} "
+            f"an up vector needs 3 numbers 'ux uy uz', got {len(numbers)} in {brief(spec)} "
             "(a 4x4 matrix goes in a file)"
         )
     return up_vector_transform(numbers)
@@ -205,10 +209,11 @@ def up_vector_transform(up: ArrayLike) -> FloatArray:
         raise InputError(f"an up vector needs 3 numbers 'ux uy uz', got shape {u.shape}")
     if not np.isfinite(u).all():
         raise InputError(f"the up vector must be finite, got {_fmt(u)}")
-    norm = np.linalg.norm(u)
-    if norm == 0.0:
+    scale = float(np.abs(u).max())
+    if scale == 0.0:
         raise InputError("the up vector must be non-zero, got 0 0 0")
-    ux, uy, uz = u / norm
+    u = u / scale  # no overflow or underflow in the norm for any finite magnitude
+    ux, uy, uz = u / np.linalg.norm(u)
     sin = float(np.hypot(ux, uy))  # |u x z|
     if sin == 0.0:
         R = np.eye(3) if uz > 0 else np.diag([1.0, -1.0, -1.0])

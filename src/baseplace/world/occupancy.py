@@ -35,7 +35,7 @@ import yaml
 from numpy.typing import ArrayLike, NDArray
 from scipy.ndimage import distance_transform_edt
 
-from baseplace.errors import InputError, unknown
+from baseplace.errors import InputError, brief, unknown
 
 MODES = ("trinary", "scale", "raw")
 IMAGE_FORMATS = (".bmp", ".pgm", ".png")
@@ -178,7 +178,7 @@ class OccupancyGrid:
 def _number(doc: dict[str, Any], key: str, where: str) -> float:
     v = doc[key]
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise InputError(f"{where}: '{key}' must be a finite number, got {v!r}")
+        raise InputError(f"{where}: '{key}' must be a finite number, got {brief(v)}")
     return float(v)
 
 
@@ -193,6 +193,8 @@ def _read_yaml(path: Path) -> dict[str, Any]:
         raise InputError(f"{path}: cannot parse YAML{at}: {e.problem or e.context}") from None
     except (yaml.YAMLError, UnicodeDecodeError, OSError) as e:
         raise InputError(f"{path}: cannot parse YAML: {' '.join(str(e).split())}") from None
+    except RecursionError:
+        raise InputError(f"{path}: cannot parse YAML: nested too deeply") from None
     if not isinstance(doc, dict):
         raise InputError(f"{path}: expected a YAML mapping with keys {', '.join(REQUIRED_KEYS)}[, mode]")
     for key in REQUIRED_KEYS:
@@ -275,7 +277,7 @@ def load_occupancy(path: str | Path) -> OccupancyGrid:
     where = str(path)
     image = doc["image"]
     if not isinstance(image, str) or not image.strip():
-        raise InputError(f"{where}: 'image' must be a non-empty file name, got {image!r}")
+        raise InputError(f"{where}: 'image' must be a non-empty file name, got {brief(image)}")
     mode = "trinary" if doc.get("mode") is None else str(doc["mode"]).lower()
     if mode not in MODES:
         raise unknown("map mode", str(doc["mode"]), MODES, owner=where)
@@ -288,7 +290,7 @@ def load_occupancy(path: str | Path) -> OccupancyGrid:
         and len(origin) == 3
         and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in origin)
     ):
-        raise InputError(f"{where}: 'origin' must be 3 numbers [x, y, yaw], got {origin!r}")
+        raise InputError(f"{where}: 'origin' must be 3 numbers [x, y, yaw], got {brief(origin)}")
     occupied, free = _number(doc, "occupied_thresh", where), _number(doc, "free_thresh", where)
     if not (0.0 <= free < occupied <= 1.0):
         raise InputError(
@@ -296,7 +298,7 @@ def load_occupancy(path: str | Path) -> OccupancyGrid:
         )
     negate = doc["negate"]
     if not isinstance(negate, int):  # bool is an int; map_server reads an int, else a bool
-        raise InputError(f"{where}: 'negate' must be 0, 1, true or false, got {negate!r}")
+        raise InputError(f"{where}: 'negate' must be 0, 1, true or false, got {brief(negate)}")
     img = _read_image(path.parent / image, where)
     data = occupancy_from_image(img, mode, bool(negate), occupied, free)
     return OccupancyGrid(
