@@ -16,7 +16,7 @@ REASONS = ("no_ik", "collision", "footprint", "exhausted")
 
 def plot_failure_rates(rows: list[dict[str, Any]], path: Path) -> None:
     """Stacked bars: rejected candidates per query by reason, per scene class and strategy."""
-    labels = [f"{r['scene']}\\n{r['strategy']}" for r in rows]
+    labels = [f"{r['scene']}\n{r['strategy']}" for r in rows]
     fig, ax = plt.subplots(figsize=(max(6.0, 0.55 * len(rows)), 4.2), dpi=110)
     bottom = np.zeros(len(rows))
     for reason in REASONS:
