@@ -8,9 +8,7 @@ not the segmentation, and not the reachability map). For every reachable grasp e
 runs Algorithm 2 on the noisy cloud; reported: success %, t_RM (OSRM), t_a (all queries), t_s
 (successful queries) and the failure reasons.
 
-Status: the runner and its ground-truth oracle are tested; the experiment's grasp definition is
-still being fitted to TIAGo (its hand reaches ~0.2 m past ``arm_tool_link``), so no table has been
-published from it yet.
+The full run's tables are in docs/placement.md (``baseplace experiment osrm``).
 """
 
 from __future__ import annotations
