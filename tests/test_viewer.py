@@ -202,22 +202,43 @@ def test_port_in_use(scene_data, tmp_path):
         serve(path, host="no-such-host.invalid", port=0, block=False)
 
 
-def screenshot_stats(png: Path) -> tuple[float, int, float]:
-    """In the 3D area (GUI panels left out): share of non-background pixels, distinct colours, and
-    share of saturated (coloured, not grey) pixels."""
-    img = np.asarray(Image.open(png).convert("RGB")).astype(np.int16)
-    area = img[170:, :930]  # below the notification, left of the control panel
+def screenshot_stats(png: Path) -> tuple[float, int, dict[str, float]]:
+    """In the 3D area (GUI panels left out): share of non-background pixels, distinct colours, and the
+    share of pixels of each hue family the scene's layers use.
+
+    Hue, not saturation: how pale the colours come out depends on whether the environment lighting
+    had loaded when Chromium took the shot, but their hues do not."""
+    rgb = Image.open(png).convert("RGB")
+    area = np.asarray(rgb).astype(np.int16)[170:, :930]  # below the notification, left of the panel
     background = np.abs(area - 255).max(axis=2) <= 6
     colours = len(np.unique(area.reshape(-1, 3), axis=0))
-    hi, lo = area.max(axis=2), area.min(axis=2)
-    saturated = (hi - lo) > 0.25 * np.maximum(hi, 1)
-    return float(1.0 - background.mean()), colours, float(saturated.mean())
+    hsv = np.asarray(rgb.convert("HSV")).astype(np.int16)[170:, :930]
+    hue, coloured = hsv[..., 0] * (360 / 255), hsv[..., 1] >= 20  # saturation >= 8 %
+    families = {"orange": (15, 50), "green": (70, 160), "blue": (180, 240)}
+    shares = {k: float((coloured & (hue >= a) & (hue < b)).mean()) for k, (a, b) in families.items()}
+    return float(1.0 - background.mean()), colours, shares
 
 
 def run_chromium(browser: str, tmp_path: Path, name: str, *args: str) -> subprocess.CompletedProcess[str]:
     env = {**os.environ, "HOME": str(tmp_path)}  # chromium writes caches and crash reports under HOME
     command = [browser, *CHROMIUM_FLAGS, f"--user-data-dir={tmp_path / name}", *args]
     return subprocess.run(command, capture_output=True, text=True, timeout=150, env=env)
+
+
+def view_problems(png: Path) -> tuple[list[str], str]:
+    """What the screenshot lacks (empty when it shows the whole scene), and its statistics."""
+    covered, colours, hues = screenshot_stats(png)
+    stats = f"{covered:.0%} covered, {colours} colours, " + ", ".join(f"{k} {v:.1%}" for k, v in hues.items())
+    problems = []
+    # The floor's cloud and regions fill most of the view; the floor region (blue), the ramp region
+    # (green), and the platform region and path (orange) are all drawn.
+    if covered <= 0.3:
+        problems.append("the 3D view is mostly blank")
+    if colours <= 1000:
+        problems.append(f"the 3D view has only {colours} colours")
+    least = {"blue": 0.1, "green": 0.01, "orange": 0.01}
+    problems += [f"no {k} layer" for k, v in least.items() if hues[k] < v]
+    return problems, stats
 
 
 def test_viewer_renders_in_headless_chromium(scene_data, tmp_path):
@@ -231,25 +252,26 @@ def test_viewer_renders_in_headless_chromium(scene_data, tmp_path):
     try:
         assert server.get_port() == port
         url = f"http://127.0.0.1:{port}/"
-        t1 = time.perf_counter()
-        shot = run_chromium(
-            browser, tmp_path, "shot", "--virtual-time-budget=8000", f"--screenshot={png}", url
-        )
-        t_shot = time.perf_counter() - t1
-        assert shot.returncode == 0, shot.stderr[-3000:]
-        assert png.is_file(), shot.stderr[-3000:]
         dom = run_chromium(browser, tmp_path, "dom", "--virtual-time-budget=3000", "--dump-dom", url)
         assert dom.returncode == 0, dom.stderr[-3000:]
+        # The scene streams over a websocket in real time while Chromium's budget is virtual time: on
+        # a loaded machine the first shot can come before every layer arrived, so give it longer.
+        for budget in (8_000, 20_000, 45_000):
+            t1 = time.perf_counter()
+            shot = run_chromium(
+                browser, tmp_path, "shot", f"--virtual-time-budget={budget}", f"--screenshot={png}", url
+            )
+            assert shot.returncode == 0 and png.is_file(), shot.stderr[-3000:]
+            problems, stats = view_problems(png)
+            print(
+                f"serve {t_serve:.1f} s, screenshot ({budget} ms budget) {time.perf_counter() - t1:.1f} s: {stats}"
+            )
+            if not problems:
+                break
     finally:
         server.stop()
     # The viser client loaded: its React root and the three.js canvas of the 3D view.
     assert 'id="root"' in dom.stdout and 'data-engine="three.js' in dom.stdout, dom.stdout[-3000:]
-    covered, colours, saturated = screenshot_stats(png)
-    print(f"serve {t_serve:.1f} s, screenshot {t_shot:.1f} s: {covered:.0%} covered, {colours} colours, "
-          f"{saturated:.0%} saturated")  # fmt: skip
     if os.environ.get("BASEPLACE_VIEWER_SCREENSHOT"):
         shutil.copyfile(png, os.environ["BASEPLACE_VIEWER_SCREENSHOT"])
-    # The floor's cloud and regions fill most of the view; regions, heat map and path are coloured.
-    assert covered > 0.3, f"the 3D view is mostly blank ({covered:.0%} covered); see {png}"
-    assert colours > 1000, f"the 3D view has only {colours} colours; see {png}"
-    assert saturated > 0.1, f"the 3D view is mostly grey ({saturated:.0%} coloured); see {png}"
+    assert not problems, f"{'; '.join(problems)} ({stats}); see {png}"
