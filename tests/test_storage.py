@@ -1,6 +1,6 @@
 from __future__ import annotations
 
-import json
+import dataclasses
 
 import h5py
 import numpy as np
@@ -54,16 +54,47 @@ def test_newer_format_and_wrong_robot(small_map, tiago, planar3, tmp_path):
         load_map(path, tiago)
     with pytest.raises(InputError, match="arm 'arm', not 'left'"):
         load_map(path, planar3, "left")
-    with h5py.File(path, "a") as f:
-        info = json.loads(f.attrs["info"])
-        info["urdf_sha256"] = "0" * 64
-        f.attrs["info"] = json.dumps(info)
+    other_urdf = dataclasses.replace(small_map.info, urdf_sha256="0" * 64)
+    save_map(dataclasses.replace(small_map, info=other_urdf), path)
     with pytest.raises(InputError, match="different URDF"):
         load_map(path, planar3)
     with h5py.File(path, "a") as f:
         f.attrs["format_version"] = FORMAT_VERSION + 1
     with pytest.raises(InputError, match="newer than this baseplace"):
         load_map(path)
+
+
+def test_header_texts_are_checksummed(small_map, tmp_path):
+    path = tmp_path / "m.rmap"
+    save_map(small_map, path)
+    with h5py.File(path, "a") as f:
+        text = bytes(f["info"][()]).replace(b'"planar3"', b'"planar4"')
+        del f["info"]
+        f["info"] = np.frombuffer(text, dtype=np.uint8)
+    with pytest.raises(InputError, match="checksum"):
+        load_map(path)
+
+
+def test_format_version_1_is_refused_unread(small_map, tmp_path):
+    """Version 1 kept grid and info in variable-length string attributes, which are never read now."""
+    path = tmp_path / "v1.rmap"
+    with h5py.File(path, "w") as f:
+        f.attrs["format"] = "baseplace-reachability-map"
+        f.attrs["format_version"] = 1
+        f.attrs["grid"] = "{}"
+        f["cells"] = small_map.cells
+    with pytest.raises(
+        InputError, match="format version 1, from an older baseplace; rebuild it with build-map"
+    ):
+        load_map(path)
+
+
+def test_no_variable_length_strings_in_the_file(small_map, tmp_path):
+    path = tmp_path / "m.rmap"
+    save_map(small_map, path)
+    with h5py.File(path, "r") as f:  # variable-length strings have numpy kind "O"
+        assert all(f.attrs.get_id(name).dtype.kind != "O" for name in f.attrs), dict(f.attrs)
+        assert all(f[name].dtype.kind != "O" for name in f), list(f)
 
 
 def test_corrupt_data_and_foreign_files(small_map, tmp_path):

@@ -23,7 +23,7 @@ from baseplace.files import atomic_write
 from baseplace.geometry.poses import parse_pose6
 from baseplace.reachability.build import BuildSettings, build_map
 from baseplace.reachability.rmap import ReachabilityMap
-from baseplace.reachability.storage import load_map, save_map
+from baseplace.reachability.storage import FORMAT_VERSION, load_map, save_map
 from baseplace.robots.codegen import cache_dir
 from baseplace.robots.model import Robot
 
@@ -45,7 +45,7 @@ def cached_map(
     arm_name = arm or robot.spec.default_arm
     key = (
         f"{robot.name}-{arm_name}-{robot.spec.urdf_sha256[:12]}-s{settings.samples}-seed{settings.seed}"
-        f"-v{settings.voxel_size}-o{settings.orientation_resolution}"
+        f"-v{settings.voxel_size}-o{settings.orientation_resolution}-f{FORMAT_VERSION}"
     )
     path = cache_dir().parent / "maps" / f"{key}.rmap"
     if path.is_file():

@@ -1,14 +1,14 @@
 """Saving and loading surface maps as sparse HDF5 (seed 002 V-A keeps only poses with R_S > 0).
 
 Layout: ``index`` (uint32 flat indices into the (T, NX, NY) grid of the poses with R_S > 0) and
-``value`` (their R_S as uint16, R_S * 65535 rounded: 1.5e-5 resolution); attributes hold the
-grid, the surface, the robot and arms, the format version and a SHA-256 of the datasets. Loading
+``value`` (their R_S as uint16, R_S * 65535 rounded: 1.5e-5 resolution); the JSON text ``meta``
+(grid, surface, robot and arms) as a uint8 dataset (see :mod:`baseplace.h5files`); attributes hold
+the format, its version and a SHA-256 of the datasets. Loading
 rebuilds the dense grid, so lookups stay constant-time. Writes are atomic.
 """
 
 from __future__ import annotations
 
-import hashlib
 import json
 from pathlib import Path
 
@@ -17,19 +17,22 @@ import numpy as np
 
 from baseplace.errors import InputError
 from baseplace.files import atomic_write
+from baseplace.h5files import (
+    CORRUPT_FILE_ERRORS,
+    attr_text,
+    digest,
+    read_header,
+    read_text,
+    short_text,
+    write_header,
+    write_text,
+)
 from baseplace.placement.surface_map import SurfaceMap
 
 FORMAT = "baseplace-surface-map"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 1 kept meta in a variable-length string attribute
 SCALE = 65535
 MAX_POSES = 10**9
-
-
-def _digest(*arrays: np.ndarray) -> str:
-    h = hashlib.sha256()
-    for a in arrays:
-        h.update(np.ascontiguousarray(a).tobytes())
-    return h.hexdigest()
 
 
 def save_surface_map(smap: SurfaceMap, path: str | Path) -> int:
@@ -43,12 +46,11 @@ def save_surface_map(smap: SurfaceMap, path: str | Path) -> int:
         "combine": smap.combine, "cone": smap.cone, "tcp_height": smap.tcp_height,
     }  # fmt: skip
     with atomic_write(path, "surface map") as tmp, h5py.File(tmp, "w") as f:
-        f.attrs["format"] = FORMAT
-        f.attrs["format_version"] = FORMAT_VERSION
-        f.attrs["meta"] = json.dumps(meta)
+        write_header(f, FORMAT, FORMAT_VERSION)
+        meta_text = write_text(f, "meta", json.dumps(meta))
         f.create_dataset("index", data=index, compression="gzip", shuffle=True)
         f.create_dataset("value", data=value, compression="gzip", shuffle=True)
-        f.attrs["sha256"] = _digest(index, value)
+        f.attrs["sha256"] = short_text(digest(meta_text, index, value))
     return path.stat().st_size
 
 
@@ -63,16 +65,13 @@ def load_surface_map(path: str | Path) -> SurfaceMap:
         raise InputError(f"surface map {path} does not exist")
     try:
         with h5py.File(path, "r") as f:
-            if f.attrs.get("format") != FORMAT:
-                raise InputError(f"{path} is not a baseplace surface map (make one with surface-map)")
-            version = int(f.attrs["format_version"])
-            if version > FORMAT_VERSION:
-                raise InputError(f"{path} has surface map format {version}, newer than this baseplace reads")
-            meta = json.loads(f.attrs["meta"])
+            read_header(f, path, FORMAT, FORMAT_VERSION, "surface map", "rebuild it with surface-map")
+            meta_text = read_text(f, "meta")
             index, value = f["index"][()], f["value"][()]
-            digest = str(f.attrs["sha256"])
-        if _digest(index, value) != digest:
+            stored = attr_text(f.attrs, "sha256")
+        if digest(meta_text, index, value) != stored:
             raise InputError(f"cannot read surface map {path}: checksum mismatch, the file is corrupt")
+        meta = json.loads(meta_text)
         shape = tuple(int(v) for v in meta["shape"])
         if len(shape) != 3 or min(shape) < 1 or float(np.prod(shape, dtype=float)) > MAX_POSES:
             raise ValueError("grid shape out of range")
@@ -85,16 +84,7 @@ def load_surface_map(path: str | Path) -> SurfaceMap:
         )  # fmt: skip
     except InputError:
         raise
-    except (
-        OSError,
-        KeyError,
-        ValueError,
-        TypeError,
-        IndexError,
-        AttributeError,
-        RecursionError,
-        MemoryError,
-    ) as exc:
+    except CORRUPT_FILE_ERRORS as exc:
         raise InputError(
             f"cannot read surface map {path}: truncated or corrupt ({type(exc).__name__})"
         ) from None

@@ -7,8 +7,9 @@ the grid. Since chunk ``k`` is drawn from ``default_rng([seed, k])`` whatever ra
 build resumed from a checkpoint gives exactly the map an uninterrupted build gives.
 
 Layout: datasets ``chunks`` (int64), ``cells`` (int64), ``counts`` (uint32) and, with
-manipulability, ``best`` (float32); attributes ``format``, ``format_version``, ``build`` (JSON of
-the identity), ``dropped``, ``elapsed_s`` (build wall time so far) and ``sha256`` over all of it.
+manipulability, ``best`` (float32), and the text ``build`` (JSON of the identity) as a uint8 dataset
+(see :mod:`baseplace.h5files`); attributes ``format``, ``format_version``, ``dropped``,
+``elapsed_s`` (build wall time so far) and ``sha256`` over all of it.
 Writes go through :func:`baseplace.files.atomic_write`, so a build killed at any moment, even
 with SIGKILL while writing, leaves either the previous checkpoint or the new one, never a torn
 file. The convention for a map written to ``OUT`` is the checkpoint ``OUT.partial``
@@ -23,7 +24,6 @@ valid.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 import math
 import signal
@@ -38,11 +38,21 @@ import numpy as np
 
 from baseplace.errors import InputError
 from baseplace.files import atomic_write
+from baseplace.h5files import (
+    CORRUPT_FILE_ERRORS,
+    attr_text,
+    digest,
+    read_header,
+    read_text,
+    short_text,
+    write_header,
+    write_text,
+)
 from baseplace.reachability.build import CHUNK, MapAccumulator, PartialMap
 from baseplace.reachability.rmap import ReachabilityMap
 
 FORMAT = "baseplace-build-checkpoint"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 1 kept build in a variable-length string attribute
 SUFFIX = ".partial"
 
 
@@ -72,11 +82,8 @@ def build_identity(acc: MapAccumulator) -> dict[str, Any]:
     return json.loads(json.dumps(identity))  # the form it takes after a round trip through the file
 
 
-def _digest(build: str, dropped: int, elapsed_s: float, arrays: list[np.ndarray]) -> str:
-    h = hashlib.sha256(f"{build}\n{dropped}\n{elapsed_s!r}\n".encode())
-    for a in arrays:
-        h.update(np.ascontiguousarray(a).tobytes())
-    return h.hexdigest()
+def _digest(build: bytes, dropped: int, elapsed_s: float, arrays: list[np.ndarray]) -> str:
+    return digest(build + f"\n{dropped}\n{elapsed_s!r}\n".encode(), *arrays)
 
 
 def save_checkpoint(path: str | Path, acc: MapAccumulator, elapsed_s: float) -> None:
@@ -96,14 +103,13 @@ def save_checkpoint(path: str | Path, acc: MapAccumulator, elapsed_s: float) -> 
     if part.best is not None:
         arrays.append(part.best)
     with atomic_write(path, "checkpoint") as tmp, h5py.File(tmp, "w") as f:
-        f.attrs["format"] = FORMAT
-        f.attrs["format_version"] = FORMAT_VERSION
-        f.attrs["build"] = build
+        write_header(f, FORMAT, FORMAT_VERSION)
+        build_text = write_text(f, "build", build)
         f.attrs["dropped"] = part.dropped
         f.attrs["elapsed_s"] = elapsed_s
         for name, a in zip(("chunks", "cells", "counts", "best"), arrays, strict=False):
             f.create_dataset(name, data=a)
-        f.attrs["sha256"] = _digest(build, part.dropped, elapsed_s, arrays)
+        f.attrs["sha256"] = short_text(_digest(build_text, part.dropped, elapsed_s, arrays))
 
 
 def _mismatch(stored: dict[str, Any], current: dict[str, Any]) -> str | None:
@@ -136,28 +142,20 @@ def load_checkpoint(path: str | Path, acc: MapAccumulator) -> float:
     )
     try:
         with h5py.File(path, "r") as f:
-            if f.attrs.get("format") != FORMAT:
-                raise InputError(
-                    f"{path} is not a baseplace build checkpoint; delete it or choose another path"
-                )
-            version = int(f.attrs["format_version"])
-            if version > FORMAT_VERSION:
-                raise InputError(
-                    f"checkpoint {path} has format version {version}, newer than this baseplace reads "
-                    f"({FORMAT_VERSION}); upgrade baseplace or delete it to start over"
-                )
-            build = str(f.attrs["build"])
+            read_header(f, path, FORMAT, FORMAT_VERSION, "build checkpoint", "delete it to start over")
+            build = read_text(f, "build")
             dropped = int(f.attrs["dropped"])
             elapsed_s = float(f.attrs["elapsed_s"])
             arrays = [f[name][()] for name in ("chunks", "cells", "counts", "best") if name in f]
-            digest = str(f.attrs["sha256"])
+            stored = attr_text(f.attrs, "sha256")
+        if _digest(build, dropped, elapsed_s, arrays) != stored or len(arrays) < 3:
+            raise InputError(corrupt)
+        identity = json.loads(build)
     except InputError:
         raise
-    except (OSError, KeyError, ValueError, TypeError):
+    except CORRUPT_FILE_ERRORS:
         raise InputError(corrupt) from None
-    if _digest(build, dropped, elapsed_s, arrays) != digest or len(arrays) < 3:
-        raise InputError(corrupt)
-    difference = _mismatch(json.loads(build), build_identity(acc))
+    difference = _mismatch(identity, build_identity(acc))
     if difference is not None:
         raise InputError(
             f"checkpoint {path} is from another build ({difference}); delete it to start over, "

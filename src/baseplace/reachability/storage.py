@@ -1,15 +1,15 @@
 """Saving and loading reachability maps as HDF5 (never pickle).
 
 Layout: datasets ``cells`` (int64), ``counts`` (uint32) and optionally ``manipulability``
-(float32); attributes hold the grid, the provenance (:class:`MapInfo`), the format version and a
-SHA-256 of the datasets. Writes go to a temporary file in the target directory and are renamed
+(float32); the JSON texts ``grid`` and ``info`` (the provenance, :class:`MapInfo`) as uint8 datasets
+(see :mod:`baseplace.h5files`); attributes hold the format, its version and a SHA-256 of the
+datasets. Writes go to a temporary file in the target directory and are renamed
 into place, so a crash never leaves a half-written map under the final name.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 from pathlib import Path
 
@@ -18,29 +18,31 @@ import numpy as np
 
 from baseplace.errors import InputError
 from baseplace.files import atomic_write
+from baseplace.h5files import (
+    CORRUPT_FILE_ERRORS,
+    attr_text,
+    digest,
+    read_header,
+    read_text,
+    short_text,
+    write_header,
+    write_text,
+)
 from baseplace.reachability.grid import SE3Grid
 from baseplace.reachability.rmap import MapInfo, ReachabilityMap
 from baseplace.robots.model import Robot
 
 FORMAT = "baseplace-reachability-map"
-FORMAT_VERSION = 1
-
-
-def _digest(*arrays: np.ndarray) -> str:
-    h = hashlib.sha256()
-    for a in arrays:
-        h.update(np.ascontiguousarray(a).tobytes())
-    return h.hexdigest()
+FORMAT_VERSION = 2  # 1 kept grid and info in variable-length string attributes
 
 
 def save_map(rmap: ReachabilityMap, path: str | Path) -> int:
     """Write ``rmap`` to ``path`` atomically; returns the file size in bytes."""
     path = Path(path)
     with atomic_write(path, "map") as tmp, h5py.File(tmp, "w") as f:
-        f.attrs["format"] = FORMAT
-        f.attrs["format_version"] = FORMAT_VERSION
+        write_header(f, FORMAT, FORMAT_VERSION)
         grid = rmap.grid
-        f.attrs["grid"] = json.dumps(
+        grid_text = json.dumps(
             {
                 "origin": list(grid.origin),
                 "voxel_size": grid.voxel_size,
@@ -49,14 +51,18 @@ def save_map(rmap: ReachabilityMap, path: str | Path) -> int:
                 "n_twist": grid.n_twist,
             }
         )
-        f.attrs["info"] = json.dumps(dataclasses.asdict(rmap.info))
+        parts: list[np.ndarray | bytes] = [
+            write_text(f, "grid", grid_text),
+            write_text(f, "info", json.dumps(dataclasses.asdict(rmap.info))),
+            rmap.cells,
+            rmap.counts,
+        ]
         f.create_dataset("cells", data=rmap.cells, compression="gzip", compression_opts=4, shuffle=True)
         f.create_dataset("counts", data=rmap.counts, compression="gzip", compression_opts=4, shuffle=True)
-        arrays: list[np.ndarray] = [rmap.cells, rmap.counts]
         if rmap.manipulability is not None:
             f.create_dataset("manipulability", data=rmap.manipulability, compression="gzip")
-            arrays.append(rmap.manipulability)
-        f.attrs["sha256"] = _digest(*arrays)
+            parts.append(rmap.manipulability)
+        f.attrs["sha256"] = short_text(digest(*parts))
     return path.stat().st_size
 
 
@@ -72,23 +78,16 @@ def load_map(path: str | Path, robot: Robot | None = None, arm: str | None = Non
         raise InputError(f"map file {path} does not exist")
     try:
         with h5py.File(path, "r") as f:
-            if f.attrs.get("format") != FORMAT:
-                raise InputError(f"{path} is not a baseplace reachability map")
-            version = int(f.attrs["format_version"])
-            if version > FORMAT_VERSION:
-                raise InputError(
-                    f"{path} has map format version {version}, newer than this baseplace reads "
-                    f"({FORMAT_VERSION}); upgrade baseplace"
-                )
-            g = json.loads(f.attrs["grid"])
-            info_raw = json.loads(f.attrs["info"])
+            read_header(f, path, FORMAT, FORMAT_VERSION, "reachability map", "rebuild it with build-map")
+            grid_text, info_text = read_text(f, "grid"), read_text(f, "info")
             cells = f["cells"][()]
             counts = f["counts"][()]
             manip = f["manipulability"][()] if "manipulability" in f else None
-            digest = str(f.attrs["sha256"])
+            stored = attr_text(f.attrs, "sha256")
         arrays: list[np.ndarray] = [cells, counts] + ([manip] if manip is not None else [])
-        if _digest(*arrays) != digest:
+        if digest(grid_text, info_text, *arrays) != stored:
             raise InputError(f"cannot read map {path}: checksum mismatch, the file is corrupt")
+        g, info_raw = json.loads(grid_text), json.loads(info_text)
         info_raw["joint_names"] = tuple(info_raw["joint_names"])
         info = MapInfo(**info_raw)
         grid = _grid(g)
@@ -101,7 +100,7 @@ def load_map(path: str | Path, robot: Robot | None = None, arm: str | None = Non
         rmap = ReachabilityMap(grid, cells.astype(np.int64), counts.astype(np.uint32), info, manip)
     except InputError:
         raise
-    except (OSError, KeyError, ValueError, TypeError, AttributeError, RecursionError, MemoryError) as exc:
+    except CORRUPT_FILE_ERRORS as exc:
         raise InputError(
             f"cannot read map {path}: the file is truncated or corrupt ({type(exc).__name__})"
         ) from None
