@@ -278,9 +278,12 @@ def load_occupancy(path: str | Path) -> OccupancyGrid:
     image = doc["image"]
     if not isinstance(image, str) or not image.strip():
         raise InputError(f"{where}: 'image' must be a non-empty file name, got {brief(image)}")
-    mode = "trinary" if doc.get("mode") is None else str(doc["mode"]).lower()
+    mode = doc.get("mode")
+    mode = "trinary" if mode is None else mode.lower() if isinstance(mode, str) else mode
     if mode not in MODES:
-        raise unknown("map mode", str(doc["mode"]), MODES, owner=where)
+        raise unknown(
+            "map mode", mode if isinstance(mode, str) and len(mode) < 60 else brief(mode), MODES, owner=where
+        )
     resolution = _number(doc, "resolution", where)
     if resolution <= 0:
         raise InputError(f"{where}: 'resolution' must be > 0 m/cell, got {resolution}")
