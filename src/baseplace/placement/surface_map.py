@@ -32,7 +32,7 @@ import shapely
 from numpy.typing import ArrayLike, NDArray
 from scipy.signal import fftconvolve
 
-from baseplace.errors import InputError, unknown
+from baseplace.errors import InputError, brief, unknown
 from baseplace.geometry.poses import FloatArray
 from baseplace.placement.osrm import footprint_kernel
 from baseplace.reachability.rmap import ReachabilityMap
@@ -49,11 +49,15 @@ TCP_HEIGHT = 0.05
 """Height [m] of the TCP above the surface where it works: grasping a small object standing there."""
 
 
+MAX_COORDINATE = 1e6  # m: beyond any workspace; keeps areas and grid sizes finite
+
+
 def parse_polygon(text: str | ArrayLike) -> FloatArray:
     """A simple polygon from ``"x1,y1;x2,y2;..."`` or an (N, 2) array; (N, 2) vertices [m].
 
     Raises:
-        InputError: unparsable text, fewer than 3 vertices, zero area or a self-intersection.
+        InputError: unparsable text, fewer than 3 vertices, a vertex beyond
+            :data:`MAX_COORDINATE`, zero area or a self-intersection.
     """
     if isinstance(text, str):
         try:
@@ -66,7 +70,9 @@ def parse_polygon(text: str | ArrayLike) -> FloatArray:
         except (TypeError, ValueError):
             raise InputError("polygon must be an (N, 2) array of numbers in metres") from None
     if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 3 or not np.all(np.isfinite(pts)):
-        raise InputError(f"polygon needs at least 3 finite (x, y) vertices, got {pts.tolist()}")
+        raise InputError(f"polygon needs at least 3 finite (x, y) vertices, got {brief(pts.tolist())}")
+    if np.abs(pts).max() > MAX_COORDINATE:
+        raise InputError(f"polygon vertices must lie within {MAX_COORDINATE:g} m of the origin")
     centred = pts - pts.mean(axis=0)
     if np.linalg.matrix_rank(centred, tol=1e-6) < 2:
         raise InputError(f"polygon is degenerate: its vertices {pts.tolist()} are collinear")

@@ -10,6 +10,7 @@ rebuilds the dense grid, so lookups stay constant-time. Writes are atomic.
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import h5py
@@ -27,7 +28,7 @@ from baseplace.h5files import (
     write_header,
     write_text,
 )
-from baseplace.placement.surface_map import SurfaceMap
+from baseplace.placement.surface_map import SurfaceMap, parse_polygon
 
 FORMAT = "baseplace-surface-map"
 FORMAT_VERSION = 2  # 1 kept meta in a variable-length string attribute
@@ -77,10 +78,19 @@ def load_surface_map(path: str | Path) -> SurfaceMap:
             raise ValueError("grid shape out of range")
         values = np.zeros(int(np.prod(shape)), dtype=np.float32)
         values[index] = value.astype(np.float32) / SCALE
+        origin, resolution = [float(v) for v in meta["origin"]], float(meta["resolution"])
+        if len(origin) != 2 or not (
+            np.isfinite(origin).all() and math.isfinite(resolution) and resolution > 0
+        ):
+            raise ValueError("grid origin or resolution out of range")
+        try:
+            polygon = parse_polygon(meta["polygon"])
+        except InputError:
+            raise ValueError("not a polygon") from None
         smap = SurfaceMap(
-            values.reshape(shape), (float(meta["origin"][0]), float(meta["origin"][1])), float(meta["resolution"]),
-            np.asarray(meta["polygon"], dtype=float), float(meta["height"]), str(meta["robot"]), tuple(meta["arms"]),
-            str(meta["combine"]), None if meta["cone"] is None else float(meta["cone"]), float(meta["tcp_height"]),
+            values.reshape(shape), (origin[0], origin[1]), resolution, polygon, float(meta["height"]),
+            str(meta["robot"]), tuple(meta["arms"]), str(meta["combine"]),
+            None if meta["cone"] is None else float(meta["cone"]), float(meta["tcp_height"]),
         )  # fmt: skip
     except InputError:
         raise

@@ -94,6 +94,7 @@ def load_map(path: str | Path, robot: Robot | None = None, arm: str | None = Non
         if (
             cells.ndim != 1
             or cells.shape != counts.shape
+            or (manip is not None and manip.shape != cells.shape)
             or (len(cells) and not 0 <= cells.min() <= cells.max() < grid.n_cells)
         ):
             raise ValueError("cells out of the grid")
