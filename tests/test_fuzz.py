@@ -171,14 +171,16 @@ def test_yaml_alias_bomb_stays_small(kind: str, tmp_path: Path) -> None:
             load_spec(tmp_path / "r.yaml")
 
 
-def _rewrite(kind: str, tmp_path: Path, **texts: str) -> Path:
-    """The reference map of ``kind`` with JSON texts replaced and the checksum made valid again."""
+def _rewrite(kind: str, tmp_path: Path, arrays: dict[str, np.ndarray] | None = None, **texts: str) -> Path:
+    """The reference map of ``kind`` with JSON texts or datasets replaced and the checksum made valid
+    again."""
     path = tmp_path / ("m.rmap" if kind == "rmap" else "s.h5")
     path.write_bytes(fc.reference_files()[kind])
+    replace = {k: np.frombuffer(v.encode(), dtype=np.uint8) for k, v in texts.items()} | (arrays or {})
     with h5py.File(path, "a") as f:
-        for key, value in texts.items():
+        for key, value in replace.items():
             del f[key]
-            f[key] = np.frombuffer(value.encode(), dtype=np.uint8)
+            f[key] = value
         parts = [f[k][()] for k in fc.TEXTS[kind]] + [f[k][()] for k in f if k not in fc.TEXTS[kind]]
         f.attrs["sha256"] = np.bytes_(digest(*parts).encode())
     return path
@@ -344,3 +346,20 @@ def test_up_vector_of_extreme_magnitude_maps_onto_z(up: str) -> None:
     u = np.array([float(v) for v in up.split()])
     u /= np.abs(u).max()
     np.testing.assert_allclose(load_transform(up)[:3, :3] @ (u / np.linalg.norm(u)), [0, 0, 1], atol=1e-9)
+
+
+def test_loaded_values_keep_their_invariants(tmp_path: Path) -> None:
+    """Found as 'loaded' notes (valid checksums, inconsistent contents), not crashes."""
+    from baseplace.placement.surface_map import parse_polygon
+    from baseplace.placement.surface_storage import load_surface_map
+    from baseplace.reachability.storage import load_map
+
+    with pytest.raises(BaseplaceError, match="within 1e"):  # its area overflowed to inf
+        parse_polygon([[0.07, 0.89], [3.5e38, 6.55e4], [-0.8, 1e308]])
+    doc = json.loads(_json_attr("smap", "meta"))
+    for change in ({"polygon": None}, {"origin": [1e-300, 1e-300, 0.0]}, {"resolution": 0.0}):
+        with pytest.raises(BaseplaceError, match="truncated or corrupt"):
+            load_surface_map(_rewrite("smap", tmp_path, meta=json.dumps(doc | change)))
+    manip = fc.reference_contents("rmap")[2]["manipulability"]
+    with pytest.raises(BaseplaceError, match="truncated or corrupt"):
+        load_map(_rewrite("rmap", tmp_path, arrays={"manipulability": manip[:-1]}))
