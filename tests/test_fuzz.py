@@ -16,6 +16,7 @@ from __future__ import annotations
 import faulthandler
 import io
 import json
+import math
 import subprocess
 import sys
 from collections.abc import Callable
@@ -360,6 +361,9 @@ def test_loaded_values_keep_their_invariants(tmp_path: Path) -> None:
     for change in ({"polygon": None}, {"origin": [1e-300, 1e-300, 0.0]}, {"resolution": 0.0}):
         with pytest.raises(BaseplaceError, match="truncated or corrupt"):
             load_surface_map(_rewrite("smap", tmp_path, meta=json.dumps(doc | change)))
+    for grid in ({"origin": [1e20, math.nan]}, {"voxel_size": math.inf}, {"voxel_size": 0}):
+        with pytest.raises(BaseplaceError, match="truncated or corrupt"):
+            load_map(_rewrite("rmap", tmp_path, grid=_json_attr("rmap", "grid", **grid)))
     manip = fc.reference_contents("rmap")[2]["manipulability"]
     with pytest.raises(BaseplaceError, match="truncated or corrupt"):
         load_map(_rewrite("rmap", tmp_path, arrays={"manipulability": manip[:-1]}))

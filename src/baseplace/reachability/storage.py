@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from pathlib import Path
 
 import h5py
@@ -126,7 +127,10 @@ def _grid(g: dict[str, object]) -> SE3Grid:
     origin = tuple(float(v) for v in g["origin"])  # type: ignore[attr-defined]
     if not all(isinstance(v, (int, float)) for v in (g["voxel_size"], *g["origin"])):  # type: ignore[misc]
         raise TypeError("grid numbers must be numbers")
-    return SE3Grid(origin, float(g["voxel_size"]), shape, nside, n_twist)  # type: ignore[arg-type]
+    voxel_size = float(g["voxel_size"])  # type: ignore[arg-type]
+    if len(origin) != 3 or not (np.isfinite(origin).all() and math.isfinite(voxel_size) and voxel_size > 0):
+        raise ValueError("grid origin or voxel size out of range")
+    return SE3Grid(origin, voxel_size, shape, nside, n_twist)
 
 
 def check_map_matches(
