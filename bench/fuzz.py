@@ -61,6 +61,7 @@ def _worker(args: argparse.Namespace) -> None:
     limit = int(args.memory_gib * 2**30)
     resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
     target = fc.TARGETS[args.worker]
+    fc.prepare(target.name)
     out = Path(args.result)
     scratch = Path(tempfile.mkdtemp(prefix=f"scratch-{target.name}-", dir=out.parent))  # parent removes
     last_case = out.with_suffix(".last_case.txt")

@@ -39,6 +39,7 @@ F = TypeVar("F", bound=Callable[..., object])
 @pytest.mark.parametrize("name", list(fc.TARGETS))
 def test_fuzz_target(name: str, tmp_path: Path) -> None:
     target = fc.TARGETS[name]
+    fc.prepare(name)
 
     @settings(fc.CI_SETTINGS, max_examples=target.ci_examples)
     @given(target.strategy)
