@@ -55,14 +55,13 @@ from baseplace.sim.osrm_experiment import (
     SCENE_CLASSES,
     ExperimentSettings,
     GroundTruth,
-    HandFilter,
     grasp_candidates,
 )
 from baseplace.sim.scenes import Scene, SceneSettings, generate_scene
 from baseplace.terrain.pipeline import Terrain, terrain_from_points
 from baseplace.terrain.polygons import footprint_inside, footprint_outline
 from baseplace.terrain.voxels import VoxelMap
-from baseplace.world.environment import Environment
+from baseplace.world.environment import Environment, HandFilter
 
 RESULTS = Path(__file__).parent / "results"
 CLASS_INDEX = 0  # flat

@@ -29,8 +29,15 @@ from baseplace.placement.candidates import (
     radial_candidates,
     radial_search,
 )
-from baseplace.placement.irm_candidates import IrmSettings, grasp_poses, irm_candidates
+from baseplace.placement.irm_candidates import (
+    IrmSettings,
+    grasp_poses,
+    hand_feasible,
+    irm_candidates,
+    verify_candidates,
+)
 from baseplace.placement.pointing import pointed_object, pointing_ray, ray_box_distances
+from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import Environment
 from baseplace.world.gridnav import GridNavigator, path_length, plan_path
@@ -513,3 +520,44 @@ def test_irm_candidates_pass_an_independent_ik_check(tiago, tiago_map, table_sce
     seps = [math.dist(a.xy, b.xy) for i, a in enumerate(found) for b in found[i + 1 :]]
     assert min(seps) >= settings.separation
     assert [c.reachability for c in found] == sorted((c.reachability for c in found), reverse=True)
+
+
+def test_hand_pruning_loses_no_placement(tiago, tiago_map, table_scene):
+    """A grasp whose hand alone is in the table fails the whole-robot check from every base pose.
+
+    Oracle: IK from many base poses (collision ignored), then ``Environment.colliding`` on the
+    whole robot at each solution.
+    """
+    grid, _, _ = table_scene
+    x0, x1, y0, y1, top = TABLE
+    table_top = np.stack(np.meshgrid(np.arange(x0, x1, 0.02), np.arange(y0, y1, 0.02), [top - 0.01]), -1)
+    env = Environment(tiago, VoxelMap.from_points(table_top.reshape(-1, 3), 0.025))
+    # side grasps 2 cm above the top put the fingers into the table; top-down ones 12 cm above clear it
+    p_o = np.array([x0 + 0.1, 0.5 * (y0 + y1), top + 0.02])
+    side = grasp_poses(p_o, n=8, standoff=0.15)
+    top_down = grasp_poses(p_o + [0.0, 0.0, 0.10], n=8, top_down=True, standoff=0.15)[8:]
+    grasps = np.concatenate([side, top_down])
+    ok = hand_feasible(tiago, None, grasps, env)
+    assert not ok[:8].any() and ok[8:].all()  # every side grasp pruned, every top-down one kept
+
+    arm = tiago.arm()
+    ik = DampedLeastSquaresIK(arm)
+    rng = np.random.default_rng(1)
+    solved = 0
+    for k in range(8):  # side grasps, approached from the open side of the table
+        for d in (0.55, 0.7):
+            yaw = 2 * math.pi * k / 8
+            base = BasePose(p_o[0] - d * math.cos(yaw), p_o[1] - d * math.sin(yaw), yaw)
+            q = ik.solve_world(grasps[k], base.matrix(), rng)
+            if q is not None:
+                solved += 1
+                assert env.colliding_arm(arm, q, base.matrix())
+    assert solved >= 2  # the oracle saw some IK solutions to check
+
+    # the IRM search spends its checks on the top-down grasps only
+    found = irm_candidates(tiago, tiago_map, p_o, grasps, env, grid, IrmSettings(count=2),
+                           np.random.default_rng(0))  # fmt: skip
+    assert found and all(c.grasp is not None and c.grasp >= 8 for c in found)
+    assert not hand_feasible(tiago, None, grasps[:8], env).any()
+    verified, rejected = verify_candidates(tiago, None, found, grasps[:8], env, rng)
+    assert not verified and all(reason == "collision" for _, reason in rejected)

@@ -44,7 +44,7 @@ def test_grasp_candidates_lie_above_the_objects():
 def test_hand_filter_rejects_a_hand_sunk_into_a_slab(tiago):
     import coal
 
-    from baseplace.sim.osrm_experiment import HandFilter
+    from baseplace.world.environment import HandFilter
 
     xs, ys = np.meshgrid(np.arange(-0.5, 0.5, 0.02), np.arange(-0.5, 0.5, 0.02))
     slab = coal.makeOctree(np.c_[xs.ravel(), ys.ravel(), np.full(xs.size, 0.44)], 0.025)

@@ -14,7 +14,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError
 from baseplace.geometry.poses import BasePose, FloatArray, pose_from_xyz_rpy
@@ -25,7 +25,7 @@ from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Robot
 from baseplace.terrain.polygons import footprint_outline
 from baseplace.terrain.voxels import VoxelMap
-from baseplace.world.environment import Environment
+from baseplace.world.environment import Environment, HandFilter
 from baseplace.world.occupancy import OccupancyGrid
 
 
@@ -49,6 +49,22 @@ def grasp_poses(p_o: ArrayLike, n: int = 8, top_down: bool = False, standoff: fl
     T = pose_from_xyz_rpy(np.array(rows))
     T[:, :3, 3] -= standoff * T[:, :3, 0]
     return T
+
+
+def hand_feasible(
+    robot: Robot, arm_name: str | None, grasps: FloatArray, environment: Environment
+) -> NDArray[np.bool_]:
+    """(K,) True for the grasps whose hand alone is clear of the environment's obstacles.
+
+    A grasp whose hand touches an obstacle fails the whole-robot check from every base pose
+    (:class:`~baseplace.world.environment.HandFilter`); skipping it saves a verifier call per
+    base pose and loses nothing.
+    """
+    tree = environment.obstacle_tree
+    if tree is None:
+        return np.ones(len(grasps), dtype=bool)
+    hand = HandFilter(robot, arm_name)
+    return np.array([hand.clear(g, tree) for g in grasps], dtype=bool)
 
 
 @dataclass(frozen=True)
@@ -93,7 +109,8 @@ def irm_candidates(
 
     Base poses on an xy grid (``resolution``) within the map's horizontal reach of the object,
     outside the footprint radius, times ``n_yaw`` headings, are scored by the best reachability
-    of any grasp (``rmap.inverse``); poses whose footprint disc risks collision on the grid
+    of any grasp (``rmap.inverse``) whose hand alone is clear of the obstacles
+    (:func:`hand_feasible`); poses whose footprint disc risks collision on the grid
     (:func:`occupancy_risk`) are dropped. From the best score down, each pose's grasps are tried
     in order of their value with the shared :class:`~baseplace.placement.verify.Verifier`, until
     ``count`` poses passed or ``max_checks`` checks were spent.
@@ -134,13 +151,14 @@ def irm_candidates(
     yaws = (yaws + math.pi) % (2.0 * math.pi) - math.pi
     poses = np.column_stack([np.repeat(xy, s.n_yaw, axis=0), np.tile(yaws, len(xy))])
     T = BasePose.batch_matrix(poses)
-    values = np.stack([rmap.inverse(g, T) for g in G]) if len(T) else np.zeros((len(G), 0))
-    best = values.max(axis=0)
-
-    arm = robot.arm(rmap.info.arm)
     env = environment
     if env is None:  # self-collision only
         env = Environment(robot, VoxelMap(0.025, np.zeros((0, 3), dtype=np.int64)))
+    values = np.stack([rmap.inverse(g, T) for g in G]) if len(T) else np.zeros((len(G), 0))
+    values[~hand_feasible(robot, rmap.info.arm, G, env)] = 0.0
+    best = values.max(axis=0)
+
+    arm = robot.arm(rmap.info.arm)
     ik = DampedLeastSquaresIK(arm)
     outline = footprint_outline(robot.spec.footprint_radius, robot.spec.footprint_polygon)
     verifiers = [Verifier(arm, ik, env, g[None], {}, outline) for g in G]
@@ -193,14 +211,16 @@ def verify_candidates(
     ik = DampedLeastSquaresIK(arm)
     outline = footprint_outline(robot.spec.footprint_radius, robot.spec.footprint_polygon)
     verifiers = [Verifier(arm, ik, environment, g[None], {}, outline) for g in G]
+    usable = np.flatnonzero(hand_feasible(robot, arm_name, G, environment))
     verified: list[RadialCandidate] = []
     rejected: list[tuple[RadialCandidate, str]] = []
     for c in candidates:
-        reasons: list[str] = []
-        for k, verifier in enumerate(verifiers):
+        reasons: list[str] = [] if len(usable) else ["collision"]  # no grasp leaves the hand clear
+        for k in usable:
+            verifier = verifiers[k]
             placement = verifier.check(Candidate(c.T_world_base, -1, c.reachability), rng)
             if placement is not None:
-                verified.append(dataclasses.replace(c, grasp=k, joints=placement.joints[0],
+                verified.append(dataclasses.replace(c, grasp=int(k), joints=placement.joints[0],
                                                     joint_names=placement.joint_names))  # fmt: skip
                 break
             reasons.extend(verifier.failures.elements())

@@ -21,7 +21,6 @@ from typing import Any
 
 import coal
 import numpy as np
-import pinocchio as pin
 import shapely
 from shapely.geometry import Polygon
 
@@ -30,12 +29,12 @@ from baseplace.geometry.poses import FloatArray, invert_transforms, pose_from_xy
 from baseplace.geometry.surface_poses import plane_base_poses
 from baseplace.placement.pipeline import PlaceSettings, place
 from baseplace.reachability.rmap import ReachabilityMap
-from baseplace.robots.collision import load_collision_model
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Robot
 from baseplace.sim.scenes import Scene, SceneSettings, generate_scene
 from baseplace.terrain.pipeline import terrain_from_points
 from baseplace.terrain.voxels import VoxelMap
+from baseplace.world.environment import HandFilter
 
 SCENE_CLASSES = (
     ("flat", 0),
@@ -110,47 +109,6 @@ def grasp_candidates(
         grasps.append(T)
         spheres.append(spheres_of[i])
     return (np.stack(grasps) if grasps else np.zeros((0, 4, 4))), spheres
-
-
-class HandFilter:
-    """Keeps grasps the hand alone can take: its collision geometry at the grasp pose, clear of the scene.
-
-    Seed 000's grasp candidates come from a grasp planner, so the hand fits around the object; random
-    grasp poses need this check (the open hand must not sink into the box bottom or the neighbours).
-    The hand is every collision geometry that no arm joint moves relative to the TCP.
-
-    Args:
-        robot: the robot.
-        arm_name: the arm whose hand is checked.
-    """
-
-    def __init__(self, robot: Robot, arm_name: str | None = None) -> None:
-        arm = robot.arm(arm_name)
-        geom = load_collision_model(robot)
-        model, data = robot.model, robot.model.createData()
-        q = robot.q_reference
-        pin.framesForwardKinematics(model, data, q)
-        gdata = pin.GeometryData(geom)
-        pin.updateGeometryPlacements(model, data, geom, gdata, q)
-        last = model.getJointId(arm.joint_names[-1])
-        T_tcp_world = data.oMf[model.getFrameId(arm.tcp_frame)].inverse()
-        self.parts = [
-            (obj.geometry, (T_tcp_world * gdata.oMg[k]).homogeneous)
-            for k, obj in enumerate(geom.geometryObjects)
-            if last in set(model.supports[obj.parentJoint])
-        ]
-
-    def clear(self, T_world_tcp: FloatArray, obstacles: coal.OcTree) -> bool:
-        """True if no hand geometry at ``T_world_tcp`` (4, 4) touches ``obstacles``."""
-        request, identity = coal.CollisionRequest(), coal.Transform3s()
-        for geometry, T_tcp_geom in self.parts:
-            T = T_world_tcp @ T_tcp_geom
-            result = coal.CollisionResult()
-            if coal.collide(
-                geometry, coal.Transform3s(T[:3, :3], T[:3, 3]), obstacles, identity, request, result
-            ):
-                return False
-        return True
 
 
 @dataclass

@@ -1,5 +1,5 @@
 """The robot's surroundings: obstacle voxels for collision checks."""
 
-from baseplace.world.environment import Environment, obstacle_voxels
+from baseplace.world.environment import Environment, HandFilter, obstacle_voxels
 
-__all__ = ["Environment", "obstacle_voxels"]
+__all__ = ["Environment", "HandFilter", "obstacle_voxels"]

@@ -14,7 +14,7 @@ import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError
-from baseplace.robots.collision import SelfCollision
+from baseplace.robots.collision import SelfCollision, load_collision_model
 from baseplace.robots.model import Arm, Robot
 from baseplace.terrain.segmentation import Segmentation
 from baseplace.terrain.voxels import VoxelMap
@@ -49,8 +49,6 @@ class Environment:
         self._self = SelfCollision(robot) if self_collision else None
         base_geom = self._self.geom if self._self is not None else None
         if base_geom is None:
-            from baseplace.robots.collision import load_collision_model
-
             base_geom = load_collision_model(robot)
         self.geom = base_geom.copy()
         self.geom.removeAllCollisionPairs()
@@ -72,6 +70,14 @@ class Environment:
         ref = self.model.createData()
         pin.framesForwardKinematics(self.model, ref, robot.q_reference)
         self._T_root_base = ref.oMf[self.model.getFrameId(robot.spec.base_frame)]
+
+    @property
+    def obstacle_tree(self) -> coal.OcTree | None:
+        """The obstacle voxels as a coal OcTree in the world frame, or None when there are none."""
+        if self.env_id is None:
+            return None
+        tree: coal.OcTree = self.geom.geometryObjects[self.env_id].geometry
+        return tree
 
     def colliding(self, q_full: ArrayLike, T_world_base: ArrayLike) -> bool:
         """True if the robot touches an obstacle voxel or itself.
@@ -104,3 +110,47 @@ class Environment:
         if self._self is not None and self._self.colliding_arm(arm, q_arm)[0]:
             return True
         return self._touches_obstacles(arm.to_pinocchio(q_arm, self.robot.q_reference), T_world_base)
+
+
+class HandFilter:
+    """Keeps grasps the hand alone can take: its collision geometry at the grasp pose, clear of the scene.
+
+    Seed 000's grasp candidates come from a grasp planner, so the hand fits around the object; random
+    grasp poses need this check (the open hand must not sink into the box bottom or the neighbours).
+    The hand is every collision geometry that no arm joint moves relative to the TCP, at the
+    robot's reference configuration (as :class:`Environment` checks it). A grasp whose hand is not
+    clear fails the whole-robot check from every base pose, so dropping it loses no placement.
+
+    Args:
+        robot: the robot.
+        arm_name: the arm whose hand is checked.
+    """
+
+    def __init__(self, robot: Robot, arm_name: str | None = None) -> None:
+        arm = robot.arm(arm_name)
+        geom = load_collision_model(robot)
+        model, data = robot.model, robot.model.createData()
+        q = robot.q_reference
+        pin.framesForwardKinematics(model, data, q)
+        gdata = pin.GeometryData(geom)
+        pin.updateGeometryPlacements(model, data, geom, gdata, q)
+        last = model.getJointId(arm.joint_names[-1])
+        T_tcp_world = data.oMf[model.getFrameId(arm.tcp_frame)].inverse()
+        self.parts = [
+            (obj.geometry, (T_tcp_world * gdata.oMg[k]).homogeneous)
+            for k, obj in enumerate(geom.geometryObjects)
+            if last in set(model.supports[obj.parentJoint])
+        ]
+
+    def clear(self, T_world_tcp: ArrayLike, obstacles: coal.OcTree) -> bool:
+        """True if no hand geometry at ``T_world_tcp`` (4, 4) touches ``obstacles``."""
+        T_tcp = np.asarray(T_world_tcp, dtype=float)
+        request, identity = coal.CollisionRequest(), coal.Transform3s()
+        for geometry, T_tcp_geom in self.parts:
+            T = T_tcp @ T_tcp_geom
+            result = coal.CollisionResult()
+            if coal.collide(
+                geometry, coal.Transform3s(T[:3, :3], T[:3, 3]), obstacles, identity, request, result
+            ):
+                return False
+        return True
