@@ -535,7 +535,7 @@ def test_hand_pruning_loses_no_placement(tiago, tiago_map, table_scene):
     # side grasps 2 cm above the top put the fingers into the table; top-down ones 12 cm above clear it
     p_o = np.array([x0 + 0.1, 0.5 * (y0 + y1), top + 0.02])
     side = grasp_poses(p_o, n=8, standoff=0.15)
-    top_down = grasp_poses(p_o + [0.0, 0.0, 0.10], n=8, top_down=True, standoff=0.15)[8:]
+    top_down = grasp_poses(p_o, n=8, top_down=True, standoff=0.15, top_offset=0.10)[8:]
     grasps = np.concatenate([side, top_down])
     ok = hand_feasible(tiago, None, grasps, env)
     assert not ok[:8].any() and ok[8:].all()  # every side grasp pruned, every top-down one kept
@@ -561,3 +561,15 @@ def test_hand_pruning_loses_no_placement(tiago, tiago_map, table_scene):
     assert not hand_feasible(tiago, None, grasps[:8], env).any()
     verified, rejected = verify_candidates(tiago, None, found, grasps[:8], env, rng)
     assert not verified and all(reason == "collision" for _, reason in rejected)
+
+
+def test_grasp_poses_top_offset_lifts_only_top_down_grasps():
+    p_o = np.array([1.0, 2.0, 0.8])
+    G = grasp_poses(p_o, n=4, top_down=True, standoff=0.15, top_offset=0.08)
+    # the grasp point is the TCP moved standoff along its approach (x) axis
+    grip = G[:, :3, 3] + 0.15 * G[:, :3, 0]
+    np.testing.assert_allclose(grip[:4], np.tile(p_o, (4, 1)), atol=1e-12)
+    np.testing.assert_allclose(grip[4:], np.tile([1.0, 2.0, 0.88], (4, 1)), atol=1e-12)
+    np.testing.assert_allclose(G[4:, :3, 0], np.tile([0.0, 0.0, -1.0], (4, 1)), atol=1e-12)
+    with pytest.raises(InputError, match="top_offset"):
+        grasp_poses(p_o, top_down=True, top_offset=float("nan"))

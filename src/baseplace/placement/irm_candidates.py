@@ -29,12 +29,16 @@ from baseplace.world.environment import Environment, HandFilter
 from baseplace.world.occupancy import OccupancyGrid
 
 
-def grasp_poses(p_o: ArrayLike, n: int = 8, top_down: bool = False, standoff: float = 0.0) -> FloatArray:
+def grasp_poses(
+    p_o: ArrayLike, n: int = 8, top_down: bool = False, standoff: float = 0.0, top_offset: float = 0.0
+) -> FloatArray:
     """World TCP poses (K, 4, 4) grasping an object at ``p_o`` (3,) [m] from ``n`` directions.
 
     Side grasps put the TCP x axis (the approach axis of TIAGo's ``arm_tool_link`` and PR2's
     ``*_gripper_tool_frame``) horizontal, pointing at the object from yaw ``k 2 pi / n``; with
-    ``top_down`` another ``n`` poses point x straight down, rotated by the same yaws (K = 2 n).
+    ``top_down`` another ``n`` poses point x straight down, rotated by the same yaws (K = 2 n),
+    at ``top_offset`` [m] above ``p_o``: a tall object is taken from above near its top (half its
+    height less a little), or the open fingers reach down into its support.
     The TCP stands ``standoff`` [m] back from the object along x: TIAGo's TCP is the wrist flange,
     and its hand grasps 0.15 m ahead of it (``hand_grasping_frame``).
     """
@@ -43,9 +47,15 @@ def grasp_poses(p_o: ArrayLike, n: int = 8, top_down: bool = False, standoff: fl
         raise InputError(f"need n >= 1 grasp directions, got {n}")
     if not (math.isfinite(standoff) and standoff >= 0):
         raise InputError(f"standoff must be a finite distance >= 0 m, got {standoff}")
+    if not math.isfinite(top_offset):
+        raise InputError(f"top_offset must be a finite height [m], got {top_offset}")
     yaws = np.arange(n) * (2.0 * math.pi / n)
     pitches = [0.0, math.pi / 2] if top_down else [0.0]
-    rows = [[*p, 0.0, pitch, yaw] for pitch in pitches for yaw in yaws]
+    rows = [
+        [p[0], p[1], p[2] + (top_offset if pitch else 0.0), 0.0, pitch, yaw]
+        for pitch in pitches
+        for yaw in yaws
+    ]
     T = pose_from_xyz_rpy(np.array(rows))
     T[:, :3, 3] -= standoff * T[:, :3, 0]
     return T

@@ -16,7 +16,7 @@ to place the base before grasping:
 
 Success does not depend on the method: a trial succeeds when the robot reached its placement
 (a grid path exists) and from there some grasp of the *true* object (16 side grasps around it
-and 16 top-down, TIAGo's 0.15 m hand standoff) has an IK solution whose whole robot is free of
+and 16 top-down 2 cm below its top, TIAGo's 0.15 m hand standoff) has an IK solution whose whole robot is free of
 self-collision and of the table's voxels (:class:`GraspOracle`; no reachability map).
 :func:`any_placement` asks the same oracle over a dense grid of base poses, to tell the cells
 where some placement works.
@@ -162,6 +162,11 @@ class TableGridSettings:
         return np.array([x0 + margin + (i + 0.5) * self.cell, y0 + (j + 0.5) * self.cell,
                          self.table_height + self.object_height / 2])  # fmt: skip
 
+    def grasps(self, p_o: ArrayLike) -> FloatArray:
+        """The grasps of the bottle at ``p_o`` (3,): side grasps at its centre, top-down ones 2 cm below its top."""
+        return grasp_poses(p_o, self.grasp_directions, top_down=True, standoff=self.standoff,
+                           top_offset=0.5 * self.object_height - 0.02)  # fmt: skip
+
     def baseline_pose(self, robot: Robot) -> BasePose:
         """The fixed pose: facing +y at the short edge, centred, footprint ``baseline_clearance`` off."""
         _, _, y0, _ = self.table_bounds
@@ -263,7 +268,7 @@ class GraspOracle:
         self.arm = robot.arm(arm_name)
         self.ik = DampedLeastSquaresIK(self.arm, restarts=settings.ik_restarts)
         self.environment = Environment(robot, obstacles)
-        self.grasps = grasp_poses(p_o, settings.grasp_directions, top_down=True, standoff=settings.standoff)
+        self.grasps = settings.grasps(p_o)
         self.solutions = settings.ik_solutions
 
     def first_grasp(self, poses: Sequence[BasePose], rng: np.random.Generator,
@@ -348,7 +353,7 @@ def _trial(robot: Robot, rmap: ReachabilityMap, cell: tuple[int, int], rng: np.r
                 candidates = radial_search(p_est, radial, seen, occupancy).candidates
             else:
                 env = Environment(robot, VoxelMap.from_points(without_object(clean, p_est, s), s.voxel_size))
-                grasps = grasp_poses(p_est, s.grasp_directions, top_down=True, standoff=s.standoff)
+                grasps = s.grasps(p_est)
                 candidates = irm_candidates(robot, rmap, p_est, grasps, env, occupancy, irm, rng)
             result = pickup(candidates, p_est, start, navigate)
             chosen = None if result.chosen is None else result.chosen.pose
