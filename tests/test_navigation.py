@@ -99,7 +99,7 @@ def test_true_traversability_on_the_demo_scene():
     floor, platform = (-3.5, 0.0), (1.6, 0.0)
     assert truth.connected(floor, platform)  # up the 6 deg ramp: 2.7 mm per 2.5 cm cell
     assert truth.connected((-3.5, -2.5), (1.6, 0.8))
-    assert not truth.connected(floor, (2.8, 1.2))  # 0.1 m from the platform's edge: the disc hangs over
+    assert not truth.connected(floor, (2.75, 1.15))  # 0.15 m from the platform's edge: the disc hangs over
     assert not truth.connected(floor, (10.0, 0.0))  # off the scene
     steep = TrueTraversability(demo_scene(), radius=0.3, max_step=0.002)  # the ramp's 2.7 mm step is too much
     assert not steep.connected(floor, platform)

@@ -42,9 +42,11 @@ class TrueTraversability:
     """Ground truth of where the base can drive, from the scene's noise-free height field.
 
     On a grid of ``resolution``, a *ledge* cell has a neighbour more than ``max_step`` higher or
-    lower (or no surface); the base centre may stand where the nearest ledge is more than
-    ``radius`` away (its footprint disc touches none). Two poses are connected when they lie in the
-    same 4-connected component of those cells. No segmentation and no planner is involved.
+    lower (or no surface); the base centre may stand where the nearest ledge cell's centre is more
+    than ``radius - resolution`` away (its footprint disc touches no ledge, within the grid's
+    tolerance: a step marks the cells on both of its sides, whose centres lie half a cell from it,
+    and a pose lies anywhere in its cell). Two poses are connected when they lie in the same
+    4-connected component of those cells. No segmentation and no planner is involved.
     """
 
     def __init__(self, scene: Scene, radius: float, max_step: float, resolution: float = 0.025) -> None:
@@ -60,7 +62,7 @@ class TrueTraversability:
             lo[axis], hi[axis] = slice(None, -1), slice(1, None)
             ledge[tuple(lo)] |= step
             ledge[tuple(hi)] |= step
-        clear = ndimage.distance_transform_edt(~ledge) * resolution > radius
+        clear = ndimage.distance_transform_edt(~ledge) * resolution > radius - resolution
         self.labels, _ = ndimage.label(clear)
 
     def _label(self, xy: ArrayLike) -> int:
