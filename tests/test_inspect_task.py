@@ -51,7 +51,7 @@ def test_predefined_poses_face_the_table_from_outside(pr2, table):
     outline = footprint_outline(pr2.spec.footprint_radius, pr2.spec.footprint_polygon)
     for pose in poses:
         foot = shapely.Polygon(footprint_in_world(outline, pose.matrix()))
-        assert not foot.intersects(poly) and foot.distance(poly) >= 0.05 - 1e-9
+        assert not foot.intersects(poly) and abs(foot.distance(poly) - 0.05) < 1e-9
         to_centre = np.array(poly.centroid.coords[0]) - (pose.x, pose.y)
         assert abs(math.remainder(math.atan2(to_centre[1], to_centre[0]) - pose.yaw, 2 * math.pi)) < 1e-9
     assert [round(p.y, 3) for p in poses[:2]] == sorted(round(p.y, 3) for p in poses[:2])  # long sides first

@@ -76,7 +76,7 @@ class TaskSettings:
         grasp_directions: top-down grasps per object (rotations about the vertical).
         edge_margin: objects stand at least this far inside the table's outline [m].
         object_spacing: objects stand at least this far apart [m].
-        predefined_gap: the predefined poses keep their footprint this far from the table [m].
+        predefined_gap: the predefined poses stand with their footprint's front this far from the table [m].
     """
 
     speed: float = 0.3
@@ -143,10 +143,13 @@ def _require_planner() -> Any:
 
 
 def predefined_poses(robot: Robot, smap: SurfaceMap, gap: float = 0.05) -> list[BasePose]:
-    """Facing the middle of each side of the surface polygon, the footprint ``gap`` [m] from it; longest sides first."""
+    """Facing the middle of each side of the surface polygon, the footprint's front ``gap`` [m] from it.
+
+    Longest sides first. The front is the footprint's largest extent along the base x axis.
+    """
     poly = np.asarray(smap.polygon, dtype=float)
     centre = poly.mean(axis=0)
-    r = robot.spec.footprint_bounding_radius
+    r = float(footprint_outline(robot.spec.footprint_radius, robot.spec.footprint_polygon)[:, 0].max())
     poses: list[tuple[float, BasePose]] = []
     for a, b in zip(poly, np.roll(poly, -1, axis=0), strict=True):
         mid = 0.5 * (a + b)
