@@ -16,6 +16,7 @@ for script in [
     "bench_segmentation.py",
     "bench_placement.py",
     "bench_surface_map.py",
+    "bench_memory.py",
 ]:
     print(f"== {script}", flush=True)
     subprocess.run([sys.executable, str(HERE / script)], check=True, cwd=HERE)
