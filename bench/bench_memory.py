@@ -114,6 +114,7 @@ def main() -> None:
         out = Path(tmp) / "tiago.rmap"
         build = peak_rss([BASEPLACE, "build-map", "--robot", "tiago", "--samples", args.samples,
                           "--out", str(out), "--json"])  # fmt: skip
+        build["stdout_tail"] = build["stdout_tail"].replace(tmp, "TMP")  # no path of this machine in results
         result["build_map"] = {"samples": float(args.samples), **build}
         cloud = Path(tmp) / "cloud.npy"
         subprocess.run([sys.executable, "-c", GENERATE, str(cloud), str(args.extent)], check=True)
