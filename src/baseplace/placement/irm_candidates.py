@@ -73,7 +73,7 @@ def hand_feasible(
     tree = environment.obstacle_tree
     if tree is None:
         return np.ones(len(grasps), dtype=bool)
-    hand = HandFilter(robot, arm_name)
+    hand = HandFilter(robot, arm_name, environment.geom)  # the environment's own meshes, not a second load
     return np.array([hand.clear(g, tree) for g in grasps], dtype=bool)
 
 

@@ -124,11 +124,15 @@ class HandFilter:
     Args:
         robot: the robot.
         arm_name: the arm whose hand is checked.
+        geom: the robot's collision model, if one is loaded already (e.g. ``Environment.geom``);
+            default: loaded from the URDF.
     """
 
-    def __init__(self, robot: Robot, arm_name: str | None = None) -> None:
+    def __init__(
+        self, robot: Robot, arm_name: str | None = None, geom: pin.GeometryModel | None = None
+    ) -> None:
         arm = robot.arm(arm_name)
-        geom = load_collision_model(robot)
+        geom = geom if geom is not None else load_collision_model(robot)
         model, data = robot.model, robot.model.createData()
         q = robot.q_reference
         pin.framesForwardKinematics(model, data, q)
