@@ -350,15 +350,19 @@ def run_inspect_task(
     known: list[str] = []
     generator: Iterator[Any] | None = None
 
+    def ground_reach(name: str, pose: BasePose) -> None:
+        """``can_reach(name, o)`` for every known object o (the reach attachment)."""
+        for k in known:
+            if reach(pose, objects[int(k[1:])], rng) is not None:
+                can_reach.add((name, k))
+
     def add_pose(pose: BasePose) -> None:
         t0 = time.perf_counter()
         name = f"p{len(poses)}"
         poses[name] = pose
         if reachability(smap, (pose.x, pose.y, pose.yaw)) > 0:
             can_see.add(name)
-        for k in known:
-            if reach(pose, objects[int(k[1:])], rng) is not None:
-                can_reach.add((name, k))
+        ground_reach(name, pose)
         result.grounding_s += time.perf_counter() - t0
 
     if mode == "predefined":
@@ -403,9 +407,8 @@ def run_inspect_task(
                 t0 = time.perf_counter()
                 known = [f"o{i}" for i in range(len(objects))]
                 for pn, pose in poses.items():
-                    for k in known:
-                        if pn != "start" and reach(pose, objects[int(k[1:])], rng) is not None:
-                            can_reach.add((pn, k))
+                    if pn != "start":
+                        ground_reach(pn, pose)
                 result.grounding_s += time.perf_counter() - t0
                 replan = bool(known)
                 break
