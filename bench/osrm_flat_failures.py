@@ -52,15 +52,14 @@ from baseplace.robots.collision import SelfCollision
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Arm, Robot
 from baseplace.sim.osrm_experiment import (
-    SCENE_CLASSES,
     ExperimentSettings,
     GroundTruth,
+    experiment_scene,
     grasp_candidates,
 )
-from baseplace.sim.scenes import Scene, SceneSettings, generate_scene
-from baseplace.terrain.pipeline import Terrain, terrain_from_points
+from baseplace.sim.scenes import Scene
+from baseplace.terrain.pipeline import Terrain
 from baseplace.terrain.polygons import footprint_inside, footprint_outline
-from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import Environment, HandFilter
 
 RESULTS = Path(__file__).parent / "results"
@@ -86,19 +85,7 @@ def reproduce_scene(
     robot: Robot, rmap: ReachabilityMap, k: int, s: ExperimentSettings, strategy: str = "MR"
 ) -> SceneRun:
     """Scene k of the flat class, built and queried exactly as ``osrm_scene`` does (one strategy)."""
-    size_class, n_planes = SCENE_CLASSES[CLASS_INDEX]
-    rng = np.random.default_rng([s.seed, CLASS_INDEX, k])
-    settings = SceneSettings(
-        size_class="small" if size_class == "flat" else size_class, n_planes=n_planes,
-        box_elevation=s.box_elevation, box_height=s.box_height, object_height=s.object_height,
-        extent=s.extent, box_near=s.box_near,
-    )  # fmt: skip
-    scene = generate_scene(settings, rng)
-    points = scene.sample_cloud(rng)
-    clean = VoxelMap.from_points(
-        scene.sample_cloud(np.random.default_rng([s.seed, CLASS_INDEX, k, 1]), sigma=0.0)
-    )
-    terrain = dataclasses.replace(terrain_from_points(points), voxels=clean)
+    rng, scene, points, terrain = experiment_scene(s, CLASS_INDEX, k)
     environments: dict[str, Any] = {}
     grasps, spheres = grasp_candidates(scene, rng, s.grasps_per_scene, hand=HandFilter(robot, rmap.info.arm))
     truth = GroundTruth()

@@ -32,7 +32,7 @@ from baseplace.reachability.rmap import ReachabilityMap
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Robot
 from baseplace.sim.scenes import Scene, SceneSettings, generate_scene
-from baseplace.terrain.pipeline import terrain_from_points
+from baseplace.terrain.pipeline import Terrain, terrain_from_points
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import HandFilter
 
@@ -208,6 +208,30 @@ def strategies_for(n_planes: int) -> tuple[str, ...]:
     return ("orm", "TO", "MR", "MRTO") if n_planes == 0 else ("TO", "MR", "MRTO")
 
 
+def experiment_scene(
+    s: ExperimentSettings, class_index: int, k: int, classes: tuple[tuple[str, int], ...] = SCENE_CLASSES
+) -> tuple[np.random.Generator, Scene, FloatArray, Terrain]:
+    """Scene k of a class, deterministic in (seed, class_index, k): (rng, scene, noisy cloud, terrain).
+
+    Seed 000 VI adds the noise to the height map: the terrain is segmented from the noisy cloud,
+    and its collision voxels (the seed's OctoMap) come from a clean one. The returned generator
+    goes on to draw the scene's grasps.
+    """
+    size_class, n_planes = classes[class_index]
+    rng = np.random.default_rng([s.seed, class_index, k])
+    settings = SceneSettings(
+        size_class="small" if size_class == "flat" else size_class, n_planes=n_planes,
+        box_elevation=s.box_elevation, box_height=s.box_height, object_height=s.object_height,
+        extent=s.extent, box_near=s.box_near,
+    )  # fmt: skip
+    scene = generate_scene(settings, rng)
+    points = scene.sample_cloud(rng)
+    clean = VoxelMap.from_points(
+        scene.sample_cloud(np.random.default_rng([s.seed, class_index, k, 1]), sigma=0.0)
+    )
+    return rng, scene, points, dataclasses.replace(terrain_from_points(points), voxels=clean)
+
+
 def osrm_scene(
     robot: Robot | str, rmap: ReachabilityMap, class_index: int, k: int, s: ExperimentSettings,
     classes: tuple[tuple[str, int], ...] = SCENE_CLASSES,
@@ -218,22 +242,9 @@ def osrm_scene(
     name or robot-file path, for dask workers).
     """
     robot = Robot(robot) if isinstance(robot, str) else robot
-    size_class, n_planes = classes[class_index]
-    stats = {name: _Tally() for name in strategies_for(n_planes)}
-    rng = np.random.default_rng([s.seed, class_index, k])
-    settings = SceneSettings(
-        size_class="small" if size_class == "flat" else size_class, n_planes=n_planes,
-        box_elevation=s.box_elevation, box_height=s.box_height, object_height=s.object_height,
-        extent=s.extent, box_near=s.box_near,
-    )  # fmt: skip
-    scene = generate_scene(settings, rng)
-    # Seed 000 VI adds the noise to the height map: the segmentation sees the noisy cloud, the
-    # collision voxels (its OctoMap) come from the clean one.
-    points = scene.sample_cloud(rng)
-    clean = VoxelMap.from_points(
-        scene.sample_cloud(np.random.default_rng([s.seed, class_index, k, 1]), sigma=0.0)
-    )
-    terrain = dataclasses.replace(terrain_from_points(points), voxels=clean)
+    stats = {name: _Tally() for name in strategies_for(classes[class_index][1])}
+    rng, scene, points, terrain = experiment_scene(s, class_index, k, classes)
+    clean = terrain.voxels
     environments: dict[str, Any] = {}
     grasps, spheres = grasp_candidates(scene, rng, s.grasps_per_scene, hand=HandFilter(robot, rmap.info.arm),
                                        obstacles=clean)  # fmt: skip
