@@ -54,6 +54,11 @@ def _count(text: str) -> int:
     return int(value)
 
 
+def _cell(value: Any, fmt: str, suffix: str = "") -> str:
+    """A table cell: ``value`` formatted with ``fmt`` and ``suffix``, or "-" when it is None."""
+    return "-" if value is None else format(value, fmt) + suffix
+
+
 def _int_list(text: str) -> list[int]:
     """Parse "1,2,3" into [1, 2, 3]."""
     try:
@@ -709,9 +714,8 @@ def cmd_experiment_navigation(args: argparse.Namespace) -> int:
     lines = [f"{'scene':<16} {'planner':<8} {'pairs':>5} {'success':>8} {'false':>5} {'length m':>8} "
              f"{'time ms':>8} {'steps':>5}"]  # fmt: skip
     for r in result["rows"]:
-        ok = "-" if r["success_rate"] is None else f"{r['success_rate']:.1f}%"
-        length = "-" if r["mean_length_m"] is None else f"{r['mean_length_m']:.2f}"
-        ms = "-" if r["median_time_ms"] is None else f"{r['median_time_ms']:.0f}"
+        ok, length = _cell(r["success_rate"], ".1f", "%"), _cell(r["mean_length_m"], ".2f")
+        ms = _cell(r["median_time_ms"], ".0f")
         lines.append(f"{r['scene']:<16} {r['planner']:<8} {r['pairs']:>5} {ok:>8} {r['paths_to_unreachable_goals']:>5} "
                      f"{length:>8} {ms:>8} {r['paths_crossing_a_step']:>5}")  # fmt: skip
     _emit(args, result, "\n".join(lines))
@@ -742,12 +746,9 @@ def cmd_experiment_inspect_table(args: argparse.Namespace) -> int:
     lines = [f"{'objects':>7} {'poses':<10} {'unsolved':>8} {'T min':>6} {'moves':>6} {'other':>6} "
              f"{'replans':>7} {'plan s':>7}"]  # fmt: skip
     for r in result["summary"]:
-
-        def f(v: Any, fmt: str = ".1f") -> str:
-            return "-" if v is None else format(v, fmt)
-
-        lines.append(f"{r['objects']:>7} {r['config']:<10} {r['unsolved']:>5}/{r['runs']:<2} {f(r['exec_min']):>6} "
-                     f"{f(r['moves']):>6} {f(r['other_actions']):>6} {f(r['replans']):>7} {f(r['plan_s']):>7}")  # fmt: skip
+        cells = [_cell(r[key], ".1f") for key in ("exec_min", "moves", "other_actions", "replans", "plan_s")]
+        lines.append(f"{r['objects']:>7} {r['config']:<10} {r['unsolved']:>5}/{r['runs']:<2} {cells[0]:>6} "
+                     f"{cells[1]:>6} {cells[2]:>6} {cells[3]:>7} {cells[4]:>7}")  # fmt: skip
     _emit(args, result, "\n".join(lines))
     return 0
 
@@ -840,8 +841,7 @@ def cmd_experiment_osrm(args: argparse.Namespace) -> int:
         def f(v: Any) -> str:
             return "-" if v is None else f"{v[0]:.0f}±{v[1]:.0f}"
 
-        ok = "-" if r["success_rate"] is None else f"{r['success_rate']:.1f}%"
-        paper = "-" if r["paper_success_rate"] is None else f"{r['paper_success_rate']:.1f}"
+        ok, paper = _cell(r["success_rate"], ".1f", "%"), _cell(r["paper_success_rate"], ".1f")
         lines.append(f"{r['scene']:<16} {r['strategy']:<8} {r['reachable_grasps']:>9} {ok:>8} {paper:>6} "
                      f"{f(r['t_RM_ms']):>9} {f(r['t_a_ms']):>9} {f(r['t_s_ms']):>9}")  # fmt: skip
     _emit(args, result, "\n".join(lines))
