@@ -490,3 +490,12 @@ def test_build_map_with_a_local_cluster_and_a_bad_scheduler(tmp_path):
     proc = run(*args, "--out", str(tmp_path / "x.rmap"), "--scheduler", "tcp://127.0.0.1:9")
     assert_one_line_error(proc, 2, "cannot connect to dask scheduler", "127.0.0.1:9")
     assert not (tmp_path / "x.rmap").exists() and not (tmp_path / "x.rmap.partial").exists()
+
+
+def test_inspect_table_bad_input():
+    assert_one_line_error(run("experiment", "inspect-table", "--objects", "1,x"), 2, "comma-separated", "1,x")
+    assert_one_line_error(run("experiment", "inspect-table", "--runs", "0"), 2, "--runs >= 1")
+    assert_one_line_error(
+        run("experiment", "inspect-table", "--objects", "0,9"), 2, "object counts from 1 to 8"
+    )
+    assert_one_line_error(run("experiment", "inspect-table", "--seed", "-1"), 2, "--seed")
