@@ -1,0 +1,138 @@
+"""Results files written whole by the command that makes them.
+
+Every experiment and benchmark stores its result through :func:`write_results`: one JSON object
+holding the result and, under ``"provenance"``, what made it: the command line, the git commit of
+the source (and whether the work tree had uncommitted changes), the seeds (development and
+held-out, and which of them this run used), the protocol text fixed before the run, the wall time
+and the UTC time it finished. The file is replaced atomically, so it is never half-written and
+never edited by hand; the docs' tables are read from these files.
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import subprocess
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from baseplace.errors import InputError
+from baseplace.files import atomic_write
+
+SPLITS = ("dev", "held-out")
+"""Seed sets: ``dev`` chooses parameters, ``held-out`` gives the reported tables."""
+
+
+@dataclass(frozen=True)
+class SeedSplit:
+    """The development and held-out seeds of one experiment, fixed before any held-out run.
+
+    Attributes:
+        dev: seeds used to choose parameters (and to debug); never reported as the result.
+        held_out: seeds disjoint from ``dev`` that give the reported tables.
+    """
+
+    dev: tuple[int, ...]
+    held_out: tuple[int, ...]
+
+    def __post_init__(self) -> None:
+        if not self.dev or not self.held_out:
+            raise InputError("a seed split needs at least one development and one held-out seed")
+        if set(self.dev) & set(self.held_out):
+            raise InputError(
+                f"development and held-out seeds overlap: {sorted(set(self.dev) & set(self.held_out))}"
+            )
+
+    def seeds(self, split: str) -> tuple[int, ...]:
+        """The seeds of ``split`` ("dev" or "held-out")."""
+        if split not in SPLITS:
+            raise InputError(f"unknown split {split!r}; valid: {', '.join(SPLITS)}")
+        return self.dev if split == "dev" else self.held_out
+
+
+@dataclass
+class RunClock:
+    """Wall time of a run, started when the command starts (before any work)."""
+
+    started: float = field(default_factory=time.perf_counter)
+
+    @property
+    def seconds(self) -> float:
+        """Seconds since the start [s]."""
+        return time.perf_counter() - self.started
+
+
+def git_commit(where: Path | None = None) -> dict[str, Any]:
+    """The commit of the source tree ``where`` (default: this package's) and whether it is dirty.
+
+    Returns ``{"commit": None, ...}`` outside a git work tree (an installed package).
+    """
+    cwd = where or Path(__file__).resolve().parent
+    try:
+        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=cwd, capture_output=True, text=True,
+                              timeout=10, check=True).stdout.strip()  # fmt: skip
+        status = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=cwd,
+                                capture_output=True, text=True, timeout=10, check=True).stdout  # fmt: skip
+    except (OSError, subprocess.SubprocessError):
+        return {"commit": None, "dirty": None}
+    return {"commit": head, "dirty": bool(status.strip())}
+
+
+def provenance(
+    clock: RunClock,
+    *,
+    seeds: SeedSplit | None = None,
+    split: str | None = None,
+    used_seeds: Sequence[int] | None = None,
+    protocol: str | Sequence[str] | None = None,
+    argv: Sequence[str] | None = None,
+) -> dict[str, Any]:
+    """The provenance block of a results file (see the module docstring).
+
+    Args:
+        clock: started when the command started; its time so far is the run's wall time.
+        seeds: the experiment's development and held-out seeds.
+        split: which of them this run used ("dev", "held-out"), None for a custom seed.
+        used_seeds: the seeds this run actually used.
+        protocol: the protocol, written down before the held-out run.
+        argv: the command line (default ``sys.argv``).
+    """
+    args = list(sys.argv if argv is None else argv)
+    if args:
+        args[0] = Path(args[0]).name
+    out: dict[str, Any] = {
+        "command": " ".join(args),
+        **git_commit(),
+        "python": platform.python_version(),
+        "machine": f"{platform.machine()} {platform.processor() or ''}".strip(),
+        "finished_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "wall_time_s": round(clock.seconds, 1),
+    }
+    if seeds is not None:
+        out["seeds"] = {"dev": list(seeds.dev), "held_out": list(seeds.held_out)}
+    out["split"] = split
+    if used_seeds is not None:
+        out["seeds_used"] = [int(s) for s in used_seeds]
+    if protocol is not None:
+        out["protocol"] = [protocol] if isinstance(protocol, str) else list(protocol)
+    return out
+
+
+def write_results(path: str | Path, result: dict[str, Any], clock: RunClock, **kwargs: Any) -> dict[str, Any]:
+    """Write ``result`` with its :func:`provenance` (keyword arguments as there) to ``path``, atomically.
+
+    Returns:
+        The object written: ``result`` with a ``"provenance"`` entry added.
+    """
+    whole = {**result, "provenance": provenance(clock, **kwargs)}
+    text = json.dumps(whole, indent=1, allow_nan=False) + "\n"
+    with atomic_write(path, "results file") as tmp:
+        tmp.write_text(text)
+    return whole
+
+
+__all__ = ["SPLITS", "RunClock", "SeedSplit", "git_commit", "provenance", "write_results"]
