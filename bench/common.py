@@ -1,9 +1,8 @@
-"""Shared helpers for the benchmarks: timing and result reporting."""
+"""Shared helpers for the benchmarks: timing and result reporting (files with provenance)."""
 
 from __future__ import annotations
 
 import json
-import platform
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -11,7 +10,11 @@ from typing import Any
 
 import numpy as np
 
+from baseplace.sim.results import RunClock, write_results
+
 RESULTS = Path(__file__).parent / "results"
+STARTED = RunClock()
+"""Started when a benchmark imports this module, before its work: the run's wall time."""
 
 
 def median_time(fn: Callable[[], Any], repeats: int = 5) -> float:
@@ -24,13 +27,11 @@ def median_time(fn: Callable[[], Any], repeats: int = 5) -> float:
     return float(np.median(times))
 
 
-def report(name: str, result: dict[str, Any]) -> None:
-    """Print a result and store it as bench/results/NAME.json."""
-    result = {
-        "benchmark": name,
-        "machine": f"{platform.machine()} {platform.processor() or ''}".strip(),
-        **result,
-    }
+def report(name: str, result: dict[str, Any], **provenance: Any) -> None:
+    """Print a result and store it whole as bench/results/NAME.json, with its provenance.
+
+    Keyword arguments go to :func:`baseplace.sim.results.provenance` (seeds, split, protocol ...).
+    """
     RESULTS.mkdir(exist_ok=True)
-    (RESULTS / f"{name}.json").write_text(json.dumps(result, indent=2) + "\n")
-    print(json.dumps(result, indent=2))
+    whole = write_results(RESULTS / f"{name}.json", {"benchmark": name, **result}, STARTED, **provenance)
+    print(json.dumps(whole, indent=2))

@@ -34,9 +34,12 @@ def test_results_file_holds_command_commit_seeds_and_time(tmp_path):
 
 def test_results_file_never_half_written(tmp_path):
     path = tmp_path / "r.json"
-    with pytest.raises(ValueError):
-        write_results(path, {"x": float("nan")}, RunClock())
+    with pytest.raises(TypeError):
+        write_results(path, {"x": object()}, RunClock())
     assert list(tmp_path.iterdir()) == []
+    stored = write_results(path, {"x": [float("nan"), 1.0], "y": {"z": float("inf")}}, RunClock())
+    assert json.loads(path.read_text()) == stored and stored["x"] == [None, 1.0] and stored["y"]["z"] is None
+    assert stored["provenance"]["non_finite_written_as_null"] == 2
     with pytest.raises(InputError, match="overlap"):
         SeedSplit(dev=(0, 1), held_out=(1,))
     with pytest.raises(InputError, match="valid: dev, held-out"):

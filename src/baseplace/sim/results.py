@@ -11,6 +11,7 @@ never edited by hand; the docs' tables are read from these files.
 from __future__ import annotations
 
 import json
+import math
 import platform
 import subprocess
 import sys
@@ -128,11 +129,26 @@ def write_results(path: str | Path, result: dict[str, Any], clock: RunClock, **k
     Returns:
         The object written: ``result`` with a ``"provenance"`` entry added.
     """
-    whole = {**result, "provenance": provenance(clock, **kwargs)}
+    nulled = [0]
+    whole = {**_finite(result, nulled), "provenance": provenance(clock, **kwargs)}
+    if nulled[0]:
+        whole["provenance"]["non_finite_written_as_null"] = nulled[0]
     text = json.dumps(whole, indent=1, allow_nan=False) + "\n"
     with atomic_write(path, "results file") as tmp:
         tmp.write_text(text)
     return whole
+
+
+def _finite(value: Any, nulled: list[int]) -> Any:
+    """``value`` with NaN and infinities as None (JSON has neither), counted in ``nulled[0]``."""
+    if isinstance(value, float) and not math.isfinite(value):
+        nulled[0] += 1
+        return None
+    if isinstance(value, dict):
+        return {k: _finite(v, nulled) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v, nulled) for v in value]
+    return value
 
 
 __all__ = ["SPLITS", "RunClock", "SeedSplit", "git_commit", "provenance", "write_results"]
