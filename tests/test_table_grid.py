@@ -10,16 +10,22 @@ import pytest
 from baseplace.geometry.poses import BasePose
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.sim.table_grid import (
+    CHOSEN,
+    DEV_CHOICES,
     METHODS,
     PAPER_SUCCESS_RATE,
     PAPER_TABLE1,
+    SEEDS,
     GraspOracle,
+    RobotShapes,
     TableGridSettings,
     object_cloud,
     radial_settings,
     run_table_grid,
     table_cloud,
     table_occupancy,
+    true_bottle,
+    true_table,
     without_object,
 )
 from baseplace.terrain.voxels import VoxelMap
@@ -75,11 +81,53 @@ def test_occupancy_and_clouds():
 
 
 @pytest.fixture(scope="module")
-def oracle_setup(tiago):
+def robot_shapes(tiago):
+    return RobotShapes(tiago)
+
+
+@pytest.fixture(scope="module")
+def oracle_setup(robot_shapes):
     p = SETTINGS.cell_centre(0, 1)
-    clean = np.concatenate([table_cloud(SETTINGS), object_cloud(p, SETTINGS)])
-    voxels = VoxelMap.from_points(without_object(clean, p, SETTINGS), SETTINGS.voxel_size)
-    return GraspOracle(tiago, None, voxels, p, SETTINGS), p
+    return GraspOracle(robot_shapes, p, SETTINGS), p
+
+
+def test_true_shapes_match_the_cloud():
+    """The oracle's boxes and cylinder hold the synthetic cloud's points (the methods' view of the same scene)."""
+    table, p = table_cloud(SETTINGS), SETTINGS.cell_centre(2, 3)
+    sphere = __import__("coal").Sphere(0.002)
+    request = __import__("coal").CollisionRequest()
+
+    def inside(shapes, pts):
+        hit = []
+        for x in pts:
+            T = __import__("coal").Transform3s(np.eye(3), x)
+            hit.append(any(__import__("coal").collide(sphere, T, s.geometry, s.transform(), request,
+                                                      __import__("coal").CollisionResult()) for s in shapes))  # fmt: skip
+        return np.array(hit)
+
+    rng = np.random.default_rng(0)
+    assert inside(true_table(SETTINGS), table[rng.choice(len(table), 300)]).all()
+    bottle = object_cloud(p, SETTINGS)
+    assert inside([true_bottle(p, SETTINGS)], bottle[rng.choice(len(bottle), 100)]).all()
+    assert not inside(true_table(SETTINGS), np.array([[1.0, 1.0, 0.5], [3.0, 3.0, 0.80]])).any()
+
+
+def test_only_the_hand_may_touch_the_grasped_object(tiago, robot_shapes):
+    """A cylinder around the gripper is allowed as the grasped object, not as an obstacle; around the elbow, never."""
+    arm, model, data = tiago.arm(), tiago.model, tiago.model.createData()
+    q = (arm.lower + arm.upper) / 2
+    base = np.eye(4)
+    pin.framesForwardKinematics(model, data, arm.to_pinocchio(q, tiago.q_reference))
+    root_base = data.oMf[model.getFrameId(tiago.spec.base_frame)].homogeneous
+    assert robot_shapes.touching(q, base, []) is None  # the mid-range posture is free of self-collision
+    T_base_tcp = np.linalg.inv(root_base) @ data.oMf[model.getFrameId(arm.tcp_frame)].homogeneous
+    # where the hand grasps: the standoff ahead of the TCP along its approach axis
+    around_hand = true_bottle(T_base_tcp[:3, 3] + SETTINGS.standoff * T_base_tcp[:3, 0], SETTINGS)
+    assert robot_shapes.touching(q, base, [], grasped=around_hand) is None
+    assert robot_shapes.touching(q, base, [around_hand]) is not None
+    elbow = (np.linalg.inv(root_base) @ data.oMi[model.getJointId(arm.joint_names[3])].homogeneous)[:3, 3]
+    hit = robot_shapes.touching(q, base, [], grasped=true_bottle(elbow, SETTINGS))
+    assert hit is not None and hit.endswith("bottle")
 
 
 def test_oracle_accepts_an_fk_checked_grasp(tiago, oracle_setup):
@@ -101,7 +149,7 @@ def test_oracle_accepts_an_fk_checked_grasp(tiago, oracle_setup):
             data.oMf[model.getFrameId(arm.base_frame)].inverse() * data.oMf[model.getFrameId(arm.tcp_frame)]
         ).homogeneous
         assert np.allclose(T_fk, T_base_tcp, atol=1e-3)
-        if not oracle.environment.colliding_arm(arm, q, base.matrix()):
+        if oracle.touching(q, base.matrix()) is None:
             break
     else:
         pytest.fail("no collision-free IK solution for the test's grasp")
@@ -140,9 +188,11 @@ def test_smoke_run_and_plot(tiago, tiago_map, tmp_path):
                 assert trial["feasible"]  # a working placement is a placement that works
         assert np.hypot(*np.subtract(trial["true"][:2], row["centre"][:2])) <= math.sqrt(2) * 0.05 + 1e-9
     assert result["cells"][0]["trials"][0]["methods"]["baseline"]["success"]  # the cell before it
-    assert result["radial_settings"]["surface_margin"] == 0.04
+    assert result["radial_settings"]["surface_margin"] == CHOSEN["surface_margin"]
+    assert result["settings"]["method_top_below"] == CHOSEN["method_top_below"]
+    assert all(CHOSEN[k] in DEV_CHOICES[k] for k in CHOSEN) and not set(SEEDS.dev) & set(SEEDS.held_out)
     assert result["radial_settings"]["d_max"] == pytest.approx(tiago_map.horizontal_reach)
-    assert radial_settings(tiago, tiago_map, SETTINGS, tuned=False).surface_margin == 0.02
+    assert radial_settings(tiago, tiago_map, SETTINGS, 0.02).surface_margin == 0.02
     png = tmp_path / "grid.png"
     plot_table_grid(result, png)
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -55,18 +55,6 @@ class SeedSplit:
         return self.dev if split == "dev" else self.held_out
 
 
-@dataclass
-class RunClock:
-    """Wall time of a run, started when the command starts (before any work)."""
-
-    started: float = field(default_factory=time.perf_counter)
-
-    @property
-    def seconds(self) -> float:
-        """Seconds since the start [s]."""
-        return time.perf_counter() - self.started
-
-
 def git_commit(where: Path | None = None) -> dict[str, Any]:
     """The commit of the source tree ``where`` (default: this package's) and whether it is dirty.
 
@@ -81,6 +69,23 @@ def git_commit(where: Path | None = None) -> dict[str, Any]:
     except (OSError, subprocess.SubprocessError):
         return {"commit": None, "dirty": None}
     return {"commit": head, "dirty": bool(status.strip())}
+
+
+@dataclass
+class RunClock:
+    """Wall time and source commit of a run, taken when the command starts (before any work).
+
+    The commit is read at the start: the code that runs is the code imported then, whatever
+    changes in the work tree while it runs.
+    """
+
+    started: float = field(default_factory=time.perf_counter)
+    source: dict[str, Any] = field(default_factory=lambda: git_commit())
+
+    @property
+    def seconds(self) -> float:
+        """Seconds since the start [s]."""
+        return time.perf_counter() - self.started
 
 
 def provenance(
@@ -107,7 +112,7 @@ def provenance(
         args[0] = Path(args[0]).name
     out: dict[str, Any] = {
         "command": " ".join(args),
-        **git_commit(),
+        **clock.source,
         "python": platform.python_version(),
         "machine": f"{platform.machine()} {platform.processor() or ''}".strip(),
         "finished_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
