@@ -56,16 +56,23 @@ class SeedSplit:
 
 
 def git_commit(where: Path | None = None) -> dict[str, Any]:
-    """The commit of the source tree ``where`` (default: this package's) and whether it is dirty.
+    """The commit of the source tree ``where`` (default: this package's) and whether its code is dirty.
 
     Returns ``{"commit": None, ...}`` outside a git work tree (an installed package).
     """
     cwd = where or Path(__file__).resolve().parent
+
+    def git(*args: str) -> str:
+        return subprocess.run(["git", *args], cwd=cwd, capture_output=True, text=True, timeout=10,
+                              check=True).stdout  # fmt: skip
+
     try:
-        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=cwd, capture_output=True, text=True,
-                              timeout=10, check=True).stdout.strip()  # fmt: skip
-        status = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=cwd,
-                                capture_output=True, text=True, timeout=10, check=True).stdout  # fmt: skip
+        head = git("rev-parse", "HEAD").strip()
+        top = git("rev-parse", "--show-toplevel").strip()
+        # dirty: uncommitted changes to code; results files and docs being rewritten do not count
+        status = git(
+            "-C", top, "status", "--porcelain", "--untracked-files=no", "--", ".", ":!bench/results", ":!docs"
+        )
     except (OSError, subprocess.SubprocessError):
         return {"commit": None, "dirty": None}
     return {"commit": head, "dirty": bool(status.strip())}

@@ -398,6 +398,7 @@ class GraspOracle:
         self.bottle = true_bottle(p_o, settings)
         self.grasps = settings.grasps(p_o)
         self.solutions = settings.ik_solutions
+        self.contacts: dict[str, int] = {}
 
     def touching(self, q_arm: ArrayLike, T_world_base: ArrayLike) -> str | None:
         """What a solution touches (see :meth:`RobotShapes.touching`), None when it is clear."""
@@ -408,6 +409,7 @@ class GraspOracle:
         """(pose index, grasp index) of the first pose, in order, with a valid grasp; None if none has one."""
         m = solutions or self.solutions
         K = len(self.grasps)
+        self.contacts = {}  # what the rejected IK solutions of this call touched
         for lo in range(0, len(poses), 4):  # a few poses per IK batch: stop early once one works
             chunk = poses[lo : lo + 4]
             T_world_base = BasePose.batch_matrix([(p.x, p.y, p.yaw) for p in chunk])
@@ -415,8 +417,10 @@ class GraspOracle:
             q, ok = self.ik.solve_batch(np.repeat(T_base_tcp.reshape(-1, 4, 4), m, axis=0), rng)
             for k in np.flatnonzero(ok):
                 n, g = divmod(int(k) // m, K)
-                if self.touching(q[k], T_world_base[n]) is None:
+                contact = self.touching(q[k], T_world_base[n])
+                if contact is None:
                     return lo + n, g
+                self.contacts[contact] = self.contacts.get(contact, 0) + 1
         return None
 
     def grasp(self, pose: BasePose, rng: np.random.Generator) -> int:
@@ -494,6 +498,8 @@ def _trial(robot: Robot, rmap: ReachabilityMap, cell: tuple[int, int], rng: np.r
                          else "no path", pose=None, grasp=-1)  # fmt: skip
         else:
             g = oracle.grasp(chosen, rng)
+            if g < 0:  # IK solutions the oracle found and rejected, by what they touched (none: no IK)
+                entry["oracle_contacts"] = dict(oracle.contacts)
             entry.update(success=g >= 0, reason="ok" if g >= 0 else "no collision-free grasp of the true bottle",
                          pose=_pose_json(chosen), grasp=g,
                          grasp_kind=None if g < 0 else ("side" if g < s.grasp_directions else "top-down"),
