@@ -2,6 +2,7 @@ from __future__ import annotations
 
 import json
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -67,3 +68,42 @@ def test_height_map_noise_is_the_seeds_model():
     assert 1.4826 * np.median(np.abs(lifted - np.median(lifted))) < 0.8 * sigma
     with pytest.raises(InputError, match="valid: cloud, heightmap"):
         noisy_height_map(scene, rng, "points")
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "baseplace.cli", *args], capture_output=True, text=True,
+                          stdin=subprocess.DEVNULL, timeout=300)  # fmt: skip
+
+
+def test_experiment_command_writes_its_results_file(tmp_path):
+    path = tmp_path / "seg.json"
+    proc = _cli("experiment", "segmentation", "--scenes", "1", "--noise", "heightmap", "--seed", "5",
+                "--results", str(path), "--json")  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    stored = json.loads(path.read_text())
+    assert stored == json.loads(proc.stdout)  # the file is what the command printed, whole
+    prov = stored["provenance"]
+    assert prov["command"].endswith(
+        f"experiment segmentation --scenes 1 --noise heightmap --seed 5 --results {path} --json"
+    )
+    assert prov["split"] is None and prov["seeds_used"] == [5]  # a custom seed is neither dev nor held-out
+    assert prov["seeds"] == {"dev": [0], "held_out": [1]} and "height map" in prov["protocol"][0]
+    assert list(stored["noise_models"]) == ["heightmap"] and stored["noise_models"]["heightmap"]["seed"] == 5
+
+
+@pytest.mark.parametrize(
+    ("args", "fragment"),
+    [
+        (("segmentation", "--noise", "points"), "valid: heightmap, cloud"),
+        (("segmentation", "--results", "no/such/dir/x.json"), "cannot write results file"),
+        (("table-grid", "--surface-margin", "0.5"), "--surface-margin must be between 0 and 0.1 m"),
+        (("table-grid", "--results", "no/such/dir/x.json"), "cannot write results file"),
+    ],
+)
+def test_experiment_bad_input_is_one_line(args, fragment, tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "baseplace.cli", "experiment", *args], capture_output=True,
+                          text=True, stdin=subprocess.DEVNULL, timeout=300, cwd=tmp_path)  # fmt: skip
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and fragment in lines[0], proc.stderr
+    assert list(tmp_path.iterdir()) == []
