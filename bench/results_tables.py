@@ -25,7 +25,7 @@ def _load(path: str | Path) -> dict[str, Any]:
 def _source(data: dict[str, Any]) -> str:
     p = data["provenance"]
     return (f"`{p['command']}` (commit {str(p['commit'])[:7]}{' + uncommitted changes' if p['dirty'] else ''}, "
-            f"{p['split'] or 'custom'} seeds {p.get('seeds_used')}, {p['wall_time_s']} s)")  # fmt: skip
+            f"{p['split'] or 'custom'} run, seeds used {p.get('seeds_used')}, {p['wall_time_s']} s)")  # fmt: skip
 
 
 def segmentation(paths: list[str]) -> None:
