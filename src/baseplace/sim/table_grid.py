@@ -112,10 +112,11 @@ class TableGridSettings:
         placement_noise: the true object is uniform within +- this of its cell centre in x and y [m].
         estimate_sigma: the methods see the object centre with this Gaussian noise per axis [m].
         cloud_spacing: point spacing of the synthetic RGB-D cloud of table and bottle [m].
-        cloud_sigma: Gaussian noise per axis [m] of the cloud the radial method's cuboids count;
-            collision voxels (IRM's and the oracle's) come from the noise-free cloud, as seed 000 VI
-            builds its OctoMap (3 mm noise on the table top puts stray voxels into the 25 mm layer
-            above it, and TIAGo's ``hand_safety_box`` clears the top by only 2 cm in a side grasp).
+        cloud_sigma: Gaussian noise per axis [m] of the cloud the methods see: the radial method's
+            cuboids count its points and the IRM method's collision voxels come from it (3 mm noise
+            on the table top can put stray voxels into the 25 mm layer above it, and TIAGo's
+            ``hand_safety_box`` clears the top by only 2 cm in a side grasp). The oracle uses
+            no cloud: it checks the true table and bottle.
         grid_resolution: occupancy grid cell [m].
         voxel_size: collision voxels [m] (seed 000's OctoMap resolution).
         start: the robot's start pose (x [m], y [m], yaw [rad]), in the room, away from the table.
@@ -128,8 +129,8 @@ class TableGridSettings:
         method_top_below: the same for the IRM method's grasps [m] (a method parameter, chosen on
             the development seeds).
         hand_clearance: cloud points above the object's bottom within ``object_width / 2 +`` this of
-            its axis are the object's own and left out of the collision voxels [m]: the closing hand
-            surrounds it (the methods cut around the estimate, the oracle around the truth).
+            its axis are the object's own and left out of the IRM method's collision voxels [m]:
+            the closing hand surrounds it (cut around the estimate).
         ik_restarts: random restarts per IK solve in the oracle.
         ik_solutions: independent IK solves per grasp in the oracle, each collision-checked.
         feasible_spacing: base positions of the dense "any placement works" search [m].
