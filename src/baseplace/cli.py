@@ -371,7 +371,8 @@ def cmd_scene_generate(args: argparse.Namespace) -> int:
 
 def cmd_experiment_segmentation(args: argparse.Namespace) -> int:
     """Segmentation accuracy of both algorithms on generated scenes, per noise model."""
-    from baseplace.sim.results import RunClock, write_results
+    from baseplace.sim import segmentation_eval
+    from baseplace.sim.results import RunClock
     from baseplace.sim.segmentation_eval import NOISE_MODELS, PAPER, SEEDS, run_segmentation_experiment
 
     clock = RunClock()
@@ -392,11 +393,6 @@ def cmd_experiment_segmentation(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.close()
     result: dict[str, Any] = {"experiment": "segmentation", "paper": PAPER, "noise_models": runs}
-    if results is not None:
-        from baseplace.sim.segmentation_eval import __doc__ as protocol
-
-        result = write_results(results, result, clock, seeds=SEEDS, split=split, used_seeds=[seed],
-                               protocol=(protocol or "").strip())  # fmt: skip
     lines = []
     for noise, run in runs.items():
         lines.append(f"noise on the {'height map' if noise == 'heightmap' else 'cloud'} (sigma {run['sigma_m']} m), "
@@ -412,8 +408,8 @@ def cmd_experiment_segmentation(args: argparse.Namespace) -> int:
                          f"mean normal error, {o['missed_planes']} planes missed ({o['scenes']} scenes)")  # fmt: skip
     lines.append(f"seed 000 VI: {100 * PAPER['cell_accuracy']:.1f}% cells, {PAPER['mean_normal_error_deg']}° "
                  "(noise on the height map)")  # fmt: skip
-    if results is not None:
-        lines.append(f"wrote {results}")
+    result = _write_results(results, result, clock, lines, seeds=SEEDS, split=split, used_seeds=[seed],
+                            protocol=(segmentation_eval.__doc__ or "").strip())  # fmt: skip
     _emit(args, result, "\n".join(lines))
     return 0
 
@@ -426,6 +422,18 @@ def _results_path(path: str | None) -> Path | None:
     if out.is_dir() or not (out.parent if str(out.parent) else Path(".")).is_dir():
         raise InputError(f"cannot write results file {path}: not a file in an existing directory")
     return out
+
+
+def _write_results(
+    path: Path | None, result: dict[str, Any], clock: Any, lines: list[str], **provenance: Any
+) -> dict[str, Any]:
+    """Write ``result`` whole to the --results file (if one was given) and say so in ``lines``."""
+    if path is None:
+        return result
+    from baseplace.sim.results import write_results
+
+    lines.append(f"wrote {path}")
+    return write_results(path, result, clock, **provenance)
 
 
 def cmd_place(args: argparse.Namespace) -> int:
@@ -733,9 +741,12 @@ def cmd_navigate(args: argparse.Namespace) -> int:
 def cmd_experiment_navigation(args: argparse.Namespace) -> int:
     """RRTConnect vs the region-graph planner on generated multi-level scenes."""
     from baseplace.sim.navigation_experiment import CLASSES, run_navigation_experiment
+    from baseplace.sim.results import RunClock
 
+    clock = RunClock()
     if args.scenes < 1 or args.pairs < 1:
         raise InputError(f"--scenes and --pairs must be >= 1, got {args.scenes} and {args.pairs}")
+    results = _results_path(args.results)
     update, bar = _progress(args, args.scenes * len(CLASSES), "navigation experiment")
     try:
         result = run_navigation_experiment(
@@ -751,6 +762,7 @@ def cmd_experiment_navigation(args: argparse.Namespace) -> int:
         ms = _cell(r["median_time_ms"], ".0f")
         lines.append(f"{r['scene']:<16} {r['planner']:<8} {r['pairs']:>5} {ok:>8} {r['paths_to_unreachable_goals']:>5} "
                      f"{length:>8} {ms:>8} {r['paths_crossing_a_step']:>5}")  # fmt: skip
+    result = _write_results(results, result, clock, lines, used_seeds=[args.seed])
     _emit(args, result, "\n".join(lines))
     return 0
 
@@ -762,10 +774,13 @@ def cmd_experiment_inspect_table(args: argparse.Namespace) -> int:
     from baseplace.planning.inspect_task import SEED002_TABLE, run_inspect_experiment
     from baseplace.reachability.build import BuildSettings
     from baseplace.robots.model import Robot
+    from baseplace.sim.results import RunClock
 
+    clock = RunClock()
     counts = args.objects
     if args.runs < 1 or min(counts) < 1 or max(counts) > 8:
         raise InputError(f"need --runs >= 1 and object counts from 1 to 8, got {args.runs} and {counts}")
+    results = _results_path(args.results)
     robot = Robot("pr2")
     rmaps = {arm: cached_map(robot, BuildSettings(), arm)[0] for arm in ("left", "right")}
     smap = build_surface_map(robot, rmaps, *SEED002_TABLE, combine="any")
@@ -782,6 +797,7 @@ def cmd_experiment_inspect_table(args: argparse.Namespace) -> int:
         cells = [_cell(r[key], ".1f") for key in ("exec_min", "moves", "other_actions", "replans", "plan_s")]
         lines.append(f"{r['objects']:>7} {r['config']:<10} {r['unsolved']:>5}/{r['runs']:<2} {cells[0]:>6} "
                      f"{cells[1]:>6} {cells[2]:>6} {cells[3]:>7} {cells[4]:>7}")  # fmt: skip
+    result = _write_results(results, result, clock, lines, used_seeds=[args.seed])
     _emit(args, result, "\n".join(lines))
     return 0
 
@@ -793,7 +809,7 @@ def cmd_experiment_table_grid(args: argparse.Namespace) -> int:
     from baseplace.reachability.storage import load_map
     from baseplace.robots.model import Robot
     from baseplace.sim import table_grid
-    from baseplace.sim.results import RunClock, write_results
+    from baseplace.sim.results import RunClock
 
     clock = RunClock()
     if args.trials < 1:
@@ -824,9 +840,6 @@ def cmd_experiment_table_grid(args: argparse.Namespace) -> int:
 
         plot_table_grid(result, out)
         result["png"] = str(out)
-    if results is not None:
-        result = write_results(results, result, clock, seeds=seeds, split=split, used_seeds=[seed],
-                               protocol=(table_grid.__doc__ or "").strip())  # fmt: skip
     lines = [
         f"{'cell':<7} {'radial':>7} {'irm':>7} {'baseline':>9} {'paper prop.':>11} {'paper base':>10} {'feasible':>8}"
     ]
@@ -842,8 +855,8 @@ def cmd_experiment_table_grid(args: argparse.Namespace) -> int:
     totals = result["totals"]
     lines.append("success rate: " + ", ".join(f"{m} {totals[m]['rate']:.1f}%" for m in ("radial", "irm", "baseline"))
                  + " (seed 004 with an HSR: proposed 81.7%, baseline 40%)")  # fmt: skip
-    if results is not None:
-        lines.append(f"wrote {results}")
+    result = _write_results(results, result, clock, lines, seeds=seeds, split=split, used_seeds=[seed],
+                            protocol=(table_grid.__doc__ or "").strip())  # fmt: skip
     _emit(args, result, "\n".join(lines))
     return 0
 
@@ -1222,6 +1235,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help='object counts, comma-separated (default "1,2,3,4")')  # fmt: skip
     p.add_argument("--runs", type=int, default=7, help="random layouts per object count (default 7)")
     p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
+    p.add_argument("--results", default=None, help="write the results file (JSON with provenance) here")
 
     p = command("navigation", "RRTConnect vs region-graph paths on multi-level scenes (seed 000 V)",
                 cmd_experiment_navigation, exp_sub,
@@ -1230,6 +1244,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scenes", type=int, default=5, help="scenes per class (default 5)")
     p.add_argument("--pairs", type=int, default=12, help="start/goal pairs per scene (default 12)")
     p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
+    p.add_argument("--results", default=None, help="write the results file (JSON with provenance) here")
 
     p = command("osrm", "placement success and timing, seed 000 Tables I and II", cmd_experiment_osrm, exp_sub,
                 "Flat and {small, medium, large} x {2, 4} plane scenes with a box of objects; success "
