@@ -84,6 +84,12 @@ def invert_transforms(T: ArrayLike) -> FloatArray:
     return out
 
 
+def wrap_angle(angle: ArrayLike) -> FloatArray:
+    """Angles [rad], scalar or any shape, wrapped to (-pi, pi]: the one range headings have."""
+    a = np.asarray(angle, dtype=float)
+    return a - (2.0 * np.pi) * np.ceil((a - np.pi) / (2.0 * np.pi))
+
+
 def _parse_numbers(text: str, count: int, what: str) -> FloatArray:
     parts = text.replace(",", " ").split()
     if len(parts) != count:
@@ -103,9 +109,13 @@ def parse_pose6(text: str) -> FloatArray:
 
 
 def parse_base_pose(text: str) -> BasePose:
-    """Parse ``"x y yaw"`` (metres, radians) into a :class:`BasePose`."""
+    """Parse ``"x y yaw"`` (metres, radians) into a :class:`BasePose`.
+
+    The heading may be given in any range (5.328 or -0.955, say); it comes back wrapped to
+    (-pi, pi], the range every planner, map and result uses.
+    """
     x, y, yaw = _parse_numbers(text, 3, "base pose 'x y yaw'")
-    return BasePose(float(x), float(y), float(yaw))
+    return BasePose(float(x), float(y), float(wrap_angle(yaw)))
 
 
 @dataclass(frozen=True)
