@@ -172,6 +172,49 @@ def cmd_robots(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_robot_check(args: argparse.Namespace) -> int:
+    """Load a robot file, describe it, render it and warn where it looks wrong."""
+    from baseplace.robots.check import check_robot, collision_meshes
+    from baseplace.robots.collision import load_collision_model
+    from baseplace.robots.model import Robot
+    from baseplace.viz.robot import plot_robot
+
+    robot = Robot(args.robot)
+    png = _out_path(args.png if args.png is not None else f"{robot.name}_check.png")
+    assert png is not None
+    report = check_robot(robot)
+    plot_robot(robot, collision_meshes(robot, load_collision_model(robot)), png)
+    obj = {**report.to_dict(), "png": str(png)}
+    fp = report.footprint
+    lines = [
+        f"robot {report.name}: URDF {report.urdf}",
+        f"base frame {report.base_frame}; footprint "
+        + (f"radius {fp['radius']} m" if "radius" in fp else f"polygon {fp['polygon']}")
+        + (
+            f"; base meshes reach {fp['base_mesh_radius']} m from its origin"
+            if "base_mesh_radius" in fp
+            else ""
+        ),
+    ]
+    if report.mount is not None:
+        lines.append(f"arm mounted at xyz {report.mount['xyz']} rpy {report.mount['rpy']}, "
+                     f"base body up to {report.mount['base_height']} m")  # fmt: skip
+    for name, arm in report.arms.items():
+        lines.append(f"arm {name!r}: TCP {arm['tcp_frame']}, approach axis {arm['approach']} "
+                     f"(at the reference configuration: TCP at {arm['tcp_at_reference']}, approach "
+                     f"{arm['approach_in_base_at_reference']} in {report.base_frame})")  # fmt: skip
+        lines += [
+            f"  {j['name']:<24} {j['type']:<10} [{j['lower']:.4g}, {j['upper']:.4g}]" for j in arm["joints"]
+        ]
+    col = report.collision
+    lines.append(f"collision: {col['geometries']} geometries, {col['pairs']} active self-collision pairs "
+                 f"({'SRDF ' + col['srdf'] if col['srdf'] else 'pruned as MoveIt does, no SRDF'})")  # fmt: skip
+    lines.append(f"wrote {png}")
+    lines += [f"warning: {w}" for w in report.warnings] or ["no warnings"]
+    _emit(args, obj, "\n".join(lines))
+    return 0
+
+
 def cmd_build_map(args: argparse.Namespace) -> int:
     """Build a map and save it."""
     from baseplace.reachability.build import BuildSettings, build_map
@@ -574,7 +617,8 @@ def cmd_candidates(args: argparse.Namespace) -> int:
         voxels = voxels.without(np.linalg.norm(voxels.centres - p_o, axis=1) <= 0.12)
     environment = Environment(robot, voxels)
     standoff = grasp_standoff(robot) if args.standoff is None else args.standoff
-    grasps = grasp_poses(p_o, n=16, top_down=True, standoff=standoff)
+    approach = robot.arm(rmap.info.arm).approach_axis  # the TCP axis out of the hand, from the robot file
+    grasps = grasp_poses(p_o, n=16, top_down=True, standoff=standoff, approach_axis=approach)
     rng = np.random.default_rng(args.seed)
     rejected: list[tuple[tuple[float, float], str]] = []
     if args.method == "radial":
@@ -962,6 +1006,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Where should a mobile manipulator stand?",
         formatter_class=_Formatter,
     )
+    parser.add_argument("--version", action="version", version=f"baseplace {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
 
@@ -978,6 +1023,7 @@ def build_parser() -> argparse.ArgumentParser:
         return p
 
     command("robots", "list the built-in robots, their arms and TCP frames", cmd_robots)
+    _add_robot_commands(sub, command)
 
     p = command("build-map", "build a reachability map by random joint sampling", cmd_build_map)
     p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
@@ -1195,6 +1241,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--samples", type=_count, default=50_000_000, help="samples of the cached map")
     p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
     return parser
+
+
+def _version() -> str:
+    from baseplace import __version__
+
+    return __version__
+
+
+def _add_robot_commands(sub: Any, command: Callable[..., argparse.ArgumentParser]) -> None:
+    robot = sub.add_parser("robot", help="check a robot file: arms, joints, TCP axes, footprint, a picture",
+                           description="robot files (see docs/robots.md)")  # fmt: skip
+    robot_sub = robot.add_subparsers(dest="robot_command", metavar="SUBCOMMAND", parser_class=_Parser)
+    robot_sub.required = True
+    p = command("check", "load a robot file, print what it describes, render it and warn where it looks wrong",
+                cmd_robot_check, robot_sub,
+                "Prints arms, joints, limits, TCP approach axes, footprint and self-collision pairs; renders "
+                "the collision geometry to a PNG; warns about approach axes that do not point out of the hand, "
+                "links without collision geometry and footprints smaller than the base.")  # fmt: skip
+    p.add_argument("robot", help="robot file (.toml/.yaml) or built-in name")
+    p.add_argument("--png", default=None, help="picture of the robot (default: NAME_check.png here)")
 
 
 def main(argv: Sequence[str] | None = None) -> int:

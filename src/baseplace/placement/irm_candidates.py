@@ -30,17 +30,23 @@ from baseplace.world.occupancy import OccupancyGrid
 
 
 def grasp_poses(
-    p_o: ArrayLike, n: int = 8, top_down: bool = False, standoff: float = 0.0, top_offset: float = 0.0
+    p_o: ArrayLike,
+    n: int = 8,
+    top_down: bool = False,
+    standoff: float = 0.0,
+    top_offset: float = 0.0,
+    approach_axis: ArrayLike = (1.0, 0.0, 0.0),
 ) -> FloatArray:
     """World TCP poses (K, 4, 4) grasping an object at ``p_o`` (3,) [m] from ``n`` directions.
 
-    Side grasps put the TCP x axis (the approach axis of TIAGo's ``arm_tool_link`` and PR2's
-    ``*_gripper_tool_frame``) horizontal, pointing at the object from yaw ``k 2 pi / n``; with
-    ``top_down`` another ``n`` poses point x straight down, rotated by the same yaws (K = 2 n),
+    Side grasps put the TCP's approach axis (``approach_axis``, (3,) in the TCP frame: the arm's
+    ``Arm.approach_axis``; x for TIAGo's ``arm_tool_link`` and PR2's ``*_gripper_tool_frame``)
+    horizontal, pointing at the object from yaw ``k 2 pi / n``; with
+    ``top_down`` another ``n`` poses point it straight down, rotated by the same yaws (K = 2 n),
     at ``top_offset`` [m] above ``p_o``: a tall object is taken from above near its top (half its
     height less a little), or the open fingers reach down into its support.
-    The TCP stands ``standoff`` [m] back from the object along x: TIAGo's TCP is the wrist flange,
-    and its hand grasps 0.15 m ahead of it (``hand_grasping_frame``).
+    The TCP stands ``standoff`` [m] back from the object along the approach axis: TIAGo's TCP is
+    the wrist flange, and its hand grasps 0.15 m ahead of it (``hand_grasping_frame``).
     """
     p = _object(p_o, "a grasp pose")
     if n < 1:
@@ -56,9 +62,34 @@ def grasp_poses(
         for pitch in pitches
         for yaw in yaws
     ]
-    T = pose_from_xyz_rpy(np.array(rows))
-    T[:, :3, 3] -= standoff * T[:, :3, 0]
+    T = pose_from_xyz_rpy(np.array(rows))  # x is the approach here
+    T[:, :3, :3] = T[:, :3, :3] @ _rotation_taking(approach_axis, (1.0, 0.0, 0.0))
+    T[:, :3, 3] -= standoff * (T[:, :3, :3] @ _unit(approach_axis))
     return T
+
+
+def _unit(v: ArrayLike) -> FloatArray:
+    a = np.asarray(v, dtype=float)
+    norm = float(np.linalg.norm(a))
+    if a.shape != (3,) or not (math.isfinite(norm) and norm > 1e-9):
+        raise InputError(f"an approach axis is a non-zero 3-vector, got {a.tolist()}")
+    return a / norm
+
+
+def _rotation_taking(a: ArrayLike, b: ArrayLike) -> FloatArray:
+    """The smallest rotation (3, 3) with ``R @ a = b`` for unit directions a, b (Rodrigues)."""
+    u, w = _unit(a), _unit(b)
+    axis, c = np.cross(u, w), float(u @ w)
+    s = float(np.linalg.norm(axis))
+    if s < 1e-12:
+        if c > 0:
+            return np.eye(3)
+        # half a turn about any axis perpendicular to u
+        k = np.cross(u, [1.0, 0.0, 0.0] if abs(u[0]) < 0.9 else [0.0, 1.0, 0.0])
+        k /= np.linalg.norm(k)
+        return 2.0 * np.outer(k, k) - np.eye(3)
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]]) / s
+    return np.eye(3) + s * K + (1 - c) * (K @ K)
 
 
 def hand_feasible(
