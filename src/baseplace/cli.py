@@ -109,6 +109,20 @@ def _progress(args: argparse.Namespace, total: int, desc: str) -> tuple[Callable
     return lazy.update, lazy
 
 
+def _default_map(args: argparse.Namespace, robot: Any, arm: str | None = None) -> Any:
+    """The robot's cached default map, built on first use (tens of seconds) behind a progress bar."""
+    from baseplace.demo import cached_map
+    from baseplace.reachability.build import BuildSettings
+
+    settings = BuildSettings()
+    update, bar = _progress(args, settings.samples, f"default {robot.name} map (first run only)")
+    try:
+        return cached_map(robot, settings, arm, update)[0]
+    finally:
+        if bar is not None:
+            bar.close()
+
+
 def _out_path(text: str | None) -> Path | None:
     """The ``--out`` path, or None; its directory must exist (checked before any work is done)."""
     if text is None:
@@ -573,7 +587,6 @@ def _routes(
 
 def cmd_candidates(args: argparse.Namespace) -> int:
     """Seed 004: base placement candidates from an object position, a cloud and an occupancy grid."""
-    from baseplace.demo import cached_map
     from baseplace.geometry.poses import BasePose
     from baseplace.placement.candidates import RadialSettings, motion_costs, radial_search
     from baseplace.placement.irm_candidates import (
@@ -583,7 +596,6 @@ def cmd_candidates(args: argparse.Namespace) -> int:
         irm_candidates,
         verify_candidates,
     )
-    from baseplace.reachability.build import BuildSettings
     from baseplace.reachability.storage import load_map
     from baseplace.robots.model import Robot
     from baseplace.terrain.voxels import VoxelMap
@@ -596,9 +608,7 @@ def cmd_candidates(args: argparse.Namespace) -> int:
     robot_pose = _base_xyyaw(args.robot_pose) if args.robot_pose is not None else None
     grid = load_occupancy(args.occupancy)
     robot = Robot(args.robot)
-    rmap = (
-        load_map(args.map, robot, args.arm) if args.map else cached_map(robot, BuildSettings(), args.arm)[0]
-    )
+    rmap = load_map(args.map, robot, args.arm) if args.map else _default_map(args, robot, args.arm)
     settings = RadialSettings.for_robot(robot, rmap)
     _check_object(grid, p_o, settings.d_max)
     points = None
@@ -768,17 +778,15 @@ def cmd_experiment_navigation(args: argparse.Namespace) -> int:
 
 def cmd_experiment_inspect_table(args: argparse.Namespace) -> int:
     """Seed 002's inspect-every-object task: predefined vs sampled poses with a PDDL planner."""
-    from baseplace.demo import cached_map
     from baseplace.placement.surface_map import build_surface_map
     from baseplace.planning.inspect_task import SEED002_TABLE, run_inspect_experiment
-    from baseplace.reachability.build import BuildSettings
     from baseplace.robots.model import Robot
 
     counts = args.objects
     if args.runs < 1 or min(counts) < 1 or max(counts) > 8:
         raise InputError(f"need --runs >= 1 and object counts from 1 to 8, got {args.runs} and {counts}")
     robot = Robot("pr2")
-    rmaps = {arm: cached_map(robot, BuildSettings(), arm)[0] for arm in ("left", "right")}
+    rmaps = {arm: _default_map(args, robot, arm) for arm in ("left", "right")}
     smap = build_surface_map(robot, rmaps, *SEED002_TABLE, combine="any")
     update, bar = _progress(args, 5 * len(counts) * args.runs, "inspect-table experiment")
     try:
@@ -799,8 +807,6 @@ def cmd_experiment_inspect_table(args: argparse.Namespace) -> int:
 
 def cmd_experiment_table_grid(args: argparse.Namespace) -> int:
     """Seed 004's table-grid experiment: fixed pose vs radial vs IRM-verified placements."""
-    from baseplace.demo import cached_map
-    from baseplace.reachability.build import BuildSettings
     from baseplace.reachability.storage import load_map
     from baseplace.robots.model import Robot
     from baseplace.sim.table_grid import run_table_grid
@@ -809,7 +815,7 @@ def cmd_experiment_table_grid(args: argparse.Namespace) -> int:
         raise InputError(f"--trials must be >= 1, got {args.trials}")
     out = _out_path(args.out)
     robot = Robot(args.robot)
-    rmap = load_map(args.map, robot) if args.map else cached_map(robot, BuildSettings())[0]
+    rmap = load_map(args.map, robot) if args.map else _default_map(args, robot)
     update, bar = _progress(args, 12 * args.trials, "table-grid experiment")
     try:
         result = run_table_grid(robot, rmap, args.trials, args.seed, progress=_step_progress(update),
@@ -843,8 +849,6 @@ def cmd_experiment_table_grid(args: argparse.Namespace) -> int:
 
 def cmd_experiment_osrm(args: argparse.Namespace) -> int:
     """Seed 000 Tables I and II on generated scenes."""
-    from baseplace.demo import cached_map
-    from baseplace.reachability.build import BuildSettings
     from baseplace.reachability.storage import load_map
     from baseplace.robots.model import Robot
     from baseplace.sim.osrm_experiment import SCENE_CLASSES, ExperimentSettings, run_osrm_experiment
@@ -853,7 +857,7 @@ def cmd_experiment_osrm(args: argparse.Namespace) -> int:
         raise InputError(f"--scenes and --grasps must be >= 1, got {args.scenes} and {args.grasps}")
     out = _out_path(args.out)
     robot = Robot(args.robot)
-    rmap = load_map(args.map, robot) if args.map else cached_map(robot, BuildSettings())[0]
+    rmap = load_map(args.map, robot) if args.map else _default_map(args, robot)
     classes = SCENE_CLASSES if not args.flat_only else SCENE_CLASSES[:1]
     update, bar = _progress(args, args.scenes * len(classes), "osrm experiment")
     step = _step_progress(update)

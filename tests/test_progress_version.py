@@ -1,0 +1,42 @@
+"""``baseplace --version`` and the progress bar of a command's first, map-building run."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+from baseplace.cli import main
+from conftest import SHARED
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_version_prints_the_project_version():
+    proc = subprocess.run([sys.executable, "-m", "baseplace.cli", "--version"], capture_output=True, text=True,
+                          stdin=subprocess.DEVNULL, timeout=60)  # fmt: skip
+    match = re.search(r'^version = "([^"]+)"', (ROOT / "pyproject.toml").read_text(), re.MULTILINE)
+    assert match is not None
+    version = match.group(1)
+    assert proc.returncode == 0 and proc.stdout.strip() == f"baseplace {version}"
+
+
+def test_first_candidates_run_shows_a_progress_bar_while_it_builds_the_map(monkeypatch, tmp_path, capsys):
+    """The first ``candidates`` builds the default map (40 s at 5e7 samples): no longer silent."""
+    import baseplace.reachability.build as build
+
+    monkeypatch.setenv("BASEPLACE_CACHE", str(tmp_path / "cache"))
+    full = build.BuildSettings
+    monkeypatch.setattr(build, "BuildSettings", lambda: full(samples=300_000))  # a small "default" map
+    args = ["candidates", "--occupancy", str(SHARED / "maps" / "tb3_sandbox.yaml"), "--object",
+            "-1.025 -0.775 0.6"]  # fmt: skip
+    code = main(args)
+    first = capsys.readouterr()
+    assert code in (0, 3), first.err
+    assert "default tiago map (first run only)" in first.err and "samples" in first.err
+    assert list((tmp_path / "cache" / "maps").glob("tiago-arm-*-s300000-*.rmap"))  # built and cached
+    code = main(args)  # second run: the cached map, no bar
+    assert code in (0, 3) and "first run only" not in capsys.readouterr().err
+    code = main([*args, "--json"])  # --json: nothing but the JSON object
+    assert "first run only" not in capsys.readouterr().err
