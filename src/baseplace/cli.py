@@ -172,7 +172,8 @@ def cmd_robots(args: argparse.Namespace) -> int:
             "urdf": str(spec.urdf),
             "base_frame": spec.base_frame,
             "default_arm": spec.default_arm,
-            "arms": {a: {"joints": list(s.joints), "tcp_frame": s.tcp_frame} for a, s in spec.arms.items()},
+            "arms": {a: {"joints": list(s.joints), "tcp_frame": s.tcp_frame, "approach": s.approach}
+                     for a, s in spec.arms.items()},
             "footprint": {"radius": spec.footprint_radius} if spec.footprint_radius is not None
             else {"polygon": [list(p) for p in spec.footprint_polygon or ()]},
         })  # fmt: skip
@@ -181,7 +182,9 @@ def cmd_robots(args: argparse.Namespace) -> int:
         spec = builtin_spec(name)
         arms = ", ".join(f"{a} (TCP {s.tcp_frame}, {len(s.joints)} joints)" for a, s in spec.arms.items())
         lines.append(f"{name:<11} base {spec.base_frame}; arms {arms}")
-    lines.append("custom robots: pass --robot path/to/robot.toml (see docs/concepts.md)")
+    lines.append(
+        "custom robots: pass --robot path/to/robot.toml; check one with `baseplace robot check` (docs/robots.md)"
+    )
     _emit(args, {"robots": rows}, "\n".join(lines))
     return 0
 
