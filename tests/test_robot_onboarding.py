@@ -149,6 +149,30 @@ def test_robot_check_flags_a_footprint_smaller_than_the_base():
     assert not any("footprint" in w for w in check_robot(Robot(tiago)).warnings)
 
 
+def test_robot_check_flags_an_arm_link_without_collision_geometry(tmp_path):
+    """The UR5 URDF copied with the forearm's collision element removed (its meshes still found)."""
+    text = UR5_URDF.read_text()
+    start = text.index('<link name="forearm_link">')
+    c0 = text.index("<collision>", start)
+    c1 = text.index("</collision>", c0) + len("</collision>")
+    (tmp_path / "ur5.urdf").write_text(text[:c0] + text[c1:])
+    robot_file = (
+        (EXAMPLES / "ur5_base.toml")
+        .read_text()
+        .replace(
+            'urdf = "package://example-robot-data/robots/ur_description/urdf/ur5_robot.urdf"',
+            'urdf = "ur5.urdf"',
+        )
+    )
+    (tmp_path / "ur5.toml").write_text(robot_file)
+    report = check_robot(Robot(tmp_path / "ur5.toml"))
+    flagged = [w for w in report.warnings if "no collision geometry" in w]
+    assert len(flagged) == 1 and flagged[0].endswith(": forearm_link")
+    assert not [
+        w for w in check_robot(Robot(EXAMPLES / "ur5_base.toml")).warnings if "collision geometry" in w
+    ]
+
+
 def _write_package(tmp_path: Path) -> Path:
     """A ROS-style package folder: ws/my_arm/{urdf/arm.urdf, meshes/link.stl} with package:// URIs."""
     pkg = tmp_path / "ws" / "my_arm"

@@ -11,6 +11,7 @@ import argparse
 import json
 import math
 import os
+import re
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -196,9 +197,10 @@ def cmd_robot_check(args: argparse.Namespace) -> int:
     from baseplace.robots.model import Robot
     from baseplace.viz.robot import plot_robot
 
+    png = _out_path(args.png)  # checked before the robot loads
     robot = Robot(args.robot)
-    png = _out_path(args.png if args.png is not None else f"{robot.name}_check.png")
-    assert png is not None
+    if png is None:  # the robot's name as a plain file name in this folder
+        png = Path(re.sub(r"[^A-Za-z0-9_.-]", "_", robot.name).lstrip(".") + "_check.png")
     report = check_robot(robot)
     plot_robot(robot, collision_meshes(robot, load_collision_model(robot)), png)
     obj = {**report.to_dict(), "png": str(png)}

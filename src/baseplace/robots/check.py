@@ -8,8 +8,8 @@ mistakes that otherwise show up only as poor or empty results:
   wrist (the last moving joint of the arm) towards the TCP; an axis more than 45 degrees off that
   direction is flagged, with the axis that fits (a UR ``tool0`` or Panda's ``panda_hand_tcp``
   approaches along z, TIAGo's ``arm_tool_link`` along x);
-* a link moved by an arm with visual geometry but no collision geometry (invisible to every
-  collision check; the report lists such links of the base too);
+* a link of an arm's chain or hand with visual geometry but no collision geometry (invisible to
+  every collision check; the report lists all such links, of the base and head too);
 * a footprint that does not contain the base's collision meshes, or a base frame above the floor
   (geometry of the base below z = 0);
 * visual meshes that cannot be found, and a reference configuration in self-collision.
@@ -181,6 +181,18 @@ def _parent_joint(robot: Robot, frame: str) -> int:
     return int(robot.model.frames[robot.model.getFrameId(frame)].parentJoint)
 
 
+def _on_an_arm(robot: Robot, frame: str) -> bool:
+    """True for a link of an arm's chain (base to TCP) or of its hand (after its last joint)."""
+    joint = _parent_joint(robot, frame)
+    for name in robot.spec.arms:
+        arm = robot.arm(name)
+        chain = set(robot.model.supports[_parent_joint(robot, arm.tcp_frame)])
+        last = robot.model.getJointId(arm.joint_names[-1])
+        if (joint in chain and joint != 0) or last in set(robot.model.supports[joint]):
+            return True
+    return False
+
+
 def _links_without_collision(urdf_xml: str) -> list[str]:
     root = ElementTree.fromstring(urdf_xml)
     return [
@@ -240,14 +252,10 @@ def check_robot(robot: Robot) -> RobotReport:
             warnings.append(warning)
 
     bare = _links_without_collision(robot.urdf.xml)
-    arm_ids = {robot.model.getJointId(j) for name in spec.arms for j in robot.arm(name).joint_names}
-    bare_on_arm = [
-        link for link in bare
-        if robot.model.existFrame(link) and set(robot.model.supports[_parent_joint(robot, link)]) & arm_ids
-    ]  # fmt: skip
+    bare_on_arm = [link for link in bare if robot.model.existFrame(link) and _on_an_arm(robot, link)]
     if bare_on_arm:
         warnings.append(
-            "link(s) moved by an arm with visual but no collision geometry, invisible to collision checks: "
+            "arm or hand link(s) with visual but no collision geometry, invisible to collision checks: "
             + ", ".join(bare_on_arm)
         )
     base = [m for m in meshes if not m.on_arm]
