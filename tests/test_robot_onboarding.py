@@ -149,6 +149,17 @@ def test_robot_check_flags_a_footprint_smaller_than_the_base():
     assert not any("footprint" in w for w in check_robot(Robot(tiago)).warnings)
 
 
+def test_robot_check_flags_a_reference_configuration_outside_the_joint_limits(tmp_path):
+    """Panda's joint 4 lies in [-3.07, -0.07] rad: the all-zero configuration is outside."""
+    text = (EXAMPLES / "panda_base.toml").read_text()
+    assert not [w for w in check_robot(Robot(EXAMPLES / "panda_base.toml")).warnings if "reference" in w]
+    (tmp_path / "panda.toml").write_text(text.replace("panda_joint4 = -2.356194\n", ""))
+    flagged = [
+        w for w in check_robot(Robot(tmp_path / "panda.toml")).warnings if "outside the joint limits" in w
+    ]
+    assert len(flagged) == 1 and "panda_joint4 = 0 not in [-3.07, -0.0698]" in flagged[0]
+
+
 def test_robot_check_flags_an_arm_link_without_collision_geometry(tmp_path):
     """The UR5 URDF copied with the forearm's collision element removed (its meshes still found)."""
     text = UR5_URDF.read_text()

@@ -12,7 +12,8 @@ mistakes that otherwise show up only as poor or empty results:
   every collision check; the report lists all such links, of the base and head too);
 * a footprint that does not contain the base's collision meshes, or a base frame above the floor
   (geometry of the base below z = 0);
-* visual meshes that cannot be found, and a reference configuration in self-collision.
+* visual meshes that cannot be found, and a reference configuration outside the joint limits or
+  in self-collision.
 """
 
 from __future__ import annotations
@@ -289,6 +290,20 @@ def check_robot(robot: Robot) -> RobotReport:
         warnings.append(
             f"visual mesh(es) not found (the viewer will skip them): {', '.join(robot.urdf.missing_visual[:5])}"
         )
+    for name in spec.arms:
+        arm = robot.arm(name)
+        q_ref = arm.from_pinocchio(robot.q_reference)
+        outside = [
+            f"{j} = {v:.3g} not in [{lo:.3g}, {hi:.3g}]"
+            for j, v, lo, hi in zip(arm.joint_names, q_ref, arm.lower, arm.upper, strict=True)
+            if not lo - 1e-9 <= v <= hi + 1e-9
+        ]
+        if outside:
+            warnings.append(
+                f"arm {name!r}: the reference configuration (the pose the robot stands in, e.g. for "
+                f"surface-sample's collision checks) is outside the joint limits: {'; '.join(outside)}; "
+                "set these joints under [reference]"
+            )
     if selfcol.colliding(robot.q_reference):
         warnings.append("the reference configuration is in self-collision; check the SRDF or the mount")
 
