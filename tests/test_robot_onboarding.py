@@ -290,3 +290,52 @@ def test_surface_map_counts_only_bins_whose_approach_points_down():
     assert np.array_equal(
         allowed_bins(rmap, math.pi / 4, "z"), allowed_bins(rmap, math.pi / 4, robot.arm().approach_axis)
     )
+
+
+def test_candidates_grasps_approach_along_the_robot_files_axis(tmp_path):
+    """Through the CLI: every grasp of a UR5 candidate points tool0's z (its approach) at the object."""
+    from conftest import SHARED
+
+    rmap = tmp_path / "ur5.rmap"
+    proc = run(
+        "build-map", "--robot", str(EXAMPLES / "ur5_base.toml"), "--samples", "3e6", "--out", str(rmap)
+    )
+    assert proc.returncode == 0, proc.stderr
+    p_o = np.array([-1.025, -0.775, 0.6])
+    occupancy = str(SHARED / "maps" / "tb3_sandbox.yaml")
+    proc = run("candidates", "--robot", str(EXAMPLES / "ur5_base.toml"), "--map", str(rmap), "--occupancy", occupancy,
+               "--object", "-1.025 -0.775 0.6", "--standoff", "0.1", "--json")  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    candidates = json.loads(proc.stdout)["candidates"]
+    assert candidates
+    robot = Robot(EXAMPLES / "ur5_base.toml")
+    arm = robot.arm()
+    for c in candidates:
+        G = np.asarray(c["grasp"])
+        z = G[:3, 2]
+        to_object = (p_o - G[:3, 3]) / max(np.linalg.norm(p_o - G[:3, 3]), 1e-12)
+        side = abs(z[2]) < 1e-4 and np.allclose(z, to_object, atol=1e-4)
+        top = np.allclose(z, [0, 0, -1], atol=1e-4)
+        assert side or top, z
+        # the arm's FK (checked against pinocchio above) puts tool0 on the grasp from the candidate's joints
+        T = forward_kinematics(arm, np.array([[c["joints"][j] for j in arm.joint_names]]))[0]
+        base = np.array([[math.cos(c["yaw"]), -math.sin(c["yaw"]), 0, c["x"]],
+                         [math.sin(c["yaw"]), math.cos(c["yaw"]), 0, c["y"]], [0, 0, 1, 0], [0, 0, 0, 1]])  # fmt: skip
+        assert np.allclose((base @ T)[:3, 3], G[:3, 3], atol=2e-3)
+
+
+def test_surface_map_reads_the_arms_approach_axis():
+    import dataclasses
+
+    from baseplace.placement.surface_map import build_surface_map
+    from baseplace.reachability.build import BuildSettings, build_map
+
+    robot_z = Robot(EXAMPLES / "ur5_base.toml")
+    spec = robot_z.spec
+    spec_x = dataclasses.replace(spec, arms={"arm": dataclasses.replace(spec.arms["arm"], approach="x")})
+    robot_x = Robot(spec_x)
+    rmap = build_map(robot_z, None, BuildSettings(samples=300_000, seed=0))
+    polygon = "0,0;0.8,0;0.8,0.5;0,0.5"
+    smap_z = build_surface_map(robot_z, {"arm": rmap}, polygon, 0.6, 0.1, 8)
+    smap_x = build_surface_map(robot_x, {"arm": rmap}, polygon, 0.6, 0.1, 8)
+    assert smap_z.values.max() > 0 and not np.array_equal(smap_z.values, smap_x.values)
