@@ -227,7 +227,10 @@ def cmd_robot_check(args: argparse.Namespace) -> int:
         ]
     col = report.collision
     lines.append(f"collision: {col['geometries']} geometries, {col['pairs']} active self-collision pairs "
-                 f"({'SRDF ' + col['srdf'] if col['srdf'] else 'pruned as MoveIt does, no SRDF'})")  # fmt: skip
+                 f"({'SRDF ' + col['srdf'] if col['srdf'] else 'pruned as MoveIt does, no SRDF'})"
+                 + ("" if args.pairs else "; --pairs lists them"))  # fmt: skip
+    if args.pairs:
+        lines += [f"  {a} - {b}" for a, b in col["pair_names"]]
     lines.append(f"wrote {png}")
     lines += [f"warning: {w}" for w in report.warnings] or ["no warnings"]
     _emit(args, obj, "\n".join(lines))
@@ -1270,6 +1273,7 @@ def _add_robot_commands(sub: Any, command: Callable[..., argparse.ArgumentParser
                 "links without collision geometry and footprints smaller than the base.")  # fmt: skip
     p.add_argument("robot", help="robot file (.toml/.yaml) or built-in name")
     p.add_argument("--png", default=None, help="picture of the robot (default: NAME_check.png here)")
+    p.add_argument("--pairs", action="store_true", help="list the active self-collision pairs")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
