@@ -339,3 +339,18 @@ def test_surface_map_reads_the_arms_approach_axis():
     smap_z = build_surface_map(robot_z, {"arm": rmap}, polygon, 0.6, 0.1, 8)
     smap_x = build_surface_map(robot_x, {"arm": rmap}, polygon, 0.6, 0.1, 8)
     assert smap_z.values.max() > 0 and not np.array_equal(smap_z.values, smap_x.values)
+
+
+def test_rotation_taking_one_direction_onto_another():
+    from baseplace.geometry.poses import rotation_taking
+
+    rng = np.random.default_rng(3)
+    pairs = [(rng.normal(size=3), rng.normal(size=3)) for _ in range(200)]
+    pairs += [(np.array(v), -np.array(v)) for v in ([1.0, 0, 0], [0, 0, 1.0], [0.3, -0.2, 0.9])]
+    pairs += [(np.array([0, 0, 2.0]), np.array([0, 0, 1.0]))]
+    for a, b in pairs:
+        R = rotation_taking(a, b)
+        assert np.allclose(R @ R.T, np.eye(3), atol=1e-12) and np.isclose(np.linalg.det(R), 1.0)
+        assert np.allclose(R @ (a / np.linalg.norm(a)), b / np.linalg.norm(b), atol=1e-12)
+    with pytest.raises(InputError, match="non-zero 3-vector"):
+        rotation_taking([0, 0, 0], [1, 0, 0])

@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError
-from baseplace.geometry.poses import BasePose, FloatArray, pose_from_xyz_rpy
+from baseplace.geometry.poses import BasePose, FloatArray, pose_from_xyz_rpy, rotation_taking
 from baseplace.placement.candidates import RadialCandidate, _object, occupancy_risk
 from baseplace.placement.verify import Candidate, Verifier
 from baseplace.reachability.rmap import ReachabilityMap
@@ -62,34 +62,10 @@ def grasp_poses(
         for pitch in pitches
         for yaw in yaws
     ]
-    T = pose_from_xyz_rpy(np.array(rows))  # x is the approach here
-    T[:, :3, :3] = T[:, :3, :3] @ _rotation_taking(approach_axis, (1.0, 0.0, 0.0))
-    T[:, :3, 3] -= standoff * (T[:, :3, :3] @ _unit(approach_axis))
+    T = pose_from_xyz_rpy(np.array(rows))
+    T[:, :3, 3] -= standoff * T[:, :3, 0]
+    T[:, :3, :3] = T[:, :3, :3] @ rotation_taking(approach_axis, (1.0, 0.0, 0.0))  # approach onto that x
     return T
-
-
-def _unit(v: ArrayLike) -> FloatArray:
-    a = np.asarray(v, dtype=float)
-    norm = float(np.linalg.norm(a))
-    if a.shape != (3,) or not (math.isfinite(norm) and norm > 1e-9):
-        raise InputError(f"an approach axis is a non-zero 3-vector, got {a.tolist()}")
-    return a / norm
-
-
-def _rotation_taking(a: ArrayLike, b: ArrayLike) -> FloatArray:
-    """The smallest rotation (3, 3) with ``R @ a = b`` for unit directions a, b (Rodrigues)."""
-    u, w = _unit(a), _unit(b)
-    axis, c = np.cross(u, w), float(u @ w)
-    s = float(np.linalg.norm(axis))
-    if s < 1e-12:
-        if c > 0:
-            return np.eye(3)
-        # half a turn about any axis perpendicular to u
-        k = np.cross(u, [1.0, 0.0, 0.0] if abs(u[0]) < 0.9 else [0.0, 1.0, 0.0])
-        k /= np.linalg.norm(k)
-        return 2.0 * np.outer(k, k) - np.eye(3)
-    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]]) / s
-    return np.eye(3) + s * K + (1 - c) * (K @ K)
 
 
 def hand_feasible(
