@@ -7,17 +7,20 @@ by hand (obstacle voxels placed against the base body).
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import math
+import os
 import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 import pytest
 
+from baseplace.cli import main
 from baseplace.errors import InputError
 from baseplace.robots.check import check_robot
 from baseplace.robots.codegen import arm_kernels
@@ -32,9 +35,18 @@ UR5_URDF = ERD / "ur_description" / "urdf" / "ur5_robot.urdf"
 PANDA_URDF = ERD / "panda_description" / "urdf" / "panda.urdf"
 
 
-def run(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "baseplace.cli", *args], capture_output=True, text=True,
-                          stdin=subprocess.DEVNULL, timeout=600, cwd=cwd)  # fmt: skip
+def run(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
+    """The CLI in this process (saves the interpreter's start per call); stdout and stderr captured."""
+    out, err = io.StringIO(), io.StringIO()
+    saved = dict(os.environ)
+    os.environ.update(env or {})
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            code = main(list(args))
+    finally:
+        os.environ.clear()
+        os.environ.update(saved)
+    return subprocess.CompletedProcess(list(args), code, out.getvalue(), err.getvalue())
 
 
 def _pinocchio_mounted_fk(urdf: Path, root: str, xyz, rpy, tcp: str, joint_names, Q) -> np.ndarray:
