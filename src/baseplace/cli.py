@@ -210,7 +210,7 @@ def cmd_robot_check(args: argparse.Namespace) -> int:
         f"base frame {report.base_frame}; footprint "
         + (f"radius {fp['radius']} m" if "radius" in fp else f"polygon {fp['polygon']}")
         + (
-            f"; base meshes reach {fp['base_mesh_radius']} m from its origin"
+            f"; meshes fixed to the base reach {fp['base_mesh_radius']} m from its origin"
             if "base_mesh_radius" in fp
             else ""
         ),

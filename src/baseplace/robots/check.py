@@ -259,7 +259,9 @@ def check_robot(robot: Robot) -> RobotReport:
             "arm or hand link(s) with visual but no collision geometry, invisible to collision checks: "
             + ", ".join(bare_on_arm)
         )
-    base = [m for m in meshes if not m.on_arm]
+    # a mount's generated base body is the footprint itself (a polygon's bounding box): not a finding
+    generated = spec.base_frame if spec.mount is not None else None
+    base = [m for m in meshes if not m.on_arm and m.link != generated]
     footprint: dict[str, Any] = (
         {"radius": spec.footprint_radius}
         if spec.footprint_radius is not None
@@ -282,7 +284,7 @@ def check_robot(robot: Robot) -> RobotReport:
                 f"the base's collision geometry reaches {-lowest:.3f} m below {spec.base_frame!r}: the base "
                 "frame should lie on the floor"
             )
-    else:
+    if not [m for m in meshes if not m.on_arm]:
         warnings.append(
             "the base has no collision geometry: nothing keeps it off obstacles (set mount.base_height)"
         )
