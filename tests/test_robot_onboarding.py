@@ -366,3 +366,17 @@ def test_rotation_taking_one_direction_onto_another():
         assert np.allclose(R @ (a / np.linalg.norm(a)), b / np.linalg.norm(b), atol=1e-12)
     with pytest.raises(InputError, match="non-zero 3-vector"):
         rotation_taking([0, 0, 0], [1, 0, 0])
+
+
+@pytest.mark.parametrize(("approach", "flagged"), [("y", False), ("z", True), ("-y", True)])
+def test_approach_check_when_the_tcp_sits_on_the_wrist(tmp_path, approach, flagged):
+    """TCP = wrist_3_link, at the last joint: the hand's geometry (towards tool0, along its y) decides."""
+    text = (EXAMPLES / "ur5_base.toml").read_text()
+    text = text.replace('tcp_frame = "tool0"', 'tcp_frame = "wrist_3_link"').replace(
+        'approach = "z"', f'approach = "{approach}"'
+    )
+    (tmp_path / "w3.toml").write_text(text)
+    warnings = [w for w in check_robot(Robot(tmp_path / "w3.toml")).warnings if "approach" in w]
+    assert bool(warnings) == flagged
+    if flagged:
+        assert 'set approach = "y"' in warnings[0]

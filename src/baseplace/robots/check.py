@@ -139,7 +139,8 @@ def approach_warning(robot: Robot, arm_name: str, meshes: list[CollisionMesh]) -
 
     The hand's outward direction is wrist -> TCP: from the origin of the arm's last moving joint
     to the TCP. When the TCP sits on the wrist (closer than :data:`WRIST_OFFSET_MIN`), it is the
-    direction from the centre of the geometry the last joint carries to the TCP.
+    direction from the TCP to the centre of the geometry the last joint carries (the hand, which
+    lies ahead of the wrist).
     """
     arm = robot.arm(arm_name)
     spec = robot.spec.arm(arm_name)
@@ -156,7 +157,7 @@ def approach_warning(robot: Robot, arm_name: str, meshes: list[CollisionMesh]) -
         hand = [m.vertices for m in meshes if last in set(robot.model.supports[_parent_joint(robot, m.link)])]
         if not hand:
             return None
-        direction = T_base_tcp[:3, 3] - np.concatenate(hand).mean(axis=0)
+        direction = np.concatenate(hand).mean(axis=0) - T_base_tcp[:3, 3]  # the hand lies ahead of the wrist
         R = T_base_tcp[:3, :3]
         if np.linalg.norm(direction) < WRIST_OFFSET_MIN:
             return None
@@ -174,7 +175,7 @@ def approach_warning(robot: Robot, arm_name: str, meshes: list[CollisionMesh]) -
     )
     return (
         f"arm {arm_name!r}: TCP {spec.tcp_frame!r} approach axis {spec.approach} {into} "
-        f"({angle:.0f} deg from the wrist -> TCP direction){suggestion}"
+        f"({angle:.0f} deg off the direction out of the hand, wrist -> TCP){suggestion}"
     )
 
 
