@@ -131,7 +131,8 @@ class RobotSpec:
         footprint_radius: base footprint as a circle [m], or None if a polygon is given.
         footprint_polygon: base footprint as a polygon ((x, y), ...) in the base frame [m].
         srdf: optional SRDF with disabled self-collision pairs.
-        package_dirs: directories where ``package://`` mesh URIs resolve.
+        package_dirs: directories searched first where ``package://`` mesh URIs resolve; more are
+            found automatically (:func:`baseplace.robots.urdf.package_search_dirs`).
         joint_limits: joint name -> (lower, upper) overriding the URDF [rad or m].
         reference: joint name -> value for joints outside the arm (default 0).
         mount: where an arm-only URDF stands on the mobile base ``base_frame``, or None when the
