@@ -40,3 +40,14 @@ def test_first_candidates_run_shows_a_progress_bar_while_it_builds_the_map(monke
     assert code in (0, 3) and "first run only" not in capsys.readouterr().err
     code = main([*args, "--json"])  # --json: nothing but the JSON object
     assert "first run only" not in capsys.readouterr().err
+
+
+def test_help_lists_the_robot_command_and_version(capsys):
+    import pytest
+
+    with pytest.raises(SystemExit) as done:
+        main(["--help"])
+    assert done.value.code == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert any(line.split()[:1] == ["robot"] and "check a robot file" in line for line in lines)
+    assert any("--version" in line for line in lines)
