@@ -51,3 +51,60 @@ def test_help_lists_the_robot_command_and_version(capsys):
     lines = capsys.readouterr().out.splitlines()
     assert any(line.split()[:1] == ["robot"] and "check a robot file" in line for line in lines)
     assert any("--version" in line for line in lines)
+
+
+def _stderr_on_a_terminal(*args: str) -> tuple[int, str, str]:
+    """Run the CLI with stderr on a pseudo-terminal (100 columns); (exit code, stdout, stderr)."""
+    import fcntl
+    import os
+    import pty
+    import select
+    import struct
+    import termios
+
+    master, slave = pty.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))
+    proc = subprocess.Popen([sys.executable, "-m", "baseplace.cli", *args], stdout=subprocess.PIPE,
+                            stderr=slave, stdin=subprocess.DEVNULL)  # fmt: skip
+    os.close(slave)
+    chunks = []
+    while True:
+        ready, _, _ = select.select([master], [], [], 0.2)
+        if ready:
+            try:
+                data = os.read(master, 4096)
+            except OSError:  # the child closed the terminal
+                break
+            if not data:
+                break
+            chunks.append(data)
+        elif proc.poll() is not None:
+            break
+    os.close(master)
+    assert proc.stdout is not None
+    return proc.wait(timeout=60), proc.stdout.read().decode(), b"".join(chunks).decode(errors="replace")
+
+
+def test_a_step_past_two_seconds_shows_a_status_line_on_a_terminal(tmp_path):
+    import numpy as np
+
+    from test_navigation import _ramp_scene
+
+    cloud = tmp_path / "ramp.npy"
+    np.save(cloud, _ramp_scene(with_object=True).sample_cloud(np.random.default_rng(0)))
+    # the planner runs to its 3 s time limit and finds nothing: no progress bar of its own
+    args = (
+        "navigate",
+        "--cloud",
+        str(cloud),
+        "--start",
+        "-2 -1.9 0",
+        "--goal",
+        "0.5 -1.9 0",
+        "--time-limit",
+        "3",
+    )
+    code, _, err = _stderr_on_a_terminal(*args)
+    assert code == 3 and "baseplace navigate: working, 00:0" in err and "error: no path" in err
+    code, _, err = _stderr_on_a_terminal(*args, "--json")
+    assert code == 3 and "working" not in err

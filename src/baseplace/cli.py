@@ -1280,8 +1280,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point: run one command, map errors to exit codes."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    from baseplace.status import elapsed_status
+
     try:
-        return int(args.func(args))
+        with elapsed_status(f"baseplace {args.command}", enabled=not getattr(args, "json", False)):
+            return int(args.func(args))
     except BaseplaceError as exc:
         sys.stderr.write(f"error: {exc}\n")
         return exc.exit_code
