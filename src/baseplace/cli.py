@@ -11,6 +11,7 @@ import argparse
 import json
 import math
 import os
+import re
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -109,6 +110,20 @@ def _progress(args: argparse.Namespace, total: int, desc: str) -> tuple[Callable
     return lazy.update, lazy
 
 
+def _default_map(args: argparse.Namespace, robot: Any, arm: str | None = None) -> Any:
+    """The robot's cached default map, built on first use (tens of seconds) behind a progress bar."""
+    from baseplace.demo import cached_map
+    from baseplace.reachability.build import BuildSettings
+
+    settings = BuildSettings()
+    update, bar = _progress(args, settings.samples, f"default {robot.name} map (first run only)")
+    try:
+        return cached_map(robot, settings, arm, update)[0]
+    finally:
+        if bar is not None:
+            bar.close()
+
+
 def _out_path(text: str | None) -> Path | None:
     """The ``--out`` path, or None; its directory must exist (checked before any work is done)."""
     if text is None:
@@ -158,7 +173,8 @@ def cmd_robots(args: argparse.Namespace) -> int:
             "urdf": str(spec.urdf),
             "base_frame": spec.base_frame,
             "default_arm": spec.default_arm,
-            "arms": {a: {"joints": list(s.joints), "tcp_frame": s.tcp_frame} for a, s in spec.arms.items()},
+            "arms": {a: {"joints": list(s.joints), "tcp_frame": s.tcp_frame, "approach": s.approach}
+                     for a, s in spec.arms.items()},
             "footprint": {"radius": spec.footprint_radius} if spec.footprint_radius is not None
             else {"polygon": [list(p) for p in spec.footprint_polygon or ()]},
         })  # fmt: skip
@@ -167,8 +183,57 @@ def cmd_robots(args: argparse.Namespace) -> int:
         spec = builtin_spec(name)
         arms = ", ".join(f"{a} (TCP {s.tcp_frame}, {len(s.joints)} joints)" for a, s in spec.arms.items())
         lines.append(f"{name:<11} base {spec.base_frame}; arms {arms}")
-    lines.append("custom robots: pass --robot path/to/robot.toml (see docs/concepts.md)")
+    lines.append(
+        "custom robots: pass --robot path/to/robot.toml; check one with `baseplace robot check` (docs/robots.md)"
+    )
     _emit(args, {"robots": rows}, "\n".join(lines))
+    return 0
+
+
+def cmd_robot_check(args: argparse.Namespace) -> int:
+    """Load a robot file, describe it, render it and warn where it looks wrong."""
+    from baseplace.robots.check import check_robot, collision_meshes
+    from baseplace.robots.collision import load_collision_model
+    from baseplace.robots.model import Robot
+    from baseplace.viz.robot import plot_robot
+
+    png = _out_path(args.png)  # checked before the robot loads
+    robot = Robot(args.robot)
+    if png is None:  # the robot's name as a plain file name in this folder
+        png = Path(re.sub(r"[^A-Za-z0-9_.-]", "_", robot.name).lstrip(".") + "_check.png")
+    report = check_robot(robot)
+    plot_robot(robot, collision_meshes(robot, load_collision_model(robot)), png)
+    obj = {**report.to_dict(), "png": str(png)}
+    fp = report.footprint
+    lines = [
+        f"robot {report.name}: URDF {report.urdf}",
+        f"base frame {report.base_frame}; footprint "
+        + (f"radius {fp['radius']} m" if "radius" in fp else f"polygon {fp['polygon']}")
+        + (
+            f"; meshes fixed to the base reach {fp['base_mesh_radius']} m from its origin"
+            if "base_mesh_radius" in fp
+            else ""
+        ),
+    ]
+    if report.mount is not None:
+        lines.append(f"arm mounted at xyz {report.mount['xyz']} rpy {report.mount['rpy']}, "
+                     f"base body up to {report.mount['base_height']} m")  # fmt: skip
+    for name, arm in report.arms.items():
+        lines.append(f"arm {name!r}: TCP {arm['tcp_frame']}, approach axis {arm['approach']} "
+                     f"(at the reference configuration: TCP at {arm['tcp_at_reference']}, approach "
+                     f"{arm['approach_in_base_at_reference']} in {report.base_frame})")  # fmt: skip
+        lines += [
+            f"  {j['name']:<24} {j['type']:<10} [{j['lower']:.4g}, {j['upper']:.4g}]" for j in arm["joints"]
+        ]
+    col = report.collision
+    lines.append(f"collision: {col['geometries']} geometries, {col['pairs']} active self-collision pairs "
+                 f"({'SRDF ' + col['srdf'] if col['srdf'] else 'pruned as MoveIt does, no SRDF'})"
+                 + ("" if args.pairs else "; --pairs lists them"))  # fmt: skip
+    if args.pairs:
+        lines += [f"  {a} - {b}" for a, b in col["pair_names"]]
+    lines.append(f"wrote {png}")
+    lines += [f"warning: {w}" for w in report.warnings] or ["no warnings"]
+    _emit(args, obj, "\n".join(lines))
     return 0
 
 
@@ -571,7 +636,6 @@ def _routes(
 
 def cmd_candidates(args: argparse.Namespace) -> int:
     """Seed 004: base placement candidates from an object position, a cloud and an occupancy grid."""
-    from baseplace.demo import cached_map
     from baseplace.geometry.poses import BasePose
     from baseplace.placement.candidates import RadialSettings, motion_costs, radial_search
     from baseplace.placement.irm_candidates import (
@@ -581,7 +645,6 @@ def cmd_candidates(args: argparse.Namespace) -> int:
         irm_candidates,
         verify_candidates,
     )
-    from baseplace.reachability.build import BuildSettings
     from baseplace.reachability.storage import load_map
     from baseplace.robots.model import Robot
     from baseplace.terrain.voxels import VoxelMap
@@ -594,9 +657,7 @@ def cmd_candidates(args: argparse.Namespace) -> int:
     robot_pose = _base_xyyaw(args.robot_pose) if args.robot_pose is not None else None
     grid = load_occupancy(args.occupancy)
     robot = Robot(args.robot)
-    rmap = (
-        load_map(args.map, robot, args.arm) if args.map else cached_map(robot, BuildSettings(), args.arm)[0]
-    )
+    rmap = load_map(args.map, robot, args.arm) if args.map else _default_map(args, robot, args.arm)
     settings = RadialSettings.for_robot(robot, rmap)
     _check_object(grid, p_o, settings.d_max)
     points = None
@@ -615,7 +676,8 @@ def cmd_candidates(args: argparse.Namespace) -> int:
         voxels = voxels.without(np.linalg.norm(voxels.centres - p_o, axis=1) <= 0.12)
     environment = Environment(robot, voxels)
     standoff = grasp_standoff(robot) if args.standoff is None else args.standoff
-    grasps = grasp_poses(p_o, n=16, top_down=True, standoff=standoff)
+    approach = robot.arm(rmap.info.arm).approach_axis  # the TCP axis out of the hand, from the robot file
+    grasps = grasp_poses(p_o, n=16, top_down=True, standoff=standoff, approach_axis=approach)
     rng = np.random.default_rng(args.seed)
     rejected: list[tuple[tuple[float, float], str]] = []
     if args.method == "radial":
@@ -769,10 +831,8 @@ def cmd_experiment_navigation(args: argparse.Namespace) -> int:
 
 def cmd_experiment_inspect_table(args: argparse.Namespace) -> int:
     """Seed 002's inspect-every-object task: predefined vs sampled poses with a PDDL planner."""
-    from baseplace.demo import cached_map
     from baseplace.placement.surface_map import build_surface_map
     from baseplace.planning.inspect_task import SEED002_TABLE, run_inspect_experiment
-    from baseplace.reachability.build import BuildSettings
     from baseplace.robots.model import Robot
     from baseplace.sim.results import RunClock
 
@@ -782,7 +842,7 @@ def cmd_experiment_inspect_table(args: argparse.Namespace) -> int:
         raise InputError(f"need --runs >= 1 and object counts from 1 to 8, got {args.runs} and {counts}")
     results = _results_path(args.results)
     robot = Robot("pr2")
-    rmaps = {arm: cached_map(robot, BuildSettings(), arm)[0] for arm in ("left", "right")}
+    rmaps = {arm: _default_map(args, robot, arm) for arm in ("left", "right")}
     smap = build_surface_map(robot, rmaps, *SEED002_TABLE, combine="any")
     update, bar = _progress(args, 5 * len(counts) * args.runs, "inspect-table experiment")
     try:
@@ -804,8 +864,6 @@ def cmd_experiment_inspect_table(args: argparse.Namespace) -> int:
 
 def cmd_experiment_table_grid(args: argparse.Namespace) -> int:
     """Seed 004's table-grid experiment: fixed pose vs radial vs IRM-verified placements."""
-    from baseplace.demo import cached_map
-    from baseplace.reachability.build import BuildSettings
     from baseplace.reachability.storage import load_map
     from baseplace.robots.model import Robot
     from baseplace.sim import table_grid
@@ -823,7 +881,7 @@ def cmd_experiment_table_grid(args: argparse.Namespace) -> int:
     seed = args.seed if args.seed is not None else seeds.seeds(args.split)[0]
     split = args.split if args.seed is None or args.seed in seeds.seeds(args.split) else None
     robot = Robot(args.robot)
-    rmap = load_map(args.map, robot) if args.map else cached_map(robot, BuildSettings())[0]
+    rmap = load_map(args.map, robot) if args.map else _default_map(args, robot)
     settings = table_grid.TableGridSettings()
     if args.top_below is not None:
         settings = table_grid.TableGridSettings(method_top_below=args.top_below)
@@ -863,8 +921,6 @@ def cmd_experiment_table_grid(args: argparse.Namespace) -> int:
 
 def cmd_experiment_osrm(args: argparse.Namespace) -> int:
     """Seed 000 Tables I and II on generated scenes."""
-    from baseplace.demo import cached_map
-    from baseplace.reachability.build import BuildSettings
     from baseplace.reachability.storage import load_map
     from baseplace.robots.model import Robot
     from baseplace.sim.osrm_experiment import SCENE_CLASSES, ExperimentSettings, run_osrm_experiment
@@ -873,7 +929,7 @@ def cmd_experiment_osrm(args: argparse.Namespace) -> int:
         raise InputError(f"--scenes and --grasps must be >= 1, got {args.scenes} and {args.grasps}")
     out = _out_path(args.out)
     robot = Robot(args.robot)
-    rmap = load_map(args.map, robot) if args.map else cached_map(robot, BuildSettings())[0]
+    rmap = load_map(args.map, robot) if args.map else _default_map(args, robot)
     classes = SCENE_CLASSES if not args.flat_only else SCENE_CLASSES[:1]
     update, bar = _progress(args, args.scenes * len(classes), "osrm experiment")
     step = _step_progress(update)
@@ -1026,6 +1082,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Where should a mobile manipulator stand?",
         formatter_class=_Formatter,
     )
+    parser.add_argument("--version", action="version", version=f"baseplace {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
 
@@ -1042,6 +1099,7 @@ def build_parser() -> argparse.ArgumentParser:
         return p
 
     command("robots", "list the built-in robots, their arms and TCP frames", cmd_robots)
+    _add_robot_commands(sub, command)
 
     p = command("build-map", "build a reachability map by random joint sampling", cmd_build_map)
     p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
@@ -1276,12 +1334,36 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _version() -> str:
+    from baseplace import __version__
+
+    return __version__
+
+
+def _add_robot_commands(sub: Any, command: Callable[..., argparse.ArgumentParser]) -> None:
+    robot = sub.add_parser("robot", help="check a robot file: arms, joints, TCP axes, footprint, a picture",
+                           description="robot files (see docs/robots.md)")  # fmt: skip
+    robot_sub = robot.add_subparsers(dest="robot_command", metavar="SUBCOMMAND", parser_class=_Parser)
+    robot_sub.required = True
+    p = command("check", "load a robot file, print what it describes, render it and warn where it looks wrong",
+                cmd_robot_check, robot_sub,
+                "Prints arms, joints, limits, TCP approach axes, footprint and self-collision pairs; renders "
+                "the collision geometry to a PNG; warns about approach axes that do not point out of the hand, "
+                "links without collision geometry and footprints smaller than the base.")  # fmt: skip
+    p.add_argument("robot", help="robot file (.toml/.yaml) or built-in name")
+    p.add_argument("--png", default=None, help="picture of the robot (default: NAME_check.png here)")
+    p.add_argument("--pairs", action="store_true", help="list the active self-collision pairs")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point: run one command, map errors to exit codes."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    from baseplace.status import elapsed_status
+
     try:
-        return int(args.func(args))
+        with elapsed_status(f"baseplace {args.command}", enabled=not getattr(args, "json", False)):
+            return int(args.func(args))
     except BaseplaceError as exc:
         sys.stderr.write(f"error: {exc}\n")
         return exc.exit_code

@@ -8,6 +8,7 @@ from baseplace.geometry.poses import (
     parse_pose6,
     pose_from_xyz_rpy,
     rpy_to_matrix,
+    wrap_angle,
 )
 from baseplace.geometry.surface_poses import plane_base_poses, plane_frame
 
@@ -21,4 +22,5 @@ __all__ = [
     "plane_frame",
     "pose_from_xyz_rpy",
     "rpy_to_matrix",
+    "wrap_angle",
 ]

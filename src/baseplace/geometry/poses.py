@@ -84,6 +84,38 @@ def invert_transforms(T: ArrayLike) -> FloatArray:
     return out
 
 
+def _unit_vector(v: ArrayLike, what: str) -> FloatArray:
+    a = np.asarray(v, dtype=float)
+    norm = float(np.linalg.norm(a)) if a.shape == (3,) else 0.0
+    if not (np.isfinite(norm) and norm > 1e-9):
+        raise InputError(f"{what} must be a finite non-zero 3-vector, got {a.tolist()}")
+    return a / norm
+
+
+def rotation_taking(a: ArrayLike, b: ArrayLike) -> FloatArray:
+    """The smallest rotation (3, 3) with ``R @ a/|a| = b/|b|``, for (3,) directions (Rodrigues).
+
+    Opposite directions: half a turn about an axis perpendicular to ``a``.
+    """
+    u, w = _unit_vector(a, "a direction"), _unit_vector(b, "a direction")
+    axis, c = np.cross(u, w), float(u @ w)
+    s = float(np.linalg.norm(axis))
+    if s < 1e-12:
+        if c > 0:
+            return np.eye(3)
+        k = np.cross(u, [1.0, 0.0, 0.0] if abs(u[0]) < 0.9 else [0.0, 1.0, 0.0])
+        k /= np.linalg.norm(k)
+        return 2.0 * np.outer(k, k) - np.eye(3)
+    K = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]]) / s
+    return np.eye(3) + s * K + (1.0 - c) * (K @ K)
+
+
+def wrap_angle(angle: ArrayLike) -> FloatArray:
+    """Angles [rad], scalar or any shape, wrapped to (-pi, pi]: the one range headings have."""
+    a = np.asarray(angle, dtype=float)
+    return a - (2.0 * np.pi) * np.ceil((a - np.pi) / (2.0 * np.pi))
+
+
 def _parse_numbers(text: str, count: int, what: str) -> FloatArray:
     parts = text.replace(",", " ").split()
     if len(parts) != count:
@@ -103,9 +135,13 @@ def parse_pose6(text: str) -> FloatArray:
 
 
 def parse_base_pose(text: str) -> BasePose:
-    """Parse ``"x y yaw"`` (metres, radians) into a :class:`BasePose`."""
+    """Parse ``"x y yaw"`` (metres, radians) into a :class:`BasePose`.
+
+    The heading may be given in any range (5.328 or -0.955, say); it comes back wrapped to
+    (-pi, pi], the range every planner, map and result uses.
+    """
     x, y, yaw = _parse_numbers(text, 3, "base pose 'x y yaw'")
-    return BasePose(float(x), float(y), float(yaw))
+    return BasePose(float(x), float(y), float(wrap_angle(yaw)))
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 from scipy import ndimage
 
 from baseplace.errors import NothingFoundError, unknown
-from baseplace.geometry.poses import FloatArray
+from baseplace.geometry.poses import FloatArray, wrap_angle
 from baseplace.navigation.navmap import NavigationMap
 
 PLANNERS = ("rrt", "regions")
@@ -81,7 +81,8 @@ def plan_path(
     """
     if planner not in PLANNERS:
         raise unknown("planner", planner, PLANNERS)
-    start, goal = np.asarray(start, dtype=float), np.asarray(goal, dtype=float)
+    start, goal = np.array(start, dtype=float), np.array(goal, dtype=float)
+    start[2], goal[2] = wrap_angle(start[2]), wrap_angle(goal[2])  # OMPL's SE(2) holds (-pi, pi]
     navmap.check_pose("start", start[:2])
     navmap.check_pose("goal", goal[:2])
     t0 = time.perf_counter()

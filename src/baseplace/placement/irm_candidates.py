@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError
-from baseplace.geometry.poses import BasePose, FloatArray, pose_from_xyz_rpy
+from baseplace.geometry.poses import BasePose, FloatArray, pose_from_xyz_rpy, rotation_taking
 from baseplace.placement.candidates import RadialCandidate, _object, occupancy_risk
 from baseplace.placement.verify import Candidate, Verifier
 from baseplace.reachability.rmap import ReachabilityMap
@@ -30,17 +30,23 @@ from baseplace.world.occupancy import OccupancyGrid
 
 
 def grasp_poses(
-    p_o: ArrayLike, n: int = 8, top_down: bool = False, standoff: float = 0.0, top_offset: float = 0.0
+    p_o: ArrayLike,
+    n: int = 8,
+    top_down: bool = False,
+    standoff: float = 0.0,
+    top_offset: float = 0.0,
+    approach_axis: ArrayLike = (1.0, 0.0, 0.0),
 ) -> FloatArray:
     """World TCP poses (K, 4, 4) grasping an object at ``p_o`` (3,) [m] from ``n`` directions.
 
-    Side grasps put the TCP x axis (the approach axis of TIAGo's ``arm_tool_link`` and PR2's
-    ``*_gripper_tool_frame``) horizontal, pointing at the object from yaw ``k 2 pi / n``; with
-    ``top_down`` another ``n`` poses point x straight down, rotated by the same yaws (K = 2 n),
+    Side grasps put the TCP's approach axis (``approach_axis``, (3,) in the TCP frame: the arm's
+    ``Arm.approach_axis``; x for TIAGo's ``arm_tool_link`` and PR2's ``*_gripper_tool_frame``)
+    horizontal, pointing at the object from yaw ``k 2 pi / n``; with
+    ``top_down`` another ``n`` poses point it straight down, rotated by the same yaws (K = 2 n),
     at ``top_offset`` [m] above ``p_o``: a tall object is taken from above near its top (half its
     height less a little), or the open fingers reach down into its support.
-    The TCP stands ``standoff`` [m] back from the object along x: TIAGo's TCP is the wrist flange,
-    and its hand grasps 0.15 m ahead of it (``hand_grasping_frame``).
+    The TCP stands ``standoff`` [m] back from the object along the approach axis: TIAGo's TCP is
+    the wrist flange, and its hand grasps 0.15 m ahead of it (``hand_grasping_frame``).
     """
     p = _object(p_o, "a grasp pose")
     if n < 1:
@@ -58,6 +64,7 @@ def grasp_poses(
     ]
     T = pose_from_xyz_rpy(np.array(rows))
     T[:, :3, 3] -= standoff * T[:, :3, 0]
+    T[:, :3, :3] = T[:, :3, :3] @ rotation_taking(approach_axis, (1.0, 0.0, 0.0))  # approach onto that x
     return T
 
 

@@ -84,21 +84,27 @@ def parse_polygon(text: str | ArrayLike) -> FloatArray:
     return pts
 
 
-def allowed_bins(rmap: ReachabilityMap, cone: float | None, approach_axis: str = "x") -> NDArray[np.bool_]:
+def allowed_bins(
+    rmap: ReachabilityMap, cone: float | None, approach_axis: str | ArrayLike = "x"
+) -> NDArray[np.bool_]:
     """Orientation bins (n_orientations,) whose TCP approach axis lies within ``cone`` [rad] of down.
 
-    ``cone=None`` allows every bin. The approach axis is the TCP frame's x axis for the built-in
-    robots (``arm_tool_link``, ``*_gripper_tool_frame``).
+    ``cone=None`` allows every bin. The approach axis is an axis name or a (3,) unit vector in
+    the TCP frame: the arm's ``approach_axis`` (x for the built-in robots' ``arm_tool_link`` and
+    ``*_gripper_tool_frame``, z for a UR ``tool0`` or Panda's ``panda_hand_tcp``).
     """
-    if approach_axis not in AXES:
-        raise unknown("approach axis", approach_axis, AXES)
+    if isinstance(approach_axis, str):
+        if approach_axis not in AXES:
+            raise unknown("approach axis", approach_axis, AXES)
+        approach_axis = np.eye(3)[AXES[approach_axis]]
+    axis = np.asarray(approach_axis, dtype=float)
     n = rmap.grid.n_orientations
     if cone is None:
         return np.ones(n, dtype=bool)
     if not 0.0 < cone <= math.pi:
         raise InputError(f"approach cone must be in (0, pi] rad, got {cone}")
     R = rmap.grid.orientation_centre(np.arange(n))
-    return R[:, 2, AXES[approach_axis]] <= -math.cos(cone)
+    return R[:, 2, :] @ axis <= -math.cos(cone)  # the world z component of the approach direction
 
 
 def point_map(
@@ -107,6 +113,7 @@ def point_map(
     resolution: float,
     thetas: FloatArray,
     cone: float | None = math.pi / 4,
+    approach_axis: str | ArrayLike = "x",
 ) -> tuple[NDArray[np.float32], float]:
     """R_P of a point at ``height`` over base offsets (dx, dy) = base - point and headings.
 
@@ -116,13 +123,14 @@ def point_map(
         resolution: grid spacing of the offsets [m].
         thetas: (T,) base headings [rad].
         cone: approach cone about straight down [rad], or None for any orientation.
+        approach_axis: the TCP's approach axis, see :func:`allowed_bins`.
 
     Returns:
         ((T, K, K) values in {0, 1}, half-width [m]): offsets run from -half to +half in steps of
         ``resolution`` along both axes (x first).
     """
     offset, blocks = rmap.tables
-    ok: NDArray[np.bool_] = np.asarray((blocks[:, allowed_bins(rmap, cone)] > 0).any(axis=1))
+    ok: NDArray[np.bool_] = np.asarray((blocks[:, allowed_bins(rmap, cone, approach_axis)] > 0).any(axis=1))
     voxel_ok = np.zeros(len(offset), dtype=bool)
     voxel_ok[offset >= 0] = ok[offset[offset >= 0]]
     k = math.ceil(rmap.horizontal_reach / resolution)
@@ -273,8 +281,9 @@ def build_surface_map(
     mask = np.zeros(tuple(g.max(axis=0) - g0 + 1), dtype=np.float32)
     mask[g[:, 0] - g0[0], g[:, 1] - g0[1]] = 1.0
     combined: NDArray[np.float32] | None = None
-    for rmap in rmaps.values():
-        pm, half = point_map(rmap, height + tcp_height, resolution, thetas, cone)
+    for name, rmap in rmaps.items():
+        approach = robot.arm(name).approach_axis  # the arm's own, from its robot file
+        pm, half = point_map(rmap, height + tcp_height, resolution, thetas, cone, approach)
         acc = np.stack([fftconvolve(mask, p, mode="full") for p in pm])
         acc = np.clip(acc / len(grid_pts), 0.0, 1.0).astype(np.float32)  # FFT round-off stays in [0, 1]
         acc[acc < 0.5 / len(grid_pts)] = 0.0  # below one point's share: FFT noise, not reach

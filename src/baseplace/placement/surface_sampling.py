@@ -22,7 +22,7 @@ import shapely
 from numpy.typing import NDArray
 
 from baseplace.errors import InputError, NothingFoundError
-from baseplace.geometry.poses import BasePose, FloatArray
+from baseplace.geometry.poses import BasePose, FloatArray, wrap_angle
 from baseplace.placement.surface_map import SurfaceMap, surface_grid
 from baseplace.robots.model import Robot
 from baseplace.terrain.voxels import VoxelMap
@@ -43,7 +43,7 @@ class SampledPose:
     """One sampled base pose.
 
     Attributes:
-        x, y, theta: the pose [m, m, rad].
+        x, y, theta: the pose [m, m, rad], theta in (-pi, pi].
         reachability: R_S of the pose.
         score: R_S times the discount when it was chosen.
     """
@@ -166,8 +166,7 @@ class SurfaceSampler:
         w = discount(cand, np.array([[p.x, p.y, p.theta] for p in self.history])) if self.discounted else 1.0
         best = int(np.argmax(rs * w))
         score = float((rs * w if self.discounted else rs)[best])
-        out = SampledPose(
-            float(cand[best, 0]), float(cand[best, 1]), float(cand[best, 2]), float(rs[best]), score
-        )
+        heading = float(wrap_angle(cand[best, 2]))  # (-pi, pi], as every base pose (navigate takes it)
+        out = SampledPose(float(cand[best, 0]), float(cand[best, 1]), heading, float(rs[best]), score)
         self.history.append(out)
         return out

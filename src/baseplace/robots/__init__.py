@@ -4,7 +4,7 @@ from baseplace.robots.collision import SelfCollision
 from baseplace.robots.fk import forward_kinematics
 from baseplace.robots.ik import DampedLeastSquaresIK, IKSolver
 from baseplace.robots.model import Arm, Robot
-from baseplace.robots.spec import BUILTIN_ROBOTS, ArmSpec, RobotSpec, load_spec
+from baseplace.robots.spec import BUILTIN_ROBOTS, ArmSpec, Mount, RobotSpec, load_spec
 
 __all__ = [
     "BUILTIN_ROBOTS",
@@ -12,6 +12,7 @@ __all__ = [
     "ArmSpec",
     "DampedLeastSquaresIK",
     "IKSolver",
+    "Mount",
     "Robot",
     "RobotSpec",
     "SelfCollision",

@@ -19,16 +19,11 @@ from baseplace.robots.model import Arm, Robot, native_stderr_captured
 
 
 def load_collision_model(robot: Robot) -> pin.GeometryModel:
-    """The robot's collision geometry (meshes resolved through the spec's package dirs)."""
+    """The robot's collision geometry (mesh paths resolved when the robot was loaded)."""
     spec = robot.spec
     try:
         with native_stderr_captured():
-            return pin.buildGeomFromUrdf(
-                robot.model,
-                str(spec.urdf),
-                pin.COLLISION,
-                package_dirs=[str(p) for p in spec.package_dirs],
-            )
+            return pin.buildGeomFromUrdfString(robot.model, robot.urdf.xml, pin.COLLISION)
     except Exception as exc:
         lines = str(exc).strip().splitlines()
         raise InputError(
@@ -51,6 +46,11 @@ class SelfCollision:
         self.geom.addAllCollisionPairs()
         if robot.spec.srdf is not None:
             pin.removeCollisionPairs(self.model, self.geom, str(robot.spec.srdf))
+            # an SRDF knows nothing of a mount's base body: rigidly joined geometry never moves apart
+            objects = self.geom.geometryObjects
+            for pair in [p for p in self.geom.collisionPairs
+                         if objects[p.first].parentJoint == objects[p.second].parentJoint]:  # fmt: skip
+                self.geom.removeCollisionPair(pin.CollisionPair(pair.first, pair.second))
         else:
             self._disable_structural_pairs()
         self.num_threads = num_threads or os.cpu_count() or 1

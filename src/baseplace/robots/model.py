@@ -15,7 +15,7 @@ import os
 import sys
 import tempfile
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
 from xml.etree import ElementTree
@@ -27,6 +27,7 @@ from numpy.typing import ArrayLike, NDArray
 from baseplace.errors import InputError, unknown
 from baseplace.geometry.poses import FloatArray
 from baseplace.robots.spec import RobotSpec, load_spec
+from baseplace.robots.urdf import robot_urdf
 
 REVOLUTE, PRISMATIC = 0, 1
 
@@ -51,20 +52,35 @@ def native_stderr_captured() -> Iterator[list[str]]:
             lines.extend(sink.read().decode(errors="replace").splitlines())
 
 
-def load_urdf(path: Path) -> pin.Model:
-    """Parse a URDF into a pinocchio model, turning parser failures into one-line errors."""
+def _urdfdom_reason(native: list[str]) -> str | None:
+    """The explanation urdfdom printed, among its lines (console_bridge's "Error: ..." lines)."""
+    for line in native:
+        text = line.strip()
+        if text.startswith("Error:"):
+            return " ".join(text[len("Error:") :].split())
+    return None
+
+
+def load_urdf(path: Path, xml: str | None = None) -> pin.Model:
+    """Parse a URDF (the file, or its text ``xml``) into a pinocchio model; failures are one line.
+
+    Where urdfdom explains a failure (a joint whose parent link, such as a removed ``world``
+    link, is not defined, say), its explanation is the message.
+    """
     if not path.is_file():
         raise InputError(f"URDF {path} does not exist")
     try:
-        ElementTree.parse(path)
+        ElementTree.fromstring(xml) if xml is not None else ElementTree.parse(path)
     except ElementTree.ParseError as exc:
         raise InputError(f"cannot parse URDF {path}: malformed XML ({exc})") from None
+    native: list[str] = []
     try:
-        with native_stderr_captured():
-            return pin.buildModelFromUrdf(str(path))
+        with native_stderr_captured() as native:
+            return pin.buildModelFromXML(xml) if xml is not None else pin.buildModelFromUrdf(str(path))
     except Exception as exc:  # pinocchio raises ValueError/RuntimeError with multi-line text
         lines = str(exc).strip().splitlines()
-        raise InputError(f"cannot parse URDF {path}: {lines[0] if lines else exc!r}") from None
+        reason = _urdfdom_reason(native) or (lines[0] if lines else repr(exc))
+        raise InputError(f"cannot parse URDF {path}: {reason}") from None
 
 
 @dataclass(frozen=True)
@@ -87,6 +103,8 @@ class Arm:
         T_last_tcp: (4, 4) TCP frame in the frame of the last moving joint.
         q_index: (n,) index of each joint in pinocchio's configuration vector.
         q_width: (n,) 1, or 2 for unbounded joints stored as (cos, sin).
+        approach_axis: (3,) unit vector in the TCP frame pointing out of the hand (the spec's
+            ``approach``, default x).
     """
 
     robot_name: str
@@ -103,6 +121,7 @@ class Arm:
     T_last_tcp: FloatArray
     q_index: NDArray[np.int64]
     q_width: NDArray[np.int64]
+    approach_axis: FloatArray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0]))
 
     @property
     def n_joints(self) -> int:
@@ -151,7 +170,10 @@ class Robot:
 
     def __init__(self, spec: RobotSpec | str | Path) -> None:
         self.spec = spec if isinstance(spec, RobotSpec) else load_spec(spec)
-        self.model = load_urdf(self.spec.urdf)
+        if not self.spec.urdf.is_file():
+            raise InputError(f"URDF {self.spec.urdf} does not exist")
+        self.urdf = robot_urdf(self.spec)
+        self.model = load_urdf(self.spec.urdf, self.urdf.xml)
         if not self.model.existFrame(self.spec.base_frame):
             raise unknown("base frame", self.spec.base_frame, self.frame_names, f"robot {self.name!r}")
         for joint in [*self.spec.joint_limits, *self.spec.reference]:
@@ -278,6 +300,7 @@ class Robot:
             T_last_tcp=(T_acc * tcp.placement).homogeneous,
             q_index=np.array(q_index, dtype=np.int64),
             q_width=np.array(q_width, dtype=np.int64),
+            approach_axis=np.array(spec.approach_vector, dtype=float),
         )
 
     def frame_pose(self, q_full: ArrayLike, frame: str, relative_to: str | None = None) -> FloatArray:

@@ -6,12 +6,17 @@ from a small TOML or YAML file::
     name = "my_arm"
     urdf = "my_arm.urdf"              # relative to this file
     srdf = "my_arm.srdf"              # optional: disabled self-collision pairs
-    package_dirs = ["."]              # optional: where package:// mesh paths resolve
+    package_dirs = ["."]              # optional: where package:// mesh paths resolve (else found)
     base_frame = "base_link"
     footprint = { radius = 0.3 }      # or { polygon = [[x, y], ...] } in the base frame [m]
+    [mount]                           # optional: the URDF is an arm alone, standing on a mobile base
+    xyz = [0.1, 0.0, 0.4]             # pose of the URDF's root link in base_frame [m]
+    rpy = [0.0, 0.0, 0.0]             # [rad]
+    base_height = 0.4                 # optional: top of the base's collision body [m] (default xyz z)
     [arms.arm]
     joints = ["joint1", "joint2"]     # the joints sampled for reachability
     tcp_frame = "tool0"
+    approach = "z"                    # optional: the TCP axis pointing out of the hand (default "x")
     [joint_limits]                    # optional overrides [rad or m]
     joint1 = [-1.5, 1.5]
     [reference]                       # optional values of joints not in an arm (default 0)
@@ -23,6 +28,7 @@ from __future__ import annotations
 import hashlib
 import importlib.metadata
 import math
+import os
 import sys
 from dataclasses import dataclass, field
 from functools import cache
@@ -39,6 +45,11 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 
+APPROACH_AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0),
+                 "-x": (-1.0, 0.0, 0.0), "-y": (0.0, -1.0, 0.0), "-z": (0.0, 0.0, -1.0)}  # fmt: skip
+"""TCP approach axes a robot file may name: the TCP frame's axis pointing out of the hand."""
+
+
 @dataclass(frozen=True)
 class ArmSpec:
     """One arm: the joints sampled for its reachability and its tool centre point frame.
@@ -46,10 +57,65 @@ class ArmSpec:
     Attributes:
         joints: joint names; any order, they are sorted along the kinematic chain.
         tcp_frame: name of the TCP frame in the URDF.
+        approach: the TCP frame's axis that points out of the hand, towards what it grasps: one
+            of :data:`APPROACH_AXES`. "x" for TIAGo's ``arm_tool_link`` and PR2's
+            ``*_gripper_tool_frame``; "z" for ROS-Industrial ``tool0`` frames and Panda's
+            ``panda_hand_tcp``. Surface maps and the side/top grasps read it.
     """
 
     joints: tuple[str, ...]
     tcp_frame: str
+    approach: str = "x"
+
+    def __post_init__(self) -> None:
+        if self.approach not in APPROACH_AXES:
+            raise unknown("TCP approach axis", self.approach, APPROACH_AXES, f"TCP {self.tcp_frame!r}")
+
+    @property
+    def approach_vector(self) -> tuple[float, float, float]:
+        """The approach axis as a unit vector in the TCP frame."""
+        return APPROACH_AXES[self.approach]
+
+
+@dataclass(frozen=True)
+class Mount:
+    """Where an arm's URDF stands on the mobile base: no wrapper URDF needed.
+
+    The URDF's root link is attached to a new ``base_frame`` link at ``T_base_root``; the base
+    gets a collision body, the footprint (a cylinder, or the polygon's bounding box) from
+    :data:`BASE_CLEARANCE` above the floor up to ``base_height``.
+
+    Attributes:
+        xyz: position of the URDF's root link in the base frame [m].
+        rpy: its orientation as ROS roll, pitch, yaw [rad].
+        base_height: top of the base's collision body above the floor [m]; None: the mount's z.
+            0 gives the base no collision body.
+    """
+
+    xyz: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    base_height: float | None = None
+
+    def __post_init__(self) -> None:
+        values = (*self.xyz, *self.rpy, 0.0 if self.base_height is None else self.base_height)
+        if len(self.xyz) != 3 or len(self.rpy) != 3 or not all(math.isfinite(v) for v in values):
+            raise InputError(
+                "mount needs xyz = [x, y, z] [m] and rpy = [roll, pitch, yaw] [rad], finite numbers"
+            )
+        if max(abs(v) for v in self.xyz) > 5.0 or not (0.0 <= self.body_top <= 5.0):
+            raise InputError(
+                "mount xyz and base_height must lie within 5 m of the base frame, base_height >= 0"
+            )
+
+    @property
+    def body_top(self) -> float:
+        """Top of the base's collision body [m]."""
+        return self.xyz[2] if self.base_height is None else self.base_height
+
+
+BASE_CLEARANCE = 0.05
+"""Height [m] of a mounted base's collision body above the floor: its wheels' clearance (floor
+voxels within 0.1 m of the plane are support, never obstacles)."""
 
 
 @dataclass(frozen=True)
@@ -65,9 +131,12 @@ class RobotSpec:
         footprint_radius: base footprint as a circle [m], or None if a polygon is given.
         footprint_polygon: base footprint as a polygon ((x, y), ...) in the base frame [m].
         srdf: optional SRDF with disabled self-collision pairs.
-        package_dirs: directories where ``package://`` mesh URIs resolve.
+        package_dirs: directories searched first where ``package://`` mesh URIs resolve; more are
+            found automatically (:func:`baseplace.robots.urdf.package_search_dirs`).
         joint_limits: joint name -> (lower, upper) overriding the URDF [rad or m].
         reference: joint name -> value for joints outside the arm (default 0).
+        mount: where an arm-only URDF stands on the mobile base ``base_frame``, or None when the
+            URDF is the whole robot.
     """
 
     name: str
@@ -81,6 +150,7 @@ class RobotSpec:
     package_dirs: tuple[Path, ...] = ()
     joint_limits: dict[str, tuple[float, float]] = field(default_factory=dict)
     reference: dict[str, float] = field(default_factory=dict)
+    mount: Mount | None = None
 
     def __post_init__(self) -> None:
         if not self.arms:
@@ -106,8 +176,10 @@ class RobotSpec:
 
     @property
     def urdf_sha256(self) -> str:
-        """SHA-256 of the URDF file, recorded in maps to catch a changed robot."""
-        return _sha256(self.urdf)
+        """SHA-256 of the URDF file (and the mount), recorded in maps to catch a changed robot."""
+        if self.mount is None:
+            return _sha256(self.urdf)
+        return hashlib.sha256(f"{_sha256(self.urdf)} mount {self.mount}".encode()).hexdigest()
 
     @property
     def footprint_bounding_radius(self) -> float:
@@ -133,6 +205,21 @@ def example_robot_data_dir() -> Path:
     if not (share / "example-robot-data" / "robots").is_dir():  # pragma: no cover
         raise InputError(f"example-robot-data has no robots directory under {share}")
     return share
+
+
+def ros_package_roots() -> tuple[Path, ...]:
+    """Folders holding ROS packages, in order.
+
+    ``ROS_PACKAGE_PATH``, then the ``share`` folders of ``AMENT_PREFIX_PATH``, then
+    example-robot-data's share folder.
+    """
+    roots = [Path(e) for e in os.environ.get("ROS_PACKAGE_PATH", "").split(os.pathsep) if e]
+    roots += [Path(e) / "share" for e in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if e]
+    try:
+        roots.append(example_robot_data_dir())
+    except InputError:  # pragma: no cover - a dependency of baseplace
+        pass
+    return tuple(roots)
 
 
 def _erd(relative: str) -> Path:
@@ -234,7 +321,9 @@ def load_spec(name_or_path: str | Path) -> RobotSpec:
 
 
 _KEYS = {"name", "urdf", "srdf", "package_dirs", "base_frame", "footprint", "arms", "default_arm",
-         "joint_limits", "reference"}  # fmt: skip
+         "joint_limits", "reference", "mount"}  # fmt: skip
+_ARM_KEYS = {"joints", "tcp_frame", "approach"}
+_MOUNT_KEYS = {"xyz", "rpy", "base_height"}
 
 
 def spec_from_dict(data: Any, root: Path, source: str = "robot spec") -> RobotSpec:
@@ -256,6 +345,14 @@ def spec_from_dict(data: Any, root: Path, source: str = "robot spec") -> RobotSp
     def path_of(value: Any, key: str) -> Path:
         if not isinstance(value, str):
             raise InputError(f"{source}: {key} must be a path string")
+        if value.startswith("package://"):  # a URDF or SRDF inside a ROS package, found as meshes are
+            rest = value[len("package://") :]
+            for d in ros_package_roots():
+                if (d / rest).is_file():
+                    return d / rest
+            raise InputError(
+                f"{source}: {key} {value} not found under {[str(d) for d in ros_package_roots()]}"
+            )
         p = Path(value)
         p = p if p.is_absolute() else root / p
         if not p.exists():
@@ -269,10 +366,18 @@ def spec_from_dict(data: Any, root: Path, source: str = "robot spec") -> RobotSp
     for arm_name, arm in arms_raw.items():
         if not isinstance(arm, dict) or "joints" not in arm or "tcp_frame" not in arm:
             raise InputError(f"{source}: arm {brief(arm_name)} needs 'joints' and 'tcp_frame'")
+        if set(arm) - _ARM_KEYS:
+            raise InputError(f"{source}: arm {brief(arm_name)}: unknown key(s) {sorted(set(arm) - _ARM_KEYS)}; "
+                             f"valid: {sorted(_ARM_KEYS)}")  # fmt: skip
         joints = arm["joints"]
         if not isinstance(joints, list) or not joints or not all(isinstance(j, str) for j in joints):
             raise InputError(f"{source}: arm {brief(arm_name)} joints must be a non-empty list of names")
-        arms[text(arm_name, "an arm name")] = ArmSpec(tuple(joints), text(arm["tcp_frame"], "tcp_frame"))
+        approach = text(arm.get("approach", "x"), "approach")
+        if approach not in APPROACH_AXES:
+            raise unknown("TCP approach axis", approach, APPROACH_AXES, f"{source}: arm {brief(arm_name)}")
+        arms[text(arm_name, "an arm name")] = ArmSpec(
+            tuple(joints), text(arm["tcp_frame"], "tcp_frame"), approach
+        )
 
     fp = data["footprint"]
     if not isinstance(fp, dict) or len(fp) != 1 or next(iter(fp)) not in ("radius", "polygon"):
@@ -291,6 +396,7 @@ def spec_from_dict(data: Any, root: Path, source: str = "robot spec") -> RobotSp
     except (TypeError, ValueError, IndexError, AttributeError):
         raise InputError(f"{source}: footprint, joint_limits and reference must hold numbers") from None
 
+    mount = _mount(data.get("mount"), source)
     dirs = data.get("package_dirs", [])
     if not isinstance(dirs, list):
         raise InputError(f"{source}: package_dirs must be a list of directories")
@@ -306,4 +412,23 @@ def spec_from_dict(data: Any, root: Path, source: str = "robot spec") -> RobotSp
         package_dirs=tuple(path_of(d, "package_dirs entry") for d in dirs) or (root,),
         joint_limits=limits,
         reference=reference,
+        mount=mount,
     )
+
+
+def _mount(raw: Any, source: str) -> Mount | None:
+    if raw is None:
+        return None
+    if not isinstance(raw, dict) or set(raw) - _MOUNT_KEYS:
+        raise InputError(f"{source}: mount must be a table with keys {sorted(_MOUNT_KEYS)}")
+    try:
+        xyz = tuple(float(v) for v in raw.get("xyz", (0.0, 0.0, 0.0)))
+        rpy = tuple(float(v) for v in raw.get("rpy", (0.0, 0.0, 0.0)))
+        height = raw.get("base_height")
+        height = None if height is None else float(height)
+    except (TypeError, ValueError):
+        raise InputError(f"{source}: mount xyz, rpy and base_height must hold numbers") from None
+    try:
+        return Mount(xyz, rpy, height)  # type: ignore[arg-type]
+    except InputError as exc:
+        raise InputError(f"{source}: {exc}") from None

@@ -485,6 +485,7 @@ def build_scene(server: viser.ViserServer, scene: ResultScene, data: ViewData) -
     from viser.extras import ViserUrdf
 
     from baseplace.robots.spec import load_spec
+    from baseplace.robots.urdf import robot_urdf
 
     api = server.scene
     api.set_up_direction("+z")
@@ -559,10 +560,12 @@ def build_scene(server: viser.ViserServer, scene: ResultScene, data: ViewData) -
         )  # fmt: skip
     if scene.base_poses:
         try:
-            urdf = yourdfpy.URDF.load(
-                str(spec.urdf), build_scene_graph=True, load_meshes=True,
+            urdf = yourdfpy.URDF.load(  # the robot file's URDF: meshes resolved, a mounted arm on its base
+                io.StringIO(robot_urdf(spec).xml), build_scene_graph=True, load_meshes=True,
                 filename_handler=_package_handler(spec),
             )  # fmt: skip
+        except InputError:
+            raise
         except Exception as exc:  # yourdfpy raises bare ValueError, KeyError, OSError, lxml errors
             raise InputError(f"cannot load the URDF {spec.urdf} of robot {spec.name!r}: {exc}") from None
         cfg = joint_configuration(spec, scene.joints, list(urdf.actuated_joint_names))

@@ -1,0 +1,70 @@
+"""A status line for steps that run longer than 2 s without a progress bar of their own.
+
+Map builds and experiments report their progress through tqdm bars. Every other step (the first
+run's kernel compilation, a placement search, a planner running to its time limit) shows, after
+2 s, one line with the command and the elapsed time on a terminal's stderr, which gives way to
+any real progress bar while that one runs. Nothing is printed when stderr is not a terminal (logs,
+tests, pipes) or with ``--json``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from typing import Any
+
+QUIET_FOR = 2.0
+"""Seconds a step may run before the status line appears."""
+REFRESH = 0.5
+"""Seconds between updates of the elapsed time."""
+
+
+@contextlib.contextmanager
+def elapsed_status(label: str, enabled: bool = True, stream: Any = None) -> Iterator[None]:
+    """Show ``label: working, MM:SS`` on ``stream`` (default stderr) while the block runs past 2 s.
+
+    Args:
+        label: what runs, e.g. ``"baseplace place"``.
+        enabled: False shows nothing (``--json``).
+        stream: where to write; shown only if it is a terminal.
+    """
+    out = sys.stderr if stream is None else stream
+    if not enabled or not getattr(out, "isatty", lambda: False)():
+        yield
+        return
+    from tqdm import tqdm
+
+    stop = threading.Event()
+    started = time.time()
+
+    def run() -> None:
+        if stop.wait(QUIET_FOR):
+            return
+        bar: Any = None
+        while True:
+            others = [b for b in list(tqdm._instances) if b is not bar]
+            if others and bar is not None:  # a real progress bar is running: give way to it
+                bar.close()
+                bar = None
+            elif not others and bar is None:
+                bar = tqdm(
+                    total=None, desc=label, bar_format="{desc}: working, {elapsed}", file=out, leave=False
+                )
+                bar.start_t = started  # the time since the command started
+            elif bar is not None:
+                bar.refresh()
+            if stop.wait(REFRESH):
+                break
+        if bar is not None:
+            bar.close()
+
+    thread = threading.Thread(target=run, name="baseplace-status", daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join()

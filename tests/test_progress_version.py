@@ -1,0 +1,110 @@
+"""``baseplace --version`` and the progress bar of a command's first, map-building run."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+from baseplace.cli import main
+from conftest import SHARED
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_version_prints_the_project_version():
+    proc = subprocess.run([sys.executable, "-m", "baseplace.cli", "--version"], capture_output=True, text=True,
+                          stdin=subprocess.DEVNULL, timeout=60)  # fmt: skip
+    match = re.search(r'^version = "([^"]+)"', (ROOT / "pyproject.toml").read_text(), re.MULTILINE)
+    assert match is not None
+    version = match.group(1)
+    assert proc.returncode == 0 and proc.stdout.strip() == f"baseplace {version}"
+
+
+def test_first_candidates_run_shows_a_progress_bar_while_it_builds_the_map(monkeypatch, tmp_path, capsys):
+    """The first ``candidates`` builds the default map (40 s at 5e7 samples): no longer silent."""
+    import baseplace.reachability.build as build
+
+    monkeypatch.setenv("BASEPLACE_CACHE", str(tmp_path / "cache"))
+    full = build.BuildSettings
+    monkeypatch.setattr(build, "BuildSettings", lambda: full(samples=300_000))  # a small "default" map
+    args = ["candidates", "--occupancy", str(SHARED / "maps" / "tb3_sandbox.yaml"), "--object",
+            "-1.025 -0.775 0.6"]  # fmt: skip
+    code = main(args)
+    first = capsys.readouterr()
+    assert code in (0, 3), first.err
+    assert "default tiago map (first run only)" in first.err and "samples" in first.err
+    assert list((tmp_path / "cache" / "maps").glob("tiago-arm-*-s300000-*.rmap"))  # built and cached
+    code = main(args)  # second run: the cached map, no bar
+    assert code in (0, 3) and "first run only" not in capsys.readouterr().err
+    code = main([*args, "--json"])  # --json: nothing but the JSON object
+    assert "first run only" not in capsys.readouterr().err
+
+
+def test_help_lists_the_robot_command_and_version(capsys):
+    import pytest
+
+    with pytest.raises(SystemExit) as done:
+        main(["--help"])
+    assert done.value.code == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert any(line.split()[:1] == ["robot"] and "check a robot file" in line for line in lines)
+    assert any("--version" in line for line in lines)
+
+
+def _stderr_on_a_terminal(*args: str) -> tuple[int, str, str]:
+    """Run the CLI with stderr on a pseudo-terminal (100 columns); (exit code, stdout, stderr)."""
+    import fcntl
+    import os
+    import pty
+    import select
+    import struct
+    import termios
+
+    master, slave = pty.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))
+    proc = subprocess.Popen([sys.executable, "-m", "baseplace.cli", *args], stdout=subprocess.PIPE,
+                            stderr=slave, stdin=subprocess.DEVNULL)  # fmt: skip
+    os.close(slave)
+    chunks = []
+    while True:
+        ready, _, _ = select.select([master], [], [], 0.2)
+        if ready:
+            try:
+                data = os.read(master, 4096)
+            except OSError:  # the child closed the terminal
+                break
+            if not data:
+                break
+            chunks.append(data)
+        elif proc.poll() is not None:
+            break
+    os.close(master)
+    assert proc.stdout is not None
+    return proc.wait(timeout=60), proc.stdout.read().decode(), b"".join(chunks).decode(errors="replace")
+
+
+def test_a_step_past_two_seconds_shows_a_status_line_on_a_terminal(tmp_path):
+    import numpy as np
+
+    from test_navigation import _ramp_scene
+
+    cloud = tmp_path / "ramp.npy"
+    np.save(cloud, _ramp_scene(with_object=True).sample_cloud(np.random.default_rng(0)))
+    # the planner runs to its 3 s time limit and finds nothing: no progress bar of its own
+    args = (
+        "navigate",
+        "--cloud",
+        str(cloud),
+        "--start",
+        "-2 -1.9 0",
+        "--goal",
+        "0.5 -1.9 0",
+        "--time-limit",
+        "3",
+    )
+    code, _, err = _stderr_on_a_terminal(*args)
+    assert code == 3 and "baseplace navigate: working, 00:0" in err and "error: no path" in err
+    code, _, err = _stderr_on_a_terminal(*args, "--json")
+    assert code == 3 and "working" not in err
