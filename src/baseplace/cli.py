@@ -318,26 +318,36 @@ def cmd_view(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_segment(args: argparse.Namespace) -> int:
-    """Segment a cloud into planar regions."""
+def _world_cloud(args: argparse.Namespace) -> Any:
+    """The cloud of ``--cloud`` in the world frame: through ``--transform``, or checked to be z-up."""
+    from baseplace.terrain.diagnose import check_up_direction
     from baseplace.terrain.io import load_cloud, load_transform
-    from baseplace.terrain.pipeline import terrain_from_points, terrain_json
 
     cloud = load_cloud(args.cloud)
     if args.transform is not None:
-        cloud = cloud.transformed(load_transform(args.transform))
+        return cloud.transformed(load_transform(args.transform))
+    check_up_direction(cloud.points, optical=cloud.width is not None and cloud.height not in (None, 1))
+    return cloud
+
+
+def cmd_segment(args: argparse.Namespace) -> int:
+    """Segment a cloud into planar regions."""
+    from baseplace.terrain.pipeline import terrain_from_points, terrain_json
+
     out = _out_path(args.out)
+    cloud = _world_cloud(args)
     terrain = terrain_from_points(cloud.points, args.algorithm, args.resolution)
     result = terrain_json(terrain)
     result["cloud"] = {"path": str(args.cloud), "points": len(cloud.points)}
     result["algorithm"] = args.algorithm
+    result["resolution"] = terrain.segmentation.hmap.resolution
     if out is not None:
         from baseplace.viz.regions import plot_regions
 
         plot_regions(terrain.segmentation, terrain.graph, out)
         result["png"] = str(out)
-    lines = [f"{len(result['regions'])} planar regions from {len(cloud.points)} points "
-             f"({result['timings_ms']['total']:.0f} ms, {args.algorithm})"]  # fmt: skip
+    lines = [f"{len(result['regions'])} planar regions from {len(cloud.points)} points at "
+             f"{result['resolution']:g} m cells ({result['timings_ms']['total']:.0f} ms, {args.algorithm})"]  # fmt: skip
     for r in result["regions"]:
         lines.append(f"  region {r['id']}: tilt {r['tilt_deg']:.1f} deg, area {r['area_m2']:.2f} m^2, "
                      f"centroid z {r['centroid'][2]:.3f} m")  # fmt: skip
@@ -403,17 +413,15 @@ def cmd_place(args: argparse.Namespace) -> int:
     from baseplace.reachability.build import BuildSettings
     from baseplace.reachability.storage import load_map
     from baseplace.robots.model import Robot
-    from baseplace.terrain.io import load_cloud, load_transform
 
     if not args.target:
         raise InputError('give at least one --target "x y z roll pitch yaw"')
     targets = np.stack([parse_pose6(t) for t in args.target])
-    settings = PlaceSettings(strategy=args.strategy, placements=args.placements, tries=args.tries)
+    settings = PlaceSettings(strategy=args.strategy, placements=args.placements, tries=args.tries,
+                             resolution=args.resolution)  # fmt: skip
     out = _out_path(args.out)
     robot = Robot(args.robot)
-    cloud = load_cloud(args.cloud)
-    if args.transform is not None:
-        cloud = cloud.transformed(load_transform(args.transform))
+    cloud = _world_cloud(args)
     if args.map is not None:
         rmap = load_map(args.map, robot, args.arm)
     else:
@@ -429,7 +437,7 @@ def cmd_place(args: argparse.Namespace) -> int:
         from baseplace.terrain.pipeline import terrain_from_points
 
         start = _base_xyyaw(args.start)
-        terrain = terrain_from_points(cloud.points)
+        terrain = terrain_from_points(cloud.points, resolution=args.resolution)
         navmap = navigation_map(terrain, robot.spec.footprint_bounding_radius)
         navmap.check_pose("--start", start[:2])
     result = place(
@@ -560,12 +568,7 @@ def cmd_candidates(args: argparse.Namespace) -> int:
     _check_object(grid, p_o, settings.d_max)
     points = None
     if args.cloud is not None:
-        from baseplace.terrain.io import load_cloud, load_transform
-
-        cloud = load_cloud(args.cloud)
-        if args.transform is not None:
-            cloud = cloud.transformed(load_transform(args.transform))
-        points = cloud.points
+        points = _world_cloud(args).points
     # the shared verification: IK for one of the grasps, whole robot against the cloud's voxels
     # (less the object's own, which the closing hand surrounds)
     voxels = VoxelMap(0.025, np.zeros((0, 3), dtype=np.int64))
@@ -668,16 +671,13 @@ def cmd_navigate(args: argparse.Namespace) -> int:
     from baseplace.navigation.navmap import navigation_map
     from baseplace.navigation.planners import plan_path
     from baseplace.robots.model import Robot
-    from baseplace.terrain.io import load_cloud, load_transform
     from baseplace.terrain.pipeline import terrain_from_points
 
     out = _out_path(args.out)
     start, goal = _base_xyyaw(args.start), _base_xyyaw(args.goal)
     robot = Robot(args.robot)
-    cloud = load_cloud(args.cloud)
-    if args.transform is not None:
-        cloud = cloud.transformed(load_transform(args.transform))
-    terrain = terrain_from_points(cloud.points)
+    cloud = _world_cloud(args)
+    terrain = terrain_from_points(cloud.points, resolution=args.resolution)
     navmap = navigation_map(terrain, robot.spec.footprint_bounding_radius)
     path = plan_path(navmap, start, goal, args.planner, args.time_limit, args.seed)
     obj = {
@@ -1033,6 +1033,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--planner", default="rrt", choices=["rrt", "regions"],
                    help="path planner with --start: OMPL RRTConnect or the region graph (default rrt)")  # fmt: skip
+    p.add_argument("--resolution", type=float, default=None,
+                   help="height-map cell [m] (default: from the cloud's extent and point spacing, 0.02-0.05)")  # fmt: skip
 
     p = command("candidates", "base placement candidates around an object (seed 004)", cmd_candidates)
     p.add_argument("--occupancy", required=True, help="occupancy grid: map_server YAML")
@@ -1067,6 +1069,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--planner", default="rrt", choices=["rrt", "regions"],
                    help="OMPL RRTConnect (seed 000) or the region-graph planner (default rrt)")  # fmt: skip
     p.add_argument("--time-limit", type=float, default=2.0, help="RRT planning time limit [s] (default 2)")
+    p.add_argument("--resolution", type=float, default=None,
+                   help="height-map cell [m] (default: from the cloud's extent and point spacing, 0.02-0.05)")  # fmt: skip
     p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
     p.add_argument("--out", default=None, help="PNG of the path over regions and obstacles (as Fig. 4)")
 
@@ -1103,7 +1107,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="robust (seed 000) or baseline region growing (default: robust)")  # fmt: skip
     p.add_argument("--transform", default=None,
                    help='world_T_sensor: a file with a 4x4 matrix, or the sensor-frame up vector "ux uy uz"')  # fmt: skip
-    p.add_argument("--resolution", type=float, default=0.05, help="height map cell [m] (default 0.05)")
+    p.add_argument("--resolution", type=float, default=None,
+                   help="height-map cell [m] (default: from the cloud's extent and point spacing, 0.02-0.05)")  # fmt: skip
     p.add_argument("--out", default=None, help="PNG of the regions (as seed 000 Fig. 2a)")
 
     scene = sub.add_parser(
