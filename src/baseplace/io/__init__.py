@@ -1,0 +1,15 @@
+"""ROS recordings in and out without ROS (``rosbags``): clouds, grids and tf in; results out as MCAP."""
+
+from baseplace.io.bag import BagCloud, BagScene, read_bag
+from baseplace.io.results import ResultMessages, read_result_mcap, write_result_mcap
+from baseplace.io.tf import TfTree
+
+__all__ = [
+    "BagCloud",
+    "BagScene",
+    "ResultMessages",
+    "TfTree",
+    "read_bag",
+    "read_result_mcap",
+    "write_result_mcap",
+]

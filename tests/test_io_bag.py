@@ -1,0 +1,195 @@
+"""ROS recordings in and out: PCL clouds, a tf tree and a map_server grid written to bags and read back."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from scipy.spatial.transform import Rotation
+
+from baseplace.cli import main
+from baseplace.errors import InputError
+from baseplace.io.bag import read_bag
+from baseplace.io.bag_writer import CloudRecord, GridRecord, TfRecord, write_input_bag
+from baseplace.io.results import read_result_mcap
+from baseplace.io.tf import TfTree
+from baseplace.terrain.io import load_cloud, load_transform
+from baseplace.world.occupancy import load_occupancy
+from conftest import SHARED
+
+MUG = SHARED / "pointclouds" / "table_scene_mug_stereo_textured.pcd"
+DEPOT = SHARED / "maps" / "depot.yaml"
+T0 = 1_700_000_000_000_000_000  # the cloud's stamp [ns]
+# The camera looks at the table from 1.27 m; the PCL reference plane puts the table 0.5287 m below
+# it, so with the camera there the tabletop is 0.74 m above the depot's floor, in its largest free area.
+T_MAP_CAMERA = load_transform("0.0162 -0.8378 -0.5458")
+T_MAP_CAMERA[:3, 3] = [4.55, 6.98, 0.74 + 0.5287]
+T_BASE_CAMERA = np.eye(4)
+T_BASE_CAMERA[:3, :3] = Rotation.from_euler("xyz", [0.1, -0.3, 0.2]).as_matrix()
+T_BASE_CAMERA[:3, 3] = [0.1, 0.0, 1.1]
+
+
+def _base_at(dx: float) -> np.ndarray:
+    """T_map_base that puts the camera at T_MAP_CAMERA shifted by dx along map x."""
+    T = T_MAP_CAMERA @ np.linalg.inv(T_BASE_CAMERA)
+    T = T.copy()
+    T[0, 3] += dx
+    return T
+
+
+def _write(path: Path, fmt: str) -> None:
+    cloud = load_cloud(MUG)
+    write_input_bag(
+        path, fmt,
+        clouds=[CloudRecord("/head/points", "head_camera", T0, cloud.points)],
+        tf=[TfRecord("map", "base_link", T0 - 10**9, _base_at(-0.1)),  # the base drives 0.2 m in 2 s:
+            TfRecord("map", "base_link", T0 + 10**9, _base_at(0.1)),  # at T0 it is half-way
+            TfRecord("base_link", "head_camera", T0 - 5 * 10**9, T_BASE_CAMERA, static=True)],
+        grids=[GridRecord("/map", "map", T0 - 5 * 10**9, load_occupancy(DEPOT))],
+    )  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def bags(tmp_path_factory) -> dict[str, Path]:
+    root = tmp_path_factory.mktemp("bags")
+    out = {"mcap": root / "rec_mcap", "sqlite3": root / "rec_db3", "ros1": root / "rec.bag"}
+    for fmt, path in out.items():
+        _write(path, fmt)
+    return out
+
+
+@pytest.mark.parametrize("fmt", ["mcap", "sqlite3", "ros1"])
+def test_read_cloud_grid_and_tf_from_every_format(bags, fmt):
+    scene = read_bag(bags[fmt], ["/head/points"], "/map", "map")
+    (c,) = scene.clouds
+    assert c.frame == "head_camera" and c.stamp_ns == T0
+    np.testing.assert_allclose(c.T_world_sensor, T_MAP_CAMERA, atol=1e-9)  # interpolated half-way
+    expected = load_cloud(MUG).points @ T_MAP_CAMERA[:3, :3].T + T_MAP_CAMERA[:3, 3]
+    np.testing.assert_allclose(c.world_points, expected, atol=2e-5)  # float32 in the message
+    grid = load_occupancy(DEPOT)
+    assert scene.grid is not None
+    np.testing.assert_array_equal(scene.grid.data, grid.data)
+    assert scene.grid.resolution == pytest.approx(grid.resolution) and scene.grid.origin == pytest.approx(
+        grid.origin
+    )
+
+
+def test_tf_interpolation_against_a_hand_computed_chain():
+    tree = TfTree()
+    Rz = Rotation.from_euler("z", [[0.0], [1.0]])
+    tree.add("map", "odom", 0, [0, 0, 0], [0, 0, 0, 1], static=True)
+    tree.add("odom", "base", 0, [0, 0, 0], Rz[0].as_quat(), static=False)
+    tree.add("odom", "base", 2 * 10**9, [2, 0, 0], Rz[1].as_quat(), static=False)
+    tree.add("base", "cam", 0, [0.5, 0, 1], [0, 0, 0, 1], static=True)
+    T = tree.lookup("map", "cam", 10**9)
+    # half-way: base at x = 1, yaw 0.5; the camera 0.5 m ahead of it and 1 m up
+    np.testing.assert_allclose(T[:3, 3], [1 + 0.5 * math.cos(0.5), 0.5 * math.sin(0.5), 1.0], atol=1e-12)
+    np.testing.assert_allclose(tree.lookup("cam", "map", 10**9), np.linalg.inv(T), atol=1e-12)
+    with pytest.raises(InputError, match=r"no transform from 'cam' to 'map' at 5.000 s.*nearest 2.000 s"):
+        tree.lookup("map", "cam", 5 * 10**9)
+
+
+def test_bag_errors_are_one_line_and_name_the_cause(bags, tmp_path):
+    b = bags["mcap"]
+    with pytest.raises(
+        InputError, match=r"no topic '/points'.*topics: /head/points \(sensor_msgs/msg/PointCloud2\)"
+    ):
+        read_bag(b, ["/points"], None, "map")
+    with pytest.raises(
+        InputError, match="unknown message type nav_msgs/msg/OccupancyGrid.*expected sensor_msgs"
+    ):
+        read_bag(b, ["/map"], None, "map")
+    with pytest.raises(
+        InputError, match=r"frame 'odom' is not in /tf or /tf_static; frames: base_link, head_camera, map"
+    ):
+        read_bag(b, ["/head/points"], None, "odom")
+    # a cloud recorded 30 s after the last /tf: the frames and the nearest stamps are named
+    late = tmp_path / "late"
+    write_input_bag(late, "mcap", clouds=[CloudRecord("/c", "head_camera", T0 + 30 * 10**9, np.ones((4, 3)))],
+                    tf=[TfRecord("map", "base_link", T0, np.eye(4)), TfRecord("map", "base_link", T0 + 10**9, np.eye(4)),
+                        TfRecord("base_link", "head_camera", T0, np.eye(4), static=True)])  # fmt: skip
+    with pytest.raises(
+        InputError, match=r"no transform from 'head_camera' to 'map' at .* recorded from .* nearest"
+    ):
+        read_bag(late, ["/c"], None, "map")
+    with pytest.raises(InputError, match="does not exist"):
+        read_bag(tmp_path / "missing.mcap", ["/c"], None, "map")
+
+
+@pytest.fixture(scope="module")
+def map_file(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("rmap") / "tiago.rmap"
+    assert main(["build-map", "--samples", "5e6", "--seed", "1", "--out", str(path)]) == 0
+    return path
+
+
+def test_place_from_a_bag_through_the_cli(bags, map_file, tmp_path, capsys, tiago):
+    capsys.readouterr()
+    out = tmp_path / "result.mcap"
+    target = "4.6 7.7 0.9 0 1.5708 0"  # 16 cm above the middle of the table, top-down
+    code = main(["place", "--bag", str(bags["mcap"]), "--cloud-topic", "/head/points", "--map-topic", "/map",
+                 "--world-frame", "map", "--target", target, "--map", str(map_file), "--placements", "2",
+                 "--tries", "300", "--mcap", str(out), "--json"])  # fmt: skip
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    result = json.loads(captured.out)
+    assert result["placements"] and result["mcap"] == str(out)
+    grid = load_occupancy(DEPOT)
+    arm = tiago.arm()
+    T_target = np.eye(4)
+    T_target[:3, :3] = Rotation.from_euler("ZYX", [0.0, 1.5708, 0.0]).as_matrix()
+    T_target[:3, 3] = [4.6, 7.7, 0.9]
+    for p in result["placements"]:
+        T = np.array(p["base_pose"])
+        # the base stands on the grid's free floor: z = 0 (within a voxel) and its whole footprint free
+        assert abs(T[2, 3]) < 0.03
+        ring = np.array([[math.cos(a), math.sin(a)] for a in np.linspace(0, 2 * math.pi, 36)])
+        disc = T[:2, 3] + np.vstack([r * ring for r in (0.0, 0.15, tiago.spec.footprint_radius)])
+        assert grid.is_free(disc).all()
+        # ... out of the table's way, which the cloud alone shows (0.6 x 0.4 m around (4.6, 7.7))
+        assert not (abs(T[0, 3] - 4.6) < 0.3 and abs(T[1, 3] - 7.7) < 0.2)
+        # and the arm reaches the target: pinocchio FK of the returned joints (an independent oracle)
+        q = np.array([p["joints"][0][n] for n in arm.joint_names])
+        data = tiago.model.createData()
+        pin.framesForwardKinematics(tiago.model, data, arm.to_pinocchio(q, tiago.q_reference))
+        base = data.oMf[tiago.model.getFrameId(arm.base_frame)]
+        tcp = data.oMf[tiago.model.getFrameId(arm.tcp_frame)]
+        reached = T @ (base.inverse() * tcp).homogeneous
+        np.testing.assert_allclose(reached[:3, 3], T_target[:3, 3], atol=2e-3)
+        angle = np.degrees(
+            np.arccos(np.clip((np.trace(reached[:3, :3].T @ T_target[:3, :3]) - 1) / 2, -1, 1))
+        )
+        assert angle < 1.0
+    # the MCAP holds the same poses as the JSON, in the map frame at the cloud's stamp
+    msgs = read_result_mcap(out)
+    poses = msgs["/baseplace/placements"]
+    assert len(poses) == len(result["placements"])
+    for msg, p in zip(poses, result["placements"], strict=True):
+        assert msg.header.frame_id == "map" and msg.header.stamp.sec == T0 // 10**9
+        q = msg.pose.orientation
+        T = np.eye(4)
+        T[:3, :3] = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
+        T[:3, 3] = [msg.pose.position.x, msg.pose.position.y, msg.pose.position.z]
+        np.testing.assert_allclose(T, np.array(p["base_pose"]), atol=2e-6)
+    (targets,) = msgs["/baseplace/targets"]
+    assert [targets.poses[0].position.x, targets.poses[0].position.y] == pytest.approx([4.6, 7.7])
+    (markers,) = msgs["/baseplace/regions"]
+    assert len({m.id // 100 for m in markers.markers}) == result["regions"]
+
+
+def test_every_command_takes_the_bag(bags, capsys):
+    capsys.readouterr()
+    code = main(["segment", "--bag", str(bags["ros1"]), "--cloud-topic", "/head/points", "--json"])
+    assert code == 0, capsys.readouterr().err
+    regions = json.loads(capsys.readouterr().out)["regions"]
+    assert any(abs(r["centroid"][2] - 0.74) < 0.02 and r["tilt_deg"] < 1.0 for r in regions)  # the table
+    code = main(["segment", "--bag", str(bags["sqlite3"]), "--cloud-topic", "/nope"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "no topic '/nope'" in err
+    code = main(["occupancy", str(DEPOT)])  # (occupancy reads files only; surface-sample takes --bag)
+    capsys.readouterr()
+    assert code == 0
