@@ -193,3 +193,49 @@ def test_every_command_takes_the_bag(bags, capsys):
     code = main(["occupancy", str(DEPOT)])  # (occupancy reads files only; surface-sample takes --bag)
     capsys.readouterr()
     assert code == 0
+
+
+def test_place_from_files_camera_cloud_and_grid(map_file, tmp_path, capsys):
+    # the same scene without a bag: the PCD, world_T_camera in a file, the map_server YAML
+    transform = tmp_path / "map_T_camera.txt"
+    transform.write_text("\n".join(" ".join(f"{v:.12g}" for v in row) for row in T_MAP_CAMERA) + "\n")
+    capsys.readouterr()
+    code = main(["place", "--cloud", str(MUG), "--transform", str(transform), "--occupancy", str(DEPOT),
+                 "--target", "4.6 7.7 0.9 0 1.5708 0", "--map", str(map_file), "--tries", "300", "--json"])  # fmt: skip
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    p = json.loads(captured.out)["placements"][0]
+    assert abs(p["z"]) < 0.03 and load_occupancy(DEPOT).is_free(np.array([[p["x"], p["y"]]]))[0]
+    # two clouds need two transforms
+    code = main(["place", "--cloud", str(MUG), "--cloud", str(MUG), "--transform", str(transform),
+                 "--occupancy", str(DEPOT), "--target", "4.6 7.7 0.9 0 1.5708 0", "--map", str(map_file)])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 2 and "one --transform per --cloud" in err
+
+
+def test_segment_a_fused_bag(bags, tmp_path, capsys):
+    out = tmp_path / "fused.bt"
+    capsys.readouterr()
+    args = [
+        "segment",
+        "--bag",
+        str(bags["mcap"]),
+        "--cloud-topic",
+        "/head/points",
+        "--fuse",
+        "--fused-out",
+        str(out),
+    ]
+    # a 25 mm OctoMap is too coarse for the table at the 5 cm its point spacing gives; the error says what to try
+    assert main(args) == 2
+    assert "try --resolution 0.03" in capsys.readouterr().err
+    code = main([*args, "--resolution", "0.03", "--json"])
+    assert code == 0, capsys.readouterr().err
+    regions = json.loads(capsys.readouterr().out)["regions"]
+    assert any(abs(r["centroid"][2] - 0.74) < 0.03 and r["tilt_deg"] < 1.0 for r in regions)  # the table
+    fused = load_cloud(out).points  # 25 mm voxel centres of the camera's view: (k + 1/2) 0.025
+    frac = (fused / 0.025 - 0.5) % 1.0
+    assert np.all(np.minimum(frac, 1.0 - frac) < 1e-6)
+    expected = load_cloud(MUG).points @ T_MAP_CAMERA[:3, :3].T + T_MAP_CAMERA[:3, 3]
+    keys = {tuple(k) for k in np.floor(expected / 0.025).astype(int).tolist()}
+    assert {tuple(k) for k in np.floor(fused / 0.025).astype(int).tolist()} <= keys  # one view: no new voxel

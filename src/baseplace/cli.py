@@ -359,7 +359,10 @@ def _world_cloud(args: argparse.Namespace) -> Any:
 
     scene = _bag(args, need_cloud=True, need_grid=False)
     if scene is not None:
-        return Cloud(scene.world_points(), source=f"{args.bag} {' '.join(args.cloud_topic)}")
+        source = f"{args.bag} {' '.join(args.cloud_topic)}"
+        if getattr(args, "fuse", False):
+            return _fused([(c.world_points, c.T_world_sensor[:3, 3]) for c in scene.clouds], args, source)
+        return Cloud(scene.world_points(), source=source)
     if args.cloud is None:
         raise InputError("give --cloud FILE or --bag FILE --cloud-topic TOPIC")
     paths = args.cloud if isinstance(args.cloud, list) else [args.cloud]
@@ -368,20 +371,46 @@ def _world_cloud(args: argparse.Namespace) -> Any:
         raise InputError(
             f"give one --transform per --cloud ({len(paths)} clouds, {len(transforms)} transforms)"
         )
-    clouds = []
+    clouds, origins = [], []
     for k, path in enumerate(paths):
         cloud = load_cloud(path)
         spec = transforms[k] if len(transforms) == len(paths) else transforms[0] if len(paths) == 1 else None
+        origins.append(np.zeros(3))
         if spec is not None:
-            cloud = cloud.transformed(load_transform(spec))
+            T = load_transform(spec)
+            cloud = cloud.transformed(T)
+            origins[-1] = T[:3, 3]
         else:
             check_up_direction(
                 cloud.points, optical=cloud.width is not None and cloud.height not in (None, 1)
             )
         clouds.append(cloud)
+    if getattr(args, "fuse", False):
+        return _fused([(c.points, o) for c, o in zip(clouds, origins, strict=True)], args, " ".join(paths))
     if len(clouds) == 1:
         return clouds[0]
     return Cloud(np.vstack([c.points for c in clouds]), source=" ".join(paths))
+
+
+def _fused(clouds: list[tuple[np.ndarray, np.ndarray]], args: argparse.Namespace, source: str) -> Any:
+    """World clouds with their sensor origins fused into one OctoMap (seed 000); its occupied voxels."""
+    from baseplace.terrain.fusion import FusionSettings, PosedCloud, fuse_clouds
+    from baseplace.terrain.io import Cloud
+
+    save = _out_path(getattr(args, "fused_out", None))
+    points = fuse_clouds(
+        [PosedCloud(p, o) for p, o in clouds], FusionSettings(prob_miss=args.fuse_miss), save
+    )
+    return Cloud(points, source=f"OctoMap of {source}")
+
+
+def _add_fuse_args(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("fusion (seed 000: the clouds into one OctoMap by ray casting)")
+    g.add_argument("--fuse", action="store_true",
+                   help="fuse the clouds (every --cloud, or the bag's clouds) into a 25 mm OctoMap, rays from each sensor origin")  # fmt: skip
+    g.add_argument("--fuse-miss", type=float, default=0.35,
+                   help="occupancy probability of a ray passing a voxel (default 0.35; octomap's own: 0.4)")  # fmt: skip
+    g.add_argument("--fused-out", default=None, help="also write the fused OctoMap (.bt)")
 
 
 def _grid(args: argparse.Namespace, option: str = "occupancy") -> Any:
@@ -1127,6 +1156,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="navigation map (map_server YAML) in the clouds' world frame: its free cells are floor")  # fmt: skip
     p.add_argument("--mcap", default=None, help="also write the result as an MCAP recording (ROS 2 messages)")
     _add_bag_args(p)
+    _add_fuse_args(p)
     p.add_argument(
         "--target", action="append", help='TCP target "x y z roll pitch yaw" [m, rad]; repeat for several'
     )
@@ -1177,6 +1207,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--transform", default=None, help='world_T_sensor file, or the sensor-frame up vector "ux uy uz"'
     )
     _add_bag_args(p, grid=False)
+    _add_fuse_args(p)
     p.add_argument("--start", required=True, help='start base pose "x y yaw" [m, rad]')
     p.add_argument("--goal", required=True, help='goal base pose "x y yaw" [m, rad]')
     p.add_argument("--planner", default="rrt", choices=["rrt", "regions"],
@@ -1227,6 +1258,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="height-map cell [m] (default: from the cloud's extent and point spacing, 0.02-0.05)")  # fmt: skip
     p.add_argument("--out", default=None, help="PNG of the regions (as seed 000 Fig. 2a)")
     _add_bag_args(p, grid=False)
+    _add_fuse_args(p)
 
     scene = sub.add_parser(
         "scene", help="generated test scenes with ground truth", description="generated scenes"

@@ -232,7 +232,7 @@ def explain_no_support(points: ArrayLike, resolution: float, rng: np.random.Gene
     """Why a z-up cloud (N, 3) [m] gave no support region at ``resolution`` [m]: a one-line message.
 
     If RANSAC finds a level plane, it was too small for the cell: the message names its area and a
-    finer resolution to try. Otherwise it names the dominant plane's normal as the up vector to pass.
+    finer resolution to try (half the cell, at most 2 cm, at least 1.2 point spacings). Otherwise it names the dominant plane's normal as the up vector to pass.
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     planes = dominant_planes(pts, n_planes=10, min_share=0.01, rng=rng)
@@ -242,7 +242,9 @@ def explain_no_support(points: ArrayLike, resolution: float, rng: np.random.Gene
         inside = np.abs(pts @ best.normal + best.d) <= 0.03
         xy = pts[inside, :2]
         area = _occupied_area(xy, 0.02) if len(xy) else 0.0
-        finer = max(0.01, min(resolution / 2, 0.02))
+        # finer, but not below the points' own spacing (a fused OctoMap is a 25 mm lattice)
+        floor = math.ceil(round(1.2 * point_spacing(pts) * 100, 6)) / 100
+        finer = max(0.01, min(resolution / 2, 0.02), floor)
         return (
             f"no planar region large enough at --resolution {resolution:g} m: the largest level plane "
             f"(z = {float(np.median(pts[inside, 2])):.2f} m, about {area:.2f} m^2) is too small for "
