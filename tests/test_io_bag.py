@@ -239,3 +239,38 @@ def test_segment_a_fused_bag(bags, tmp_path, capsys):
     expected = load_cloud(MUG).points @ T_MAP_CAMERA[:3, :3].T + T_MAP_CAMERA[:3, 3]
     keys = {tuple(k) for k in np.floor(expected / 0.025).astype(int).tolist()}
     assert {tuple(k) for k in np.floor(fused / 0.025).astype(int).tolist()} <= keys  # one view: no new voxel
+
+
+def _pose_xyyaw(pose) -> list[float]:
+    q = pose.orientation
+    yaw = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_euler("ZYX")[0]
+    return [pose.position.x, pose.position.y, yaw]
+
+
+def test_candidates_and_navigate_write_their_mcap(bags, map_file, tmp_path, capsys):
+    out = tmp_path / "candidates.mcap"
+    capsys.readouterr()
+    code = main(["candidates", "--bag", str(bags["sqlite3"]), "--map-topic", "/map", "--cloud-topic", "/head/points",
+                 "--object", "4.4 7.6 0.8", "--robot-pose", "3.0 7.0 0", "--map", str(map_file),
+                 "--mcap", str(out), "--json"])  # fmt: skip
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    rows = json.loads(captured.out)["candidates"]
+    (arr,) = read_result_mcap(out)["/baseplace/candidates"]
+    assert len(arr.poses) == len(rows)
+    for pose, row in zip(arr.poses, rows, strict=True):
+        assert _pose_xyyaw(pose) == pytest.approx([row["x"], row["y"], row["yaw"]], abs=1e-3)
+    from test_navigation import _ramp_scene
+
+    cloud = tmp_path / "ramp.npy"
+    np.save(cloud, _ramp_scene(with_object=True).sample_cloud(np.random.default_rng(0)))
+    out = tmp_path / "path.mcap"
+    code = main(["navigate", "--cloud", str(cloud), "--start", "-2 0.6 0", "--goal", "1.7 0.6 0", "--planner",
+                 "regions", "--mcap", str(out), "--json"])  # fmt: skip
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    poses = json.loads(captured.out)["poses"]
+    msgs = read_result_mcap(out)
+    (path,) = msgs["/baseplace/path"]
+    assert np.allclose([_pose_xyyaw(p.pose) for p in path.poses], poses, atol=1e-3)
+    assert len(msgs["/baseplace/regions"][0].markers) >= 2  # floor and ramp outlines

@@ -589,7 +589,9 @@ def cmd_place(args: argparse.Namespace) -> int:
                        [r.poses for r in routes if r is not None])  # fmt: skip
         obj["png"] = str(out)
     if mcap is not None:
-        _write_place_mcap(mcap, args, result, kept, routes, targets)
+        _write_mcap(mcap, args, result.terrain, placements=[p.T_world_base for p in kept],
+                    candidates=[p.T_world_base for p in kept], paths=[r.poses for r in routes if r is not None],
+                    targets=list(targets))  # fmt: skip
         obj["mcap"] = str(mcap)
     if not placements and result.placements:
         raise NothingFoundError(
@@ -614,29 +616,24 @@ def cmd_place(args: argparse.Namespace) -> int:
     return 0
 
 
-def _write_place_mcap(path: Path, args: argparse.Namespace, result: Any, kept: list[Any], routes: list[Any],
-                      targets: np.ndarray) -> None:  # fmt: skip
-    """The placements, paths, targets and regions as an MCAP recording (io.results)."""
+def _write_mcap(path: Path, args: argparse.Namespace, terrain: Any = None, **poses: Any) -> None:
+    """Results as an MCAP recording (io.results): ``poses`` are ResultMessages fields; regions from ``terrain``."""
     from baseplace.io.results import ResultMessages, write_result_mcap
 
     scene = getattr(args, "_bag_scene", None)
     stamp = max((c.stamp_ns for c in scene.clouds), default=0) if scene is not None else 0
-    frame = args.world_frame if scene is not None else "map"
-    graph = result.terrain.graph
     regions = []
-    for r in result.terrain.segmentation.regions:
-        poly = graph.nodes[r.id]["polygon"]
-        rings = []
-        for p in list(poly.geoms) if poly.geom_type == "MultiPolygon" else [poly]:
-            for ring in [p.exterior, *p.interiors]:
-                xy = np.asarray(ring.coords)
-                if len(xy):
-                    rings.append(np.c_[xy, r.height_at(xy)])
-        regions.append((r.id, rings))
-    write_result_mcap(path, ResultMessages(
-        frame, stamp, placements=[p.T_world_base for p in kept], candidates=[p.T_world_base for p in kept],
-        paths=[r.poses for r in routes if r is not None], regions=regions, targets=list(targets),
-    ))  # fmt: skip
+    if terrain is not None:
+        for r in terrain.segmentation.regions:
+            poly = terrain.graph.nodes[r.id]["polygon"]
+            rings = []
+            for p in list(poly.geoms) if poly.geom_type == "MultiPolygon" else [poly]:
+                for ring in [p.exterior, *p.interiors]:
+                    xy = np.asarray(ring.coords)
+                    if len(xy):
+                        rings.append(np.c_[xy, r.height_at(xy)])
+            regions.append((r.id, rings))
+    write_result_mcap(path, ResultMessages(args.world_frame, stamp, regions=regions, **poses))
 
 
 def _place_timings(timings: dict[str, float], terrain: Any, routes: list[Any]) -> dict[str, float]:
@@ -697,6 +694,7 @@ def cmd_candidates(args: argparse.Namespace) -> int:
     from baseplace.world.gridnav import GridNavigator
 
     out = _out_path(args.png)
+    mcap = _out_path(args.mcap)
     p_o = _parse_xyz(args.object, "--object")
     robot_pose = _base_xyyaw(args.robot_pose) if args.robot_pose is not None else None
     grid = _grid(args)
@@ -766,6 +764,13 @@ def cmd_candidates(args: argparse.Namespace) -> int:
         plot_candidates(grid, p_o, ranked, rejected, out, robot_pose, route,
                         f"{args.method} candidates for {robot.name}: {len(ranked)} verified, {len(rejected)} rejected")  # fmt: skip
         obj["png"] = str(out)
+    if mcap is not None:
+        from baseplace.geometry.poses import pose_from_xyz_rpy
+
+        T_c = [pose_from_xyz_rpy([c.pose.x, c.pose.y, 0.0, 0.0, 0.0, c.pose.yaw]) for c in ranked]
+        _write_mcap(mcap, args, candidates=T_c, placements=T_c[:1],
+                    paths=[] if route is None else [np.asarray(route)])  # fmt: skip
+        obj["mcap"] = str(mcap)
     if not ranked:
         raise NothingFoundError(
             f"no verified candidate ({args.method}); {len(rejected)} positions rejected "
@@ -816,6 +821,7 @@ def cmd_navigate(args: argparse.Namespace) -> int:
     from baseplace.terrain.pipeline import terrain_from_points
 
     out = _out_path(args.out)
+    mcap = _out_path(args.mcap)
     start, goal = _base_xyyaw(args.start), _base_xyyaw(args.goal)
     robot = Robot(args.robot)
     cloud = _world_cloud(args)
@@ -833,6 +839,9 @@ def cmd_navigate(args: argparse.Namespace) -> int:
 
         plot_navigation(navmap, [path], start, goal, out)
         obj["png"] = str(out)
+    if mcap is not None:
+        _write_mcap(mcap, args, terrain, paths=[path.poses])
+        obj["mcap"] = str(mcap)
     text = (f"{path.planner} path of {path.length:.2f} m through regions {list(path.regions)} "
             f"in {path.time_ms:.0f} ms, {len(path.poses)} poses") + (f"\nwrote {out}" if out else "")  # fmt: skip
     _emit(args, obj, text)
@@ -1194,6 +1203,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="TCP distance behind the grasp point [m] (default: 0.15 for TIAGo, else 0)")  # fmt: skip
     p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
     p.add_argument("--png", default=None, help="PNG of the candidates over the grid (as seed 004 Fig. 2)")
+    p.add_argument("--mcap", default=None, help="also write the candidates (best first) as an MCAP recording")
     _add_bag_args(p)
 
     p = command(
@@ -1208,6 +1218,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_bag_args(p, grid=False)
     _add_fuse_args(p)
+    p.add_argument("--mcap", default=None, help="also write the path and the regions as an MCAP recording")
     p.add_argument("--start", required=True, help='start base pose "x y yaw" [m, rad]')
     p.add_argument("--goal", required=True, help='goal base pose "x y yaw" [m, rad]')
     p.add_argument("--planner", default="rrt", choices=["rrt", "regions"],

@@ -45,7 +45,7 @@ class ResultMessages:
         stamp_ns: header stamp and log time [ns].
         placements: (4, 4) world_T_base of each placement.
         candidates: (4, 4) world_T_base of each candidate.
-        paths: base paths, each (K, 3) x [m], y [m], yaw [rad] (z from ``path_z``).
+        paths: base paths, each (K, 3) x [m], y [m], yaw [rad], or (K, 2) x, y (yaw along the path); z = 0.
         regions: (region id, rings) with rings (M, 3) world points of each polygon ring.
         targets: (4, 4) world TCP targets.
     """
@@ -64,6 +64,16 @@ def _base_T(x: float, y: float, yaw: float, z: float = 0.0) -> FloatArray:
     T[:2, :2] = [[math.cos(yaw), -math.sin(yaw)], [math.sin(yaw), math.cos(yaw)]]
     T[:3, 3] = [x, y, z]
     return T
+
+
+def _with_yaw(poses: Any) -> FloatArray:
+    """(K, 3) x, y, yaw of a path given as (K, 3), or as (K, 2) points (yaw: the direction of travel)."""
+    p = np.asarray(poses, dtype=float).reshape(len(poses), -1)
+    if p.shape[1] >= 3:
+        return p[:, :3]
+    step = np.diff(p[:, :2], axis=0)
+    yaw = np.arctan2(step[:, 1], step[:, 0]) if len(step) else np.zeros(0)
+    return np.c_[p[:, :2], np.r_[yaw, yaw[-1:] if len(yaw) else [0.0]]]
 
 
 def _marker_array(ts: Any, res: ResultMessages) -> Any:
@@ -124,8 +134,8 @@ def write_result_mcap(path: str | Path, res: ResultMessages) -> None:
                         [g["geometry_msgs/msg/PoseArray"](header=h, poses=[pose_msg(ts, T) for T in poses])])  # fmt: skip
             put(PATH_TOPIC, "nav_msgs/msg/Path", [
                 g["nav_msgs/msg/Path"](header=h, poses=[
-                    g["geometry_msgs/msg/PoseStamped"](header=h, pose=pose_msg(ts, _base_T(*p[:3])))
-                    for p in np.asarray(poses, dtype=float)])
+                    g["geometry_msgs/msg/PoseStamped"](header=h, pose=pose_msg(ts, _base_T(*p)))
+                    for p in _with_yaw(poses)])
                 for poses in res.paths])  # fmt: skip
             if res.regions:
                 put(REGIONS_TOPIC, "visualization_msgs/msg/MarkerArray", [_marker_array(ts, res)])
