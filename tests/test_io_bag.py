@@ -274,3 +274,41 @@ def test_candidates_and_navigate_write_their_mcap(bags, map_file, tmp_path, caps
     (path,) = msgs["/baseplace/path"]
     assert np.allclose([_pose_xyyaw(p.pose) for p in path.poses], poses, atol=1e-3)
     assert len(msgs["/baseplace/regions"][0].markers) >= 2  # floor and ramp outlines
+
+
+def test_three_pcl_clouds_from_three_cameras(tmp_path):
+    names = ("table_scene_mug_stereo_textured.pcd", "office1.pcd", "sac_plane_test.pcd")
+    rng = np.random.default_rng(3)
+    T_base = {}
+    clouds, tf = (
+        [],
+        [
+            TfRecord("map", "base_link", T0 - 10**9, np.eye(4)),
+            TfRecord("map", "base_link", T0 + 10**9, np.eye(4)),
+        ],
+    )
+    for k, name in enumerate(names):
+        T = np.eye(4)
+        T[:3, :3] = Rotation.from_rotvec(rng.normal(size=3)).as_matrix()
+        T[:3, 3] = rng.uniform(-1, 1, 3)
+        T_base[f"cam{k}"] = T
+        tf.append(TfRecord("base_link", f"cam{k}", T0, T, static=True))
+        points = load_cloud(SHARED / "pointclouds" / name).points
+        # two messages per topic: the first at T0 - 0.5 s, the second at T0 + 0.5 s
+        clouds += [
+            CloudRecord(f"/cam{k}/points", f"cam{k}", T0 + s * 5 * 10**8, points[s < 0 :: 2]) for s in (-1, 1)
+        ]
+    path = tmp_path / "three.bag"
+    write_input_bag(path, "ros1", clouds=clouds, tf=tf)
+    topics = [f"/cam{k}/points" for k in range(3)]
+    scene = read_bag(path, topics, None, "map", clouds="all")
+    assert len(scene.clouds) == 6
+    for c in scene.clouds:
+        k = int(c.frame[3:])
+        points = load_cloud(SHARED / "pointclouds" / names[k]).points
+        first = c.stamp_ns < T0
+        expected = points[first::2] @ T_base[c.frame][:3, :3].T + T_base[c.frame][:3, 3]
+        np.testing.assert_allclose(c.world_points, expected, atol=1e-4)
+    assert [c.stamp_ns for c in read_bag(path, topics[:1], None, "map", clouds="first").clouds] == [
+        T0 - 5 * 10**8
+    ]

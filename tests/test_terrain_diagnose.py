@@ -122,3 +122,19 @@ def test_sideways_scene_is_flagged_with_its_true_up():
     assert _angle_deg(up, R @ np.array([0.0, 0.0, 1.0])) < 2.0 and up @ R[:, 2] > 0
     planes = dominant_planes(pts)
     assert _angle_deg(planes[0].normal, np.array([0.0, 0.0, 1.0])) < 1.0  # the floor dominates
+
+
+def test_sac_plane_test_flagged_then_segmented_with_the_suggested_up(capsys):
+    cloud = CLOUDS / "sac_plane_test.pcd"  # PCL's RANSAC test plane, tilted in its frame, with outliers
+    assert main(["segment", str(cloud)]) == 2
+    err = capsys.readouterr().err
+    up = err.split('--transform "')[1].split('"')[0]
+    assert main(["segment", str(cloud), "--transform", up, "--json"]) == 0
+    import json
+
+    (region,) = json.loads(capsys.readouterr().out)["regions"]
+    assert region["tilt_deg"] < 3.0
+    # the region's plane holds most of the raw points (a check on the data, not on the segmentation)
+    pts = load_cloud(cloud).transformed(load_transform(up)).points
+    n, d = np.array(region["normal"]), region["d"]
+    assert np.mean(np.abs(pts @ n + d) < 0.03) > 0.5
