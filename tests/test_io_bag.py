@@ -312,3 +312,25 @@ def test_three_pcl_clouds_from_three_cameras(tmp_path):
     assert [c.stamp_ns for c in read_bag(path, topics[:1], None, "map", clouds="first").clouds] == [
         T0 - 5 * 10**8
     ]
+
+
+def test_bad_messages_and_files_are_one_line_errors(tmp_path):
+    from rosbags.typesys import Stores, get_typestore
+
+    from baseplace.io.messages import cloud_msg, cloud_points
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    msg = cloud_msg(ts, np.arange(12.0).reshape(4, 3), "cam", T0)
+    np.testing.assert_allclose(cloud_points(msg, "t")[0], np.arange(12.0).reshape(4, 3))
+    no_z = type(msg)(**{**msg.__dict__, "fields": msg.fields[:2]})
+    with pytest.raises(InputError, match=r"needs float fields x, y, z; missing \['z'\]"):
+        cloud_points(no_z, "t")
+    short = type(msg)(**{**msg.__dict__, "data": msg.data[:20]})
+    with pytest.raises(InputError, match="data of 20 bytes does not fit 4 x 1 points"):
+        cloud_points(short, "t")
+    garbage = tmp_path / "broken.mcap"
+    garbage.write_bytes(b"\x89MCAP0\r\n" + bytes(range(256)))
+    with pytest.raises(InputError, match="cannot read bag"):
+        read_bag(garbage, ["/c"], None, "map")
+    with pytest.raises(InputError, match="give a cloud topic"):
+        read_bag(garbage, [], None, "map")

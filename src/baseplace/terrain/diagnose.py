@@ -72,26 +72,23 @@ def _thin(points: ArrayLike, voxel: float, limit: int, rng: np.random.Generator)
     return pts
 
 
-def point_spacing(points: ArrayLike, rng: np.random.Generator | None = None, samples: int = 2000) -> float:
+def point_spacing(points: ArrayLike, samples: int = 2000, limit: int = 50_000) -> float:
     """Median distance from a point to its nearest neighbour [m] (points (N, 3) [m]).
 
-    Above 2 x 10^5 points a random subset is searched and the spacing scaled back by the square root of
-    the subsampling factor (surface samples: spacing ~ 1 / sqrt(density)).
+    Above ``limit`` points an evenly strided subset is searched and the spacing scaled back by the
+    square root of the subsampling factor (surface samples: spacing ~ 1 / sqrt(density)).
     """
     from scipy.spatial import cKDTree
 
-    rng = rng or np.random.default_rng(0)
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    scale = 1.0
-    if len(pts) > 200_000:
-        scale = math.sqrt(len(pts) / 200_000)
-        pts = pts[rng.choice(len(pts), 200_000, replace=False)]
     if len(pts) < 2:
         return 0.0
-    tree = cKDTree(pts)
-    query = pts[rng.choice(len(pts), min(samples, len(pts)), replace=False)]
+    stride = max(1, len(pts) // limit)
+    sub = pts[::stride]
+    tree = cKDTree(sub)
+    query = sub[:: max(1, len(sub) // samples)]
     dist, _ = tree.query(query, k=2)
-    return float(np.median(dist[:, 1])) / scale
+    return float(np.median(dist[:, 1])) / math.sqrt(stride)
 
 
 def auto_resolution(points: ArrayLike) -> float:
@@ -104,7 +101,8 @@ def auto_resolution(points: ArrayLike) -> float:
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if len(pts) == 0:
         raise InputError("the cloud has no finite points")
-    lo, hi = np.percentile(pts[:, :2], [2, 98], axis=0)
+    sub = pts[:: max(1, len(pts) // 100_000), :2]
+    lo, hi = np.percentile(sub, [2, 98], axis=0)
     extent = math.sqrt(max(float(np.prod(hi - lo)), 0.0))
     spacing = point_spacing(pts)
     raw = max(extent / CELLS_ACROSS, SPACING_CELLS * spacing)
