@@ -334,3 +334,32 @@ def test_bad_messages_and_files_are_one_line_errors(tmp_path):
         read_bag(garbage, ["/c"], None, "map")
     with pytest.raises(InputError, match="give a cloud topic"):
         read_bag(garbage, [], None, "map")
+
+
+def test_place_with_start_plans_on_the_map_around_the_table(bags, map_file, tmp_path, capsys, tiago):
+    out = tmp_path / "with_path.mcap"
+    capsys.readouterr()
+    args = ["place", "--bag", str(bags["mcap"]), "--cloud-topic", "/head/points", "--map-topic", "/map",
+            "--target", "4.6 7.7 0.9 0 1.5708 0", "--map", str(map_file), "--tries", "300"]  # fmt: skip
+    code = main([*args, "--start", "5.6 9.6 0", "--mcap", str(out), "--json"])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    p = json.loads(captured.out)["placements"][0]
+    poses = np.array(p["path"]["poses"])
+    assert poses[0].tolist() == pytest.approx([5.6, 9.6, 0.0]) and poses[-1].tolist() == pytest.approx(
+        [p["x"], p["y"], p["yaw"]], abs=1e-3
+    )
+    # every waypoint keeps the robot's disc on free map cells and off the table the camera sees
+    grid = load_occupancy(DEPOT)
+    r = tiago.spec.footprint_bounding_radius
+    ring = np.array([[math.cos(a), math.sin(a)] for a in np.linspace(0, 2 * math.pi, 24)])
+    for x, y, _ in poses:
+        assert grid.is_free(np.array([x, y]) + 0.9 * r * ring).all()
+        # the tabletop in the map spans about [4.37, 4.83] x [7.47, 7.89] (its points' 1-99 %); one cell of slack
+        gap = np.hypot(max(4.37 - x, 0.0, x - 4.83), max(7.47 - y, 0.0, y - 7.89))
+        assert gap > r - 0.05
+    (path,) = read_result_mcap(out)["/baseplace/path"]
+    assert np.allclose([[q.pose.position.x, q.pose.position.y] for q in path.poses], poses[:, :2], atol=1e-3)
+    code = main([*args, "--start", "-5 -5 0"])  # off the map
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "start" in err

@@ -536,14 +536,11 @@ def cmd_place(args: argparse.Namespace) -> int:
         from baseplace.terrain.pipeline import terrain_from_points
 
         start = _base_xyyaw(args.start)
-        if grid is not None:
-            raise InputError(
-                "--start with an occupancy grid is not supported yet; plan on the grid with navigate"
-            )
-        assert cloud is not None  # a cloud or a grid was given
-        terrain = terrain_from_points(cloud.points, resolution=args.resolution)
-        navmap = navigation_map(terrain, robot.spec.footprint_bounding_radius)
-        navmap.check_pose("--start", start[:2])
+        if grid is None:
+            assert cloud is not None  # a cloud or a grid was given
+            terrain = terrain_from_points(cloud.points, resolution=args.resolution)
+            navmap = navigation_map(terrain, robot.spec.footprint_bounding_radius)
+            navmap.check_pose("--start", start[:2])
     if grid is not None:
         from baseplace.placement.in_map import place_in_map
 
@@ -555,7 +552,17 @@ def cmd_place(args: argparse.Namespace) -> int:
             robot, rmap, cloud.points, targets, settings, np.random.default_rng(args.seed), terrain=terrain
         )
     arm = robot.arm(rmap.info.arm)
-    kept, routes = _routes(result.placements, navmap, start, args.planner, args.seed, result.failures)
+    if grid is not None and start is not None:  # on the navigation map, around what the cameras see
+        from baseplace.placement.in_map import grid_routes
+
+        goals = [(p.T_world_base[0, 3], p.T_world_base[1, 3], p.yaw) for p in result.placements]
+        paths = grid_routes(grid, [] if cloud is None else [cloud.points], start, goals,
+                            robot.spec.footprint_bounding_radius)  # fmt: skip
+        result.failures["no_path"] += sum(r is None for r in paths)
+        kept = [p for p, r in zip(result.placements, paths, strict=True) if r is not None]
+        routes: list[Any] = [r for r in paths if r is not None]
+    else:
+        kept, routes = _routes(result.placements, navmap, start, args.planner, args.seed, result.failures)
     placements = []
     for p, route in zip(kept, routes, strict=True):
         T = p.T_world_base

@@ -107,6 +107,24 @@ def _seen_cells(grid: OccupancyGrid, seen: FloatArray) -> NDArray[np.bool_]:
     return mask
 
 
+def with_cloud_obstacles(
+    grid: OccupancyGrid, points: ArrayLike, z_min: float = 0.05, z_max: float = 2.0
+) -> OccupancyGrid:
+    """The grid with every cell under a cloud point between ``z_min`` and ``z_max`` [m] occupied.
+
+    For planning the base on the map: a table or a chair that the cameras see but the map does not
+    show blocks the path (points (N, 3) in the grid's world frame, floor at z = 0).
+    """
+    pts = np.asarray(points, dtype=float).reshape(-1, 3)
+    pts = pts[(pts[:, 2] > z_min) & (pts[:, 2] < z_max)]
+    data = grid.data.copy()
+    if len(pts):
+        ij = grid.world_to_cell(pts[:, :2])
+        ok = (ij[:, 0] >= 0) & (ij[:, 0] < grid.width) & (ij[:, 1] >= 0) & (ij[:, 1] < grid.height)
+        data[ij[ok, 1], ij[ok, 0]] = 100
+    return OccupancyGrid(data, grid.resolution, grid.origin, grid.source)
+
+
 def target_window(
     grid: OccupancyGrid, targets_xy: ArrayLike, reach: float, margin: float
 ) -> tuple[float, float, float, float]:
