@@ -363,3 +363,31 @@ def test_place_with_start_plans_on_the_map_around_the_table(bags, map_file, tmp_
     code = main([*args, "--start", "-5 -5 0"])  # off the map
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "start" in err
+
+
+@pytest.mark.slow  # ~17 s: builds a small surface map in a fresh cache
+def test_surface_sample_reads_the_grid_from_the_bag(bags, tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    env = {
+        **os.environ,
+        "BASEPLACE_CACHE": str(tmp_path / "cache"),
+    }  # small maps stay out of the user's cache
+
+    def cli(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, "-m", "baseplace.cli", *args], capture_output=True, text=True,
+                              stdin=subprocess.DEVNULL, timeout=600, env=env)  # fmt: skip
+
+    smap = tmp_path / "table.smap"
+    proc = cli("surface-map", "--robot", "tiago", "--samples", "3e5", "--height", "0.74", "--resolution", "0.1",
+               "--orientations", "8", "--polygon", "4.37,7.47;4.83,7.47;4.83,7.89;4.37,7.89", "--out", str(smap))  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    common = ("surface-sample", "--map", str(smap), "--n", "3", "--candidates", "5", "--json")
+    from_bag = cli(*common, "--bag", str(bags["sqlite3"]), "--map-topic", "/map")
+    from_file = cli(*common, "--occupancy", str(DEPOT))
+    assert from_bag.returncode == 0 and from_file.returncode == 0, from_bag.stderr + from_file.stderr
+    poses = json.loads(from_bag.stdout)["poses"]
+    assert poses == json.loads(from_file.stdout)["poses"]  # the same grid, the same poses
+    assert load_occupancy(DEPOT).is_free(np.array([[p["x"], p["y"]] for p in poses])).all()
