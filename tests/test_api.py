@@ -13,6 +13,7 @@ MODULES = [
     "baseplace.robots",
     "baseplace.terrain",
     "baseplace.sim",
+    "baseplace.io",
 ]
 
 

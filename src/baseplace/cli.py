@@ -383,26 +383,129 @@ def cmd_view(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_bag_args(p: argparse.ArgumentParser, clouds: bool = True, grid: bool = True) -> None:
+    """``--bag`` and its topic options, the same on every command that reads a cloud or a grid."""
+    g = p.add_argument_group("ROS recording (rosbag2 directory, .db3, .mcap, or ROS 1 .bag)")
+    g.add_argument("--bag", default=None, help="read the inputs from this recording instead of files")
+    if clouds:
+        g.add_argument("--cloud-topic", action="append", default=None,
+                       help="sensor_msgs/PointCloud2 topic, posed by /tf and /tf_static at its stamp; repeat for several")  # fmt: skip
+        g.add_argument("--bag-clouds", default="last", choices=["last", "first", "all"],
+                       help="which messages of each cloud topic (default last)")  # fmt: skip
+    if grid:
+        g.add_argument("--map-topic", default=None, help="nav_msgs/OccupancyGrid topic (its last message)")
+    g.add_argument("--world-frame", default="map", help="frame of the results (default map)")
+
+
+def _bag(args: argparse.Namespace, need_cloud: bool, need_grid: bool) -> Any:
+    """The recording's scene for ``--bag``, or None without it."""
+    if getattr(args, "bag", None) is None:
+        return None
+    if getattr(args, "_bag_scene", None) is not None:
+        return args._bag_scene
+    from baseplace.io.bag import read_bag
+
+    topics = getattr(args, "cloud_topic", None) or []
+    if need_cloud and not topics:
+        raise InputError("with --bag, give the cloud topic: --cloud-topic /camera/points")
+    map_topic = getattr(args, "map_topic", None)
+    if need_grid and map_topic is None:
+        raise InputError("with --bag, give the map topic: --map-topic /map")
+    args._bag_scene = read_bag(
+        args.bag, topics, map_topic, args.world_frame, getattr(args, "bag_clouds", "last")
+    )
+    return args._bag_scene
+
+
+def _world_cloud(args: argparse.Namespace) -> Any:
+    """The cloud of ``--cloud`` (or ``--bag``) in the world frame: through ``--transform`` or tf, or checked z-up."""
+    from baseplace.terrain.diagnose import check_up_direction
+    from baseplace.terrain.io import Cloud, load_cloud, load_transform
+
+    scene = _bag(args, need_cloud=True, need_grid=False)
+    if scene is not None:
+        source = f"{args.bag} {' '.join(args.cloud_topic)}"
+        if getattr(args, "fuse", False):
+            return _fused([(c.world_points, c.T_world_sensor[:3, 3]) for c in scene.clouds], args, source)
+        return Cloud(scene.world_points(), source=source)
+    if args.cloud is None:
+        raise InputError("give --cloud FILE or --bag FILE --cloud-topic TOPIC")
+    paths = args.cloud if isinstance(args.cloud, list) else [args.cloud]
+    transforms = args.transform if isinstance(args.transform, list) else [args.transform]
+    if len(paths) > 1 and len(transforms) not in (0, len(paths)) and transforms != [None]:
+        raise InputError(
+            f"give one --transform per --cloud ({len(paths)} clouds, {len(transforms)} transforms)"
+        )
+    clouds, origins = [], []
+    for k, path in enumerate(paths):
+        cloud = load_cloud(path)
+        spec = transforms[k] if len(transforms) == len(paths) else transforms[0] if len(paths) == 1 else None
+        origins.append(np.zeros(3))
+        if spec is not None:
+            T = load_transform(spec)
+            cloud = cloud.transformed(T)
+            origins[-1] = T[:3, 3]
+        else:
+            check_up_direction(
+                cloud.points, optical=cloud.width is not None and cloud.height not in (None, 1)
+            )
+        clouds.append(cloud)
+    if getattr(args, "fuse", False):
+        return _fused([(c.points, o) for c, o in zip(clouds, origins, strict=True)], args, " ".join(paths))
+    if len(clouds) == 1:
+        return clouds[0]
+    return Cloud(np.vstack([c.points for c in clouds]), source=" ".join(paths))
+
+
+def _fused(clouds: list[tuple[np.ndarray, np.ndarray]], args: argparse.Namespace, source: str) -> Any:
+    """World clouds with their sensor origins fused into one OctoMap (seed 000); its occupied voxels."""
+    from baseplace.terrain.fusion import FusionSettings, PosedCloud, fuse_clouds
+    from baseplace.terrain.io import Cloud
+
+    save = _out_path(getattr(args, "fused_out", None))
+    points = fuse_clouds(
+        [PosedCloud(p, o) for p, o in clouds], FusionSettings(prob_miss=args.fuse_miss), save
+    )
+    return Cloud(points, source=f"OctoMap of {source}")
+
+
+def _add_fuse_args(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("fusion (seed 000: the clouds into one OctoMap by ray casting)")
+    g.add_argument("--fuse", action="store_true",
+                   help="fuse the clouds (every --cloud, or the bag's clouds) into a 25 mm OctoMap, rays from each sensor origin")  # fmt: skip
+    g.add_argument("--fuse-miss", type=float, default=0.35,
+                   help="occupancy probability of a ray passing a voxel (default 0.35; octomap's own: 0.4)")  # fmt: skip
+    g.add_argument("--fused-out", default=None, help="also write the fused OctoMap (.bt)")
+
+
+def _grid(args: argparse.Namespace, option: str = "occupancy") -> Any:
+    """The occupancy grid of ``--occupancy`` (or ``--bag --map-topic``), or None without either."""
+    from baseplace.world.occupancy import load_occupancy
+
+    if getattr(args, "bag", None) is not None and getattr(args, "map_topic", None) is not None:
+        return _bag(args, need_cloud=False, need_grid=True).grid
+    path = getattr(args, option, None)
+    return None if path is None else load_occupancy(path)
+
+
 def cmd_segment(args: argparse.Namespace) -> int:
     """Segment a cloud into planar regions."""
-    from baseplace.terrain.io import load_cloud, load_transform
     from baseplace.terrain.pipeline import terrain_from_points, terrain_json
 
-    cloud = load_cloud(args.cloud)
-    if args.transform is not None:
-        cloud = cloud.transformed(load_transform(args.transform))
     out = _out_path(args.out)
+    cloud = _world_cloud(args)
     terrain = terrain_from_points(cloud.points, args.algorithm, args.resolution)
     result = terrain_json(terrain)
-    result["cloud"] = {"path": str(args.cloud), "points": len(cloud.points)}
+    result["cloud"] = {"path": str(args.cloud or args.bag), "points": len(cloud.points)}
     result["algorithm"] = args.algorithm
+    result["resolution"] = terrain.segmentation.hmap.resolution
     if out is not None:
         from baseplace.viz.regions import plot_regions
 
         plot_regions(terrain.segmentation, terrain.graph, out)
         result["png"] = str(out)
-    lines = [f"{len(result['regions'])} planar regions from {len(cloud.points)} points "
-             f"({result['timings_ms']['total']:.0f} ms, {args.algorithm})"]  # fmt: skip
+    lines = [f"{len(result['regions'])} planar regions from {len(cloud.points)} points at "
+             f"{result['resolution']:g} m cells ({result['timings_ms']['total']:.0f} ms, {args.algorithm})"]  # fmt: skip
     for r in result["regions"]:
         lines.append(f"  region {r['id']}: tilt {r['tilt_deg']:.1f} deg, area {r['area_m2']:.2f} m^2, "
                      f"centroid z {r['centroid'][2]:.3f} m")  # fmt: skip
@@ -509,17 +612,21 @@ def cmd_place(args: argparse.Namespace) -> int:
     from baseplace.reachability.build import BuildSettings
     from baseplace.reachability.storage import load_map
     from baseplace.robots.model import Robot
-    from baseplace.terrain.io import load_cloud, load_transform
 
     if not args.target:
         raise InputError('give at least one --target "x y z roll pitch yaw"')
     targets = np.stack([parse_pose6(t) for t in args.target])
-    settings = PlaceSettings(strategy=args.strategy, placements=args.placements, tries=args.tries)
+    settings = PlaceSettings(strategy=args.strategy, placements=args.placements, tries=args.tries,
+                             resolution=args.resolution)  # fmt: skip
     out = _out_path(args.out)
+    mcap = _out_path(args.mcap)
     robot = Robot(args.robot)
-    cloud = load_cloud(args.cloud)
-    if args.transform is not None:
-        cloud = cloud.transformed(load_transform(args.transform))
+    cloud = _world_cloud(args) if args.cloud is not None or (args.bag and args.cloud_topic) else None
+    grid = _grid(args)
+    if cloud is None and grid is None:
+        raise InputError(
+            "give --cloud FILE, --occupancy MAP.yaml, or --bag FILE with --cloud-topic/--map-topic"
+        )
     if args.map is not None:
         rmap = load_map(args.map, robot, args.arm)
     else:
@@ -535,14 +642,33 @@ def cmd_place(args: argparse.Namespace) -> int:
         from baseplace.terrain.pipeline import terrain_from_points
 
         start = _base_xyyaw(args.start)
-        terrain = terrain_from_points(cloud.points)
-        navmap = navigation_map(terrain, robot.spec.footprint_bounding_radius)
-        navmap.check_pose("--start", start[:2])
-    result = place(
-        robot, rmap, cloud.points, targets, settings, np.random.default_rng(args.seed), terrain=terrain
-    )
+        if grid is None:
+            assert cloud is not None  # a cloud or a grid was given
+            terrain = terrain_from_points(cloud.points, resolution=args.resolution)
+            navmap = navigation_map(terrain, robot.spec.footprint_bounding_radius)
+            navmap.check_pose("--start", start[:2])
+    if grid is not None:
+        from baseplace.placement.in_map import place_in_map
+
+        clouds = [] if cloud is None else [cloud.points]
+        result = place_in_map(robot, rmap, clouds, grid, targets, settings, np.random.default_rng(args.seed))
+    else:
+        assert cloud is not None
+        result = place(
+            robot, rmap, cloud.points, targets, settings, np.random.default_rng(args.seed), terrain=terrain
+        )
     arm = robot.arm(rmap.info.arm)
-    kept, routes = _routes(result.placements, navmap, start, args.planner, args.seed, result.failures)
+    if grid is not None and start is not None:  # on the navigation map, around what the cameras see
+        from baseplace.placement.in_map import grid_routes
+
+        goals = [(p.T_world_base[0, 3], p.T_world_base[1, 3], p.yaw) for p in result.placements]
+        paths = grid_routes(grid, [] if cloud is None else [cloud.points], start, goals,
+                            robot.spec.footprint_bounding_radius)  # fmt: skip
+        result.failures["no_path"] += sum(r is None for r in paths)
+        kept = [p for p, r in zip(result.placements, paths, strict=True) if r is not None]
+        routes: list[Any] = [r for r in paths if r is not None]
+    else:
+        kept, routes = _routes(result.placements, navmap, start, args.planner, args.seed, result.failures)
     placements = []
     for p, route in zip(kept, routes, strict=True):
         T = p.T_world_base
@@ -575,6 +701,11 @@ def cmd_place(args: argparse.Namespace) -> int:
                        f"{robot.name}, {args.strategy}: {len(placements)} placement(s) in {result.tries} tries",
                        [r.poses for r in routes if r is not None])  # fmt: skip
         obj["png"] = str(out)
+    if mcap is not None:
+        _write_mcap(mcap, args, result.terrain, placements=[p.T_world_base for p in kept],
+                    candidates=[p.T_world_base for p in kept], paths=[r.poses for r in routes if r is not None],
+                    targets=list(targets))  # fmt: skip
+        obj["mcap"] = str(mcap)
     if not placements and result.placements:
         raise NothingFoundError(
             f"none of the {len(result.placements)} verified placement(s) can be driven to from --start "
@@ -592,8 +723,30 @@ def cmd_place(args: argparse.Namespace) -> int:
                      f"region {row['region']} reachability {row['reachability']:.3f}")  # fmt: skip
     if out is not None:
         lines.append(f"wrote {out}")
+    if mcap is not None:
+        lines.append(f"wrote {mcap}")
     _emit(args, obj, "\n".join(lines))
     return 0
+
+
+def _write_mcap(path: Path, args: argparse.Namespace, terrain: Any = None, **poses: Any) -> None:
+    """Results as an MCAP recording (io.results): ``poses`` are ResultMessages fields; regions from ``terrain``."""
+    from baseplace.io.results import ResultMessages, write_result_mcap
+
+    scene = getattr(args, "_bag_scene", None)
+    stamp = max((c.stamp_ns for c in scene.clouds), default=0) if scene is not None else 0
+    regions = []
+    if terrain is not None:
+        for r in terrain.segmentation.regions:
+            poly = terrain.graph.nodes[r.id]["polygon"]
+            rings = []
+            for p in list(poly.geoms) if poly.geom_type == "MultiPolygon" else [poly]:
+                for ring in [p.exterior, *p.interiors]:
+                    xy = np.asarray(ring.coords)
+                    if len(xy):
+                        rings.append(np.c_[xy, r.height_at(xy)])
+            regions.append((r.id, rings))
+    write_result_mcap(path, ResultMessages(args.world_frame, stamp, regions=regions, **poses))
 
 
 def _place_timings(timings: dict[str, float], terrain: Any, routes: list[Any]) -> dict[str, float]:
@@ -650,24 +803,21 @@ def cmd_candidates(args: argparse.Namespace) -> int:
     from baseplace.terrain.voxels import VoxelMap
     from baseplace.world.environment import Environment
     from baseplace.world.gridnav import GridNavigator
-    from baseplace.world.occupancy import load_occupancy
 
     out = _out_path(args.png)
+    mcap = _out_path(args.mcap)
     p_o = _parse_xyz(args.object, "--object")
     robot_pose = _base_xyyaw(args.robot_pose) if args.robot_pose is not None else None
-    grid = load_occupancy(args.occupancy)
+    grid = _grid(args)
+    if grid is None:
+        raise InputError("give --occupancy MAP.yaml or --bag FILE --map-topic TOPIC")
     robot = Robot(args.robot)
     rmap = load_map(args.map, robot, args.arm) if args.map else _default_map(args, robot, args.arm)
     settings = RadialSettings.for_robot(robot, rmap)
     _check_object(grid, p_o, settings.d_max)
     points = None
-    if args.cloud is not None:
-        from baseplace.terrain.io import load_cloud, load_transform
-
-        cloud = load_cloud(args.cloud)
-        if args.transform is not None:
-            cloud = cloud.transformed(load_transform(args.transform))
-        points = cloud.points
+    if args.cloud is not None or (args.bag and args.cloud_topic):
+        points = _world_cloud(args).points
     # the shared verification: IK for one of the grasps, whole robot against the cloud's voxels
     # (less the object's own, which the closing hand surrounds)
     voxels = VoxelMap(0.025, np.zeros((0, 3), dtype=np.int64))
@@ -711,7 +861,7 @@ def cmd_candidates(args: argparse.Namespace) -> int:
         for i, c in zip(order, ranked, strict=True)
     ]  # fmt: skip
     obj: dict[str, Any] = {
-        "method": args.method, "robot": robot.name, "object": p_o.tolist(), "occupancy": args.occupancy,
+        "method": args.method, "robot": robot.name, "object": p_o.tolist(), "occupancy": args.occupancy or args.bag,
         "robot_pose": None if robot_pose is None else robot_pose.tolist(), "candidates": rows,
         "rejected": [{"x": round(xy[0], 4), "y": round(xy[1], 4), "reason": why} for xy, why in rejected],
         "path": None if route is None else np.round(route, 4).tolist(),
@@ -724,6 +874,13 @@ def cmd_candidates(args: argparse.Namespace) -> int:
         plot_candidates(grid, p_o, ranked, rejected, out, robot_pose, route,
                         f"{args.method} candidates for {robot.name}: {len(ranked)} verified, {len(rejected)} rejected")  # fmt: skip
         obj["png"] = str(out)
+    if mcap is not None:
+        from baseplace.geometry.poses import pose_from_xyz_rpy
+
+        T_c = [pose_from_xyz_rpy([c.pose.x, c.pose.y, 0.0, 0.0, 0.0, c.pose.yaw]) for c in ranked]
+        _write_mcap(mcap, args, candidates=T_c, placements=T_c[:1],
+                    paths=[] if route is None else [np.asarray(route)])  # fmt: skip
+        obj["mcap"] = str(mcap)
     if not ranked:
         raise NothingFoundError(
             f"no verified candidate ({args.method}); {len(rejected)} positions rejected "
@@ -771,16 +928,14 @@ def cmd_navigate(args: argparse.Namespace) -> int:
     from baseplace.navigation.navmap import navigation_map
     from baseplace.navigation.planners import plan_path
     from baseplace.robots.model import Robot
-    from baseplace.terrain.io import load_cloud, load_transform
     from baseplace.terrain.pipeline import terrain_from_points
 
     out = _out_path(args.out)
+    mcap = _out_path(args.mcap)
     start, goal = _base_xyyaw(args.start), _base_xyyaw(args.goal)
     robot = Robot(args.robot)
-    cloud = load_cloud(args.cloud)
-    if args.transform is not None:
-        cloud = cloud.transformed(load_transform(args.transform))
-    terrain = terrain_from_points(cloud.points)
+    cloud = _world_cloud(args)
+    terrain = terrain_from_points(cloud.points, resolution=args.resolution)
     navmap = navigation_map(terrain, robot.spec.footprint_bounding_radius)
     path = plan_path(navmap, start, goal, args.planner, args.time_limit, args.seed)
     obj = {
@@ -794,6 +949,9 @@ def cmd_navigate(args: argparse.Namespace) -> int:
 
         plot_navigation(navmap, [path], start, goal, out)
         obj["png"] = str(out)
+    if mcap is not None:
+        _write_mcap(mcap, args, terrain, paths=[path.poses])
+        obj["mcap"] = str(mcap)
     text = (f"{path.planner} path of {path.length:.2f} m through regions {list(path.regions)} "
             f"in {path.time_ms:.0f} ms, {len(path.poses)} poses") + (f"\nwrote {out}" if out else "")  # fmt: skip
     _emit(args, obj, text)
@@ -1037,11 +1195,7 @@ def cmd_surface_sample(args: argparse.Namespace) -> int:
         raise InputError(f"--n and --candidates must be >= 1, got {args.n} and {args.candidates}")
     smap = load_surface_map(args.map)
     robot = Robot(args.robot or smap.robot)
-    occupancy = None
-    if args.occupancy is not None:
-        from baseplace.world.occupancy import load_occupancy
-
-        occupancy = load_occupancy(args.occupancy)
+    occupancy = _grid(args)
     sampler = SurfaceSampler(smap, robot, occupancy, args.candidates, discounted=not args.no_discount)
     rng = np.random.default_rng(args.seed)
     samples = [sampler.sample(rng) for _ in range(args.n)]
@@ -1050,7 +1204,7 @@ def cmd_surface_sample(args: argparse.Namespace) -> int:
          "reachability": round(s.reachability, 4), "score": round(s.score, 4)}
         for s in samples
     ]  # fmt: skip
-    obj = {"map": str(args.map), "robot": robot.name, "occupancy": args.occupancy, "poses": poses}
+    obj = {"map": str(args.map), "robot": robot.name, "occupancy": args.occupancy or args.bag, "poses": poses}
     lines = [f"{'x':>7} {'y':>7} {'theta':>7} {'R_S':>6} {'score':>6}"]
     lines += [
         f"{p['x']:7.3f} {p['y']:7.3f} {p['theta']:7.3f} {p['reachability']:6.3f} {p['score']:6.3f}"
@@ -1132,12 +1286,15 @@ def build_parser() -> argparse.ArgumentParser:
     p = command("place", "verified base placements for TCP targets in a scanned scene (seed 000)", cmd_place)
     p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
     p.add_argument("--arm", default=None, help="arm (default: the robot's default arm)")
-    p.add_argument(
-        "--cloud", required=True, help="scene cloud: .pcd, .ply, .bt, .npy, .xyz (z up, or --transform)"
-    )
-    p.add_argument(
-        "--transform", default=None, help='world_T_sensor file, or the sensor-frame up vector "ux uy uz"'
-    )
+    p.add_argument("--cloud", action="append", default=None,
+                   help="scene cloud: .pcd, .ply, .bt, .npy, .xyz (z up, or --transform); repeat for several")  # fmt: skip
+    p.add_argument("--transform", action="append", default=None,
+                   help='world_T_sensor file, or the sensor-frame up vector "ux uy uz"; one per --cloud')  # fmt: skip
+    p.add_argument("--occupancy", default=None,
+                   help="navigation map (map_server YAML) in the clouds' world frame: its free cells are floor")  # fmt: skip
+    p.add_argument("--mcap", default=None, help="also write the result as an MCAP recording (ROS 2 messages)")
+    _add_bag_args(p)
+    _add_fuse_args(p)
     p.add_argument(
         "--target", action="append", help='TCP target "x y z roll pitch yaw" [m, rad]; repeat for several'
     )
@@ -1155,9 +1312,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--planner", default="rrt", choices=["rrt", "regions"],
                    help="path planner with --start: OMPL RRTConnect or the region graph (default rrt)")  # fmt: skip
+    p.add_argument("--resolution", type=float, default=None,
+                   help="height-map cell [m] (default: from the cloud's extent and point spacing, 0.02-0.05)")  # fmt: skip
 
     p = command("candidates", "base placement candidates around an object (seed 004)", cmd_candidates)
-    p.add_argument("--occupancy", required=True, help="occupancy grid: map_server YAML")
+    p.add_argument("--occupancy", default=None, help="occupancy grid: map_server YAML (or --bag --map-topic)")
     p.add_argument("--object", required=True, help='object position "x y z" in the map frame [m]')
     p.add_argument("--cloud", default=None, help="RGB-D cloud in the map frame (.pcd, .ply, .npy, ...)")
     p.add_argument("--transform", default=None, help="world_T_sensor file or up vector for --cloud")
@@ -1173,22 +1332,29 @@ def build_parser() -> argparse.ArgumentParser:
                    help="TCP distance behind the grasp point [m] (default: 0.15 for TIAGo, else 0)")  # fmt: skip
     p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
     p.add_argument("--png", default=None, help="PNG of the candidates over the grid (as seed 004 Fig. 2)")
+    p.add_argument("--mcap", default=None, help="also write the candidates (best first) as an MCAP recording")
+    _add_bag_args(p)
 
     p = command(
         "navigate", "a base path across the planar regions of a scanned scene (seed 000 V)", cmd_navigate
     )
     p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
     p.add_argument(
-        "--cloud", required=True, help="scene cloud: .pcd, .ply, .bt, .npy, .xyz (z up, or --transform)"
+        "--cloud", default=None, help="scene cloud: .pcd, .ply, .bt, .npy, .xyz (z up, or --transform)"
     )
     p.add_argument(
         "--transform", default=None, help='world_T_sensor file, or the sensor-frame up vector "ux uy uz"'
     )
+    _add_bag_args(p, grid=False)
+    _add_fuse_args(p)
+    p.add_argument("--mcap", default=None, help="also write the path and the regions as an MCAP recording")
     p.add_argument("--start", required=True, help='start base pose "x y yaw" [m, rad]')
     p.add_argument("--goal", required=True, help='goal base pose "x y yaw" [m, rad]')
     p.add_argument("--planner", default="rrt", choices=["rrt", "regions"],
                    help="OMPL RRTConnect (seed 000) or the region-graph planner (default rrt)")  # fmt: skip
     p.add_argument("--time-limit", type=float, default=2.0, help="RRT planning time limit [s] (default 2)")
+    p.add_argument("--resolution", type=float, default=None,
+                   help="height-map cell [m] (default: from the cloud's extent and point spacing, 0.02-0.05)")  # fmt: skip
     p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
     p.add_argument("--out", default=None, help="PNG of the path over regions and obstacles (as Fig. 4)")
 
@@ -1210,6 +1376,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--map", required=True, help="surface map from surface-map")
     p.add_argument("--n", type=int, default=5, help="poses to sample (default 5)")
     p.add_argument("--occupancy", default=None, help="operational area: map_server YAML (free cells only)")
+    _add_bag_args(p, clouds=False)
     p.add_argument("--candidates", type=int, default=40, help="N: best of N valid candidates (default 40)")
     p.add_argument("--no-discount", action="store_true", help="do not spread consecutive poses (eq. 3)")
     p.add_argument("--robot", default=None, help="robot file for custom robots (default: the map's robot)")
@@ -1220,13 +1387,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("map", help="map YAML file")
 
     p = command("segment", "planar regions, polygons and region graph of a point cloud", cmd_segment)
-    p.add_argument("cloud", help="point cloud: .pcd, .ply, .bt (OctoMap), .npy, .xyz")
+    p.add_argument(
+        "cloud", nargs="?", default=None, help="point cloud: .pcd, .ply, .bt (OctoMap), .npy, .xyz"
+    )
     p.add_argument("--algorithm", choices=["robust", "baseline"], default="robust",
                    help="robust (seed 000) or baseline region growing (default: robust)")  # fmt: skip
     p.add_argument("--transform", default=None,
                    help='world_T_sensor: a file with a 4x4 matrix, or the sensor-frame up vector "ux uy uz"')  # fmt: skip
-    p.add_argument("--resolution", type=float, default=0.05, help="height map cell [m] (default 0.05)")
+    p.add_argument("--resolution", type=float, default=None,
+                   help="height-map cell [m] (default: from the cloud's extent and point spacing, 0.02-0.05)")  # fmt: skip
     p.add_argument("--out", default=None, help="PNG of the regions (as seed 000 Fig. 2a)")
+    _add_bag_args(p, grid=False)
+    _add_fuse_args(p)
 
     scene = sub.add_parser(
         "scene", help="generated test scenes with ground truth", description="generated scenes"

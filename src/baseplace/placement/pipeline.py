@@ -40,7 +40,7 @@ class PlaceSettings:
         n_orientations: l, OSRM orientations per cell (seed 000: 36).
         gamma_max: largest angle between the base's forward axis and the targets [rad].
         support_dist: voxels this close to their region's plane are support, not obstacles [m].
-        resolution: height-map cell [m].
+        resolution: height-map cell [m]; None: chosen from the cloud (terrain.diagnose.auto_resolution).
     """
 
     strategy: str = "MR"
@@ -49,7 +49,7 @@ class PlaceSettings:
     n_orientations: int = 36
     gamma_max: float = math.pi / 4
     support_dist: float = SUPPORT_DIST
-    resolution: float = 0.05
+    resolution: float | None = None
 
     def __post_init__(self) -> None:
         if self.placements < 1 or self.tries < 1:

@@ -12,9 +12,16 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from baseplace.errors import InputError, unknown
+from baseplace.terrain.diagnose import auto_resolution, explain_no_support
 from baseplace.terrain.graph import GraphSettings, build_region_graph
 from baseplace.terrain.heightmap import HeightMap
-from baseplace.terrain.segmentation import BaselineSegmenter, RobustSegmenter, Segmentation, Segmenter
+from baseplace.terrain.segmentation import (
+    BaselineSegmenter,
+    NoSupportError,
+    RobustSegmenter,
+    Segmentation,
+    Segmenter,
+)
 from baseplace.terrain.voxels import VoxelMap
 
 ALGORITHMS = ("robust", "baseline")
@@ -49,20 +56,40 @@ class Terrain:
 def terrain_from_points(
     points: ArrayLike,
     algorithm: Literal["robust", "baseline"] | str = "robust",
-    resolution: float = 0.05,
+    resolution: float | None = None,
     voxel_size: float = 0.025,
     graph_settings: GraphSettings | None = None,
 ) -> Terrain:
-    """Segment a z-up world cloud (N, 3) [m] into planar regions and their graph."""
+    """Segment a z-up world cloud (N, 3) [m] into planar regions and their graph.
+
+    Args:
+        points: (N, 3) z-up world cloud [m].
+        algorithm: "robust" (seed 000 IV) or "baseline".
+        resolution: height-map cell [m]; None: chosen from the cloud's extent and point spacing
+            (:func:`~baseplace.terrain.diagnose.auto_resolution`: 5 cm for a room, 2 cm for a table
+            in a camera's view).
+        voxel_size: voxel edge [m] (seed 000: 25 mm), at most the cell.
+        graph_settings: region-graph settings.
+
+    Raises:
+        InputError: a bad setting, or no level region, with its cause (too small for the cell:
+            the resolution to try; no level plane: the dominant plane's normal as up vector).
+    """
     segmenter = make_segmenter(algorithm)
+    t_auto = time.perf_counter()
+    if resolution is None:
+        resolution = auto_resolution(points)
+    t0 = time.perf_counter()
     if not (0.01 <= resolution <= 1.0):
         raise InputError(f"--resolution must be between 0.01 and 1 m, got {resolution}")
-    t0 = time.perf_counter()
     voxels = VoxelMap.from_points(points, min(voxel_size, resolution))
     t1 = time.perf_counter()
     hmap = HeightMap.from_voxels(voxels, resolution)
     t2 = time.perf_counter()
-    seg = refine_region_planes(segmenter.segment(hmap), voxels)
+    try:
+        seg = refine_region_planes(segmenter.segment(hmap), voxels)
+    except NoSupportError:
+        raise InputError(explain_no_support(points, resolution)) from None
     t3 = time.perf_counter()
     graph = build_region_graph(seg, graph_settings)
     t4 = time.perf_counter()
@@ -73,6 +100,8 @@ def terrain_from_points(
         "graph": (t4 - t3) * 1e3,
         "total": (t4 - t0) * 1e3,
     }
+    if t0 - t_auto > 1e-4:
+        timings["auto_resolution"] = (t0 - t_auto) * 1e3  # not in the total, as before it was chosen
     return Terrain(voxels, seg, graph, timings)
 
 

@@ -316,9 +316,13 @@ def _check(hmap: HeightMap) -> None:
         raise InputError("the height map has no known cells")
 
 
+class NoSupportError(InputError):
+    """No planar region within 30 deg of level (the pipeline explains why, from the cloud)."""
+
+
 def _no_support(segmentation: Segmentation) -> Segmentation:
     if not any(r.normal[2] > math.cos(math.radians(30)) for r in segmentation.regions):
-        raise InputError(
+        raise NoSupportError(
             "no horizontal support surface found (no planar region is within 30 deg of level); "
             "is the cloud's up direction right? pass --transform with a 4x4 world_T_sensor file "
             'or the sensor-frame up vector, e.g. --transform "0 -1 0" for a y-down camera'

@@ -1,0 +1,231 @@
+"""Clouds, an occupancy grid and tf from a ROS recording, without ROS (``rosbags``).
+
+Reads ROS 2 bags (a rosbag2 directory, or a single ``.db3`` (sqlite3) or ``.mcap`` file) and ROS 1
+``.bag`` files. :func:`read_bag` picks the cloud topic(s) (sensor_msgs/PointCloud2), the map topic
+(nav_msgs/OccupancyGrid), reads every tf2_msgs/TFMessage on ``/tf`` and ``/tf_static`` into a
+:class:`~baseplace.io.tf.TfTree`, and looks up ``T_world_sensor`` at each cloud's stamp.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from baseplace.errors import InputError, brief
+from baseplace.io.messages import (
+    OCCUPANCY_GRID,
+    POINTCLOUD2,
+    TF_MESSAGE,
+    cloud_points,
+    grid_from_msg,
+    stamp_ns,
+)
+from baseplace.io.tf import TfTree
+from baseplace.world.occupancy import OccupancyGrid
+
+FloatArray = NDArray[np.float64]
+TF_TOPICS = ("/tf", "/tf_static")
+TF_TYPES = (TF_MESSAGE, "tf/msg/tfMessage")  # tf2 and ROS 1's older tf
+CLOUD_CHOICES = ("last", "first", "all")
+
+
+@dataclass(frozen=True)
+class BagCloud:
+    """One PointCloud2 message with its pose.
+
+    Attributes:
+        topic: the topic it came from.
+        frame: its header's frame_id (the sensor frame).
+        stamp_ns: its header's stamp [ns].
+        points: (N, 3) finite points in the sensor frame [m].
+        T_world_sensor: (4, 4) pose of the sensor in the world frame at ``stamp_ns``.
+        organized: the message was an image-shaped cloud (height > 1): an optical camera frame.
+    """
+
+    topic: str
+    frame: str
+    stamp_ns: int
+    points: FloatArray
+    T_world_sensor: FloatArray
+    organized: bool
+
+    @property
+    def world_points(self) -> FloatArray:
+        """(N, 3) points in the world frame [m]."""
+        T = self.T_world_sensor
+        return np.asarray(self.points @ T[:3, :3].T + T[:3, 3], dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class BagScene:
+    """What a job needs from a recording, in one world frame.
+
+    Attributes:
+        source: the bag's path.
+        world_frame: the frame everything is expressed in.
+        clouds: the selected clouds with their poses.
+        grid: the occupancy grid moved into the world frame, or None without a map topic.
+        tf: every recorded transform.
+    """
+
+    source: str
+    world_frame: str
+    clouds: list[BagCloud]
+    grid: OccupancyGrid | None
+    tf: TfTree
+
+    def world_points(self) -> FloatArray:
+        """(N, 3) all selected clouds in the world frame [m] (empty without clouds)."""
+        if not self.clouds:
+            return np.zeros((0, 3))
+        return np.vstack([c.world_points for c in self.clouds])
+
+
+def _open(path: Path) -> Any:
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+
+    if not path.exists():
+        raise InputError(f"bag {path} does not exist")
+    try:
+        reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+        reader.open()
+    except Exception as exc:  # rosbags raises its own errors, and OSError/ValueError on odd files
+        raise InputError(
+            f"cannot read bag {path}: {type(exc).__name__}: {brief(str(exc), 120)} (need a rosbag2 "
+            "directory, a .db3 or .mcap file, or a ROS 1 .bag)"
+        ) from None
+    return reader
+
+
+def _topics(reader: Any) -> dict[str, str]:
+    return {c.topic: c.msgtype for c in reader.connections}
+
+
+def _describe(topics: dict[str, str]) -> str:
+    return ", ".join(f"{t} ({m})" for t, m in sorted(topics.items())) or "none"
+
+
+def _connections(reader: Any, topic: str, msgtype: str, path: Path, option: str) -> list[Any]:
+    topics = _topics(reader)
+    if topic not in topics:
+        raise InputError(f"bag {path} has no topic {topic!r} ({option}); topics: {_describe(topics)}")
+    conns = [c for c in reader.connections if c.topic == topic]
+    bad = [c.msgtype for c in conns if c.msgtype != msgtype]
+    if bad:
+        raise InputError(
+            f"bag {path}: topic {topic!r} carries unknown message type {bad[0]} for {option}; expected {msgtype}"
+        )
+    return conns
+
+
+def _messages(reader: Any, conns: list[Any], path: Path) -> list[tuple[Any, Any]]:
+    out = []
+    try:
+        for conn, _, raw in reader.messages(connections=conns):
+            out.append((conn, reader.deserialize(raw, conn.msgtype)))
+    except Exception as exc:
+        raise InputError(f"cannot decode {conns[0].topic} in bag {path}: {brief(str(exc), 120)}") from None
+    return out
+
+
+def _read_tf(reader: Any, path: Path, tolerance_ns: int) -> TfTree:
+    tree = TfTree(tolerance_ns)
+    conns = [c for c in reader.connections if c.topic in TF_TOPICS]
+    for c in conns:
+        if c.msgtype != TF_MESSAGE:
+            raise InputError(
+                f"bag {path}: topic {c.topic!r} carries unknown message type {c.msgtype}; expected {TF_MESSAGE}"
+            )
+    if not conns:
+        return tree
+    for conn, msg in _messages(reader, conns, path):
+        for t in msg.transforms:
+            tr, q = t.transform.translation, t.transform.rotation
+            tree.add(t.header.frame_id, t.child_frame_id, stamp_ns(t.header), np.array([tr.x, tr.y, tr.z]),
+                     np.array([q.x, q.y, q.z, q.w]), static=conn.topic == "/tf_static")  # fmt: skip
+    return tree
+
+
+def read_bag(
+    path: str | Path,
+    cloud_topics: Sequence[str] = (),
+    map_topic: str | None = None,
+    world_frame: str = "map",
+    clouds: str = "last",
+    tf_tolerance: float = 0.1,
+) -> BagScene:
+    """Read clouds, a grid and tf from a recording, and put them in ``world_frame``.
+
+    Args:
+        path: rosbag2 directory, ``.db3`` or ``.mcap`` file, or ROS 1 ``.bag``.
+        cloud_topics: PointCloud2 topics to read (any number).
+        map_topic: an OccupancyGrid topic (its last message is used), or None.
+        world_frame: the frame of the result (e.g. ``map``).
+        clouds: which messages of each cloud topic: "last", "first" or "all".
+        tf_tolerance: how far [s] a cloud's stamp may lie outside a dynamic tf edge's range.
+
+    Raises:
+        InputError: a missing or unreadable bag, a missing topic (listing the topics), a topic of
+            another message type, a transform that cannot be looked up (naming the frames and
+            the nearest stamps), or a map that is not level in the world frame.
+    """
+    path = Path(path)
+    if clouds not in CLOUD_CHOICES:
+        raise InputError(f"unknown cloud selection {clouds!r}; valid: {', '.join(CLOUD_CHOICES)}")
+    if not cloud_topics and map_topic is None:
+        raise InputError(
+            "give a cloud topic (--cloud-topic) or a map topic (--map-topic) to read from the bag"
+        )
+    reader = _open(path)
+    try:
+        cloud_conns = {t: _connections(reader, t, POINTCLOUD2, path, "--cloud-topic") for t in cloud_topics}
+        map_conns = _connections(reader, map_topic, OCCUPANCY_GRID, path, "--map-topic") if map_topic else []
+        tree = _read_tf(reader, path, int(tf_tolerance * 1e9))
+        out: list[BagCloud] = []
+        for topic, conns in cloud_conns.items():
+            msgs = _messages(reader, conns, path)
+            if not msgs:
+                raise InputError(f"bag {path}: topic {topic!r} has no messages")
+            chosen = msgs if clouds == "all" else [msgs[-1] if clouds == "last" else msgs[0]]
+            for _, msg in chosen:
+                where = f"{topic} in {path}"
+                points, organized = cloud_points(msg, where)
+                frame, ns = msg.header.frame_id.lstrip("/"), stamp_ns(msg.header)
+                T = tree.lookup(world_frame, frame, ns)
+                out.append(BagCloud(topic, frame, ns, points, T, organized))
+        grid = None
+        if map_conns:
+            msgs = _messages(reader, map_conns, path)
+            if not msgs:
+                raise InputError(f"bag {path}: topic {map_topic!r} has no messages")
+            msg = msgs[-1][1]
+            grid = grid_from_msg(msg, f"{map_topic} in {path}")
+            frame = msg.header.frame_id.lstrip("/") or world_frame
+            if frame != world_frame:
+                grid = _grid_in_world(
+                    grid, tree.lookup(world_frame, frame, stamp_ns(msg.header)), frame, world_frame
+                )
+    finally:
+        reader.close()
+    return BagScene(str(path), world_frame, out, grid, tree)
+
+
+def _grid_in_world(grid: OccupancyGrid, T_world_map: FloatArray, frame: str, world: str) -> OccupancyGrid:
+    """The grid re-anchored in the world frame (the transform must be level, at floor height)."""
+    R = T_world_map[:3, :3]
+    if R[2, 2] < math.cos(math.radians(1.0)) or abs(T_world_map[2, 3]) > 0.01:
+        raise InputError(
+            f"the map's frame {frame!r} is not level at floor height in {world!r} "
+            f"(z offset {T_world_map[2, 3]:.3f} m); only level maps are supported"
+        )
+    x, y, yaw = grid.origin
+    p = T_world_map @ np.array([x, y, 0.0, 1.0])
+    yaw_w = yaw + math.atan2(R[1, 0], R[0, 0])
+    return OccupancyGrid(grid.data, grid.resolution, (float(p[0]), float(p[1]), yaw_w), grid.source)

@@ -1,0 +1,127 @@
+"""Placements from camera clouds plus a navigation map (seed 004's inputs, seed 000's method).
+
+The occupancy grid gives the floor and its obstacles (:mod:`baseplace.world.grid_scene`), the
+camera clouds the 3D shape near the targets (tables, shelves, objects); both, in one world frame,
+go through seed 000's pipeline (:func:`baseplace.placement.pipeline.place`): segmentation, OSRM,
+strategy, verification. The base may stand on the grid's free floor or on any support region of
+the clouds; obstacles come from both.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from baseplace.errors import InputError
+from baseplace.navigation.planners import Path
+from baseplace.placement.pipeline import PlacementResult, PlaceSettings, place
+from baseplace.reachability.rmap import ReachabilityMap
+from baseplace.robots.model import Robot
+from baseplace.terrain.diagnose import auto_resolution
+from baseplace.world.grid_scene import GridSceneSettings, grid_points, target_window, with_cloud_obstacles
+from baseplace.world.occupancy import OccupancyGrid
+
+
+def scene_points_with_grid(
+    clouds: Sequence[ArrayLike],
+    grid: OccupancyGrid,
+    targets_xy: ArrayLike,
+    reach: float,
+    resolution: float,
+    settings: GridSceneSettings | None = None,
+) -> np.ndarray:
+    """The camera clouds (each (N_i, 3), world frame [m]) plus the grid's points near the targets (N, 2)."""
+    s = settings or GridSceneSettings()
+    cams = [np.asarray(c, dtype=float).reshape(-1, 3) for c in clouds]
+    seen = np.vstack(cams) if cams else np.zeros((0, 3))
+    window = target_window(grid, targets_xy, reach, s.margin)
+    spacing = min(0.025, resolution)
+    return np.vstack([seen, grid_points(grid, window, spacing, s, seen)])
+
+
+def grid_routes(
+    grid: OccupancyGrid,
+    clouds: Sequence[ArrayLike],
+    start: ArrayLike,
+    goals: Sequence[ArrayLike],
+    radius: float,
+) -> list[Path | None]:
+    """Base paths on the navigation map from ``start`` (x, y, yaw) to each goal (x, y, yaw); None where none.
+
+    The grid planner of seed 004 (:class:`~baseplace.world.gridnav.GridNavigator`, 8-connected,
+    obstacles inflated by ``radius`` [m]) on the grid with the cameras' obstacles marked (points
+    between 5 cm and 2 m above the floor). Poses along a path head in the direction of travel; the
+    last takes the goal's yaw.
+
+    Raises:
+        InputError: a start the robot cannot stand on (outside the map, unknown, too near an obstacle).
+    """
+    from baseplace.geometry.poses import BasePose
+    from baseplace.world.gridnav import GridNavigator
+
+    cams = [np.asarray(c, dtype=float).reshape(-1, 3) for c in clouds]
+    navigator = GridNavigator(
+        with_cloud_obstacles(grid, np.vstack(cams) if cams else np.zeros((0, 3))), radius
+    )
+    s = np.asarray(start, dtype=float)
+    navigator.plan(s[:2], s[:2])  # a start the robot cannot stand on: the planner's one-line error
+    out: list[Path | None] = []
+    for goal in goals:
+        g = np.asarray(goal, dtype=float)
+        t0 = time.perf_counter()
+        try:
+            xy = navigator(BasePose(*s), BasePose(*g))
+        except InputError:
+            xy = None
+        if xy is None:
+            out.append(None)
+            continue
+        step = np.diff(xy, axis=0)
+        yaw = (
+            np.r_[s[2], np.arctan2(step[1:, 1], step[1:, 0]), g[2]]
+            if len(xy) > 2
+            else np.r_[s[2], g[2]][: len(xy)]
+        )
+        out.append(Path(np.c_[xy, yaw], "grid", (time.perf_counter() - t0) * 1e3, ()))
+    return out
+
+
+def place_in_map(
+    robot: Robot,
+    rmap: ReachabilityMap,
+    clouds: Sequence[ArrayLike],
+    grid: OccupancyGrid,
+    targets: ArrayLike,
+    settings: PlaceSettings | None = None,
+    rng: np.random.Generator | None = None,
+    grid_settings: GridSceneSettings | None = None,
+) -> PlacementResult:
+    """Verified base placements from camera clouds and an occupancy grid in one world frame.
+
+    Args:
+        robot: the robot.
+        rmap: reachability map of the arm to use.
+        clouds: camera clouds, each (N_i, 3) [m] already in the world frame (world_T_camera
+            applied); may be empty (the grid alone).
+        grid: the navigation map in the same world frame, floor at z = 0.
+        targets: (K, 4, 4) or (4, 4) world TCP targets.
+        settings: placement settings; ``resolution=None`` takes the cell from the camera clouds
+            (:func:`~baseplace.terrain.diagnose.auto_resolution`), or 5 cm without clouds.
+        rng: randomness.
+        grid_settings: how the grid becomes floor and obstacles.
+    """
+    s = settings or PlaceSettings()
+    T = np.asarray(targets, dtype=float).reshape(-1, 4, 4)
+    cams = [np.asarray(c, dtype=float).reshape(-1, 3) for c in clouds]
+    cams = [c for c in cams if len(c)]
+    resolution = s.resolution
+    if resolution is None:
+        resolution = auto_resolution(np.vstack(cams)) if cams else 0.05
+    if not np.all(np.isfinite(T)):
+        raise InputError("target pose contains NaN or infinity")
+    points = scene_points_with_grid(cams, grid, T[:, :2, 3], rmap.horizontal_reach, resolution, grid_settings)
+    return place(robot, rmap, points, T, dataclasses.replace(s, resolution=resolution), rng)
