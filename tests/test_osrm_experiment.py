@@ -31,8 +31,12 @@ def test_grasp_candidates_lie_above_the_objects():
     rng = np.random.default_rng(1)
     scene = generate_scene(SceneSettings(n_planes=0, box_elevation=0.5), rng)
     assert min(o.bottom for o in scene.objects) == pytest.approx(0.5 + scene.box.wall)
-    grasps, spheres = grasp_candidates(scene, rng, 20)
-    assert len(spheres) == 20 and all(r > 0.03 for _, r in spheres)
+    grasps, objects = grasp_candidates(scene, rng, 20)
+    assert len(objects) == 20  # per grasp the true shape of the object it takes, nothing larger
+    centres = np.array([o.center for o in scene.objects])
+    for obj in objects:
+        true = scene.objects[int(np.argmin(np.linalg.norm(centres - obj.center, axis=1)))]
+        assert np.allclose(obj.center, true.center) and obj.size[2] == pytest.approx(true.size[2])
     assert grasps.shape == (20, 4, 4)
     tops = np.array([o.top for o in scene.objects])
     assert np.all(grasps[:, 2, 3] > tops.min() + 0.1)  # the TCP sits 0.151 m back along the approach

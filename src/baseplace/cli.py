@@ -68,6 +68,23 @@ def _int_list(text: str) -> list[int]:
     return values
 
 
+def _finite_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
+    return value
+
+
+OBJECT_HELP = (
+    'the grasped object, which only the hand may touch: "auto" (default: the cloud\'s cluster at the '
+    'first target\'s grasp point, above its support), "none", "box CX CY CZ SX SY SZ [YAW]" or '
+    '"cylinder CX CY CZ RADIUS HEIGHT" [m, rad], world frame'
+)
+
+
 def _nonneg_int(text: str) -> int:
     try:
         value = int(text)
@@ -399,21 +416,26 @@ def cmd_place(args: argparse.Namespace) -> int:
     """Find verified base placements for the targets in a scanned scene."""
     from baseplace.demo import cached_map
     from baseplace.geometry.poses import matrix_to_rpy, parse_pose6
-    from baseplace.placement.pipeline import PlaceSettings, place
+    from baseplace.placement.pipeline import PlaceSettings, place, with_floor
+    from baseplace.placement.verify import contact_summary, most_frequent_contact
     from baseplace.reachability.build import BuildSettings
     from baseplace.reachability.storage import load_map
     from baseplace.robots.model import Robot
     from baseplace.terrain.io import load_cloud, load_transform
+    from baseplace.world.grasped_object import parse_grasped_object
 
     if not args.target:
         raise InputError('give at least one --target "x y z roll pitch yaw"')
     targets = np.stack([parse_pose6(t) for t in args.target])
-    settings = PlaceSettings(strategy=args.strategy, placements=args.placements, tries=args.tries)
+    grasped = parse_grasped_object(args.object)
+    settings = PlaceSettings(strategy=args.strategy, placements=args.placements, tries=args.tries,
+                             **({} if args.resolution is None else {"resolution": args.resolution}))  # fmt: skip
     out = _out_path(args.out)
     robot = Robot(args.robot)
     cloud = load_cloud(args.cloud)
     if args.transform is not None:
         cloud = cloud.transformed(load_transform(args.transform))
+    points = cloud.points if args.floor is None else with_floor(cloud.points, args.floor)
     if args.map is not None:
         rmap = load_map(args.map, robot, args.arm)
     else:
@@ -429,12 +451,11 @@ def cmd_place(args: argparse.Namespace) -> int:
         from baseplace.terrain.pipeline import terrain_from_points
 
         start = _base_xyyaw(args.start)
-        terrain = terrain_from_points(cloud.points)
+        terrain = terrain_from_points(points, resolution=settings.resolution)
         navmap = navigation_map(terrain, robot.spec.footprint_bounding_radius)
         navmap.check_pose("--start", start[:2])
-    result = place(
-        robot, rmap, cloud.points, targets, settings, np.random.default_rng(args.seed), terrain=terrain
-    )
+    result = place(robot, rmap, points, targets, settings, np.random.default_rng(args.seed), terrain=terrain,
+                   grasped=grasped)  # fmt: skip
     arm = robot.arm(rmap.info.arm)
     kept, routes = _routes(result.placements, navmap, start, args.planner, args.seed, result.failures)
     placements = []
@@ -457,6 +478,10 @@ def cmd_place(args: argparse.Namespace) -> int:
         "placements": placements,
         "tries": result.tries,
         "failures": dict(result.failures),
+        "collisions": contact_summary(result.contacts),
+        "object": {"requested": args.object, "found": result.grasped_note,
+                   "allowed": None if result.grasped is None else result.grasped.to_json()},
+        "floor": args.floor,
         "timings_ms": {k: round(v, 2) for k, v in _place_timings(result.timings_ms, terrain, routes).items()},
         "regions": len(result.terrain.segmentation.regions),
     }  # fmt: skip
@@ -467,7 +492,8 @@ def cmd_place(args: argparse.Namespace) -> int:
         outline = footprint_outline(robot.spec.footprint_radius, robot.spec.footprint_polygon)
         plot_placement(result.osrm, kept, outline, out,
                        f"{robot.name}, {args.strategy}: {len(placements)} placement(s) in {result.tries} tries",
-                       [r.poses for r in routes if r is not None])  # fmt: skip
+                       [r.poses for r in routes if r is not None], result.rejected, result.contacts,
+                       result.grasped)  # fmt: skip
         obj["png"] = str(out)
     if not placements and result.placements:
         raise NothingFoundError(
@@ -475,9 +501,13 @@ def cmd_place(args: argparse.Namespace) -> int:
             f"{args.start} ({args.planner} planner); ask for more with --placements"
         )
     if not placements:
+        if args.json:  # the counts per reason and per link, for the caller
+            _emit(args, obj, "")
+        worst = most_frequent_contact(result.contacts)
         raise NothingFoundError(
             f"no verified placement in {result.tries} tries with {args.strategy} "
-            f"(failures: {dict(result.failures) or 'none'}); try --tries, another --strategy or check the target"
+            f"(failures: {dict(result.failures) or 'none'}{'; ' + worst if worst else ''}); "
+            f"try --tries, another --strategy, --object or check the target"
         )
     lines = [f"{len(placements)} verified placement(s) in {result.tries} tries ({args.strategy}, "
              f"{result.timings_ms['total']:.0f} ms)"]  # fmt: skip
@@ -544,7 +574,8 @@ def cmd_candidates(args: argparse.Namespace) -> int:
     from baseplace.reachability.storage import load_map
     from baseplace.robots.model import Robot
     from baseplace.terrain.voxels import VoxelMap
-    from baseplace.world.environment import Environment
+    from baseplace.world.environment import Environment, contact_groups
+    from baseplace.world.grasped_object import GraspedObject, find_grasped_object, parse_grasped_object
     from baseplace.world.gridnav import GridNavigator
     from baseplace.world.occupancy import load_occupancy
 
@@ -566,13 +597,19 @@ def cmd_candidates(args: argparse.Namespace) -> int:
         if args.transform is not None:
             cloud = cloud.transformed(load_transform(args.transform))
         points = cloud.points
-    # the shared verification: IK for one of the grasps, whole robot against the cloud's voxels
-    # (less the object's own, which the closing hand surrounds)
+    # the shared verification: IK for one of the grasps, whole robot against the cloud's voxels;
+    # only the hand may touch the object's own (found at --object or given by --object-shape)
+    shape = parse_grasped_object(args.object_shape, "--object-shape")
+    grasped = shape if shape != "auto" else None
+    if shape == "auto" and points is not None:
+        grasped = find_grasped_object(points, p_o)
     voxels = VoxelMap(0.025, np.zeros((0, 3), dtype=np.int64))
     if points is not None:
         voxels = VoxelMap.from_points(points)
-        voxels = voxels.without(np.linalg.norm(voxels.centres - p_o, axis=1) <= 0.12)
-    environment = Environment(robot, voxels)
+    groups, object_voxels = contact_groups(
+        voxels, voxels, grasped if isinstance(grasped, GraspedObject) else None
+    )
+    environment = Environment(robot, groups, grasped=object_voxels, hand_arm=args.arm)
     standoff = grasp_standoff(robot) if args.standoff is None else args.standoff
     grasps = grasp_poses(p_o, n=16, top_down=True, standoff=standoff)
     rng = np.random.default_rng(args.seed)
@@ -612,6 +649,8 @@ def cmd_candidates(args: argparse.Namespace) -> int:
         "robot_pose": None if robot_pose is None else robot_pose.tolist(), "candidates": rows,
         "rejected": [{"x": round(xy[0], 4), "y": round(xy[1], 4), "reason": why} for xy, why in rejected],
         "path": None if route is None else np.round(route, 4).tolist(),
+        "object_shape": {"requested": args.object_shape,
+                         "allowed": grasped.to_json() if isinstance(grasped, GraspedObject) else None},
         "settings": {"r_r": settings.r_r, "d_min": settings.d_min, "d_max": round(settings.d_max, 4),
                      "theta": round(settings.theta, 5), "k_obs": settings.k_obs, "grasp_standoff": standoff},
     }  # fmt: skip
@@ -1033,6 +1072,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--planner", default="rrt", choices=["rrt", "regions"],
                    help="path planner with --start: OMPL RRTConnect or the region graph (default rrt)")  # fmt: skip
+    p.add_argument("--object", default="auto", help=OBJECT_HELP)
+    p.add_argument("--floor", type=_finite_float, default=None,
+                   help="add a floor plane at this height [m] (z up) under and around a cloud that shows none")  # fmt: skip
+    p.add_argument(
+        "--resolution", type=_finite_float, default=None, help="height-map cell [m] (default 0.05)"
+    )
 
     p = command("candidates", "base placement candidates around an object (seed 004)", cmd_candidates)
     p.add_argument("--occupancy", required=True, help="occupancy grid: map_server YAML")
@@ -1051,6 +1096,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="TCP distance behind the grasp point [m] (default: 0.15 for TIAGo, else 0)")  # fmt: skip
     p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
     p.add_argument("--png", default=None, help="PNG of the candidates over the grid (as seed 004 Fig. 2)")
+    p.add_argument("--object-shape", default="auto",
+                   help=OBJECT_HELP.replace("first target's grasp point", "--object position"))  # fmt: skip
 
     p = command(
         "navigate", "a base path across the planar regions of a scanned scene (seed 000 V)", cmd_navigate

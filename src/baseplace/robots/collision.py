@@ -90,6 +90,17 @@ class SelfCollision:
         q = np.asarray(q_full, dtype=float)
         return bool(pin.computeCollisions(self.model, self.data, self.geom, self.geom_data, q, True))
 
+    def colliding_pairs(self, q_full: ArrayLike) -> list[tuple[str, str]]:
+        """The (link, link) pairs that touch at the full pinocchio configuration."""
+        q = np.asarray(q_full, dtype=float)
+        pin.computeCollisions(self.model, self.data, self.geom, self.geom_data, q, False)
+        objects, frames = self.geom.geometryObjects, self.model.frames
+        return [
+            (str(frames[objects[p.first].parentFrame].name), str(frames[objects[p.second].parentFrame].name))
+            for p, res in zip(self.geom.collisionPairs, self.geom_data.collisionResults, strict=True)
+            if res.isCollision()
+        ]
+
     def _arm_geometry_data(self, arm: Arm) -> pin.GeometryData:
         """GeometryData with only the pairs whose relative pose changes when ``arm`` moves.
 

@@ -31,10 +31,11 @@ from baseplace.placement.pipeline import PlaceSettings, place
 from baseplace.reachability.rmap import ReachabilityMap
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Robot
-from baseplace.sim.scenes import Scene, SceneSettings, generate_scene
+from baseplace.sim.scenes import Scene, SceneObject, SceneSettings, generate_scene
 from baseplace.terrain.pipeline import Terrain, terrain_from_points
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import HandFilter
+from baseplace.world.grasped_object import GraspedObject
 
 SCENE_CLASSES = (
     ("flat", 0),
@@ -61,7 +62,7 @@ def grasp_candidates(
     hand: HandFilter | None = None,
     max_draws: int = 60,
     obstacles: VoxelMap | None = None,
-) -> tuple[FloatArray, list[tuple[FloatArray, float]]]:
+) -> tuple[FloatArray, list[GraspedObject]]:
     """Top-down grasps on the scene's objects: approach tilted up to 20 deg, random roll about it.
 
     The hand's grasp point is 1-3 cm below an object's top, within half its radius of its axis;
@@ -74,22 +75,20 @@ def grasp_candidates(
     touch the other at every base pose (8 of 500 flat grasps did). Default: a cloud of its own.
 
     Returns:
-        (K, 4, 4) grasps, K <= count, and per grasp the sphere around the grasped object that the
-        hand may touch.
+        (K, 4, 4) grasps, K <= count, and per grasp the grasped object (its true shape), which
+        only the hand may touch.
     """
     if not scene.objects:
         return np.zeros((0, 4, 4)), []
-    spheres_of = [
-        (np.asarray(o.center, dtype=float), math.hypot(o.radius, o.size[2] / 2) + 0.03) for o in scene.objects
-    ]
+    objects_of = [grasped_shape(o) for o in scene.objects]
     octrees: dict[int, coal.OcTree] = {}
     if hand is not None:
         clean = obstacles or VoxelMap.from_points(scene.sample_cloud(np.random.default_rng(0), sigma=0.0))
-        for i, (centre, radius) in enumerate(spheres_of):
-            keep = clean.without(np.linalg.norm(clean.centres - centre, axis=1) <= radius)
+        for i, shape in enumerate(objects_of):
+            keep = clean.without(shape.voxel_mask(clean))
             octrees[i] = coal.makeOctree(np.ascontiguousarray(keep.centres), keep.resolution)
     grasps: list[FloatArray] = []
-    spheres: list[tuple[FloatArray, float]] = []
+    objects: list[GraspedObject] = []
     for _ in range(count * max_draws):
         if len(grasps) == count:
             break
@@ -107,8 +106,15 @@ def grasp_candidates(
         if hand is not None and not hand.clear(T, octrees[i]):
             continue
         grasps.append(T)
-        spheres.append(spheres_of[i])
-    return (np.stack(grasps) if grasps else np.zeros((0, 4, 4))), spheres
+        objects.append(objects_of[i])
+    return (np.stack(grasps) if grasps else np.zeros((0, 4, 4))), objects
+
+
+def grasped_shape(obj: SceneObject) -> GraspedObject:
+    """The scene object's true shape as the object only the hand may touch."""
+    if obj.shape == "cylinder":
+        return GraspedObject.cylinder(obj.center, obj.size[0] / 2, obj.size[2])
+    return GraspedObject.box(obj.center, obj.size, obj.yaw)
 
 
 @dataclass
@@ -246,11 +252,11 @@ def osrm_scene(
     rng, scene, points, terrain = experiment_scene(s, class_index, k, classes)
     clean = terrain.voxels
     environments: dict[str, Any] = {}
-    grasps, spheres = grasp_candidates(scene, rng, s.grasps_per_scene, hand=HandFilter(robot, rmap.info.arm),
+    grasps, objects = grasp_candidates(scene, rng, s.grasps_per_scene, hand=HandFilter(robot, rmap.info.arm),
                                        obstacles=clean)  # fmt: skip
     truth = GroundTruth()
     reachable = 0
-    for grasp, sphere in zip(grasps, spheres, strict=True):
+    for grasp, obj in zip(grasps, objects, strict=True):
         if not truth.reachable(robot, rmap, scene, grasp, rng):
             continue
         reachable += 1
@@ -259,7 +265,7 @@ def osrm_scene(
             try:
                 res = place(robot, rmap, points, grasp, PlaceSettings(strategy=name, tries=s.tries),
                             np.random.default_rng([s.seed, class_index, k, reachable, len(name)]), terrain=terrain,
-                            environments=environments, ignore=[sphere])  # fmt: skip
+                            environments=environments, grasped=obj)  # fmt: skip
             except BaseplaceError as exc:  # e.g. no region in reach: a failure of that query
                 st.failures[type(exc).__name__] += 1
                 continue
