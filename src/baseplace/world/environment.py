@@ -12,6 +12,7 @@ its voxels are checked against every other link, and the surface under it stays 
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Iterable, Mapping
 
 import coal
@@ -74,6 +75,16 @@ def contact_groups(
     )
 
 
+_SELF_COLLISION: weakref.WeakKeyDictionary[Robot, SelfCollision] = weakref.WeakKeyDictionary()
+
+
+def _self_collision(robot: Robot) -> SelfCollision:
+    """The robot's self-collision checker, loaded once per robot (environments are built per query)."""
+    if robot not in _SELF_COLLISION:
+        _SELF_COLLISION[robot] = SelfCollision(robot)
+    return _SELF_COLLISION[robot]
+
+
 GRASPED = "grasped_object"
 """Name of the grasped object's voxels in contact reports (touched by a link that is not the hand)."""
 
@@ -111,7 +122,7 @@ class Environment:
     ) -> None:
         self.robot = robot
         self.model = robot.model
-        self._self = SelfCollision(robot) if self_collision else None
+        self._self = _self_collision(robot) if self_collision else None
         base_geom = self._self.geom if self._self is not None else None
         if base_geom is None:
             base_geom = load_collision_model(robot)

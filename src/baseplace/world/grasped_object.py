@@ -109,22 +109,32 @@ class GraspedObject:
     def voxel_mask(self, voxels: VoxelMap) -> NDArray[np.bool_]:
         """(M,) True for the voxels that hold the object.
 
-        For a box or cylinder: voxels whose centre lies in the shape grown by half a voxel, except
-        the lowest half voxel (that layer holds the support's surface too, which stays an obstacle).
-        For points: the voxels that hold one.
+        For a box or cylinder: the voxels whose cube intersects the shape (exact: separating axes
+        for the box, the closest point of the voxel's square for the cylinder), except the layer
+        whose centres lie within half a voxel above the bottom face: it holds the support's
+        surface too, and stays an obstacle. For points: the voxels that hold one.
         """
         if len(voxels) == 0:
             return np.zeros(0, dtype=bool)
         res = voxels.resolution
+        h = res / 2
         if self.kind == "points":
             keys = np.unique(np.floor(self.points / res).astype(np.int64), axis=0)
             return rows_in(voxels.keys, keys)
-        local = self._local(voxels.centres)
+        c = voxels.centres
         half = self.size / 2
-        z_ok = (local[:, 2] >= -half[2] + res / 2) & (local[:, 2] <= half[2] + res / 2)
+        z_ok = (c[:, 2] >= self.center[2] - half[2] + h) & (c[:, 2] <= self.center[2] + half[2] + h)
+        d = c[:, :2] - self.center[:2]
         if self.kind == "cylinder":
-            return z_ok & (np.hypot(local[:, 0], local[:, 1]) <= half[0] + res / 2)
-        return z_ok & np.all(np.abs(local[:, :2]) <= half[:2] + res / 2, axis=1)
+            gap = np.maximum(np.abs(d) - h, 0.0)
+            return z_ok & (np.hypot(gap[:, 0], gap[:, 1]) <= half[0])
+        cos, sin = abs(math.cos(self.yaw)), abs(math.sin(self.yaw))
+        local = self._local(c)
+        along_object = np.all(np.abs(local[:, :2]) <= half[:2] + h * (cos + sin), axis=1)
+        along_world = (np.abs(d[:, 0]) <= h + half[0] * cos + half[1] * sin) & (
+            np.abs(d[:, 1]) <= h + half[0] * sin + half[1] * cos
+        )
+        return z_ok & along_object & along_world
 
     def support_mask(self, voxels: VoxelMap) -> NDArray[np.bool_]:
         """(M,) True for the voxels of the surface the object stands on, near it.
