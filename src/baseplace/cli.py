@@ -849,6 +849,7 @@ def cmd_experiment_osrm(args: argparse.Namespace) -> int:
         DEV_SEEDS,
         SCENE_CLASSES,
         ExperimentSettings,
+        checkout_commit,
         run_osrm_experiment,
         run_record,
     )
@@ -862,7 +863,7 @@ def cmd_experiment_osrm(args: argparse.Namespace) -> int:
     classes = SCENE_CLASSES if not args.flat_only else SCENE_CLASSES[:1]
     update, bar = _progress(args, args.scenes * len(classes), "osrm experiment")
     step = _step_progress(update)
-    started = time.perf_counter()
+    started, commit = time.perf_counter(), checkout_commit()
     try:
         settings = ExperimentSettings(grasps_per_scene=args.grasps, seed=seed, tries=args.tries)
         if args.scheduler is None:
@@ -877,7 +878,7 @@ def cmd_experiment_osrm(args: argparse.Namespace) -> int:
     finally:
         if bar is not None:
             bar.close()
-    result["run"] = run_record(sys.argv, time.perf_counter() - started)
+    result["run"] = run_record(sys.argv, time.perf_counter() - started, commit)
     if out is not None:
         from baseplace.viz.experiments import plot_failure_rates
 

@@ -480,25 +480,28 @@ def run_osrm_experiment(
             "settings": dataclasses.asdict(s)}  # fmt: skip
 
 
-def run_record(argv: list[str], wall_time_s: float) -> dict[str, Any]:
-    """Where a results file came from: command line, commit, finish time (UTC), wall time [s].
-
-    The commit carries "+dirty" when tracked files differ from it.
-    """
-    import datetime
+def checkout_commit() -> str | None:
+    """The commit of the checkout this module runs from, with "+dirty" when tracked files differ."""
     import subprocess
     from pathlib import Path
 
     here = Path(__file__).resolve().parent
-    commit = None
     try:
         commit = subprocess.run(["git", "-C", str(here), "rev-parse", "HEAD"], capture_output=True, text=True,
                                 check=True, timeout=10).stdout.strip()  # fmt: skip
         dirty = subprocess.run(["git", "-C", str(here), "status", "--porcelain", "--untracked-files=no"],
                                capture_output=True, text=True, check=True, timeout=10).stdout.strip()  # fmt: skip
-        commit += "+dirty" if dirty else ""
     except (OSError, subprocess.SubprocessError):
-        pass
+        return None
+    return commit + ("+dirty" if dirty else "")
+
+
+def run_record(argv: list[str], wall_time_s: float, commit: str | None) -> dict[str, Any]:
+    """Where a results file came from: command line, ``commit`` (take it with
+    :func:`checkout_commit` before the run starts), finish time (UTC) and wall time [s].
+    """
+    import datetime
+
     return {"command": " ".join(["baseplace", *argv[1:]]) if argv else "", "commit": commit,
             "finished_utc": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
             "wall_time_s": round(wall_time_s, 1)}  # fmt: skip
