@@ -497,8 +497,9 @@ def checkout_commit() -> str | None:
 
 
 def run_record(argv: list[str], wall_time_s: float, commit: str | None) -> dict[str, Any]:
-    """Where a results file came from: command line, ``commit`` (take it with
-    :func:`checkout_commit` before the run starts), finish time (UTC) and wall time [s].
+    """Where a results file came from: command line, commit, finish time (UTC), wall time [s].
+
+    Take ``commit`` with :func:`checkout_commit` before the run starts.
     """
     import datetime
 
