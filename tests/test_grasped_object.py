@@ -273,3 +273,42 @@ def test_pcl_mug_side_grasp_through_the_cli(tiago, tiago_map, tmp_path, capsys):
     assert main([*base, "--target", "0.06 0.45 -0.44 0 0 1.5708", "--tries", "40"]) == 3
     line = capsys.readouterr().err.strip()
     assert "\n" not in line and "touched support" in line and "link hand_" in line
+
+
+def test_contacts_name_exactly_the_links_that_touch(tiago):
+    """Every reported (link, obstacle) pair is confirmed by a coal call on that link alone; a
+    configuration has contacts exactly when the collision check says it collides."""
+    from baseplace.world.environment import Environment
+
+    xs, ys = np.meshgrid(np.arange(-0.2, 1.2, 0.02), np.arange(-0.7, 0.7, 0.02))
+    slab = np.c_[xs.ravel(), ys.ravel(), np.full(xs.size, 0.6)]
+    env = Environment(tiago, VoxelMap.from_points(slab, 0.025))
+    tree = coal.makeOctree(np.ascontiguousarray(VoxelMap.from_points(slab, 0.025).centres), 0.025)
+    arm, model = tiago.arm(), tiago.model
+    geom = pin.buildGeomFromUrdf(model, str(tiago.spec.urdf), pin.COLLISION,
+                                 package_dirs=[str(p) for p in tiago.spec.package_dirs])  # fmt: skip
+    base = pin.SE3(np.eye(4))
+    rng = np.random.default_rng(7)
+    seen = set()
+    for _ in range(40):
+        q = rng.uniform(arm.lower, arm.upper)
+        contacts = env.contacts_arm(arm, q, np.eye(4))
+        assert bool(contacts) == env.colliding_arm(arm, q, np.eye(4))
+        q_full = arm.to_pinocchio(q, tiago.q_reference)
+        data, gdata = model.createData(), pin.GeometryData(geom)
+        pin.framesForwardKinematics(model, data, q_full)
+        pin.updateGeometryPlacements(model, data, geom, gdata, q_full)
+        T_world_root = data.oMf[model.getFrameId(tiago.spec.base_frame)].inverse() * base
+        for link, what in contacts:
+            if what != "obstacle":
+                continue
+            seen.add(link)
+            hit = False
+            for k, g in enumerate(geom.geometryObjects):
+                if model.frames[g.parentFrame].name != link:
+                    continue
+                T = (T_world_root * gdata.oMg[k]).homogeneous
+                hit |= coal.collide(g.geometry, coal.Transform3s(T[:3, :3], T[:3, 3]), tree, coal.Transform3s(),
+                                    coal.CollisionRequest(), coal.CollisionResult())  # fmt: skip
+            assert hit, link
+    assert seen  # some configurations reach into the slab

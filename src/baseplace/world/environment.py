@@ -216,7 +216,7 @@ class Environment:
         q = arm.to_pinocchio(q_arm, self.robot.q_reference)
         out: list[tuple[str, str]] = []
         if self._self is not None:
-            for a, b in self._self.colliding_pairs(q):
+            for a, b in self._self.colliding_pairs(q, arm):
                 out.append((a, f"self: {b}"))
         if self.env_ids:
             self._place_obstacles(T_world_base)
