@@ -60,6 +60,9 @@ def test_auto_object_is_the_bottle_and_not_its_neighbour_3cm_away():
     )
     assert obj.size[2] > 0.2  # most of the bottle's height, less the layer at the tray bottom
     assert find_grasped_object(points, [1.5, 1.5, 1.0]) is None  # nothing there
+    # on the tray's rim or the bare floor: a large surface, never allowed as "the object"
+    assert find_grasped_object(points, [0.29, 0.0, TRAY.elevation + TRAY.size[2]]) is None
+    assert find_grasped_object(points, [1.0, 1.0, 0.0]) is None
 
 
 def test_a_grasp_through_the_neighbour_fails_and_succeeds_without_it(tiago, tiago_map, tmp_path, capsys):

@@ -244,7 +244,8 @@ def find_grasped_object(
 
     Returns:
         The object (kind "points", source "auto"), or None when no point lies within
-        ``seed_radius`` of the grasp point.
+        ``seed_radius`` of the grasp point or the cluster is wider than ``max_size`` (the grasp
+        point is on a large surface, which stays an obstacle).
     """
     s = settings or AutoSettings()
     g = _vector(grasp_point, 3, "grasp point")
@@ -272,6 +273,9 @@ def find_grasped_object(
     if lab == 0:  # the grasp point sits on the support itself
         return None
     mine = labels[idx[:, 0], idx[:, 1], idx[:, 2]] == lab
+    extent = local[mine, :2].max(axis=0) - local[mine, :2].min(axis=0)
+    if float(extent.max()) > s.max_size:  # a table top or a wall, not an object in the hand
+        return None
     keys = np.floor(local / s.voxel_size).astype(np.int64)
     mixed = rows_in(keys[mine], np.unique(keys[~mine], axis=0))
     if mixed.all():
