@@ -226,6 +226,22 @@ def test_object_syntax_errors_are_one_line():
         assert "\n" not in message and any(w in message for w in ("cylinder CX", "positive", "finite"))
 
 
+def test_object_given_as_a_point_file(tiago, tiago_map, tmp_path):
+    """The object's own cloud, given as a file, allows the same as "auto" found: the grasp passes."""
+    points = cloud(tray_scene(A))
+    bottle_points = points[np.hypot(points[:, 0] - A.center[0], points[:, 1] - A.center[1]) <= 0.036]
+    bottle_points = bottle_points[bottle_points[:, 2] > BOTTOM + 0.03]  # not the tray bottom
+    np.save(tmp_path / "bottle.npy", bottle_points)
+    given = parse_grasped_object(f"points {tmp_path / 'bottle.npy'}")
+    assert isinstance(given, GraspedObject) and given.kind == "points"
+    res = place(
+        tiago, tiago_map, points, THROUGH_B, PlaceSettings(tries=60), np.random.default_rng(0), grasped=given
+    )
+    assert len(res.placements) == 1, dict(res.failures)
+    with pytest.raises(InputError):
+        parse_grasped_object(f"points {tmp_path / 'missing.npy'}")
+
+
 def test_cli_object_bad_value_exits_2(tmp_path, capsys):
     np.save(tmp_path / "c.npy", cloud(tray_scene(A)))
     code = main(

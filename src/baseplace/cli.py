@@ -80,8 +80,8 @@ def _finite_float(text: str) -> float:
 
 OBJECT_HELP = (
     'the grasped object, which only the hand may touch: "auto" (default: the cloud\'s cluster at the '
-    'first target\'s grasp point, above its support), "none", "box CX CY CZ SX SY SZ [YAW]" or '
-    '"cylinder CX CY CZ RADIUS HEIGHT" [m, rad], world frame'
+    'first target\'s grasp point, above its support), "none", "box CX CY CZ SX SY SZ [YAW]", '
+    '"cylinder CX CY CZ RADIUS HEIGHT" [m, rad] or "points FILE" (the object\'s cloud), world frame'
 )
 
 

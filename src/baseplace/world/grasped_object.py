@@ -30,7 +30,9 @@ SUPPORT_MARGIN = 0.15
 SUPPORT_DEPTH = 0.1
 """How far [m] below the object's bottom its support voxels reach."""
 
-OBJECT_SYNTAX = '"auto", "none", "box CX CY CZ SX SY SZ [YAW]" or "cylinder CX CY CZ RADIUS HEIGHT"'
+OBJECT_SYNTAX = (
+    '"auto", "none", "box CX CY CZ SX SY SZ [YAW]", "cylinder CX CY CZ RADIUS HEIGHT" or "points FILE"'
+)
 
 
 @dataclass(frozen=True)
@@ -185,7 +187,10 @@ def rows_in(keys: NDArray[np.int64], table: NDArray[np.int64]) -> NDArray[np.boo
 
 
 def parse_grasped_object(text: str, what: str = "--object") -> GraspedObject | str | None:
-    """Parse the ``--object`` syntax: "auto", "none", a box or a cylinder (see :data:`OBJECT_SYNTAX`).
+    """Parse the ``--object`` syntax (see :data:`OBJECT_SYNTAX`).
+
+    "auto", "none", a box or an upright cylinder [m, rad], or "points FILE", a cloud of the
+    object in the world frame (any format :func:`~baseplace.terrain.io.load_cloud` reads).
 
     Returns:
         "auto", None (for "none") or the given :class:`GraspedObject`.
@@ -194,6 +199,10 @@ def parse_grasped_object(text: str, what: str = "--object") -> GraspedObject | s
     if not words:
         raise InputError(f"{what} must be {OBJECT_SYNTAX}, got {text!r}")
     kind = words[0].lower()
+    if kind == "points" and len(words) == 2:
+        from baseplace.terrain.io import load_cloud
+
+        return GraspedObject.from_points(load_cloud(words[1]).points)
     if kind in ("auto", "none") and len(words) == 1:
         return kind if kind == "auto" else None
     try:
