@@ -130,7 +130,7 @@ def map_file(tmp_path_factory) -> Path:
 def test_place_from_a_bag_through_the_cli(bags, map_file, tmp_path, capsys, tiago):
     capsys.readouterr()
     out = tmp_path / "result.mcap"
-    target = "4.6 7.7 0.9 0 1.5708 0"  # 16 cm above the middle of the table, top-down
+    target = "4.6 7.7 0.95 0 1.5708 0"  # 21 cm above the middle of the table, top-down: the fingertips 6 cm above its top
     code = main(["place", "--bag", str(bags["mcap"]), "--cloud-topic", "/head/points", "--map-topic", "/map",
                  "--world-frame", "map", "--target", target, "--map", str(map_file), "--placements", "2",
                  "--tries", "300", "--mcap", str(out), "--json"])  # fmt: skip
@@ -142,7 +142,7 @@ def test_place_from_a_bag_through_the_cli(bags, map_file, tmp_path, capsys, tiag
     arm = tiago.arm()
     T_target = np.eye(4)
     T_target[:3, :3] = Rotation.from_euler("ZYX", [0.0, 1.5708, 0.0]).as_matrix()
-    T_target[:3, 3] = [4.6, 7.7, 0.9]
+    T_target[:3, 3] = [4.6, 7.7, 0.95]
     for p in result["placements"]:
         T = np.array(p["base_pose"])
         # the base stands on the grid's free floor: z = 0 (within a voxel) and its whole footprint free
@@ -201,14 +201,14 @@ def test_place_from_files_camera_cloud_and_grid(map_file, tmp_path, capsys):
     transform.write_text("\n".join(" ".join(f"{v:.12g}" for v in row) for row in T_MAP_CAMERA) + "\n")
     capsys.readouterr()
     code = main(["place", "--cloud", str(MUG), "--transform", str(transform), "--occupancy", str(DEPOT),
-                 "--target", "4.6 7.7 0.9 0 1.5708 0", "--map", str(map_file), "--tries", "300", "--json"])  # fmt: skip
+                 "--target", "4.6 7.7 0.95 0 1.5708 0", "--map", str(map_file), "--tries", "300", "--json"])  # fmt: skip
     captured = capsys.readouterr()
     assert code == 0, captured.err
     p = json.loads(captured.out)["placements"][0]
     assert abs(p["z"]) < 0.03 and load_occupancy(DEPOT).is_free(np.array([[p["x"], p["y"]]]))[0]
     # two clouds need two transforms
     code = main(["place", "--cloud", str(MUG), "--cloud", str(MUG), "--transform", str(transform),
-                 "--occupancy", str(DEPOT), "--target", "4.6 7.7 0.9 0 1.5708 0", "--map", str(map_file)])  # fmt: skip
+                 "--occupancy", str(DEPOT), "--target", "4.6 7.7 0.95 0 1.5708 0", "--map", str(map_file)])  # fmt: skip
     err = capsys.readouterr().err
     assert code == 2 and "one --transform per --cloud" in err
 
@@ -340,7 +340,7 @@ def test_place_with_start_plans_on_the_map_around_the_table(bags, map_file, tmp_
     out = tmp_path / "with_path.mcap"
     capsys.readouterr()
     args = ["place", "--bag", str(bags["mcap"]), "--cloud-topic", "/head/points", "--map-topic", "/map",
-            "--target", "4.6 7.7 0.9 0 1.5708 0", "--map", str(map_file), "--tries", "300"]  # fmt: skip
+            "--target", "4.6 7.7 0.95 0 1.5708 0", "--map", str(map_file), "--tries", "300"]  # fmt: skip
     code = main([*args, "--start", "5.6 9.6 0", "--mcap", str(out), "--json"])
     captured = capsys.readouterr()
     assert code == 0, captured.err

@@ -69,6 +69,23 @@ def _int_list(text: str) -> list[int]:
     return values
 
 
+def _finite_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
+    return value
+
+
+OBJECT_HELP = (
+    'the grasped object, which only the hand may touch: "auto" (default: the cloud\'s cluster at the '
+    'first target\'s grasp point, above its support), "none", "box CX CY CZ SX SY SZ [YAW]", '
+    '"cylinder CX CY CZ RADIUS HEIGHT" [m, rad] or "points FILE" (the object\'s cloud), world frame'
+)
+
+
 def _nonneg_int(text: str) -> int:
     try:
         value = int(text)
@@ -608,14 +625,17 @@ def cmd_place(args: argparse.Namespace) -> int:
     """Find verified base placements for the targets in a scanned scene."""
     from baseplace.demo import cached_map
     from baseplace.geometry.poses import matrix_to_rpy, parse_pose6
-    from baseplace.placement.pipeline import PlaceSettings, place
+    from baseplace.placement.pipeline import PlaceSettings, place, with_floor
+    from baseplace.placement.verify import contact_summary, most_frequent_contact
     from baseplace.reachability.build import BuildSettings
     from baseplace.reachability.storage import load_map
     from baseplace.robots.model import Robot
+    from baseplace.world.grasped_object import parse_grasped_object
 
     if not args.target:
         raise InputError('give at least one --target "x y z roll pitch yaw"')
     targets = np.stack([parse_pose6(t) for t in args.target])
+    grasped = parse_grasped_object(args.object)
     settings = PlaceSettings(strategy=args.strategy, placements=args.placements, tries=args.tries,
                              resolution=args.resolution)  # fmt: skip
     out = _out_path(args.out)
@@ -627,6 +647,9 @@ def cmd_place(args: argparse.Namespace) -> int:
         raise InputError(
             "give --cloud FILE, --occupancy MAP.yaml, or --bag FILE with --cloud-topic/--map-topic"
         )
+    points = None
+    if cloud is not None:
+        points = cloud.points if args.floor is None else with_floor(cloud.points, args.floor)
     if args.map is not None:
         rmap = load_map(args.map, robot, args.arm)
     else:
@@ -643,20 +666,20 @@ def cmd_place(args: argparse.Namespace) -> int:
 
         start = _base_xyyaw(args.start)
         if grid is None:
-            assert cloud is not None  # a cloud or a grid was given
-            terrain = terrain_from_points(cloud.points, resolution=args.resolution)
+            assert points is not None  # a cloud or a grid was given
+            terrain = terrain_from_points(points, resolution=args.resolution)
             navmap = navigation_map(terrain, robot.spec.footprint_bounding_radius)
             navmap.check_pose("--start", start[:2])
     if grid is not None:
         from baseplace.placement.in_map import place_in_map
 
-        clouds = [] if cloud is None else [cloud.points]
-        result = place_in_map(robot, rmap, clouds, grid, targets, settings, np.random.default_rng(args.seed))
+        clouds = [] if points is None else [points]
+        result = place_in_map(robot, rmap, clouds, grid, targets, settings, np.random.default_rng(args.seed),
+                              grasped=grasped)  # fmt: skip
     else:
-        assert cloud is not None
-        result = place(
-            robot, rmap, cloud.points, targets, settings, np.random.default_rng(args.seed), terrain=terrain
-        )
+        assert points is not None
+        result = place(robot, rmap, points, targets, settings, np.random.default_rng(args.seed), terrain=terrain,
+                       grasped=grasped)  # fmt: skip
     arm = robot.arm(rmap.info.arm)
     if grid is not None and start is not None:  # on the navigation map, around what the cameras see
         from baseplace.placement.in_map import grid_routes
@@ -689,6 +712,10 @@ def cmd_place(args: argparse.Namespace) -> int:
         "placements": placements,
         "tries": result.tries,
         "failures": dict(result.failures),
+        "collisions": contact_summary(result.contacts),
+        "object": {"requested": args.object, "found": result.grasped_note,
+                   "allowed": None if result.grasped is None else result.grasped.to_json()},
+        "floor": args.floor,
         "timings_ms": {k: round(v, 2) for k, v in _place_timings(result.timings_ms, terrain, routes).items()},
         "regions": len(result.terrain.segmentation.regions),
     }  # fmt: skip
@@ -699,7 +726,8 @@ def cmd_place(args: argparse.Namespace) -> int:
         outline = footprint_outline(robot.spec.footprint_radius, robot.spec.footprint_polygon)
         plot_placement(result.osrm, kept, outline, out,
                        f"{robot.name}, {args.strategy}: {len(placements)} placement(s) in {result.tries} tries",
-                       [r.poses for r in routes if r is not None])  # fmt: skip
+                       [r.poses for r in routes if r is not None], result.rejected, result.contacts,
+                       result.grasped)  # fmt: skip
         obj["png"] = str(out)
     if mcap is not None:
         _write_mcap(mcap, args, result.terrain, placements=[p.T_world_base for p in kept],
@@ -712,9 +740,13 @@ def cmd_place(args: argparse.Namespace) -> int:
             f"{args.start} ({args.planner} planner); ask for more with --placements"
         )
     if not placements:
+        if args.json:  # the counts per reason and per link, for the caller
+            _emit(args, obj, "")
+        worst = most_frequent_contact(result.contacts)
         raise NothingFoundError(
             f"no verified placement in {result.tries} tries with {args.strategy} "
-            f"(failures: {dict(result.failures) or 'none'}); try --tries, another --strategy or check the target"
+            f"(failures: {dict(result.failures) or 'none'}{'; ' + worst if worst else ''}); "
+            f"try --tries, another --strategy, --object or check the target"
         )
     lines = [f"{len(placements)} verified placement(s) in {result.tries} tries ({args.strategy}, "
              f"{result.timings_ms['total']:.0f} ms)"]  # fmt: skip
@@ -801,7 +833,8 @@ def cmd_candidates(args: argparse.Namespace) -> int:
     from baseplace.reachability.storage import load_map
     from baseplace.robots.model import Robot
     from baseplace.terrain.voxels import VoxelMap
-    from baseplace.world.environment import Environment
+    from baseplace.world.environment import Environment, contact_groups
+    from baseplace.world.grasped_object import GraspedObject, find_grasped_object, parse_grasped_object
     from baseplace.world.gridnav import GridNavigator
 
     out = _out_path(args.png)
@@ -818,13 +851,19 @@ def cmd_candidates(args: argparse.Namespace) -> int:
     points = None
     if args.cloud is not None or (args.bag and args.cloud_topic):
         points = _world_cloud(args).points
-    # the shared verification: IK for one of the grasps, whole robot against the cloud's voxels
-    # (less the object's own, which the closing hand surrounds)
+    # the shared verification: IK for one of the grasps, whole robot against the cloud's voxels;
+    # only the hand may touch the object's own (found at --object or given by --object-shape)
+    shape = parse_grasped_object(args.object_shape, "--object-shape")
+    grasped = shape if shape != "auto" else None
+    if shape == "auto" and points is not None:
+        grasped = find_grasped_object(points, p_o)
     voxels = VoxelMap(0.025, np.zeros((0, 3), dtype=np.int64))
     if points is not None:
         voxels = VoxelMap.from_points(points)
-        voxels = voxels.without(np.linalg.norm(voxels.centres - p_o, axis=1) <= 0.12)
-    environment = Environment(robot, voxels)
+    groups, object_voxels = contact_groups(
+        voxels, voxels, grasped if isinstance(grasped, GraspedObject) else None
+    )
+    environment = Environment(robot, groups, grasped=object_voxels, hand_arm=args.arm)
     standoff = grasp_standoff(robot) if args.standoff is None else args.standoff
     approach = robot.arm(rmap.info.arm).approach_axis  # the TCP axis out of the hand, from the robot file
     grasps = grasp_poses(p_o, n=16, top_down=True, standoff=standoff, approach_axis=approach)
@@ -865,6 +904,8 @@ def cmd_candidates(args: argparse.Namespace) -> int:
         "robot_pose": None if robot_pose is None else robot_pose.tolist(), "candidates": rows,
         "rejected": [{"x": round(xy[0], 4), "y": round(xy[1], 4), "reason": why} for xy, why in rejected],
         "path": None if route is None else np.round(route, 4).tolist(),
+        "object_shape": {"requested": args.object_shape,
+                         "allowed": grasped.to_json() if isinstance(grasped, GraspedObject) else None},
         "settings": {"r_r": settings.r_r, "d_min": settings.d_min, "d_max": round(settings.d_max, 4),
                      "theta": round(settings.theta, 5), "k_obs": settings.k_obs, "grasp_standoff": standoff},
     }  # fmt: skip
@@ -1078,22 +1119,33 @@ def cmd_experiment_table_grid(args: argparse.Namespace) -> int:
 
 
 def cmd_experiment_osrm(args: argparse.Namespace) -> int:
-    """Seed 000 Tables I and II on generated scenes."""
+    """Seed 000 Tables I and II on generated scenes (protocol: baseplace.sim.osrm_experiment)."""
+    import time
+
+    from baseplace.files import atomic_write
     from baseplace.reachability.storage import load_map
     from baseplace.robots.model import Robot
-    from baseplace.sim.osrm_experiment import SCENE_CLASSES, ExperimentSettings, run_osrm_experiment
+    from baseplace.sim.osrm_experiment import (
+        DEV_SEEDS,
+        SCENE_CLASSES,
+        ExperimentSettings,
+        checkout_commit,
+        run_osrm_experiment,
+        run_record,
+    )
 
     if args.scenes < 1 or args.grasps < 1:
         raise InputError(f"--scenes and --grasps must be >= 1, got {args.scenes} and {args.grasps}")
-    out = _out_path(args.out)
+    out, results_path = _out_path(args.out), _out_path(args.results)
+    seed = DEV_SEEDS[0] if args.dev else args.seed
     robot = Robot(args.robot)
     rmap = load_map(args.map, robot) if args.map else _default_map(args, robot)
     classes = SCENE_CLASSES if not args.flat_only else SCENE_CLASSES[:1]
     update, bar = _progress(args, args.scenes * len(classes), "osrm experiment")
     step = _step_progress(update)
-
+    started, commit = time.perf_counter(), checkout_commit()
     try:
-        settings = ExperimentSettings(grasps_per_scene=args.grasps, seed=args.seed, tries=args.tries)
+        settings = ExperimentSettings(grasps_per_scene=args.grasps, seed=seed, tries=args.tries)
         if args.scheduler is None:
             result = run_osrm_experiment(robot, rmap, args.scenes, settings, classes, step)
         else:
@@ -1106,22 +1158,31 @@ def cmd_experiment_osrm(args: argparse.Namespace) -> int:
     finally:
         if bar is not None:
             bar.close()
+    result["run"] = run_record(sys.argv, time.perf_counter() - started, commit)
     if out is not None:
         from baseplace.viz.experiments import plot_failure_rates
 
         plot_failure_rates(result["rows"], out)
         result["png"] = str(out)
+    if results_path is not None:
+        with atomic_write(results_path, "results file") as tmp:
+            tmp.write_text(json.dumps(result, indent=1) + "\n")
     lines = [
-        f"{'scene':<16} {'strategy':<8} {'reachable':>9} {'success':>8} {'paper':>6} {'t_RM ms':>9} {'t_a ms':>9} {'t_s ms':>9}"
+        f"{'scene':<16} {'strategy':<8} {'queries':>7} {'N=1':>6} {'N=3':>6} {'N=10':>6} {'N=100':>6} {'paper':>6} "
+        f"{'incline':>7} {'t_RM ms':>9} {'t_a ms':>10} {'t_s ms':>10}"
     ]
     for r in result["rows"]:
 
         def f(v: Any) -> str:
             return "-" if v is None else f"{v[0]:.0f}±{v[1]:.0f}"
 
-        ok, paper = _cell(r["success_rate"], ".1f", "%"), _cell(r["paper_success_rate"], ".1f")
-        lines.append(f"{r['scene']:<16} {r['strategy']:<8} {r['reachable_grasps']:>9} {ok:>8} {paper:>6} "
-                     f"{f(r['t_RM_ms']):>9} {f(r['t_a_ms']):>9} {f(r['t_s_ms']):>9}")  # fmt: skip
+        at = [_cell(r["success_rate_at"][b], ".1f") for b in ("1", "3", "10", "100")]
+        paper, incline = _cell(r["paper_success_rate"], ".1f"), _cell(r["on_inclined_plane"], ".0f", "%")
+        lines.append(f"{r['scene']:<16} {r['strategy']:<8} {r['queries']:>7} {at[0]:>6} {at[1]:>6} {at[2]:>6} "
+                     f"{at[3]:>6} {paper:>6} {incline:>7} {f(r['t_RM_ms']):>9} {f(r['t_a_ms']):>10} {f(r['t_s_ms']):>10}")  # fmt: skip
+    lines.append(f"seed {seed} ({result['seed_role']}), {result['run']['wall_time_s']:.0f} s")
+    if results_path is not None:
+        lines.append(f"wrote {results_path}")
     _emit(args, result, "\n".join(lines))
     return 0
 
@@ -1312,8 +1373,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--planner", default="rrt", choices=["rrt", "regions"],
                    help="path planner with --start: OMPL RRTConnect or the region graph (default rrt)")  # fmt: skip
-    p.add_argument("--resolution", type=float, default=None,
+    p.add_argument("--resolution", type=_finite_float, default=None,
                    help="height-map cell [m] (default: from the cloud's extent and point spacing, 0.02-0.05)")  # fmt: skip
+    p.add_argument("--object", default="auto", help=OBJECT_HELP)
+    p.add_argument("--floor", type=_finite_float, default=None,
+                   help="add a floor plane at this height [m] (z up) under and around a cloud that shows none")  # fmt: skip
 
     p = command("candidates", "base placement candidates around an object (seed 004)", cmd_candidates)
     p.add_argument("--occupancy", default=None, help="occupancy grid: map_server YAML (or --bag --map-topic)")
@@ -1334,6 +1398,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--png", default=None, help="PNG of the candidates over the grid (as seed 004 Fig. 2)")
     p.add_argument("--mcap", default=None, help="also write the candidates (best first) as an MCAP recording")
     _add_bag_args(p)
+    p.add_argument("--object-shape", default="auto",
+                   help=OBJECT_HELP.replace("first target's grasp point", "--object position"))  # fmt: skip
 
     p = command(
         "navigate", "a base path across the planar regions of a scanned scene (seed 000 V)", cmd_navigate
@@ -1477,17 +1543,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--results", default=None, help="write the results file (JSON with provenance) here")
 
     p = command("osrm", "placement success and timing, seed 000 Tables I and II", cmd_experiment_osrm, exp_sub,
-                "Flat and {small, medium, large} x {2, 4} plane scenes with a box of objects; success "
-                "over grasps reachable by IK from some valid pose.")  # fmt: skip
+                "Flat, {small, medium, large} x {2, 4} plane and incline-only scenes with a tray of objects; "
+                "success at N = 1, 3, 10, 100 over grasps reachable by IK from some valid pose; only the hand "
+                "may touch the grasped object.")  # fmt: skip
     p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
     p.add_argument("--map", default=None, help="reachability map (default: the cached default map)")
     p.add_argument("--scenes", type=int, default=10, help="scenes per class (default 10)")
     p.add_argument("--grasps", type=int, default=50, help="grasp candidates per scene (default 50)")
     p.add_argument("--tries", type=int, default=100, help="N: candidates per query (default 100)")
     p.add_argument("--flat-only", action="store_true", help="Table I only")
+    p.add_argument("--dev", action="store_true", help="run on the development seed (for choosing parameters)")
+    p.add_argument("--results", default=None,
+                   help="write the whole results file here (rows, seeds, command line, commit, wall time)")  # fmt: skip
     p.add_argument("--scheduler", default=None,
                    help='run scenes on a dask cluster: "tcp://host:port" or "local" (default: this process)')  # fmt: skip
-    p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=_nonneg_int, default=2026,
+                   help="scene seed (default 2026, the held-out seed the reported tables use)")  # fmt: skip
     p.add_argument("--out", default=None, help="PNG of the failure reasons (Fig. 5)")
 
     p = command("view", "interactive 3D viewer of a result in the browser (viser)", cmd_view)

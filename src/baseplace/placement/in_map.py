@@ -22,6 +22,7 @@ from baseplace.placement.pipeline import PlacementResult, PlaceSettings, place
 from baseplace.reachability.rmap import ReachabilityMap
 from baseplace.robots.model import Robot
 from baseplace.terrain.diagnose import auto_resolution
+from baseplace.world.grasped_object import GraspedObject
 from baseplace.world.grid_scene import GridSceneSettings, grid_points, target_window, with_cloud_obstacles
 from baseplace.world.occupancy import OccupancyGrid
 
@@ -99,6 +100,7 @@ def place_in_map(
     settings: PlaceSettings | None = None,
     rng: np.random.Generator | None = None,
     grid_settings: GridSceneSettings | None = None,
+    grasped: GraspedObject | str | None = None,
 ) -> PlacementResult:
     """Verified base placements from camera clouds and an occupancy grid in one world frame.
 
@@ -113,6 +115,7 @@ def place_in_map(
             (:func:`~baseplace.terrain.diagnose.auto_resolution`), or 5 cm without clouds.
         rng: randomness.
         grid_settings: how the grid becomes floor and obstacles.
+        grasped: the object only the hand may touch, as in :func:`~baseplace.placement.pipeline.place`.
     """
     s = settings or PlaceSettings()
     T = np.asarray(targets, dtype=float).reshape(-1, 4, 4)
@@ -124,4 +127,4 @@ def place_in_map(
     if not np.all(np.isfinite(T)):
         raise InputError("target pose contains NaN or infinity")
     points = scene_points_with_grid(cams, grid, T[:, :2, 3], rmap.horizontal_reach, resolution, grid_settings)
-    return place(robot, rmap, points, T, dataclasses.replace(s, resolution=resolution), rng)
+    return place(robot, rmap, points, T, dataclasses.replace(s, resolution=resolution), rng, grasped=grasped)

@@ -2,6 +2,9 @@
 
 cloud -> planar regions -> obstacle voxels (support removed) -> OSRM -> strategy candidates ->
 verification (footprint, IK per target, collision) -> at most M placements within N tries.
+
+Only the hand may touch the grasped object (:mod:`baseplace.world.grasped_object`), given or found
+at the first target's grasp point; the surface under it and everything else are obstacles.
 """
 
 from __future__ import annotations
@@ -9,14 +12,15 @@ from __future__ import annotations
 import math
 import time
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 from numpy.typing import ArrayLike
 
 from baseplace.errors import InputError
 from baseplace.geometry.poses import FloatArray
-from baseplace.placement.osrm import OSRM, build_osrm
+from baseplace.placement.osrm import OSRM, build_osrm, footprint_kernels
 from baseplace.placement.strategies import make_strategy
 from baseplace.placement.verify import Placement, Verifier
 from baseplace.reachability.rmap import ReachabilityMap
@@ -26,7 +30,8 @@ from baseplace.terrain.pipeline import Terrain, terrain_from_points
 from baseplace.terrain.polygons import footprint_outline
 from baseplace.terrain.segmentation import Segmentation
 from baseplace.terrain.voxels import VoxelMap
-from baseplace.world.environment import SUPPORT_DIST, Environment, obstacle_voxels
+from baseplace.world.environment import SUPPORT_DIST, Environment, contact_groups, obstacle_voxels
+from baseplace.world.grasped_object import GraspedObject, find_grasped_object
 
 
 @dataclass(frozen=True)
@@ -66,9 +71,16 @@ class PlacementResult:
         placements: verified placements (at most M).
         failures: counts of rejected candidates by reason, and "exhausted" when the strategy ran dry.
         tries: candidates checked.
-        timings_ms: segmentation, osrm, query and total [ms].
+        timings_ms: segmentation, osrm, collision_setup (the grasped object and the obstacle
+            OcTrees), query (candidates and verification), request_to_placement (all but the
+            segmentation: seed 000's t_a) and total [ms].
         terrain: the segmented scene.
         osrm: the OSRM.
+        contacts: per (robot link, what it touched), the candidates rejected for it
+            (see :class:`~baseplace.placement.verify.Verifier`).
+        rejected: per rejected candidate, (x, y) [m], reason and first contact.
+        grasped: the object only the hand may touch, or None.
+        grasped_note: how it was found ("given", "auto: ..." or "none").
     """
 
     placements: list[Placement]
@@ -77,6 +89,10 @@ class PlacementResult:
     timings_ms: dict[str, float]
     terrain: Terrain
     osrm: OSRM
+    contacts: Counter[tuple[str, str]] = field(default_factory=Counter)
+    rejected: list[tuple[tuple[float, float], str, tuple[str, str] | None]] = field(default_factory=list)
+    grasped: GraspedObject | None = None
+    grasped_note: str = "none"
 
 
 def place(
@@ -88,7 +104,7 @@ def place(
     rng: np.random.Generator | None = None,
     terrain: Terrain | None = None,
     environments: dict[str, Environment] | None = None,
-    ignore: list[tuple[FloatArray, float]] | None = None,
+    grasped: GraspedObject | str | None = None,
 ) -> PlacementResult:
     """Find verified base placements from which the map's arm reaches every target.
 
@@ -101,9 +117,12 @@ def place(
         rng: randomness (default: seed 0).
         terrain: a segmentation of the same cloud to reuse (skips segmentation).
         environments: a cache of collision environments for this terrain, filled on first use
-            (repeated queries in one scene then skip building the obstacle OcTree).
-        ignore: spheres (centre (3,), radius [m]) whose obstacle voxels the robot may touch: the
-            object being grasped, which the closing hand surrounds (an allowed collision).
+            (repeated queries in one scene then skip building the obstacle OcTree); not used
+            with a grasped object.
+        grasped: the object the hand holds at the targets, which only the hand may touch: a
+            :class:`GraspedObject`, "auto" (the cloud's cluster at the first target's grasp point,
+            :func:`find_grasped_object`; none if no point is near it) or None (nothing may be
+            touched).
     """
     s = settings or PlaceSettings()
     rng = rng or np.random.default_rng(0)
@@ -129,18 +148,15 @@ def place(
             f"(bounding radius {size:.2f} m)"
         )
     t2 = time.perf_counter()
+    obj, note = _grasped_object(robot, rmap.info.arm, points, T_targets, grasped)
     key = "floor" if s.strategy == "orm" else "regions"
-    if ignore:  # obstacles depend on the grasped object: no reuse across queries
-        obstacles = _obstacles(terrain, seg, s)
-        centres = obstacles.centres
-        allowed = np.zeros(len(centres), dtype=bool)
-        for centre, radius in ignore:
-            allowed |= np.linalg.norm(centres - np.asarray(centre, dtype=float), axis=1) <= radius
-        env = Environment(robot, obstacles.without(allowed))
+    if obj is not None:  # obstacles depend on the grasped object: no reuse across queries
+        groups, object_voxels = contact_groups(terrain.voxels, _obstacles(terrain, seg, s, outline), obj)
+        env = Environment(robot, groups, grasped=object_voxels, hand_arm=rmap.info.arm)
     else:
         cache = environments if environments is not None else {}
         if key not in cache:
-            cache[key] = Environment(robot, _obstacles(terrain, seg, s))
+            cache[key] = Environment(robot, _obstacles(terrain, seg, s, outline))
         env = cache[key]
     arm = robot.arm(rmap.info.arm)
     verifier = Verifier(arm, DampedLeastSquaresIK(arm), env, T_targets,
@@ -164,14 +180,74 @@ def place(
         "osrm": osrm.build_ms,
         "collision_setup": (t3 - t2) * 1e3,
         "query": (t4 - t3) * 1e3,
+        "request_to_placement": (t4 - t1) * 1e3,
         "total": (t4 - t0) * 1e3,
     }
-    return PlacementResult(placements, verifier.failures, tries, timings, terrain, osrm)
+    return PlacementResult(placements, verifier.failures, tries, timings, terrain, osrm, verifier.contacts,
+                           verifier.rejected, obj, note)  # fmt: skip
 
 
-def _obstacles(terrain: Terrain, seg: Segmentation, s: PlaceSettings) -> VoxelMap:
+def with_floor(points: ArrayLike, z: float, margin: float = 2.0, spacing: float = 0.02) -> FloatArray:
+    """The cloud (N, 3) plus a floor plane at height ``z`` [m] under and ``margin`` [m] around it.
+
+    For clouds that show no floor (a table scanned from above): the robot needs a surface to stand
+    on. The floor's points lie on a ``spacing`` [m] grid over the cloud's xy extent.
+    """
+    p = np.asarray(points, dtype=float).reshape(-1, 3)
+    finite = p[np.all(np.isfinite(p), axis=1)]
+    if len(finite) == 0:
+        raise InputError("the cloud has no finite points")
+    if not math.isfinite(z) or z > float(finite[:, 2].max()):
+        raise InputError(
+            f"the floor height must be finite and below the cloud's top ({finite[:, 2].max():.2f} m), got {z}"
+        )
+    lo, hi = finite[:, :2].min(axis=0) - margin, finite[:, :2].max(axis=0) + margin
+    xs, ys = np.arange(lo[0], hi[0], spacing), np.arange(lo[1], hi[1], spacing)
+    X, Y = np.meshgrid(xs, ys)
+    return np.concatenate([p, np.c_[X.ravel(), Y.ravel(), np.full(X.size, z)]])
+
+
+def _grasped_object(
+    robot: Robot, arm_name: str, points: ArrayLike, targets: FloatArray, grasped: GraspedObject | str | None
+) -> tuple[GraspedObject | None, str]:
+    """The object only the hand may touch, and how it was found."""
+    if grasped is None:
+        return None, "none"
+    if isinstance(grasped, GraspedObject):
+        return grasped, "given"
+    if grasped != "auto":
+        raise InputError(f'grasped must be a GraspedObject, "auto" or None, got {grasped!r}')
+    from baseplace.placement.irm_candidates import grasp_standoff
+
+    T = targets[0]
+    point = (
+        T[:3, 3] + grasp_standoff(robot) * T[:3, 0]
+    )  # the grasp point, ahead of the TCP on its approach axis
+    found = find_grasped_object(points, point)
+    if found is None:
+        return None, f"auto: no object at the grasp point {np.round(point, 3).tolist()}"
+    return found, f"auto: {len(found.points)} points at the grasp point {np.round(point, 3).tolist()}"
+
+
+def standable_regions(seg: Segmentation, outline: FloatArray, n_orientations: int = 8) -> list[int]:
+    """Ids of the regions large enough for the footprint (F, 2) at one of ``n_orientations`` headings.
+
+    Only these are support for the base; the voxels of the others (a table top, a tray bottom)
+    stay obstacles for every link.
+    """
+    gammas = np.arange(n_orientations, dtype=np.float64) * (2 * math.pi / n_orientations)
+    kernels = footprint_kernels(outline, gammas, seg.hmap.resolution)
+    out = []
+    for r in seg.regions:
+        mask = (seg.labels == r.id).astype(np.uint8)
+        if any(cv2.erode(mask, k, borderValue=0).any() for k in kernels):
+            out.append(r.id)
+    return out
+
+
+def _obstacles(terrain: Terrain, seg: Segmentation, s: PlaceSettings, outline: FloatArray) -> VoxelMap:
     if s.strategy != "orm":
-        return obstacle_voxels(terrain.voxels, seg, s.support_dist)
+        return obstacle_voxels(terrain.voxels, seg, s.support_dist, standable_regions(seg, outline))
     # The flat-floor baseline knows one support surface: the floor at z = 0. Ramps are obstacles.
     z = terrain.voxels.centres[:, 2]
     return terrain.voxels.without(np.abs(z) <= s.support_dist)

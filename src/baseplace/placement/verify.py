@@ -74,6 +74,10 @@ class Verifier:
         polygons: region id -> polygon, for the footprint test.
         outline: (F, 2) footprint in the base frame.
         failures: counts per failure reason.
+        contacts: per (robot link, what it touched), the candidates rejected for that contact
+            (what: an obstacle group such as "support" or "obstacle", "grasped_object" for a link
+            other than the hand, or "self: <link>").
+        rejected: per rejected candidate, (x, y) [m], the reason and its first contact (or None).
     """
 
     arm: Arm
@@ -83,23 +87,44 @@ class Verifier:
     polygons: dict[int, Polygon | MultiPolygon]
     outline: FloatArray
     failures: Counter[str] = field(default_factory=Counter)
+    contacts: Counter[tuple[str, str]] = field(default_factory=Counter)
+    rejected: list[tuple[tuple[float, float], str, tuple[str, str] | None]] = field(default_factory=list)
 
     def check(self, candidate: Candidate, rng: np.random.Generator) -> Placement | None:
         """The verified placement, or None (the reason is counted in ``failures``)."""
         T = candidate.T_world_base
         if candidate.region >= 0 and not footprint_inside(self.polygons[candidate.region], self.outline, T):
-            self.failures["footprint"] += 1
+            self._reject(T, "footprint")
             return None
         T_base_world = invert_transforms(T)
         joints = []
         for target in self.targets:
             q = self.ik.solve(T_base_world @ target, rng)
             if q is None:
-                self.failures["no_ik"] += 1
+                self._reject(T, "no_ik")
                 return None
             joints.append(q)
         for q in joints:
             if self.environment.colliding_arm(self.arm, q, T):
-                self.failures["collision"] += 1
+                contacts = self.environment.contacts_arm(self.arm, q, T)
+                self.contacts.update(contacts)
+                self._reject(T, "collision", contacts[0] if contacts else None)
                 return None
         return Placement(T.copy(), candidate.region, candidate.reachability, joints, self.arm.joint_names)
+
+    def _reject(self, T: FloatArray, reason: str, contact: tuple[str, str] | None = None) -> None:
+        self.failures[reason] += 1
+        self.rejected.append(((float(T[0, 3]), float(T[1, 3])), reason, contact))
+
+
+def contact_summary(contacts: Counter[tuple[str, str]]) -> list[dict[str, object]]:
+    """Contacts most frequent first, for JSON: [{"link": ..., "touched": ..., "candidates": n}]."""
+    return [{"link": link, "touched": what, "candidates": n} for (link, what), n in contacts.most_common()]
+
+
+def most_frequent_contact(contacts: Counter[tuple[str, str]]) -> str:
+    """One phrase for an error line: the (link, touched) pair in the most rejected candidates."""
+    if not contacts:
+        return ""
+    (link, what), n = contacts.most_common(1)[0]
+    return f"most often link {link} touched {what} ({n} candidates)"

@@ -90,6 +90,23 @@ class SelfCollision:
         q = np.asarray(q_full, dtype=float)
         return bool(pin.computeCollisions(self.model, self.data, self.geom, self.geom_data, q, True))
 
+    def colliding_pairs(self, q_full: ArrayLike, arm: Arm | None = None) -> list[tuple[str, str]]:
+        """The (link, link) pairs that touch at the full pinocchio configuration.
+
+        With ``arm``, only the pairs that arm moves relative to each other (as :meth:`colliding_arm`).
+        """
+        q = np.asarray(q_full, dtype=float)
+        geom_data = self._arm_geometry_data(arm) if arm is not None else self.geom_data
+        pin.computeCollisions(self.model, self.data, self.geom, geom_data, q, False)
+        objects, frames = self.geom.geometryObjects, self.model.frames
+        return [
+            (str(frames[objects[p.first].parentFrame].name), str(frames[objects[p.second].parentFrame].name))
+            for k, (p, res) in enumerate(
+                zip(self.geom.collisionPairs, geom_data.collisionResults, strict=True)
+            )
+            if geom_data.activeCollisionPairs[k] and res.isCollision()
+        ]
+
     def _arm_geometry_data(self, arm: Arm) -> pin.GeometryData:
         """GeometryData with only the pairs whose relative pose changes when ``arm`` moves.
 

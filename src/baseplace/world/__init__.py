@@ -1,5 +1,14 @@
-"""The robot's surroundings: obstacle voxels for collision checks."""
+"""The robot's surroundings: obstacle voxels for collision checks, and the grasped object."""
 
-from baseplace.world.environment import Environment, HandFilter, obstacle_voxels
+from baseplace.world.environment import Environment, HandFilter, contact_groups, obstacle_voxels
+from baseplace.world.grasped_object import GraspedObject, find_grasped_object, parse_grasped_object
 
-__all__ = ["Environment", "HandFilter", "obstacle_voxels"]
+__all__ = [
+    "Environment",
+    "GraspedObject",
+    "HandFilter",
+    "contact_groups",
+    "find_grasped_object",
+    "obstacle_voxels",
+    "parse_grasped_object",
+]

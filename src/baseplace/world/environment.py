@@ -2,11 +2,18 @@
 
 The obstacles are the occupied voxels without the support voxels: a voxel is support when its
 cell belongs to a planar region and its centre lies within ``support_dist`` of that region's plane
-(seed 000 V: "remove all voxels ... that belong to a planar region"). The rest go into a coal
-OcTree, checked against every collision mesh of the robot, together with self-collision.
+(seed 000 V: "remove all voxels ... that belong to a planar region"). The rest go into coal
+OcTrees, checked against every collision mesh of the robot, together with self-collision.
+
+At a grasp only the hand may touch the grasped object (:mod:`baseplace.world.grasped_object`):
+its voxels are checked against every other link, and the surface under it stays an obstacle
+(:func:`contact_groups`); collisions are reported per robot link and per thing touched.
 """
 
 from __future__ import annotations
+
+import weakref
+from collections.abc import Iterable, Mapping
 
 import coal
 import numpy as np
@@ -18,50 +25,123 @@ from baseplace.robots.collision import SelfCollision, load_collision_model
 from baseplace.robots.model import Arm, Robot
 from baseplace.terrain.segmentation import Segmentation
 from baseplace.terrain.voxels import VoxelMap
+from baseplace.world.grasped_object import GraspedObject, rows_in
 
 SUPPORT_DIST = 0.1
 """Voxels this close [m] to their region's plane are support: 4 sigma of seed 000's 25 mm noise."""
 
 
-def obstacle_voxels(voxels: VoxelMap, seg: Segmentation, support_dist: float = SUPPORT_DIST) -> VoxelMap:
-    """The voxels that are obstacles: all but those lying on the plane of their cell's region."""
+def obstacle_voxels(
+    voxels: VoxelMap,
+    seg: Segmentation,
+    support_dist: float = SUPPORT_DIST,
+    regions: Iterable[int] | None = None,
+) -> VoxelMap:
+    """The voxels that are obstacles: all but those lying on the plane of their cell's region.
+
+    ``regions``: the ids of the regions that are support (default: all); the voxels of the others
+    (e.g. a table top too small for the robot to stand on) stay obstacles.
+    """
     centres = voxels.centres
     region = seg.region_at(centres[:, :2])
     support = np.zeros(len(centres), dtype=bool)
+    chosen = None if regions is None else set(regions)
     for r in seg.regions:
+        if chosen is not None and r.id not in chosen:
+            continue
         sel = region == r.id
         support[sel] = np.abs(centres[sel] @ r.normal + r.d) <= support_dist
     return voxels.without(support)
 
 
+def contact_groups(
+    voxels: VoxelMap, obstacles: VoxelMap, grasped: GraspedObject | None
+) -> tuple[dict[str, VoxelMap], VoxelMap | None]:
+    """Split the scene for :class:`Environment`: ({"support": ..., "obstacle": ...}, object voxels).
+
+    The object's voxels come from all ``voxels`` (it may stand on a planar region); its support is
+    every voxel of ``voxels`` just under and around it (:meth:`GraspedObject.support_mask`), even
+    one a planar region removed from ``obstacles``; the other obstacles are ``obstacles`` less
+    both. Without an object: ({"obstacle": obstacles}, None).
+    """
+    if grasped is None:
+        return {"obstacle": obstacles}, None
+    mine = grasped.voxel_mask(voxels)
+    support = grasped.support_mask(voxels) & ~mine
+    taken = VoxelMap(voxels.resolution, voxels.keys[mine | support])
+    rest = obstacles.without(rows_in(obstacles.keys, taken.keys))
+    return {"support": VoxelMap(voxels.resolution, voxels.keys[support]), "obstacle": rest}, VoxelMap(
+        voxels.resolution, voxels.keys[mine]
+    )
+
+
+_SELF_COLLISION: weakref.WeakKeyDictionary[Robot, SelfCollision] = weakref.WeakKeyDictionary()
+
+
+def _self_collision(robot: Robot) -> SelfCollision:
+    """The robot's self-collision checker, loaded once per robot (environments are built per query)."""
+    if robot not in _SELF_COLLISION:
+        _SELF_COLLISION[robot] = SelfCollision(robot)
+    return _SELF_COLLISION[robot]
+
+
+GRASPED = "grasped_object"
+"""Name of the grasped object's voxels in contact reports (touched by a link that is not the hand)."""
+
+
+def hand_geometry_ids(robot: Robot, geom: pin.GeometryModel, arm_name: str | None = None) -> list[int]:
+    """Indices of the collision geometries of the arm's hand: those its last joint moves."""
+    model = robot.model
+    last = model.getJointId(robot.arm(arm_name).joint_names[-1])
+    return [k for k, obj in enumerate(geom.geometryObjects) if last in set(model.supports[obj.parentJoint])]
+
+
 class Environment:
     """Collision checks of the whole robot, placed in the world, against obstacle voxels.
 
+    Obstacles come in named groups (e.g. "support", "obstacle"), each checked against every robot
+    link; collision reports name the group. The grasped object's voxels, if given, are checked
+    against every link but the hand's (:func:`hand_geometry_ids`): only the hand may touch them.
+
     Args:
         robot: the robot.
-        obstacles: obstacle voxels in the world frame (see :func:`obstacle_voxels`).
+        obstacles: obstacle voxels in the world frame (see :func:`obstacle_voxels`), or a mapping
+            name -> voxels.
         self_collision: also check self-collision (default True).
+        grasped: voxels of the grasped object (world frame), or None.
+        hand_arm: the arm whose hand holds the object (default: the robot's first arm).
     """
 
-    def __init__(self, robot: Robot, obstacles: VoxelMap, self_collision: bool = True) -> None:
+    def __init__(
+        self,
+        robot: Robot,
+        obstacles: VoxelMap | Mapping[str, VoxelMap],
+        self_collision: bool = True,
+        grasped: VoxelMap | None = None,
+        hand_arm: str | None = None,
+    ) -> None:
         self.robot = robot
         self.model = robot.model
-        self._self = SelfCollision(robot) if self_collision else None
+        self._self = _self_collision(robot) if self_collision else None
         base_geom = self._self.geom if self._self is not None else None
         if base_geom is None:
             base_geom = load_collision_model(robot)
         self.geom = base_geom.copy()
         self.geom.removeAllCollisionPairs()
         n_robot = self.geom.ngeoms
-        if len(obstacles) == 0:
-            self.env_id = None
-        else:
-            tree = coal.makeOctree(np.ascontiguousarray(obstacles.centres), obstacles.resolution)
-            self.env_id = self.geom.addGeometryObject(
-                pin.GeometryObject("environment", 0, pin.SE3.Identity(), tree)
-            )
+        groups = dict(obstacles) if isinstance(obstacles, Mapping) else {"obstacle": obstacles}
+        self.hand_ids = set(hand_geometry_ids(robot, self.geom, hand_arm)) if grasped is not None else set()
+        self.env_ids: list[int] = []
+        for name, voxels in [*groups.items(), (GRASPED, grasped)]:
+            if voxels is None or len(voxels) == 0:
+                continue
+            tree = coal.makeOctree(np.ascontiguousarray(voxels.centres), voxels.resolution)
+            gid = self.geom.addGeometryObject(pin.GeometryObject(name, 0, pin.SE3.Identity(), tree))
+            self.env_ids.append(gid)
             for k in range(n_robot):
-                self.geom.addCollisionPair(pin.CollisionPair(k, self.env_id))
+                if name != GRASPED or k not in self.hand_ids:
+                    self.geom.addCollisionPair(pin.CollisionPair(k, gid))
+        self.obstacle_names = [n for n, v in groups.items() if len(v)]
         self.data = self.model.createData()
         self.geom_data = pin.GeometryData(self.geom)
         if self._self is not None:  # build the arm-pruned pair tables now, not in the first query
@@ -72,12 +152,24 @@ class Environment:
         self._T_root_base = ref.oMf[self.model.getFrameId(robot.spec.base_frame)]
 
     @property
+    def env_id(self) -> int | None:
+        """Index of the first obstacle geometry, or None when there are none."""
+        return self.env_ids[0] if self.env_ids else None
+
+    @property
+    def obstacle_trees(self) -> list[coal.OcTree]:
+        """The obstacle voxels (every group, not the grasped object) as coal OcTrees in the world frame."""
+        return [
+            self.geom.geometryObjects[g].geometry
+            for g in self.env_ids
+            if self.geom.geometryObjects[g].name != GRASPED
+        ]
+
+    @property
     def obstacle_tree(self) -> coal.OcTree | None:
-        """The obstacle voxels as a coal OcTree in the world frame, or None when there are none."""
-        if self.env_id is None:
-            return None
-        tree: coal.OcTree = self.geom.geometryObjects[self.env_id].geometry
-        return tree
+        """The first obstacle OcTree in the world frame, or None when there are none."""
+        trees = self.obstacle_trees
+        return trees[0] if trees else None
 
     def colliding(self, q_full: ArrayLike, T_world_base: ArrayLike) -> bool:
         """True if the robot touches an obstacle voxel or itself.
@@ -91,14 +183,18 @@ class Environment:
             return True
         return self._touches_obstacles(q, T_world_base)
 
-    def _touches_obstacles(self, q: NDArray[np.float64], T_world_base: ArrayLike) -> bool:
-        if self.env_id is None:
-            return False
+    def _place_obstacles(self, T_world_base: ArrayLike) -> None:
         T = np.asarray(T_world_base, dtype=float)
         if T.shape != (4, 4) or not np.all(np.isfinite(T)):
             raise InputError("base pose must be a finite (4, 4) matrix")
         T_root_world = self._T_root_base * pin.SE3(T).inverse()
-        self.geom.geometryObjects[self.env_id].placement = T_root_world
+        for gid in self.env_ids:
+            self.geom.geometryObjects[gid].placement = T_root_world
+
+    def _touches_obstacles(self, q: NDArray[np.float64], T_world_base: ArrayLike) -> bool:
+        if not self.env_ids:
+            return False
+        self._place_obstacles(T_world_base)
         return bool(pin.computeCollisions(self.model, self.data, self.geom, self.geom_data, q, True))
 
     def colliding_arm(self, arm: Arm, q_arm: ArrayLike, T_world_base: ArrayLike) -> bool:
@@ -110,6 +206,29 @@ class Environment:
         if self._self is not None and self._self.colliding_arm(arm, q_arm)[0]:
             return True
         return self._touches_obstacles(arm.to_pinocchio(q_arm, self.robot.q_reference), T_world_base)
+
+    def contacts_arm(self, arm: Arm, q_arm: ArrayLike, T_world_base: ArrayLike) -> list[tuple[str, str]]:
+        """Every (robot link, what it touches) at arm joint values (n,), other joints at reference.
+
+        What is an obstacle group's name, :data:`GRASPED` (a link other than the hand touching the
+        grasped object) or "self: <link>" (self-collision). Empty when :meth:`colliding_arm` is False.
+        """
+        q = arm.to_pinocchio(q_arm, self.robot.q_reference)
+        out: list[tuple[str, str]] = []
+        if self._self is not None:
+            for a, b in self._self.colliding_pairs(q, arm):
+                out.append((a, f"self: {b}"))
+        if self.env_ids:
+            self._place_obstacles(T_world_base)
+            pin.computeCollisions(self.model, self.data, self.geom, self.geom_data, q, False)
+            objects = self.geom.geometryObjects
+            for pair, res in zip(self.geom.collisionPairs, self.geom_data.collisionResults, strict=True):
+                if res.isCollision():
+                    out.append((self._link(pair.first), objects[pair.second].name))
+        return sorted(set(out))
+
+    def _link(self, geometry_id: int) -> str:
+        return str(self.model.frames[self.geom.geometryObjects[geometry_id].parentFrame].name)
 
 
 class HandFilter:
@@ -131,30 +250,29 @@ class HandFilter:
     def __init__(
         self, robot: Robot, arm_name: str | None = None, geom: pin.GeometryModel | None = None
     ) -> None:
-        arm = robot.arm(arm_name)
         geom = geom if geom is not None else load_collision_model(robot)
         model, data = robot.model, robot.model.createData()
         q = robot.q_reference
         pin.framesForwardKinematics(model, data, q)
         gdata = pin.GeometryData(geom)
         pin.updateGeometryPlacements(model, data, geom, gdata, q)
-        last = model.getJointId(arm.joint_names[-1])
-        T_tcp_world = data.oMf[model.getFrameId(arm.tcp_frame)].inverse()
+        T_tcp_world = data.oMf[model.getFrameId(robot.arm(arm_name).tcp_frame)].inverse()
         self.parts = [
-            (obj.geometry, (T_tcp_world * gdata.oMg[k]).homogeneous)
-            for k, obj in enumerate(geom.geometryObjects)
-            if last in set(model.supports[obj.parentJoint])
+            (geom.geometryObjects[k].geometry, (T_tcp_world * gdata.oMg[k]).homogeneous)
+            for k in hand_geometry_ids(robot, geom, arm_name)
         ]
 
-    def clear(self, T_world_tcp: ArrayLike, obstacles: coal.OcTree) -> bool:
-        """True if no hand geometry at ``T_world_tcp`` (4, 4) touches ``obstacles``."""
+    def clear(self, T_world_tcp: ArrayLike, obstacles: coal.OcTree | list[coal.OcTree]) -> bool:
+        """True if no hand geometry at ``T_world_tcp`` (4, 4) touches ``obstacles`` (world frame)."""
         T_tcp = np.asarray(T_world_tcp, dtype=float)
         request, identity = coal.CollisionRequest(), coal.Transform3s()
+        trees = obstacles if isinstance(obstacles, list) else [obstacles]
         for geometry, T_tcp_geom in self.parts:
             T = T_tcp @ T_tcp_geom
-            result = coal.CollisionResult()
-            if coal.collide(
-                geometry, coal.Transform3s(T[:3, :3], T[:3, 3]), obstacles, identity, request, result
-            ):
-                return False
+            for tree in trees:
+                result = coal.CollisionResult()
+                if coal.collide(
+                    geometry, coal.Transform3s(T[:3, :3], T[:3, 3]), tree, identity, request, result
+                ):
+                    return False
         return True
