@@ -109,14 +109,16 @@ def _progress(args: argparse.Namespace, total: int, desc: str) -> tuple[Callable
     return lazy.update, lazy
 
 
-def _out_path(text: str | None) -> Path | None:
-    """The ``--out`` path, or None; its directory must exist (checked before any work is done)."""
-    if text is None:
-        return None
-    out = Path(text)
-    if not (out.parent if str(out.parent) else Path(".")).is_dir():
-        raise InputError(f"--out directory {out.parent} does not exist")
-    return out
+MAP_SUFFIXES = (".rmap", ".h5", ".hdf5")
+SURFACE_SUFFIXES = (".smap", ".h5", ".hdf5")
+PLOT_SUFFIXES = (".png", ".pdf", ".svg")
+
+
+def _out_path(text: str | None, suffixes: Sequence[str] = PLOT_SUFFIXES, what: str = "--out") -> Path | None:
+    """The output path, or None; checked (length, type, suffix, writable directory) before any work."""
+    from baseplace.guards import check_output_path
+
+    return None if text is None else check_output_path(text, what, suffixes)
 
 
 def _step_progress(update: Callable[[int], None] | None) -> Callable[[int], None]:
@@ -181,7 +183,7 @@ def cmd_build_map(args: argparse.Namespace) -> int:
 
     if args.scheduler is None:
         _set_workers(args.workers)
-    out = _out_path(args.out)
+    out = _out_path(args.out, MAP_SUFFIXES)
     assert out is not None  # --out is required
     settings = BuildSettings(
         samples=args.samples, seed=args.seed, voxel_size=args.voxel_size,
@@ -287,7 +289,9 @@ def cmd_reach(args: argparse.Namespace) -> int:
 def cmd_demo(args: argparse.Namespace) -> int:
     """Run the demo: segmentation, OSRM, a verified placement on a platform and the path up its ramp."""
     from baseplace.demo import run_demo
+    from baseplace.guards import check_path_length
 
+    check_path_length(str(Path(args.out) / "demo.json"), "--out")
     update, bar = _progress(args, args.samples, "default TIAGo map (first run only)")
     try:
         result = run_demo(Path(args.out), samples=args.samples, seed=args.seed, progress=update)
@@ -354,6 +358,8 @@ def cmd_scene_generate(args: argparse.Namespace) -> int:
     from baseplace.sim.scenes import SceneSettings, generate_scene, save_scene
     from baseplace.terrain.io import Cloud, save_cloud
 
+    _out_path(args.out, (".ply", ".pcd", ".npy"))
+    _out_path(args.truth, (".json",), "--truth")
     settings = SceneSettings(size_class=args.size_class, n_planes=args.planes, sigma=args.sigma,
                              extent=(args.extent, args.extent), with_box=not args.no_box)  # fmt: skip
     rng = np.random.default_rng(args.seed)
@@ -548,7 +554,7 @@ def cmd_candidates(args: argparse.Namespace) -> int:
     from baseplace.world.gridnav import GridNavigator
     from baseplace.world.occupancy import load_occupancy
 
-    out = _out_path(args.png)
+    out = _out_path(args.png, what="--png")
     p_o = _parse_xyz(args.object, "--object")
     robot_pose = _base_xyyaw(args.robot_pose) if args.robot_pose is not None else None
     grid = load_occupancy(args.occupancy)
@@ -874,7 +880,7 @@ def cmd_surface_map(args: argparse.Namespace) -> int:
     from baseplace.reachability.build import BuildSettings
     from baseplace.robots.model import Robot
 
-    out, png = _out_path(args.out), _out_path(args.png)
+    out, png = _out_path(args.out, SURFACE_SUFFIXES), _out_path(args.png, what="--png")
     assert out is not None
     polygon = parse_polygon(args.polygon)
     robot = Robot(args.robot)

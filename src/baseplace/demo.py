@@ -10,6 +10,7 @@ and ``out/demo.png``. The default TIAGo map is built on the first run and cached
 
 from __future__ import annotations
 
+import hashlib
 import json
 import time
 from collections.abc import Callable
@@ -47,7 +48,8 @@ def cached_map(
         f"{robot.name}-{arm_name}-{robot.spec.urdf_sha256[:12]}-s{settings.samples}-seed{settings.seed}"
         f"-v{settings.voxel_size}-o{settings.orientation_resolution}-f{FORMAT_VERSION}"
     )
-    path = cache_dir().parent / "maps" / f"{key}.rmap"
+    # the file name is a hash: no name from a robot file ever becomes part of a path
+    path = cache_dir().parent / "maps" / f"map-{hashlib.sha256(key.encode()).hexdigest()[:32]}.rmap"
     if path.is_file():
         return load_map(path, robot, arm_name), path, False
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -32,6 +32,7 @@ from typing import Any
 import yaml
 
 from baseplace.errors import InputError, brief, unknown
+from baseplace.guards import check_name
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -83,6 +84,9 @@ class RobotSpec:
     reference: dict[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        check_name(self.name, "robot name")  # names reach map files and cache keys: words only
+        for arm_name in self.arms:
+            check_name(arm_name, "arm name", f"robot {self.name!r}")
         if not self.arms:
             raise InputError(f"robot {self.name!r} defines no arm")
         if self.default_arm not in self.arms:
