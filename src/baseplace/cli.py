@@ -327,10 +327,10 @@ def cmd_segment(args: argparse.Namespace) -> int:
     from baseplace.terrain.io import load_cloud, load_transform
     from baseplace.terrain.pipeline import terrain_from_points, terrain_json
 
+    out = _out_path(args.out)
     cloud = load_cloud(args.cloud)
     if args.transform is not None:
         cloud = cloud.transformed(load_transform(args.transform))
-    out = _out_path(args.out)
     terrain = terrain_from_points(cloud.points, args.algorithm, args.resolution)
     result = terrain_json(terrain)
     result["cloud"] = {"path": str(args.cloud), "points": len(cloud.points)}

@@ -42,6 +42,7 @@ from baseplace.h5files import (
     CORRUPT_FILE_ERRORS,
     attr_text,
     digest,
+    read_array,
     read_header,
     read_text,
     short_text,
@@ -146,7 +147,9 @@ def load_checkpoint(path: str | Path, acc: MapAccumulator) -> float:
             build = read_text(f, "build")
             dropped = int(f.attrs["dropped"])
             elapsed_s = float(f.attrs["elapsed_s"])
-            arrays = [f[name][()] for name in ("chunks", "cells", "counts", "best") if name in f]
+            arrays = [
+                read_array(f, name, path) for name in ("chunks", "cells", "counts", "best") if name in f
+            ]
             stored = attr_text(f.attrs, "sha256")
         if _digest(build, dropped, elapsed_s, arrays) != stored or len(arrays) < 3:
             raise InputError(corrupt)
