@@ -178,7 +178,6 @@ def cmd_build_map(args: argparse.Namespace) -> int:
     """Build a map and save it."""
     from baseplace.reachability.build import BuildSettings, build_map
     from baseplace.reachability.checkpoint import default_checkpoint_path
-    from baseplace.reachability.storage import save_map
     from baseplace.robots.model import Robot
 
     if args.scheduler is None:
@@ -198,13 +197,17 @@ def cmd_build_map(args: argparse.Namespace) -> int:
     update, bar = _progress(args, settings.samples, f"build-map {robot.name}")
     try:
         if args.scheduler is not None:
+            from baseplace.files import output_lock, remove_stray_temporaries
             from baseplace.reachability.distributed import build_map_distributed, connect
 
-            with connect(args.scheduler, n_workers=args.workers) as client:
+            with output_lock(out), connect(args.scheduler, n_workers=args.workers) as client:
+                remove_stray_temporaries(out)
                 rmap = build_map_distributed(args.robot, args.arm, settings, client, update, checkpoint,
-                                             args.checkpoint_every)  # fmt: skip
-        else:
-            rmap = build_map(robot, args.arm, settings, update, checkpoint, args.checkpoint_every)
+                                             args.checkpoint_every, save_to=out)  # fmt: skip
+        else:  # saved before the checkpoint goes; a second build to the same --out waits for this one
+            rmap = build_map(
+                robot, args.arm, settings, update, checkpoint, args.checkpoint_every, save_to=out
+            )
     except KeyboardInterrupt:
         if checkpoint is None or not checkpoint.exists():
             raise
@@ -215,7 +218,7 @@ def cmd_build_map(args: argparse.Namespace) -> int:
     finally:
         if bar is not None:
             bar.close()
-    size = save_map(rmap, out)
+    size = out.stat().st_size
     info = rmap.info
     rate = info.samples / info.build_time_s if info.build_time_s > 0 else float("nan")
     obj = {

@@ -214,6 +214,7 @@ def build_map_distributed(
     checkpoint_every: int = DEFAULT_CHECKPOINT_EVERY,
     tasks_per_worker: int = TASKS_PER_WORKER,
     worker_timeout_s: float = 60.0,
+    save_to: str | Path | None = None,
 ) -> ReachabilityMap:
     """Build a reachability map on a dask cluster; identical to :func:`build_map`'s map.
 
@@ -231,6 +232,7 @@ def build_map_distributed(
             finished task brings the unsaved chunks to it.
         tasks_per_worker: tasks per worker (more: finer progress and checkpoints, more overhead).
         worker_timeout_s: how long to wait for a first worker if the cluster has none [s].
+        save_to: map file written before the checkpoint is removed (as :func:`build_map`).
 
     Returns:
         The map; ``info.build_time_s`` is the client's wall time (summed over resumed runs).
@@ -282,9 +284,14 @@ def build_map_distributed(
                         saver.added(len(part.chunks))
                 if saver is not None:
                     saver.check_interrupt()
+            if saver is not None:
+                return saver.finish(save_to)
     finally:
         if remaining:
             client.cancel(list(remaining))
-    if saver is not None:
-        return saver.finish()
-    return acc.result(time.perf_counter() - start)
+    rmap = acc.result(time.perf_counter() - start)
+    if save_to is not None:
+        from baseplace.reachability.storage import save_map
+
+        save_map(rmap, save_to)
+    return rmap
