@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import math
 import os
 import sys
@@ -197,7 +198,17 @@ def cmd_build_map(args: argparse.Namespace) -> int:
     update, bar = _progress(args, settings.samples, f"build-map {robot.name}")
     try:
         if args.scheduler is not None:
+            import distributed  # noqa: F401  (it sets its loggers' levels on import)
+
             from baseplace.files import output_lock, remove_stray_temporaries
+
+            for name in [
+                "distributed",
+                "asyncio",
+                *logging.root.manager.loggerDict,
+            ]:  # faults: one line of ours
+                if name.startswith(("distributed", "asyncio")):
+                    logging.getLogger(name).setLevel(logging.CRITICAL)
             from baseplace.reachability.distributed import build_map_distributed, connect
 
             with output_lock(out), connect(args.scheduler, n_workers=args.workers) as client:
