@@ -305,6 +305,9 @@ class Checkpoints:
         if save_to is not None:
             from baseplace.reachability.storage import save_map
 
+            if time.perf_counter() - self._last_save > self.every_s / 2:
+                self.save()  # so a kill during the map's save loses at most half an interval
+
             save_map(rmap, save_to)
         remove_checkpoint(self.path)
         return rmap
