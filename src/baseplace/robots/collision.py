@@ -80,6 +80,22 @@ def load_collision_model(robot: Robot) -> pin.GeometryModel:
         ) from None
 
 
+def _remove_srdf_pairs(model: pin.Model, geom: pin.GeometryModel, srdf: Path) -> None:
+    """Disable the SRDF's ``disable_collisions`` pairs; a malformed SRDF is a one-line error."""
+    try:
+        ElementTree.parse(srdf)
+    except (ElementTree.ParseError, OSError) as exc:
+        raise InputError(f"cannot parse SRDF {srdf}: {' '.join(str(exc).split())[:200]}") from None
+    try:
+        with native_stderr_captured():
+            pin.removeCollisionPairs(model, geom, str(srdf))
+    except Exception as exc:  # pinocchio raises RuntimeError/ValueError with multi-line text
+        lines = str(exc).strip().splitlines()
+        raise InputError(
+            f"cannot read SRDF {srdf}: {lines[0][:200] if lines else type(exc).__name__}"
+        ) from None
+
+
 class SelfCollision:
     """Self-collision checker for one robot.
 
@@ -94,7 +110,7 @@ class SelfCollision:
         self.geom = load_collision_model(robot)
         self.geom.addAllCollisionPairs()
         if robot.spec.srdf is not None:
-            pin.removeCollisionPairs(self.model, self.geom, str(robot.spec.srdf))
+            _remove_srdf_pairs(self.model, self.geom, robot.spec.srdf)
         else:
             self._disable_structural_pairs()
         self.num_threads = num_threads or os.cpu_count() or 1
