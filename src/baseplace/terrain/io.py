@@ -424,6 +424,8 @@ def _check_declared_size(path: Path) -> None:
         check_alloc(n_bytes, "the array", path, file_bytes, 1.0)
         check_alloc(n_bytes / max(dtype.itemsize, 1) * 8 + n_bytes, "points", path)
         return
+    if suffix == ".bt":  # the node stream is unpacked to 4 codes per byte before it is checked
+        check_alloc(file_bytes * 6.0, "the OctoMap node stream", path)
     if suffix not in (".pcd", ".ply"):
         return  # text (bounded by the file) and .bt (bounded by MAX_OCTOMAP_POINTS)
     lines = head.split(b"\n")

@@ -558,6 +558,9 @@ def build_scene(server: viser.ViserServer, scene: ResultScene, data: ViewData) -
             position=T[:3, 3], axes_length=0.3, axes_radius=0.015,
         )  # fmt: skip
     if scene.base_poses:
+        from baseplace.robots.collision import check_mesh_paths
+
+        check_mesh_paths(spec)  # meshes only from the robot's package folders (docs/security.md)
         try:
             urdf = yourdfpy.URDF.load(
                 str(spec.urdf), build_scene_graph=True, load_meshes=True,
