@@ -1,5 +1,5 @@
-"""Distributed faults (issue 15): every dask worker killed mid-build ends in one line within 60 s,
-with a checkpoint that resumes to the map of an uninterrupted build.
+"""Distributed faults (issue 15): every dask worker (or the scheduler) killed mid-build ends in one
+line within 60 s, with a checkpoint that resumes to the map of an uninterrupted build.
 
 A real scheduler and two workers run as separate processes (``dask scheduler``, ``dask worker
 --no-nanny``, so nothing restarts a killed worker); the CLI builds against them and the workers
@@ -34,7 +34,8 @@ def _free_port() -> int:
 
 
 @pytest.mark.slow
-def test_all_workers_killed_gives_one_line_and_a_resumable_checkpoint(tiago, tmp_path):
+@pytest.mark.parametrize("victim", ["workers", "scheduler"])
+def test_all_workers_killed_gives_one_line_and_a_resumable_checkpoint(victim, tiago, tmp_path):
     settings = BuildSettings(samples=16 * CHUNK, seed=4)
     env = {**os.environ, "PYTHONPATH": SRC, "BASEPLACE_CACHE": os.environ.get("BASEPLACE_CACHE", "")}
     env = {k: v for k, v in env.items() if v}
@@ -64,8 +65,8 @@ def test_all_workers_killed_gives_one_line_and_a_resumable_checkpoint(tiago, tmp
                 build.kill()
                 pytest.fail(f"no checkpoint before the build ended: {build.communicate()[1][-2000:]}")
             time.sleep(0.05)
-        for w in workers:
-            w.send_signal(signal.SIGKILL)
+        for p in workers if victim == "workers" else [scheduler]:
+            p.send_signal(signal.SIGKILL)
         killed = time.monotonic()
         _, stderr = build.communicate(timeout=120)
         elapsed = time.monotonic() - killed
@@ -80,7 +81,8 @@ def test_all_workers_killed_gives_one_line_and_a_resumable_checkpoint(tiago, tmp
     assert build.returncode == 2, stderr[-3000:]
     lines = stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: "), stderr[-3000:]
-    assert "worker" in lines[0] and str(ckpt) in lines[0] and "resume" in lines[0]
+    assert ("worker" if victim == "workers" else "scheduler") in lines[0]
+    assert str(ckpt) in lines[0] and "resume" in lines[0]
     assert not out.exists()
     acc = MapAccumulator(tiago, None, settings)
     load_checkpoint(ckpt, acc)
