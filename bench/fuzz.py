@@ -18,6 +18,10 @@ save, at most 50 cases, are lost and run again).
 Workers run with hypothesis' generate phase only (no shrinking: a crash is counted, not
 minimized; ``tests/test_fuzz.py`` shrinks) from ``--seed``, under an address-space limit
 (``--memory-gib``) so a runaway allocation becomes a MemoryError instead of taking the machine.
+That cap is a safety net, not a pass: every case's growth of peak resident memory is measured
+(``fuzz_cases.run_case``; reported per target as ``peak_memory_mib``), and a case that grows it
+by more than ``MEMORY_MULTIPLE`` x its input bytes + ``MEMORY_SLACK`` counts as a crash
+("MemoryBlowup"), even if it ended in a clean error (issue 15).
 
 Usage: python bench/fuzz.py [--examples 10000] [--targets cloud_pcd,occupancy] [--jobs 2]
        [--seed 0] [--case-timeout 20] [--native-timeout 90] [--memory-gib 8] [--update]
@@ -77,6 +81,7 @@ def _worker(args: argparse.Namespace) -> None:
     noisy: dict[str, Any] = {"cases": 0, "example": "", "output": ""}
     warned = 0
     times: list[float] = []
+    peaks: list[int] = []
     start = time.perf_counter()
 
     def save(complete: bool, error: str = "") -> None:
@@ -93,6 +98,11 @@ def _worker(args: argparse.Namespace) -> None:
             "native_stderr_cases": noisy,
             "warning_cases": warned,
             "seconds": round(time.perf_counter() - start, 1),
+            "peak_memory_mib": {  # growth of peak resident memory per case (fuzz_cases.run_case)
+                "max": round(max(peaks, default=0) / 2**20, 1),
+                "median": round(sorted(peaks)[len(peaks) // 2] / 2**20, 1) if peaks else 0.0,
+                "limit": f"{fc.MEMORY_MULTIPLE} x input + {fc.MEMORY_SLACK // 2**20} MiB",
+            },
             "case_seconds": {
                 "sum": sum(times),
                 "max": max(times, default=0.0),
@@ -115,6 +125,7 @@ def _worker(args: argparse.Namespace) -> None:
         t = time.perf_counter()
         r = fc.run_case(target, case, scratch / "case", time_limit=args.case_timeout)
         times.append(time.perf_counter() - t)
+        peaks.append(r.peak_bytes)
         faulthandler.cancel_dump_traceback_later()
         outcomes[r.outcome] += 1
         warned += r.warnings > 0
@@ -176,6 +187,9 @@ def _merge(total: dict[str, Any] | None, part: dict[str, Any]) -> dict[str, Any]
     if total is None:
         return json.loads(json.dumps(part))
     total["cases"] += part.get("cases", 0)
+    if "peak_memory_mib" in part:
+        peak = total.setdefault("peak_memory_mib", dict(part["peak_memory_mib"]))
+        peak["max"] = max(peak.get("max", 0), part["peak_memory_mib"]["max"])
     for k, v in part.get("outcomes", {}).items():
         total["outcomes"][k] = total["outcomes"].get(k, 0) + v
     for key in ("crashes", "notes"):
@@ -322,7 +336,7 @@ def _run_all(args: argparse.Namespace) -> None:
         },
     )
     print(f"\n{'target':16} {'cases':>6} {'loaded':>7} {'clean':>7} {'crash':>6} {'hang':>5} {'viol':>5} "
-          f"{'notes':>6} {'stderr':>6} {'ms/case':>8} {'s':>6}")  # fmt: skip
+          f"{'notes':>6} {'stderr':>6} {'ms/case':>8} {'s':>6} {'peakMiB':>8}")  # fmt: skip
     for n in names:
         r = results[n]
         o = r.get("outcomes", {})
@@ -330,7 +344,8 @@ def _run_all(args: argparse.Namespace) -> None:
             f"{n:16} {r.get('cases', 0):6} {o.get('loaded', 0):7} {o.get('clean', 0):7} {o.get('crash', 0):6} "
             f"{o.get('hang', 0):5} {o.get('violated', 0):5} {sum(x['count'] for x in r.get('notes', [])):6} "
             f"{r.get('native_stderr_cases', {}).get('cases', 0):6} {r.get('case_ms', {}).get('mean', 0):8} "
-            f"{r.get('seconds', 0):6}" + ("  WORKER DIED" if "worker_died" in r else "")
+            f"{r.get('seconds', 0):6} {r.get('peak_memory_mib', {}).get('max', 0):8}"
+            + ("  WORKER DIED" if "worker_died" in r else "")
         )
         for c in r.get("crashes", []):
             print(

@@ -101,6 +101,7 @@ class Result:
     message: str = ""  # first line of the exception message
     note: str = ""  # loaded, but an invariant is broken
     warnings: int = 0  # Python warnings emitted
+    peak_bytes: int = 0  # growth of the peak resident memory during the case
 
 
 def _where(exc: BaseException) -> str:
@@ -120,8 +121,60 @@ def _first_line(exc: BaseException) -> str:
     return text if len(text) <= 200 else text[:197] + "..."
 
 
+MEMORY_MULTIPLE = 100
+"""A case may grow the process's peak resident memory by at most this many times its input's bytes
+(plus :data:`MEMORY_SLACK`); more is a crash (issue 15: bounded memory before allocation)."""
+MEMORY_SLACK = 256 * 2**20  # bytes: imports, numba compiles and HDF5 caches of a first case
+
+
+def _status_kib(field: str) -> int | None:
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith(field):
+                    return int(line.split()[1])
+    except OSError:
+        pass
+    return None
+
+
+def _reset_peak_rss() -> bool:
+    """Reset the kernel's peak resident size of this process (VmHWM); False where unsupported."""
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+        return True
+    except OSError:
+        return False
+
+
+def _input_bytes(workdir: Path) -> int:
+    return sum(p.stat().st_size for p in workdir.rglob("*") if p.is_file())
+
+
 def run_case(target: Target, case: Any, workdir: Path, time_limit: float = 10.0) -> Result:
-    """Run ``case`` of ``target`` in an emptied ``workdir`` and classify the result."""
+    """Run ``case`` of ``target`` in an emptied ``workdir``; classify the result, note its peak memory.
+
+    The peak is the growth of the process's peak resident memory (``VmHWM`` after a reset, less
+    the resident size before), so allocations in C count too. A case whose peak exceeds
+    ``MEMORY_MULTIPLE`` x its input bytes + ``MEMORY_SLACK`` is a crash ("MemoryBlowup"), even
+    if it ended in a clean error.
+    """
+    measured = _reset_peak_rss()
+    before = _status_kib("VmRSS") or 0
+    result = _run_case(target, case, workdir, time_limit)
+    peak = _status_kib("VmHWM") if measured else None
+    if peak is not None:
+        result.peak_bytes = max(0, peak - before) * 1024
+        allowed = MEMORY_MULTIPLE * _input_bytes(workdir) + MEMORY_SLACK
+        if result.peak_bytes > allowed and result.outcome in (LOADED, CLEAN):
+            return Result(CRASH, f"MemoryBlowup @ {target.name}",
+                          f"peak {result.peak_bytes / 2**20:.0f} MiB > {allowed / 2**20:.0f} MiB allowed",
+                          warnings=result.warnings, peak_bytes=result.peak_bytes)  # fmt: skip
+    return result
+
+
+def _run_case(target: Target, case: Any, workdir: Path, time_limit: float = 10.0) -> Result:
     shutil.rmtree(workdir, ignore_errors=True)
     workdir.mkdir(parents=True)
     with warnings.catch_warnings(record=True) as caught:

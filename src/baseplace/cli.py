@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import math
 import os
 import re
@@ -141,14 +142,16 @@ def _default_map(args: argparse.Namespace, robot: Any, arm: str | None = None) -
             bar.close()
 
 
-def _out_path(text: str | None) -> Path | None:
-    """The ``--out`` path, or None; its directory must exist (checked before any work is done)."""
-    if text is None:
-        return None
-    out = Path(text)
-    if not (out.parent if str(out.parent) else Path(".")).is_dir():
-        raise InputError(f"--out directory {out.parent} does not exist")
-    return out
+MAP_SUFFIXES = (".rmap", ".h5", ".hdf5")
+SURFACE_SUFFIXES = (".smap", ".h5", ".hdf5")
+PLOT_SUFFIXES = (".png", ".pdf", ".svg")
+
+
+def _out_path(text: str | None, suffixes: Sequence[str] = PLOT_SUFFIXES, what: str = "--out") -> Path | None:
+    """The output path, or None; checked (length, type, suffix, writable directory) before any work."""
+    from baseplace.guards import check_output_path
+
+    return None if text is None else check_output_path(text, what, suffixes)
 
 
 def _step_progress(update: Callable[[int], None] | None) -> Callable[[int], None]:
@@ -258,12 +261,11 @@ def cmd_build_map(args: argparse.Namespace) -> int:
     """Build a map and save it."""
     from baseplace.reachability.build import BuildSettings, build_map
     from baseplace.reachability.checkpoint import default_checkpoint_path
-    from baseplace.reachability.storage import save_map
     from baseplace.robots.model import Robot
 
     if args.scheduler is None:
         _set_workers(args.workers)
-    out = _out_path(args.out)
+    out = _out_path(args.out, MAP_SUFFIXES)
     assert out is not None  # --out is required
     settings = BuildSettings(
         samples=args.samples, seed=args.seed, voxel_size=args.voxel_size,
@@ -278,13 +280,27 @@ def cmd_build_map(args: argparse.Namespace) -> int:
     update, bar = _progress(args, settings.samples, f"build-map {robot.name}")
     try:
         if args.scheduler is not None:
+            import distributed  # noqa: F401  (it sets its loggers' levels on import)
+
+            from baseplace.files import output_lock, remove_stray_temporaries
+
+            for name in [
+                "distributed",
+                "asyncio",
+                *logging.root.manager.loggerDict,
+            ]:  # faults: one line of ours
+                if name.startswith(("distributed", "asyncio")):
+                    logging.getLogger(name).setLevel(logging.CRITICAL)
             from baseplace.reachability.distributed import build_map_distributed, connect
 
-            with connect(args.scheduler, n_workers=args.workers) as client:
+            with output_lock(out), connect(args.scheduler, n_workers=args.workers) as client:
+                remove_stray_temporaries(out)
                 rmap = build_map_distributed(args.robot, args.arm, settings, client, update, checkpoint,
-                                             args.checkpoint_every)  # fmt: skip
-        else:
-            rmap = build_map(robot, args.arm, settings, update, checkpoint, args.checkpoint_every)
+                                             args.checkpoint_every, save_to=out)  # fmt: skip
+        else:  # saved before the checkpoint goes; a second build to the same --out waits for this one
+            rmap = build_map(
+                robot, args.arm, settings, update, checkpoint, args.checkpoint_every, save_to=out
+            )
     except KeyboardInterrupt:
         if checkpoint is None or not checkpoint.exists():
             raise
@@ -295,7 +311,7 @@ def cmd_build_map(args: argparse.Namespace) -> int:
     finally:
         if bar is not None:
             bar.close()
-    size = save_map(rmap, out)
+    size = out.stat().st_size
     info = rmap.info
     rate = info.samples / info.build_time_s if info.build_time_s > 0 else float("nan")
     obj = {
@@ -369,7 +385,9 @@ def cmd_reach(args: argparse.Namespace) -> int:
 def cmd_demo(args: argparse.Namespace) -> int:
     """Run the demo: segmentation, OSRM, a verified placement on a platform and the path up its ramp."""
     from baseplace.demo import run_demo
+    from baseplace.guards import check_path_length
 
+    check_path_length(str(Path(args.out) / "demo.json"), "--out")
     update, bar = _progress(args, args.samples, "default TIAGo map (first run only)")
     try:
         result = run_demo(Path(args.out), samples=args.samples, seed=args.seed, progress=update)
@@ -479,7 +497,7 @@ def _fused(clouds: list[tuple[np.ndarray, np.ndarray]], args: argparse.Namespace
     from baseplace.terrain.fusion import FusionSettings, PosedCloud, fuse_clouds
     from baseplace.terrain.io import Cloud
 
-    save = _out_path(getattr(args, "fused_out", None))
+    save = _out_path(getattr(args, "fused_out", None), (".bt",), "--fused-out")
     points = fuse_clouds(
         [PosedCloud(p, o) for p, o in clouds], FusionSettings(prob_miss=args.fuse_miss), save
     )
@@ -539,6 +557,8 @@ def cmd_scene_generate(args: argparse.Namespace) -> int:
     from baseplace.sim.scenes import SceneSettings, generate_scene, save_scene
     from baseplace.terrain.io import Cloud, save_cloud
 
+    _out_path(args.out, (".ply", ".pcd", ".npy"))
+    _out_path(args.truth, (".json",), "--truth")
     settings = SceneSettings(size_class=args.size_class, n_planes=args.planes, sigma=args.sigma,
                              extent=(args.extent, args.extent), with_box=not args.no_box)  # fmt: skip
     rng = np.random.default_rng(args.seed)
@@ -601,12 +621,7 @@ def cmd_experiment_segmentation(args: argparse.Namespace) -> int:
 
 def _results_path(path: str | None) -> Path | None:
     """A results file to write (--results), checked before any work."""
-    if path is None:
-        return None
-    out = Path(path)
-    if out.is_dir() or not (out.parent if str(out.parent) else Path(".")).is_dir():
-        raise InputError(f"cannot write results file {path}: not a file in an existing directory")
-    return out
+    return _out_path(path, (".json",), "--results")
 
 
 def _write_results(
@@ -639,7 +654,7 @@ def cmd_place(args: argparse.Namespace) -> int:
     settings = PlaceSettings(strategy=args.strategy, placements=args.placements, tries=args.tries,
                              resolution=args.resolution)  # fmt: skip
     out = _out_path(args.out)
-    mcap = _out_path(args.mcap)
+    mcap = _out_path(args.mcap, (".mcap",), "--mcap")
     robot = Robot(args.robot)
     cloud = _world_cloud(args) if args.cloud is not None or (args.bag and args.cloud_topic) else None
     grid = _grid(args)
@@ -837,8 +852,8 @@ def cmd_candidates(args: argparse.Namespace) -> int:
     from baseplace.world.grasped_object import GraspedObject, find_grasped_object, parse_grasped_object
     from baseplace.world.gridnav import GridNavigator
 
-    out = _out_path(args.png)
-    mcap = _out_path(args.mcap)
+    out = _out_path(args.png, what="--png")
+    mcap = _out_path(args.mcap, (".mcap",), "--mcap")
     p_o = _parse_xyz(args.object, "--object")
     robot_pose = _base_xyyaw(args.robot_pose) if args.robot_pose is not None else None
     grid = _grid(args)
@@ -972,7 +987,7 @@ def cmd_navigate(args: argparse.Namespace) -> int:
     from baseplace.terrain.pipeline import terrain_from_points
 
     out = _out_path(args.out)
-    mcap = _out_path(args.mcap)
+    mcap = _out_path(args.mcap, (".mcap",), "--mcap")
     start, goal = _base_xyyaw(args.start), _base_xyyaw(args.goal)
     robot = Robot(args.robot)
     cloud = _world_cloud(args)
@@ -1136,7 +1151,7 @@ def cmd_experiment_osrm(args: argparse.Namespace) -> int:
 
     if args.scenes < 1 or args.grasps < 1:
         raise InputError(f"--scenes and --grasps must be >= 1, got {args.scenes} and {args.grasps}")
-    out, results_path = _out_path(args.out), _out_path(args.results)
+    out, results_path = _out_path(args.out), _out_path(args.results, (".json",), "--results")
     seed = DEV_SEEDS[0] if args.dev else args.seed
     robot = Robot(args.robot)
     rmap = load_map(args.map, robot) if args.map else _default_map(args, robot)
@@ -1213,7 +1228,7 @@ def cmd_surface_map(args: argparse.Namespace) -> int:
     from baseplace.reachability.build import BuildSettings
     from baseplace.robots.model import Robot
 
-    out, png = _out_path(args.out), _out_path(args.png)
+    out, png = _out_path(args.out, SURFACE_SUFFIXES), _out_path(args.png, what="--png")
     assert out is not None
     polygon = parse_polygon(args.polygon)
     robot = Robot(args.robot)

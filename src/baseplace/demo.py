@@ -10,6 +10,7 @@ and ``out/demo.png``. The default TIAGo map is built on the first run and cached
 
 from __future__ import annotations
 
+import hashlib
 import json
 import time
 from collections.abc import Callable
@@ -22,9 +23,10 @@ from baseplace.errors import NothingFoundError
 from baseplace.files import atomic_write
 from baseplace.geometry.poses import parse_pose6
 from baseplace.reachability.build import BuildSettings, build_map
+from baseplace.reachability.checkpoint import default_checkpoint_path
 from baseplace.reachability.rmap import ReachabilityMap
-from baseplace.reachability.storage import FORMAT_VERSION, load_map, save_map
-from baseplace.robots.codegen import cache_dir
+from baseplace.reachability.storage import FORMAT_VERSION, load_map
+from baseplace.robots.codegen import cache_dir, private_dir
 from baseplace.robots.model import Robot
 
 if TYPE_CHECKING:
@@ -47,12 +49,14 @@ def cached_map(
         f"{robot.name}-{arm_name}-{robot.spec.urdf_sha256[:12]}-s{settings.samples}-seed{settings.seed}"
         f"-v{settings.voxel_size}-o{settings.orientation_resolution}-f{FORMAT_VERSION}"
     )
-    path = cache_dir().parent / "maps" / f"{key}.rmap"
+    # the file name is a hash: no name from a robot file ever becomes part of a path
+    path = cache_dir().parent / "maps" / f"map-{hashlib.sha256(key.encode()).hexdigest()[:32]}.rmap"
     if path.is_file():
         return load_map(path, robot, arm_name), path, False
-    path.parent.mkdir(parents=True, exist_ok=True)
-    rmap = build_map(robot, arm_name, settings, progress)
-    save_map(rmap, path)
+    private_dir(path.parent)
+    # build_map locks the entry: a second process waits, then reuses the first one's map; and a
+    # cache build is resumable too: a killed first run continues from its checkpoint
+    rmap = build_map(robot, arm_name, settings, progress, default_checkpoint_path(path), save_to=path)
     return rmap, path, True
 
 

@@ -17,6 +17,7 @@ import h5py
 import numpy as np
 
 from baseplace.errors import InputError
+from baseplace.guards import check_alloc
 
 CORRUPT_FILE_ERRORS = (
     OSError,
@@ -72,6 +73,31 @@ def read_header(f: h5py.File, path: Path, fmt: str, version: int, what: str, rem
         )
     if stored < version:
         raise InputError(f"{path} is a {what} of format version {stored}, from an older baseplace; {remedy}")
+
+
+DEFLATE_MAX_RATIO = 1100.0
+"""Most bytes one byte of gzip (deflate) data can expand to (1032:1, with room for chunk headers)."""
+
+
+def read_array(f: h5py.File, name: str, path: Path) -> np.ndarray:
+    """Read the numeric dataset ``name``, its declared size checked before anything is allocated.
+
+    A dataset's shape is only declared: HDF5 returns the fill value for chunks never written, so
+    a file of a few kB can declare terabytes. The size must fit what the file's bytes can hold
+    (raw, or gzip at its maximum ratio) and the memory cap (:func:`baseplace.guards.check_alloc`).
+
+    Raises:
+        KeyError: no such dataset.
+        ValueError: not a numeric dataset.
+        InputError: the declared size is beyond the file or the cap.
+    """
+    data = f[name]
+    if not (isinstance(data, h5py.Dataset) and data.dtype.kind in "iuf" and data.dtype.itemsize <= 8):
+        raise ValueError(f"{name} is not a numeric dataset")
+    ratio = DEFLATE_MAX_RATIO if data.compression is not None else 1.0
+    n_bytes = float(np.prod(data.shape, dtype=float)) * data.dtype.itemsize
+    check_alloc(n_bytes, f"dataset {name!r}", path, path.stat().st_size, ratio)
+    return np.asarray(data[()])
 
 
 def write_text(f: h5py.File, name: str, text: str) -> bytes:

@@ -18,10 +18,12 @@ import numpy as np
 
 from baseplace.errors import InputError
 from baseplace.files import atomic_write
+from baseplace.guards import check_alloc
 from baseplace.h5files import (
     CORRUPT_FILE_ERRORS,
     attr_text,
     digest,
+    read_array,
     read_header,
     read_text,
     short_text,
@@ -34,6 +36,8 @@ FORMAT = "baseplace-surface-map"
 FORMAT_VERSION = 2  # 1 kept meta in a variable-length string attribute
 SCALE = 65535
 MAX_POSES = 10**9
+MAX_HEIGHT = 100.0  # m: heights, TCP heights (and the cone, in rad) beyond this are corrupt
+MAX_POLYGON_VERTICES = 10_000
 
 
 def save_surface_map(smap: SurfaceMap, path: str | Path) -> int:
@@ -68,7 +72,7 @@ def load_surface_map(path: str | Path) -> SurfaceMap:
         with h5py.File(path, "r") as f:
             read_header(f, path, FORMAT, FORMAT_VERSION, "surface map", "rebuild it with surface-map")
             meta_text = read_text(f, "meta")
-            index, value = f["index"][()], f["value"][()]
+            index, value = read_array(f, "index", path), read_array(f, "value", path)
             stored = attr_text(f.attrs, "sha256")
         if digest(meta_text, index, value) != stored:
             raise InputError(f"cannot read surface map {path}: checksum mismatch, the file is corrupt")
@@ -76,8 +80,24 @@ def load_surface_map(path: str | Path) -> SurfaceMap:
         shape = tuple(int(v) for v in meta["shape"])
         if len(shape) != 3 or min(shape) < 1 or float(np.prod(shape, dtype=float)) > MAX_POSES:
             raise ValueError("grid shape out of range")
+        check_alloc(float(np.prod(shape, dtype=float)) * 4, "the surface map's grid", path)
+        if (
+            index.ndim != 1
+            or index.shape != value.shape
+            or (len(index) and not 0 <= index.min() <= index.max() < np.prod(shape))
+        ):
+            raise ValueError("index out of the grid")
         values = np.zeros(int(np.prod(shape)), dtype=np.float32)
         values[index] = value.astype(np.float32) / SCALE
+        numbers = [float(meta["height"]), float(meta["tcp_height"])] + (
+            [] if meta["cone"] is None else [float(meta["cone"])]
+        )
+        if not all(math.isfinite(v) and abs(v) <= MAX_HEIGHT for v in numbers):
+            raise InputError(
+                f"cannot read surface map {path}: height, TCP height or cone is not finite or beyond {MAX_HEIGHT:g}"
+            )
+        if not isinstance(meta["polygon"], list) or len(meta["polygon"]) > MAX_POLYGON_VERTICES:
+            raise ValueError("polygon too long")
         origin, resolution = [float(v) for v in meta["origin"]], float(meta["resolution"])
         if len(origin) != 2 or not (
             np.isfinite(origin).all() and math.isfinite(resolution) and resolution > 0

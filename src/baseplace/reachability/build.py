@@ -11,6 +11,7 @@ checkpoint stores (``checkpoint.py``).
 from __future__ import annotations
 
 import math
+import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -33,6 +34,8 @@ MAX_SAMPLES = 10**11
 # A checkpoint costs ~0.5 s for TIAGo (a pass over the dense counts, ~30 MB written): one per default
 # map's worth of samples keeps that to a few percent even on many cores.
 DEFAULT_CHECKPOINT_EVERY = 50_000_000
+DEFAULT_CHECKPOINT_EVERY_S = 30.0
+"""A checkpoint is also written when this much build time [s] has passed since the last one."""
 
 
 @dataclass(frozen=True)
@@ -252,14 +255,22 @@ def build_map(
     progress: Callable[[int], None] | None = None,
     checkpoint: str | Path | None = None,
     checkpoint_every: int = DEFAULT_CHECKPOINT_EVERY,
+    save_to: str | Path | None = None,
+    checkpoint_every_s: float = DEFAULT_CHECKPOINT_EVERY_S,
 ) -> ReachabilityMap:
     """Build a reachability map of one arm by random joint sampling.
 
     With ``checkpoint``, the build is resumable (see ``checkpoint.py``): the state is saved
-    atomically to that file every ``checkpoint_every`` samples and on the first Ctrl-C; a build
-    started with an existing checkpoint of the same robot, URDF, arm and settings resumes after
-    its last finished chunk, and the map equals that of an uninterrupted build. The file is
-    removed when the build finishes.
+    atomically to that file every ``checkpoint_every`` samples or ``checkpoint_every_s``
+    seconds, whichever comes first, and on the first Ctrl-C; a build started with an existing
+    checkpoint of the same robot, URDF, arm and settings resumes after its last finished chunk,
+    and the map equals that of an uninterrupted build.
+
+    With ``save_to``, the map is written there (atomically and durably: fsync, rename, fsync of
+    the directory) before the checkpoint is removed, so a kill at any moment loses at most the
+    work since the last checkpoint. The output is locked (:func:`baseplace.files.output_lock`)
+    for the whole build: a second build to the same file waits, then reuses the map the first
+    wrote if it is of the same build, and temporary files of a killed save are removed.
 
     Args:
         robot: the robot.
@@ -269,6 +280,8 @@ def build_map(
             with the samples the checkpoint holds).
         checkpoint: checkpoint file (by convention the map path + ``.partial``), or None.
         checkpoint_every: samples between checkpoints, rounded up to whole chunks of 2^20.
+        save_to: map file to write, or None (the caller saves the returned map).
+        checkpoint_every_s: build time [s] between checkpoints.
 
     Returns:
         The map; ``info.build_time_s`` sums the wall time of every run of a resumed build.
@@ -279,18 +292,74 @@ def build_map(
         KeyboardInterrupt: Ctrl-C; with a checkpoint, it holds every chunk finished.
     """
     settings = settings or BuildSettings()
-    start = time.perf_counter()
     acc = MapAccumulator(robot, arm_name, settings)
+    target = save_to if save_to is not None else checkpoint
+    if target is None:
+        return _build(acc, progress, None, checkpoint_every, checkpoint_every_s)
+    from baseplace.files import output_lock, remove_stray_temporaries
+
+    before = _stat(save_to)
+    with output_lock(target):
+        if save_to is not None and _stat(save_to) != before:  # written while we waited
+            reused = _reuse(save_to, acc)
+            if reused is not None:
+                return reused
+        for path in (save_to, checkpoint):
+            if path is not None:
+                remove_stray_temporaries(path)
+        return _build(acc, progress, checkpoint, checkpoint_every, checkpoint_every_s, save_to)
+
+
+def _stat(path: str | Path | None) -> tuple[int, int] | None:
+    try:
+        st = os.stat(path) if path is not None else None
+    except OSError:
+        return None
+    return None if st is None else (st.st_mtime_ns, st.st_ino)
+
+
+def _reuse(path: str | Path, acc: MapAccumulator) -> ReachabilityMap | None:
+    """The map at ``path`` if it is of exactly the build ``acc`` would do, else None."""
+    from baseplace.reachability.storage import load_map
+
+    try:
+        rmap = load_map(path, acc.robot, acc.arm.name)
+    except InputError:
+        return None
+    info, s = rmap.info, acc.settings
+    same = (
+        rmap.grid == acc.grid
+        and (info.samples, info.seed, info.self_collision) == (s.samples, s.seed, s.self_collision)
+        and (rmap.manipulability is not None) == s.manipulability
+    )
+    return rmap if same else None
+
+
+def _build(
+    acc: MapAccumulator,
+    progress: Callable[[int], None] | None,
+    checkpoint: str | Path | None,
+    checkpoint_every: int,
+    checkpoint_every_s: float,
+    save_to: str | Path | None = None,
+) -> ReachabilityMap:
+    settings = acc.settings
     if checkpoint is None:
+        start = time.perf_counter()
         for k in range(acc.n_chunks):
             acc.add_chunk(k)
             if progress is not None:
                 progress(min(settings.samples, (k + 1) * CHUNK))
-        return acc.result(time.perf_counter() - start)
+        rmap = acc.result(time.perf_counter() - start)
+        if save_to is not None:
+            from baseplace.reachability.storage import save_map
+
+            save_map(rmap, save_to)
+        return rmap
 
     from baseplace.reachability.checkpoint import Checkpoints  # it builds on this module
 
-    with Checkpoints(acc, checkpoint, checkpoint_every) as saver:
+    with Checkpoints(acc, checkpoint, checkpoint_every, checkpoint_every_s) as saver:
         if progress is not None and saver.resumed_chunks:
             progress(acc.samples_done)
         for k in acc.pending_chunks():
@@ -298,4 +367,4 @@ def build_map(
             if progress is not None:
                 progress(acc.samples_done)
             saver.added(1)
-        return saver.finish()
+        return saver.finish(save_to)

@@ -42,6 +42,7 @@ from baseplace.h5files import (
     CORRUPT_FILE_ERRORS,
     attr_text,
     digest,
+    read_array,
     read_header,
     read_text,
     short_text,
@@ -146,7 +147,9 @@ def load_checkpoint(path: str | Path, acc: MapAccumulator) -> float:
             build = read_text(f, "build")
             dropped = int(f.attrs["dropped"])
             elapsed_s = float(f.attrs["elapsed_s"])
-            arrays = [f[name][()] for name in ("chunks", "cells", "counts", "best") if name in f]
+            arrays = [
+                read_array(f, name, path) for name in ("chunks", "cells", "counts", "best") if name in f
+            ]
             stored = attr_text(f.attrs, "sha256")
         if _digest(build, dropped, elapsed_s, arrays) != stored or len(arrays) < 3:
             raise InputError(corrupt)
@@ -225,15 +228,20 @@ class Checkpoints:
         acc: the build's accumulator, with nothing added yet.
         path: the checkpoint file; if it exists, the build resumes from it.
         every: samples between checkpoints, rounded to whole chunks (at least one chunk).
+        every_s: build time [s] between checkpoints (whichever of the two comes first), so a
+            kill loses at most about this much work.
 
     Raises:
-        InputError: ``every`` < 1, the directory of ``path`` does not exist, or the existing
-            checkpoint is corrupt or from another build.
+        InputError: ``every`` < 1 or ``every_s`` <= 0, the directory of ``path`` does not exist,
+            or the existing checkpoint is corrupt or from another build.
     """
 
-    def __init__(self, acc: MapAccumulator, path: str | Path, every: int) -> None:
+    def __init__(self, acc: MapAccumulator, path: str | Path, every: int, every_s: float = 30.0) -> None:
         if every < 1:
             raise InputError(f"checkpoint interval must be at least 1 sample, got {every}")
+        if not every_s > 0:
+            raise InputError(f"checkpoint interval must be more than 0 s, got {every_s}")
+        self.every_s = every_s
         self.acc = acc
         self.path = Path(path)
         directory = self.path.parent if str(self.path.parent) else Path(".")
@@ -247,6 +255,7 @@ class Checkpoints:
             self.resumed_chunks = int(acc.done.sum())
         self._since = 0
         self._start = time.perf_counter()
+        self._last_save = self._start
         self._interrupt = _DeferredInterrupt()
 
     def __enter__(self) -> Checkpoints:
@@ -267,6 +276,7 @@ class Checkpoints:
         """Write the checkpoint now."""
         save_checkpoint(self.path, self.acc, self.elapsed_s)
         self._since = 0
+        self._last_save = time.perf_counter()
 
     def check_interrupt(self) -> None:
         """After a deferred Ctrl-C: write a final checkpoint and raise ``KeyboardInterrupt``."""
@@ -278,11 +288,26 @@ class Checkpoints:
         """Note ``n_chunks`` more chunks merged; save if the interval is due or Ctrl-C was pressed."""
         self._since += n_chunks
         self.check_interrupt()
-        if self._since >= self.every_chunks and not self.acc.done.all():
+        due = self._since >= self.every_chunks or time.perf_counter() - self._last_save >= self.every_s
+        if due and not self.acc.done.all():
             self.save()
 
-    def finish(self) -> ReachabilityMap:
-        """The finished map; the checkpoint file is removed."""
+    def finish(self, save_to: str | Path | None = None) -> ReachabilityMap:
+        """The finished map, written to ``save_to`` first if given; then the checkpoint is removed.
+
+        The checkpoint goes only once the map is durably on disk (``save_map`` fsyncs and renames
+        atomically): a kill during the save leaves the checkpoint, and the next run resumes from it
+        (with nothing left to sample) and saves again. Call it inside the ``with`` block: a first
+        Ctrl-C during the save lets the save finish (the build is done); a second aborts it,
+        leaving no temporary file and the checkpoint.
+        """
         rmap = self.acc.result(self.elapsed_s)
+        if save_to is not None:
+            from baseplace.reachability.storage import save_map
+
+            if time.perf_counter() - self._last_save > self.every_s / 2:
+                self.save()  # so a kill during the map's save loses at most half an interval
+
+            save_map(rmap, save_to)
         remove_checkpoint(self.path)
         return rmap

@@ -23,6 +23,7 @@ tcp://host:port`` on each machine); a path to a ``.json`` file is a ``--schedule
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import os
 import re
@@ -30,7 +31,7 @@ import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numba as nb
 import numpy as np
@@ -131,6 +132,66 @@ def _wait_for_workers(client: Client, timeout_s: float) -> int:
     return len(workers)
 
 
+LOST_TIMEOUT_S = 20.0
+MAX_RESUBMITS = 3
+_HEALTH_EVERY_S = 2.0
+_IDENTITY_TIMEOUT_S = 5.0
+_RESULT_TIMEOUT_S = 5.0
+
+
+def _lost_errors() -> tuple[type[BaseException], ...]:
+    from distributed.comm.core import CommClosedError
+
+    return (OSError, CommClosedError, asyncio.CancelledError)
+
+
+def _killed_errors() -> tuple[type[BaseException], ...]:
+    from distributed.scheduler import KilledWorker
+
+    return (KilledWorker,)
+
+
+class _ClusterHealth:
+    """Asks the scheduler, at most every 2 s and with a deadline, whether the build can go on."""
+
+    def __init__(self, client: Client, lost_timeout_s: float) -> None:
+        self.client = client
+        self.lost_timeout_s = lost_timeout_s
+        self.address = getattr(client.scheduler, "address", "")
+        self._last_check = time.monotonic()
+        self._no_workers_since: float | None = None
+        self._unreachable_since: float | None = None
+
+    def progressed(self) -> None:
+        self._no_workers_since = self._unreachable_since = None
+
+    def check(self) -> str | None:
+        """None while the build can go on, else why it cannot (one line)."""
+        now = time.monotonic()
+        if now - self._last_check < _HEALTH_EVERY_S:
+            return None
+        self._last_check = now
+        try:
+            scheduler: Any = self.client.scheduler
+            identity = self.client.sync(
+                scheduler.identity, n_workers=-1, callback_timeout=_IDENTITY_TIMEOUT_S
+            )
+            workers = len(identity.get("workers", {}))
+            self._unreachable_since = None
+        except Exception:  # unreachable, closed, timed out: all mean no answer
+            self._unreachable_since = self._unreachable_since or now
+            if now - self._unreachable_since >= self.lost_timeout_s or self.client.status == "closed":
+                return f"lost the dask scheduler {self.address} (no answer for {now - self._unreachable_since:.0f} s)"
+            return None
+        if workers:
+            self._no_workers_since = None
+            return None
+        self._no_workers_since = self._no_workers_since or now
+        if now - self._no_workers_since >= self.lost_timeout_s:
+            return f"every dask worker of {self.address} was lost (none for {self.lost_timeout_s:g} s)"
+        return None
+
+
 # One build task at a time per worker process: numba's parallel kernels already use the cores
 # given to the process, and workers started with several threads must not oversubscribe them.
 _TASK_LOCK = threading.Lock()
@@ -214,6 +275,8 @@ def build_map_distributed(
     checkpoint_every: int = DEFAULT_CHECKPOINT_EVERY,
     tasks_per_worker: int = TASKS_PER_WORKER,
     worker_timeout_s: float = 60.0,
+    save_to: str | Path | None = None,
+    lost_timeout_s: float = LOST_TIMEOUT_S,
 ) -> ReachabilityMap:
     """Build a reachability map on a dask cluster; identical to :func:`build_map`'s map.
 
@@ -231,13 +294,23 @@ def build_map_distributed(
             finished task brings the unsaved chunks to it.
         tasks_per_worker: tasks per worker (more: finer progress and checkpoints, more overhead).
         worker_timeout_s: how long to wait for a first worker if the cluster has none [s].
+        save_to: map file written before the checkpoint is removed (as :func:`build_map`).
+        lost_timeout_s: how long the cluster may have no worker, or the scheduler be
+            unreachable, before the build gives up [s]; it then saves a final checkpoint.
+
+    Faults: a task whose worker dies is rescheduled by dask on another worker; one that dask
+    gives up on (``KilledWorker``, lost) is submitted again, up to :data:`MAX_RESUBMITS` times.
+    Every wait is bounded: the client polls, and every 2 s asks the scheduler (5 s deadline) how
+    many workers it has.
 
     Returns:
         The map; ``info.build_time_s`` is the client's wall time (summed over resumed runs).
 
     Raises:
         InputError: unknown robot or arm, a worker's URDF differs, the cluster has no workers,
-            or (with ``checkpoint``) as :func:`build_map`.
+            every worker or the scheduler was lost for ``lost_timeout_s`` (with ``checkpoint``,
+            after a final checkpoint the message names), or (with ``checkpoint``) as
+            :func:`build_map`.
         KeyboardInterrupt: Ctrl-C; the tasks are cancelled (after a final checkpoint, if any).
     """
     from distributed import wait
@@ -263,7 +336,23 @@ def build_map_distributed(
         )
         for part in shards
     ]
+    shard_of = dict(zip(futures, shards, strict=True))
+    resubmits = dict.fromkeys(futures, 0)
     remaining = set(futures)
+    health = _ClusterHealth(client, lost_timeout_s)
+    _LOST_ERRORS, _KILLED_ERRORS = _lost_errors(), _killed_errors()
+
+    def give_up(why: str) -> InputError:
+        saved = ""
+        if saver is not None:
+            with contextlib.suppress(Exception):
+                saver.save()
+            saved = (
+                f"; progress ({acc.samples_done} of {settings.samples} samples) saved in {saver.path}: "
+                "rerun the same command to resume"
+            )
+        return InputError(f"{why}{saved}")
+
     try:
         with saver if saver is not None else contextlib.nullcontext():
             while remaining:
@@ -271,20 +360,51 @@ def build_map_distributed(
                     done, _ = wait(list(remaining), timeout=_POLL_S, return_when="FIRST_COMPLETED")
                 except TimeoutError:
                     done = set()
+                except _LOST_ERRORS:
+                    raise give_up(f"lost the dask scheduler {health.address}") from None
                 for future in done:
-                    part = future.result()  # re-raises a task's error here
+                    try:
+                        # re-raises a task's error here; bounded, since a result whose worker died
+                        # after finishing is computed again and would block the wait until then
+                        part = future.result(timeout=_RESULT_TIMEOUT_S)
+                    except TimeoutError:
+                        continue  # dask reschedules it; it comes back as done, or the health check ends it
+                    except _KILLED_ERRORS:
+                        # the task's workers died (KilledWorker) or it was lost: run its chunks again
+                        if resubmits[future] >= MAX_RESUBMITS:
+                            raise give_up(
+                                f"a build task was lost with its dask worker {MAX_RESUBMITS + 1} times"
+                            ) from None
+                        again = client.submit(build_chunks, spec, robot.spec.urdf_sha256, acc.arm.name, settings,
+                                              shard_of[future], threads, pure=False)  # fmt: skip
+                        shard_of[again], resubmits[again] = shard_of[future], resubmits[future] + 1
+                        remaining.discard(future)
+                        remaining.add(again)
+                        continue
+                    except _LOST_ERRORS:
+                        raise give_up(f"lost the dask scheduler {health.address}") from None
                     remaining.discard(future)
                     future.release()
                     acc.merge(part)
+                    health.progressed()
                     if progress is not None:
                         progress(acc.samples_done)
                     if saver is not None:
                         saver.added(len(part.chunks))
                 if saver is not None:
                     saver.check_interrupt()
+                problem = health.check()
+                if problem is not None:
+                    raise give_up(problem)
+            if saver is not None:
+                return saver.finish(save_to)
     finally:
-        if remaining:
-            client.cancel(list(remaining))
-    if saver is not None:
-        return saver.finish()
-    return acc.result(time.perf_counter() - start)
+        if remaining and client.status == "running":
+            with contextlib.suppress(Exception):
+                client.cancel(list(remaining))
+    rmap = acc.result(time.perf_counter() - start)
+    if save_to is not None:
+        from baseplace.reachability.storage import save_map
+
+        save_map(rmap, save_to)
+    return rmap

@@ -20,6 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError
 from baseplace.geometry.poses import FloatArray
+from baseplace.guards import check_alloc
 from baseplace.reachability.grid import SE3Grid, cell_of
 
 
@@ -100,6 +101,9 @@ class ReachabilityMap:
     def tables(self) -> tuple[NDArray[np.int32], NDArray[np.float32]]:
         """Dense lookup: per voxel a row in a (voxels reached, orientations) block, or -1."""
         n_orient = self.grid.n_orientations
+        check_alloc(
+            self.grid.n_voxels * 4.0, "the lookup table of the map's grid", f"map of {self.info.robot}"
+        )
         voxels, orient = np.divmod(self.cells, n_orient)
         reached, row = np.unique(voxels, return_inverse=True)
         offset = np.full(self.grid.n_voxels, -1, dtype=np.int32)

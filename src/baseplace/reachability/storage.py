@@ -23,6 +23,7 @@ from baseplace.h5files import (
     CORRUPT_FILE_ERRORS,
     attr_text,
     digest,
+    read_array,
     read_header,
     read_text,
     short_text,
@@ -81,17 +82,18 @@ def load_map(path: str | Path, robot: Robot | None = None, arm: str | None = Non
         with h5py.File(path, "r") as f:
             read_header(f, path, FORMAT, FORMAT_VERSION, "reachability map", "rebuild it with build-map")
             grid_text, info_text = read_text(f, "grid"), read_text(f, "info")
-            cells = f["cells"][()]
-            counts = f["counts"][()]
-            manip = f["manipulability"][()] if "manipulability" in f else None
+            g = _grid(json.loads(grid_text), path)  # the grid's size is checked before the arrays are read
+            cells = read_array(f, "cells", path)
+            counts = read_array(f, "counts", path)
+            manip = read_array(f, "manipulability", path) if "manipulability" in f else None
             stored = attr_text(f.attrs, "sha256")
         arrays: list[np.ndarray] = [cells, counts] + ([manip] if manip is not None else [])
         if digest(grid_text, info_text, *arrays) != stored:
             raise InputError(f"cannot read map {path}: checksum mismatch, the file is corrupt")
-        g, info_raw = json.loads(grid_text), json.loads(info_text)
+        info_raw = json.loads(info_text)
         info_raw["joint_names"] = tuple(info_raw["joint_names"])
         info = MapInfo(**info_raw)
-        grid = _grid(g)
+        grid = g
         if (
             cells.ndim != 1
             or cells.shape != counts.shape
@@ -114,16 +116,24 @@ def load_map(path: str | Path, robot: Robot | None = None, arm: str | None = Non
 MAX_NSIDE = 64
 MAX_TWIST = 4096
 MAX_CELLS = 2**40
+MAX_VOXELS = 2**27
+"""Voxels of a map's grid: a query allocates 4 bytes per voxel (``ReachabilityMap.tables``).
+
+2^27 (512 MB of table) is 3 m x 3 m x 2 m at 7 mm voxels, far beyond any arm's build."""
 
 
-def _grid(g: dict[str, object]) -> SE3Grid:
+def _grid(g: dict[str, object], source: Path) -> SE3Grid:
     """The grid of a map file, with its sizes bounded before anything is allocated."""
     nside, n_twist = int(g["nside"]), int(g["n_twist"])  # type: ignore[call-overload]
     shape = tuple(int(v) for v in g["shape"])  # type: ignore[attr-defined]
     if not (1 <= nside <= MAX_NSIDE and 1 <= n_twist <= MAX_TWIST and len(shape) == 3 and min(shape) >= 1):
         raise ValueError("grid sizes out of range")
-    if float(np.prod(shape, dtype=float)) * 12 * nside * nside * n_twist > MAX_CELLS:
-        raise ValueError("grid too large")
+    n_voxels = float(np.prod(shape, dtype=float))
+    if n_voxels * 12 * nside * nside * n_twist > MAX_CELLS or n_voxels > MAX_VOXELS:
+        raise InputError(
+            f"cannot read map {source}: its grid of {shape[0]} x {shape[1]} x {shape[2]} voxels and {12 * nside * nside * n_twist} "
+            f"orientations is beyond the limits ({MAX_VOXELS} voxels, {MAX_CELLS} cells); the file is corrupt"
+        )
     origin = tuple(float(v) for v in g["origin"])  # type: ignore[attr-defined]
     if not all(isinstance(v, (int, float)) for v in (g["voxel_size"], *g["origin"])):  # type: ignore[misc]
         raise TypeError("grid numbers must be numbers")

@@ -9,18 +9,62 @@ configuration (parts that are in contact by design).
 from __future__ import annotations
 
 import os
+from pathlib import Path
+from xml.etree import ElementTree
 
 import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
-from baseplace.errors import InputError
+from baseplace.errors import InputError, brief
 from baseplace.robots.model import Arm, Robot, native_stderr_captured
+from baseplace.robots.spec import RobotSpec
+
+
+def allowed_mesh_dirs(spec: RobotSpec) -> list[Path]:
+    """Where a robot's meshes may live (resolved folders).
+
+    Its package folders, its URDF's folder, and the folders in ``$BASEPLACE_MESH_DIRS``
+    (separated by ``os.pathsep``) the user allows in addition.
+    """
+    extra = [Path(d) for d in os.environ.get("BASEPLACE_MESH_DIRS", "").split(os.pathsep) if d]
+    return [p.resolve() for p in (*spec.package_dirs, spec.urdf.parent, *extra)]
+
+
+def check_mesh_paths(spec: RobotSpec) -> None:
+    """Refuse a URDF whose mesh files lie outside :func:`allowed_mesh_dirs`.
+
+    A robot file is data: it must not make baseplace open ``/etc/shadow`` or another user's
+    files as meshes. ``package://pkg/x.stl`` is looked up under each package folder,
+    ``file://`` and plain paths relative to the URDF's folder; symbolic links are followed.
+
+    Raises:
+        InputError: a mesh path escapes the allowed folders (one line, with the remedy).
+    """
+    allowed = allowed_mesh_dirs(spec)
+    try:
+        root = ElementTree.parse(spec.urdf).getroot()
+    except (ElementTree.ParseError, OSError):
+        return  # load_urdf reports it
+    for mesh in root.iter("mesh"):
+        uri = mesh.get("filename", "")
+        if uri.startswith("package://"):
+            rest = uri[len("package://") :]
+            candidates = [(d / rest).resolve() for d in spec.package_dirs]
+        else:
+            rest = uri[len("file://") :] if uri.startswith("file://") else uri
+            candidates = [(spec.urdf.parent / rest).resolve()]
+        if not any(c.is_relative_to(d) for c in candidates for d in allowed):
+            raise InputError(
+                f"URDF {spec.urdf}: mesh {brief(uri, 80)} lies outside the robot's package folders; "
+                "add its folder to package_dirs or to BASEPLACE_MESH_DIRS to allow it"
+            )
 
 
 def load_collision_model(robot: Robot) -> pin.GeometryModel:
     """The robot's collision geometry (mesh paths resolved when the robot was loaded)."""
     spec = robot.spec
+    check_mesh_paths(spec)
     try:
         with native_stderr_captured():
             return pin.buildGeomFromUrdfString(robot.model, robot.urdf.xml, pin.COLLISION)
@@ -28,6 +72,22 @@ def load_collision_model(robot: Robot) -> pin.GeometryModel:
         lines = str(exc).strip().splitlines()
         raise InputError(
             f"cannot load collision meshes of {spec.urdf}: {lines[0] if lines else exc!r}"
+        ) from None
+
+
+def _remove_srdf_pairs(model: pin.Model, geom: pin.GeometryModel, srdf: Path) -> None:
+    """Disable the SRDF's ``disable_collisions`` pairs; a malformed SRDF is a one-line error."""
+    try:
+        ElementTree.parse(srdf)
+    except (ElementTree.ParseError, OSError) as exc:
+        raise InputError(f"cannot parse SRDF {srdf}: {' '.join(str(exc).split())[:200]}") from None
+    try:
+        with native_stderr_captured():
+            pin.removeCollisionPairs(model, geom, str(srdf))
+    except Exception as exc:  # pinocchio raises RuntimeError/ValueError with multi-line text
+        lines = str(exc).strip().splitlines()
+        raise InputError(
+            f"cannot read SRDF {srdf}: {lines[0][:200] if lines else type(exc).__name__}"
         ) from None
 
 
@@ -45,7 +105,7 @@ class SelfCollision:
         self.geom = load_collision_model(robot)
         self.geom.addAllCollisionPairs()
         if robot.spec.srdf is not None:
-            pin.removeCollisionPairs(self.model, self.geom, str(robot.spec.srdf))
+            _remove_srdf_pairs(self.model, self.geom, robot.spec.srdf)
             # an SRDF knows nothing of a mount's base body: rigidly joined geometry never moves apart
             objects = self.geom.geometryObjects
             for pair in [p for p in self.geom.collisionPairs

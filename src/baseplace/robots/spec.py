@@ -38,6 +38,7 @@ from typing import Any
 import yaml
 
 from baseplace.errors import InputError, brief, unknown
+from baseplace.guards import check_name
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -153,6 +154,9 @@ class RobotSpec:
     mount: Mount | None = None
 
     def __post_init__(self) -> None:
+        check_name(self.name, "robot name")  # names reach map files and cache keys: words only
+        for arm_name in self.arms:
+            check_name(arm_name, "arm name", f"robot {self.name!r}")
         if not self.arms:
             raise InputError(f"robot {self.name!r} defines no arm")
         if self.default_arm not in self.arms:

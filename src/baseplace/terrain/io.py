@@ -23,6 +23,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError, brief, choices
 from baseplace.files import atomic_write
+from baseplace.guards import check_alloc
 
 FloatArray = NDArray[np.float64]
 ColorArray = NDArray[np.uint8]
@@ -116,6 +117,7 @@ def load_cloud(path: str | Path) -> Cloud:
     if not path.is_file():
         raise InputError(f"cloud file {path} does not exist")
     try:
+        _check_declared_size(path)  # before the format library allocates what the header declares
         points, colors, layout = reader(path)
     except InputError:
         raise
@@ -383,6 +385,95 @@ def _check_bt(path: Path) -> float:
             "truncated or corrupt"
         )
     return resolution
+
+
+_HEADER_BYTES = 65536
+# Bytes in memory per byte of file, at most: binary data is stored as it is held; an ASCII value
+# takes at least 2 bytes ("0 ") and at most 8 in memory; LZF (PCD binary_compressed) expands at
+# most ~100:1. The readers then make float64 copies: ~40 bytes per point more.
+_PER_FILE_BYTE = {"binary": 1.05, "ascii": 4.0, "binary_compressed": 110.0}
+_PLY_TYPES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2,
+              "uint16": 2, "int": 4, "uint": 4, "int32": 4, "uint32": 4, "float": 4, "float32": 4,
+              "double": 8, "float64": 8}  # fmt: skip
+
+
+def _check_declared_size(path: Path) -> None:
+    """Refuse a cloud whose header declares more data than its file can hold, or than the cap.
+
+    PCD (``FIELDS``/``SIZE``/``COUNT``/``POINTS``/``DATA``), PLY (``element``/``property``) and
+    ``.npy`` headers declare their sizes; pypcd4, plyfile and numpy allocate them before reading.
+    A 182-byte PCD with ``COUNT 1 1 1000000000`` must fail here, not after 10 GB.
+
+    Raises:
+        InputError: the declared size does not fit the file or the memory cap (one line).
+    """
+    suffix = path.suffix.lower()
+    file_bytes = path.stat().st_size
+    with path.open("rb") as f:
+        head = f.read(_HEADER_BYTES)
+    if suffix == ".npy":
+        with path.open("rb") as f:
+            version = np.lib.format.read_magic(f)
+            read = (
+                np.lib.format.read_array_header_1_0
+                if version == (1, 0)
+                else np.lib.format.read_array_header_2_0
+            )
+            shape, _, dtype = read(f)
+        n_bytes = float(np.prod(shape, dtype=float)) * dtype.itemsize
+        check_alloc(n_bytes, "the array", path, file_bytes, 1.0)
+        check_alloc(n_bytes / max(dtype.itemsize, 1) * 8 + n_bytes, "points", path)
+        return
+    if suffix == ".bt":  # the node stream is unpacked to 4 codes per byte before it is checked
+        check_alloc(file_bytes * 6.0, "the OctoMap node stream", path)
+    if suffix not in (".pcd", ".ply"):
+        return  # text (bounded by the file) and .bt (bounded by MAX_OCTOMAP_POINTS)
+    lines = head.split(b"\n")
+    if suffix == ".pcd":
+        fields: dict[str, list[str]] = {}
+        for raw in lines:
+            words = raw.decode("ascii", "replace").split()
+            if words and not words[0].startswith("#"):
+                fields[words[0].upper()] = words[1:]
+            if words and words[0].upper() == "DATA":
+                break
+        try:
+            sizes = [int(v) for v in fields.get("SIZE", [])]
+            counts = [int(v) for v in fields.get("COUNT", ["1"] * len(sizes))]
+            n_points = int(fields.get("POINTS", fields.get("WIDTH", ["0"]))[0])
+            width = int(fields.get("WIDTH", ["0"])[0])
+            height = int(fields.get("HEIGHT", ["1"])[0])
+            data = fields.get("DATA", ["ascii"])[0].lower()
+        except (ValueError, IndexError):
+            return  # pypcd4 reports a malformed header
+        if min([n_points, width, height, *sizes, *counts], default=0) < 0:
+            raise InputError(f"cannot read cloud {path}: negative size in the PCD header")
+        point_bytes = float(sum(a * b for a, b in zip(sizes, counts, strict=False)))
+        n_points = max(n_points, width * height)
+    else:  # every element's rows are allocated (a face list of 10^9 faces as well as vertices)
+        data, elements = "ascii", []
+        for raw in lines:
+            words = raw.decode("ascii", "replace").split()
+            if not words:
+                continue
+            if words[0] == "format" and len(words) > 1:
+                data = "ascii" if words[1] == "ascii" else "binary"
+            elif words[0] == "element" and len(words) == 3:
+                try:
+                    elements.append([int(words[2]), 0.0])
+                except ValueError:
+                    return  # plyfile reports a malformed header
+                if elements[-1][0] < 0:
+                    raise InputError(f"cannot read cloud {path}: negative element count in the PLY header")
+            elif words[0] == "property" and elements and len(words) >= 3:
+                elements[-1][1] += _PLY_TYPES.get(words[2] if words[1] == "list" else words[1], 8)
+            elif words[0] == "end_header":
+                break
+        n_points = int(sum(count for count, _ in elements))
+        point_bytes = sum(count * max(row, 1.0) for count, row in elements) / max(n_points, 1)
+    n_bytes = n_points * max(point_bytes, 1.0)
+    check_alloc(n_bytes, "point data", path, file_bytes, _PER_FILE_BYTE.get(data, 1.05))
+    check_alloc(n_bytes + n_points * 40.0, "points", path)
 
 
 _READERS: dict[str, Callable[[Path], _Raw]] = {

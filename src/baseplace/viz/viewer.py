@@ -559,6 +559,9 @@ def build_scene(server: viser.ViserServer, scene: ResultScene, data: ViewData) -
             position=T[:3, 3], axes_length=0.3, axes_radius=0.015,
         )  # fmt: skip
     if scene.base_poses:
+        from baseplace.robots.collision import check_mesh_paths
+
+        check_mesh_paths(spec)  # meshes only from the robot's package folders (docs/security.md)
         try:
             urdf = yourdfpy.URDF.load(  # the robot file's URDF: meshes resolved, a mounted arm on its base
                 io.StringIO(robot_urdf(spec).xml), build_scene_graph=True, load_meshes=True,

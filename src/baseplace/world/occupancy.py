@@ -25,6 +25,7 @@ a resolution <= 0, thresholds outside [0, 1] or ``free_thresh >= occupied_thresh
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -36,6 +37,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.ndimage import distance_transform_edt
 
 from baseplace.errors import InputError, brief, unknown
+from baseplace.guards import check_alloc, check_path_length
 
 MODES = ("trinary", "scale", "raw")
 IMAGE_FORMATS = (".bmp", ".pgm", ".png")
@@ -206,9 +208,10 @@ def _read_yaml(path: Path) -> dict[str, Any]:
 def _read_image(path: Path, where: str) -> NDArray[Any]:
     """The image as (H, W[, C]) uint8 or uint16, as OpenCV decodes it (colour channels BGR[A])."""
     if path.suffix.lower() not in IMAGE_FORMATS:
-        raise unknown("map image format", path.suffix or path.name, IMAGE_FORMATS, owner=where)
+        raise unknown("map image format", (path.suffix or path.name)[:60], IMAGE_FORMATS, owner=where)
     if not path.is_file():
-        raise InputError(f"{where}: map image not found: {path}")
+        raise InputError(f"{where}: map image not found: {brief(str(path), 200)}")
+    _check_image_size(path, where)
     buf = np.fromfile(path, dtype=np.uint8)
     level = cv2.utils.logging.getLogLevel()
     cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
@@ -223,6 +226,39 @@ def _read_image(path: Path, where: str) -> NDArray[Any]:
             f"{where}: cannot read map image {path} (corrupt, truncated or not a {path.suffix} image)"
         )
     return img
+
+
+DEFLATE_MAX_RATIO = 1100.0  # PNG pixels are deflated: one byte of file holds at most ~1032 bytes
+_CELL_BYTES = 80.0  # what occupancy_from_image and the grid hold per cell (float64 passes, int8 out)
+
+
+def _check_image_size(path: Path, where: str) -> None:
+    """Refuse an image whose declared size does not fit its file or the memory cap, before decoding.
+
+    The header (read by Pillow, which decodes nothing until asked) declares width, height and
+    bands; OpenCV would allocate them. PGM and BMP store pixels raw, PNG deflated.
+
+    Raises:
+        InputError: the image cannot hold its declared size, or decoding it would exceed the cap.
+    """
+    from PIL import Image
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # Pillow warns about large images on stderr
+            with Image.open(path) as im:
+                width, height = im.size
+                bands = len(im.getbands())
+                depth = 2 if im.mode.startswith("I;16") or im.mode in ("I", "F") else 1
+                compressed = im.format == "PNG"
+    except Image.DecompressionBombError:
+        raise InputError(f"{where}: map image {path} declares more pixels than any map has") from None
+    except Exception:
+        return  # OpenCV's decoder gives the one-line error for a corrupt image
+    n_pixels = float(width) * float(height)
+    check_alloc(n_pixels * bands * depth, "the map image", f"{where}: {path}", path.stat().st_size,
+                DEFLATE_MAX_RATIO if compressed else 1.05)  # fmt: skip
+    check_alloc(n_pixels * (_CELL_BYTES + 8 * bands), "the occupancy grid", f"{where}: {path}")
 
 
 def occupancy_from_image(
@@ -278,6 +314,7 @@ def load_occupancy(path: str | Path) -> OccupancyGrid:
     image = doc["image"]
     if not isinstance(image, str) or not image.strip():
         raise InputError(f"{where}: 'image' must be a non-empty file name, got {brief(image)}")
+    check_path_length(image, f"{where}: 'image'")
     mode = doc.get("mode")
     mode = "trinary" if mode is None else mode.lower() if isinstance(mode, str) else mode
     if mode not in MODES:

@@ -1,0 +1,148 @@
+"""Guards against hostile or unlucky input: names, sizes declared by files, output paths.
+
+Files are data, never code (docs/security.md). This module holds the three checks every entry
+point shares:
+
+- :func:`check_name`: robot and arm names are conservative identifiers, so they can never
+  reach generated code or a file path as anything but a plain word.
+- :func:`check_alloc`: a loader asks before it allocates an array whose size a file declares;
+  the size must fit both a limit derived from the file's own size and a global cap
+  (``$BASEPLACE_MAX_MEMORY_MB``, default 4096 MB).
+- :func:`check_output_path`: an output path is checked (length, component length, type,
+  writability, suffix) before any work is done.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from collections.abc import Iterable
+from pathlib import Path
+
+from baseplace.errors import InputError, brief
+
+NAME_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_-]{0,63}")
+"""Robot and arm names: a letter, then up to 63 letters, digits, ``_`` or ``-``."""
+
+
+def check_name(value: str, what: str, source: str = "robot spec") -> str:
+    """Return ``value`` if it is a conservative identifier (:data:`NAME_PATTERN`), else raise.
+
+    Raises:
+        InputError: one line naming the rule; the bad value is shown shortened and escaped.
+    """
+    if not isinstance(value, str) or NAME_PATTERN.fullmatch(value) is None:
+        raise InputError(
+            f"{source}: {what} {brief(value, 40)} is not a valid name; use a letter followed by "
+            "at most 63 letters, digits, '_' or '-'"
+        )
+    return value
+
+
+DEFAULT_MAX_MEMORY_MB = 4096
+
+
+def memory_cap_bytes() -> int:
+    """The most bytes one loaded array may take: ``$BASEPLACE_MAX_MEMORY_MB`` (default 4096 MB)."""
+    text = os.environ.get("BASEPLACE_MAX_MEMORY_MB")
+    if text:
+        try:
+            mb = float(text)
+        except ValueError:
+            raise InputError(f"BASEPLACE_MAX_MEMORY_MB must be a number of megabytes, got {text!r}") from None
+        if mb > 0:
+            return int(mb * 2**20)
+    return DEFAULT_MAX_MEMORY_MB * 2**20
+
+
+def check_alloc(
+    n_bytes: float, what: str, source: object, file_bytes: int | None = None, per_file_byte: float = 0.0
+) -> None:
+    """Raise unless an allocation of ``n_bytes`` that a file declares is plausible and affordable.
+
+    Args:
+        n_bytes: bytes the loader is about to allocate.
+        what: what it is, for the message ("points", "grid cells").
+        source: the file, for the message.
+        file_bytes: the size of the file that declares it; with ``per_file_byte`` > 0, at most
+            ``per_file_byte * file_bytes`` (+ 1 MB) may be allocated (an uncompressed format
+            cannot hold more than its bytes).
+        per_file_byte: the most bytes one byte of the file can stand for (0: no such limit).
+
+    Raises:
+        InputError: the size is negative, beyond what the file can hold, or beyond the cap.
+    """
+    if not n_bytes >= 0:
+        raise InputError(f"{source}: declared size of {what} is negative or not a number")
+    if file_bytes is not None and per_file_byte > 0 and n_bytes > per_file_byte * file_bytes + 2**20:
+        raise InputError(
+            f"{source}: declares {what} of {n_bytes / 1e6:.3g} MB, more than its {file_bytes} bytes can hold; "
+            "the file is truncated or corrupt"
+        )
+    cap = memory_cap_bytes()
+    if n_bytes > cap:
+        raise InputError(
+            f"{source}: {what} would take {n_bytes / 1e6:.3g} MB, over the limit of {cap / 1e6:.0f} MB "
+            "(raise BASEPLACE_MAX_MEMORY_MB to allow it)"
+        )
+
+
+MAX_PATH_BYTES = 4095
+MAX_COMPONENT_BYTES = 255
+
+
+def check_path_length(text: str | os.PathLike[str], what: str) -> str:
+    """Return the path as text if it is not empty, holds no NUL and fits the OS limits.
+
+    Raises:
+        InputError: the path is over 4095 bytes, a component over 255 bytes, empty or has a NUL.
+    """
+    raw = os.fspath(text)
+    if not raw or "\x00" in raw:
+        raise InputError(f"{what} must be a file path, got {brief(raw, 40)}")
+    encoded = os.fsencode(raw)
+    if len(encoded) > MAX_PATH_BYTES:
+        raise InputError(f"{what} path is {len(encoded)} bytes long; the limit is {MAX_PATH_BYTES}")
+    for part in Path(raw).parts:
+        if len(os.fsencode(part)) > MAX_COMPONENT_BYTES:
+            raise InputError(
+                f"{what}: the path component {brief(part, 40)} is {len(os.fsencode(part))} bytes long; "
+                f"the limit is {MAX_COMPONENT_BYTES}"
+            )
+    return raw
+
+
+def check_output_path(
+    text: str | os.PathLike[str], what: str = "--out", suffixes: Iterable[str] | None = None
+) -> Path:
+    """Check an output file path before any work is done; returns it as a Path.
+
+    Checks: total length (4095 bytes) and every component (255 bytes), no NUL, suffix among
+    ``suffixes`` (case-insensitive; None: any), the path is not an existing directory, its
+    directory exists, is a directory and is writable.
+
+    Raises:
+        InputError: one line naming the problem.
+    """
+    raw = check_path_length(text, what)
+    path = Path(raw)
+    # temporary files are named ".NAME.XXXXXXXX.tmp" and checkpoints "NAME.partial": keep room
+    if len(os.fsencode(path.name)) > MAX_COMPONENT_BYTES - 24:
+        raise InputError(
+            f"{what}: the file name is {len(os.fsencode(path.name))} bytes long; "
+            f"the limit is {MAX_COMPONENT_BYTES - 24} (room for temporary files beside it)"
+        )
+    if suffixes is not None:
+        valid = sorted(suffixes)
+        if path.suffix.lower() not in valid:
+            raise InputError(f"{what} {brief(raw, 60)} has suffix {path.suffix!r}; valid: {', '.join(valid)}")
+    if path.is_dir():
+        raise InputError(f"{what} {brief(raw, 60)} is a directory; give a file path")
+    directory = path.parent if str(path.parent) else Path(".")
+    if not directory.is_dir():
+        raise InputError(f"{what} directory {brief(str(directory), 60)} does not exist")
+    if not os.access(directory, os.W_OK | os.X_OK):
+        raise InputError(f"{what} directory {brief(str(directory), 60)} is not writable")
+    if path.exists() and not path.is_file():
+        raise InputError(f"{what} {brief(raw, 60)} exists and is not a regular file")
+    return path

@@ -1,0 +1,266 @@
+"""Hostile files and paths (issue 15): no code from data, caches that names cannot steer.
+
+Each test plays the attacker: the oracle is an observable side effect (a marker file the injected
+code would create, a file outside the cache, the bytes on disk), never the code's own report.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from baseplace.errors import InputError
+
+DATA = Path(__file__).parent / "data"
+SRC = str(Path(__file__).resolve().parents[1] / "src")
+
+
+def _env(**extra: str) -> dict[str, str]:
+    return {**os.environ, "PYTHONPATH": SRC, **extra}
+
+
+def cli(
+    *args: str, env: dict[str, str] | None = None, cwd: Path | None = None
+) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "baseplace.cli", *args], capture_output=True, text=True,
+                          stdin=subprocess.DEVNULL, timeout=600, env=env or _env(), cwd=cwd)  # fmt: skip
+
+
+def one_line(proc: subprocess.CompletedProcess[str], code: int = 2) -> str:
+    assert proc.returncode == code, proc.stderr[-2000:]
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), proc.stderr[-2000:]
+    return lines[0]
+
+
+def _robot_dir(tmp_path: Path, name: str, arm: str = "arm") -> Path:
+    shutil.copy(DATA / "planar3.urdf", tmp_path / "planar3.urdf")
+    text = (DATA / "planar3.toml").read_text()
+    text = text.replace('name = "planar3"', f"name = {name}").replace("[arms.arm]", f"[arms.{arm}]")
+    (tmp_path / "robot.toml").write_text(text)
+    return tmp_path / "robot.toml"
+
+
+INJECT = """import os; open(os.environ["MARKER"], "w").write("pwned")"""
+
+
+@pytest.mark.parametrize("where", ["name", "arm"])
+@pytest.mark.parametrize("command", ["build-map", "surface-map"])
+def test_injection_robot_file_is_refused_and_runs_nothing(tmp_path, where, command):
+    # The name closes the generated module's docstring and appends code (the issue's attack).
+    payload = '"""\\n' + INJECT + '\\n"""'
+    toml_string = '"' + payload.replace('"', '\\"') + '"'
+    robot = (
+        _robot_dir(tmp_path, toml_string)
+        if where == "name"
+        else _robot_dir(tmp_path, '"planar3"', toml_string)
+    )
+    marker = tmp_path / "marker"
+    env = _env(MARKER=str(marker), BASEPLACE_CACHE=str(tmp_path / "cache"))
+    if command == "build-map":
+        args = ["build-map", "--robot", str(robot), "--samples", "1e5", "--out", str(tmp_path / "m.rmap")]
+    else:
+        args = [
+            "surface-map",
+            "--robot",
+            str(robot),
+            "--polygon",
+            "0,0;1,0;1,1",
+            "--height",
+            "0.7",
+            "--out",
+            str(tmp_path / "s.smap"),
+        ]
+    proc = cli(*args, env=env)
+    line = one_line(proc)
+    assert "not a valid name" in line
+    assert not marker.exists()
+    assert not (tmp_path / "m.rmap").exists() and not (tmp_path / "s.smap").exists()
+    kernels = tmp_path / "cache" / "kernels"
+    assert not kernels.exists() or not any("pwned" in p.read_text() for p in kernels.glob("*.py"))
+
+
+@pytest.mark.parametrize("name", ["../../escape", "a/b", "..", "x" * 65, "", "a b", "é", "a\nb", "1abc"])
+def test_names_are_conservative_identifiers(tmp_path, name):
+    from baseplace.robots.spec import load_spec
+
+    robot = _robot_dir(tmp_path, '"' + name.replace("\n", "\\n") + '"')
+    with pytest.raises(InputError, match="not a valid name"):
+        load_spec(robot)
+    robot = _robot_dir(tmp_path, '"ok"', '"' + name.replace("\n", "\\n") + '"')
+    with pytest.raises(InputError, match="not a valid name"):
+        load_spec(robot)
+
+
+def test_map_cache_paths_are_hashes_inside_the_cache(tmp_path, monkeypatch, planar3):
+    from baseplace.demo import cached_map
+    from baseplace.reachability.build import BuildSettings
+
+    monkeypatch.setenv("BASEPLACE_CACHE", str(tmp_path / "cache"))
+    _, path, built = cached_map(planar3, BuildSettings(samples=200_000, voxel_size=0.1))
+    assert built
+    assert path.parent.resolve() == (tmp_path / "cache" / "maps").resolve()
+    assert planar3.name not in path.name and "arm" not in path.name
+    # every file the run wrote lies under the cache
+    outside = [p for p in tmp_path.iterdir() if p.name != "cache"]
+    assert outside == []
+
+
+_KERNEL_SCRIPT = """
+import sys
+from baseplace.robots.model import Robot
+from baseplace.robots.codegen import arm_kernels, cache_dir
+robot = Robot(sys.argv[1])
+mod = arm_kernels(robot.arm())
+print(mod.__file__)
+"""
+
+
+def test_tampered_cached_kernel_is_regenerated_not_imported(tmp_path):
+    marker = tmp_path / "marker"
+    env = _env(BASEPLACE_CACHE=str(tmp_path / "cache"), MARKER=str(marker))
+    first = subprocess.run([sys.executable, "-c", _KERNEL_SCRIPT, str(DATA / "planar3.toml")],
+                           capture_output=True, text=True, env=env, timeout=300)  # fmt: skip
+    assert first.returncode == 0, first.stderr
+    kernel = Path(first.stdout.strip())
+    original = kernel.read_bytes()
+    assert kernel.parent == tmp_path / "cache" / "kernels"
+    # an attacker (or a bad disk) edits the cached module, keeping its size to fool cheap checks
+    evil = (INJECT + "\n").encode()
+    kernel.write_bytes(evil + original[len(evil) :])
+    second = subprocess.run([sys.executable, "-c", _KERNEL_SCRIPT, str(DATA / "planar3.toml")],
+                            capture_output=True, text=True, env=env, timeout=300)  # fmt: skip
+    assert second.returncode == 0, second.stderr
+    assert not marker.exists()
+    assert kernel.read_bytes() == original
+
+
+def test_kernel_cache_of_another_user_or_open_to_others(tmp_path, monkeypatch):
+    from baseplace.robots.codegen import private_dir
+
+    d = tmp_path / "k"
+    d.mkdir(mode=0o777)
+    os.chmod(d, 0o777)
+    private_dir(d)
+    assert d.stat().st_mode & 0o777 == 0o700
+
+
+def test_mesh_outside_the_package_folders_is_refused(tmp_path, monkeypatch):
+    from baseplace.robots.collision import check_mesh_paths
+    from baseplace.robots.spec import load_spec
+
+    robot = _robot_dir(tmp_path, '"planar3"')
+    urdf = (tmp_path / "planar3.urdf").read_text()
+    link = urdf.index("<link ")
+    evil = '<link name="evil"><collision><geometry><mesh filename="file:///etc/passwd"/></geometry></collision></link>'
+    (tmp_path / "planar3.urdf").write_text(urdf[:link] + evil + urdf[link:])
+    spec = load_spec(robot)
+    with pytest.raises(InputError, match="outside the robot's package folders"):
+        check_mesh_paths(spec)
+    for uri in ("package://../../../etc/passwd", "../outside.stl"):
+        (tmp_path / "planar3.urdf").write_text(
+            urdf[:link] + evil.replace("file:///etc/passwd", uri) + urdf[link:]
+        )
+        with pytest.raises(InputError, match="outside"):
+            check_mesh_paths(load_spec(robot))
+    monkeypatch.setenv("BASEPLACE_MESH_DIRS", "/etc")
+    (tmp_path / "planar3.urdf").write_text(urdf[:link] + evil + urdf[link:])
+    check_mesh_paths(load_spec(robot))  # the user allowed it
+
+
+LONG = "x" * 300
+
+
+@pytest.mark.parametrize(
+    "args,fragment",
+    [
+        (["build-map", "--robot", "tiago", "--out", f"{LONG}.rmap"], "255"),
+        (["build-map", "--robot", "tiago", "--out", "y" * 240 + ".rmap"], "temporary files"),
+        (["build-map", "--robot", "tiago", "--out", "."], "suffix"),
+        (["build-map", "--robot", "tiago", "--out", "map.txt"], "suffix"),
+        (["build-map", "--robot", "tiago", "--out", "nodir/m.rmap"], "does not exist"),
+        (["build-map", "--robot", "tiago", "--out", "adir.rmap"], "directory"),
+        (
+            [
+                "surface-map",
+                "--robot",
+                "tiago",
+                "--polygon",
+                "0,0;1,0;1,1",
+                "--height",
+                "0.7",
+                "--out",
+                f"{LONG}/s.smap",
+            ],
+            "255",
+        ),
+        (
+            [
+                "place",
+                "--robot",
+                "tiago",
+                "--cloud",
+                "c.pcd",
+                "--target",
+                "1 0 1 0 0 0",
+                "--out",
+                f"{LONG}.png",
+            ],
+            "255",
+        ),
+        (["scene", "generate", "--out", f"{LONG}.ply"], "255"),
+        (["demo", "--out", LONG], "255"),
+        (
+            [
+                "navigate",
+                "--cloud",
+                "c.pcd",
+                "--start",
+                "0 0 0",
+                "--goal",
+                "1 0 0",
+                "--out",
+                "a/" + "z/" * 2100 + "p.png",
+            ],
+            "limit",
+        ),
+    ],
+)
+def test_odd_output_paths_fail_fast_with_one_line(tmp_path, args, fragment):
+    (tmp_path / "adir.rmap").mkdir()
+    t0 = time.perf_counter()
+    proc = cli(*args, cwd=tmp_path, env=_env(BASEPLACE_CACHE=str(tmp_path / "cache")))
+    elapsed = time.perf_counter() - t0
+    line = one_line(proc)
+    assert fragment in line
+    assert elapsed < 5.0  # 2 s of checking plus the interpreter's start on a loaded machine
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["adir.rmap"]
+
+
+@pytest.mark.parametrize(
+    "srdf",
+    [
+        "<robot name='planar3'><disable_collisions link1=",  # malformed XML
+        "<robot name='planar3'><disable_collisions link1='nope' link2='tool0' reason='x'/></robot>",
+        "\x00\x01\x02",
+    ],
+)
+def test_bad_srdf_is_one_line(tmp_path, srdf):
+    robot = _robot_dir(tmp_path, '"planar3"')
+    (tmp_path / "bad.srdf").write_text(srdf)
+    robot.write_text(
+        robot.read_text().replace('urdf = "planar3.urdf"', 'urdf = "planar3.urdf"\nsrdf = "bad.srdf"')
+    )
+    proc = cli("build-map", "--robot", str(robot), "--samples", "1e4", "--self-collision", "--out",
+               str(tmp_path / "m.rmap"), env=_env(BASEPLACE_CACHE=str(tmp_path / "cache")))  # fmt: skip
+    if proc.returncode == 0:  # pinocchio ignores pairs of unknown links: then the build must succeed
+        assert "nope" in srdf and (tmp_path / "m.rmap").is_file()
+        return
+    line = one_line(proc)
+    assert "SRDF" in line
