@@ -6,6 +6,7 @@ import json
 import math
 from pathlib import Path
 
+import coal
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -31,6 +32,16 @@ T_MAP_CAMERA[:3, 3] = [4.55, 6.98, 0.74 + 0.5287]
 T_BASE_CAMERA = np.eye(4)
 T_BASE_CAMERA[:3, :3] = Rotation.from_euler("xyz", [0.1, -0.3, 0.2]).as_matrix()
 T_BASE_CAMERA[:3, 3] = [0.1, 0.0, 1.1]
+
+
+# The target: TIAGo's hand straight above the mug, top-down, ready to grasp it (a pre-grasp pose).
+# The mug (its points more than 1.5 cm above the table) stands at about (4.60, 7.585); its rim and a
+# small stereo artefact beside it reach z = 0.878. TIAGo's fingers (at q_reference) reach 0.245 m
+# beyond arm_tool_link, so at z = 1.16 they are 3 cm above both. A lower top-down target such as
+# (4.6, 7.7, 0.95) puts the fingertips at 0.705, into the table top (0.74), an obstacle for every
+# link; a grasp of the mug itself is blocked at every approach by that artefact, 3.5 cm from the
+# mug's nearest point and inside TIAGo's hand safety box.
+TARGET = "4.6 7.585 1.16 0 1.5708 0"
 
 
 def _base_at(dx: float) -> np.ndarray:
@@ -130,19 +141,24 @@ def map_file(tmp_path_factory) -> Path:
 def test_place_from_a_bag_through_the_cli(bags, map_file, tmp_path, capsys, tiago):
     capsys.readouterr()
     out = tmp_path / "result.mcap"
-    target = "4.6 7.7 0.95 0 1.5708 0"  # 21 cm above the middle of the table, top-down: the fingertips 6 cm above its top
     code = main(["place", "--bag", str(bags["mcap"]), "--cloud-topic", "/head/points", "--map-topic", "/map",
-                 "--world-frame", "map", "--target", target, "--map", str(map_file), "--placements", "2",
+                 "--world-frame", "map", "--target", TARGET, "--map", str(map_file), "--placements", "2",
                  "--tries", "300", "--mcap", str(out), "--json"])  # fmt: skip
     captured = capsys.readouterr()
     assert code == 0, captured.err
     result = json.loads(captured.out)
     assert result["placements"] and result["mcap"] == str(out)
+    assert result["object"]["allowed"] is None  # nothing at the grasp point: the hand may touch nothing
     grid = load_occupancy(DEPOT)
     arm = tiago.arm()
+    geom = pin.buildGeomFromUrdf(tiago.model, str(tiago.spec.urdf), pin.COLLISION,
+                                 package_dirs=[str(p) for p in tiago.spec.package_dirs])  # fmt: skip
+    cloud = load_cloud(MUG).points
+    cloud = cloud[np.isfinite(cloud).all(axis=1)] @ T_MAP_CAMERA[:3, :3].T + T_MAP_CAMERA[:3, 3]
+    cloud_tree = coal.makeOctree(np.ascontiguousarray(cloud), 0.01)
     T_target = np.eye(4)
     T_target[:3, :3] = Rotation.from_euler("ZYX", [0.0, 1.5708, 0.0]).as_matrix()
-    T_target[:3, 3] = [4.6, 7.7, 0.95]
+    T_target[:3, 3] = [4.6, 7.585, 1.16]
     for p in result["placements"]:
         T = np.array(p["base_pose"])
         # the base stands on the grid's free floor: z = 0 (within a voxel) and its whole footprint free
@@ -164,6 +180,17 @@ def test_place_from_a_bag_through_the_cli(bags, map_file, tmp_path, capsys, tiag
             np.arccos(np.clip((np.trace(reached[:3, :3].T @ T_target[:3, :3]) - 1) / 2, -1, 1))
         )
         assert angle < 1.0
+        # an independent coal check: no hand geometry touches a point of the recorded cloud (mug, table, artefact)
+        gdata = pin.GeometryData(geom)
+        pin.updateGeometryPlacements(tiago.model, data, geom, gdata)
+        T_world_root = pin.SE3(T) * data.oMf[tiago.model.getFrameId(tiago.spec.base_frame)].inverse()
+        for k, g in enumerate(geom.geometryObjects):
+            if g.name.startswith("hand_"):
+                M = (T_world_root * gdata.oMg[k]).homogeneous
+                hit = coal.CollisionResult()
+                coal.collide(g.geometry, coal.Transform3s(M[:3, :3], M[:3, 3]), cloud_tree, coal.Transform3s(),
+                             coal.CollisionRequest(), hit)  # fmt: skip
+                assert not hit.isCollision(), g.name
     # the MCAP holds the same poses as the JSON, in the map frame at the cloud's stamp
     msgs = read_result_mcap(out)
     poses = msgs["/baseplace/placements"]
@@ -176,7 +203,7 @@ def test_place_from_a_bag_through_the_cli(bags, map_file, tmp_path, capsys, tiag
         T[:3, 3] = [msg.pose.position.x, msg.pose.position.y, msg.pose.position.z]
         np.testing.assert_allclose(T, np.array(p["base_pose"]), atol=2e-6)
     (targets,) = msgs["/baseplace/targets"]
-    assert [targets.poses[0].position.x, targets.poses[0].position.y] == pytest.approx([4.6, 7.7])
+    assert [targets.poses[0].position.x, targets.poses[0].position.y] == pytest.approx([4.6, 7.585])
     (markers,) = msgs["/baseplace/regions"]
     assert len({m.id // 100 for m in markers.markers}) == result["regions"]
 
@@ -201,14 +228,14 @@ def test_place_from_files_camera_cloud_and_grid(map_file, tmp_path, capsys):
     transform.write_text("\n".join(" ".join(f"{v:.12g}" for v in row) for row in T_MAP_CAMERA) + "\n")
     capsys.readouterr()
     code = main(["place", "--cloud", str(MUG), "--transform", str(transform), "--occupancy", str(DEPOT),
-                 "--target", "4.6 7.7 0.95 0 1.5708 0", "--map", str(map_file), "--tries", "300", "--json"])  # fmt: skip
+                 "--target", TARGET, "--map", str(map_file), "--tries", "300", "--json"])  # fmt: skip
     captured = capsys.readouterr()
     assert code == 0, captured.err
     p = json.loads(captured.out)["placements"][0]
     assert abs(p["z"]) < 0.03 and load_occupancy(DEPOT).is_free(np.array([[p["x"], p["y"]]]))[0]
     # two clouds need two transforms
     code = main(["place", "--cloud", str(MUG), "--cloud", str(MUG), "--transform", str(transform),
-                 "--occupancy", str(DEPOT), "--target", "4.6 7.7 0.95 0 1.5708 0", "--map", str(map_file)])  # fmt: skip
+                 "--occupancy", str(DEPOT), "--target", TARGET, "--map", str(map_file)])  # fmt: skip
     err = capsys.readouterr().err
     assert code == 2 and "one --transform per --cloud" in err
 
@@ -250,8 +277,10 @@ def _pose_xyyaw(pose) -> list[float]:
 def test_candidates_and_navigate_write_their_mcap(bags, map_file, tmp_path, capsys):
     out = tmp_path / "candidates.mcap"
     capsys.readouterr()
+    # a grasp point over the table's left edge, 21 cm above its top: TIAGo's hand reaches 7 to 10 cm
+    # below its grasp point, so 6 cm above the top (as before the table became an obstacle) it enters the table
     code = main(["candidates", "--bag", str(bags["sqlite3"]), "--map-topic", "/map", "--cloud-topic", "/head/points",
-                 "--object", "4.4 7.6 0.8", "--robot-pose", "3.0 7.0 0", "--map", str(map_file),
+                 "--object", "4.4 7.6 0.95", "--robot-pose", "3.0 7.0 0", "--map", str(map_file),
                  "--mcap", str(out), "--json"])  # fmt: skip
     captured = capsys.readouterr()
     assert code == 0, captured.err
@@ -340,7 +369,7 @@ def test_place_with_start_plans_on_the_map_around_the_table(bags, map_file, tmp_
     out = tmp_path / "with_path.mcap"
     capsys.readouterr()
     args = ["place", "--bag", str(bags["mcap"]), "--cloud-topic", "/head/points", "--map-topic", "/map",
-            "--target", "4.6 7.7 0.95 0 1.5708 0", "--map", str(map_file), "--tries", "300"]  # fmt: skip
+            "--target", TARGET, "--map", str(map_file), "--tries", "300"]  # fmt: skip
     code = main([*args, "--start", "5.6 9.6 0", "--mcap", str(out), "--json"])
     captured = capsys.readouterr()
     assert code == 0, captured.err
