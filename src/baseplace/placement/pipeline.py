@@ -1,7 +1,8 @@
 """Placement generation end to end (seed 000, Algorithm 2).
 
 cloud -> planar regions -> obstacle voxels (support removed) -> OSRM -> strategy candidates ->
-verification (footprint, IK per target, collision) -> at most M placements within N tries.
+verification (footprint, IK per target, collision, reaching motion) -> robustness to base error
+-> at most M placements within N tries.
 """
 
 from __future__ import annotations
@@ -9,14 +10,16 @@ from __future__ import annotations
 import math
 import time
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from baseplace.errors import InputError
 from baseplace.geometry.poses import FloatArray
+from baseplace.placement.motion import MotionChecker, MotionSettings
 from baseplace.placement.osrm import OSRM, build_osrm
+from baseplace.placement.robustness import RobustnessEstimator, RobustnessSettings, rank_by_robustness
 from baseplace.placement.strategies import make_strategy
 from baseplace.placement.verify import Placement, Verifier
 from baseplace.reachability.rmap import ReachabilityMap
@@ -41,6 +44,9 @@ class PlaceSettings:
         gamma_max: largest angle between the base's forward axis and the targets [rad].
         support_dist: voxels this close to their region's plane are support, not obstacles [m].
         resolution: height-map cell [m].
+        motion: the reaching-motion check (:mod:`baseplace.placement.motion`), None: off.
+        robustness: the score under base error and whether to rank by it or require a minimum
+            (:mod:`baseplace.placement.robustness`).
     """
 
     strategy: str = "MR"
@@ -50,6 +56,8 @@ class PlaceSettings:
     gamma_max: float = math.pi / 4
     support_dist: float = SUPPORT_DIST
     resolution: float = 0.05
+    motion: MotionSettings | None = field(default_factory=MotionSettings)
+    robustness: RobustnessSettings = field(default_factory=RobustnessSettings)
 
     def __post_init__(self) -> None:
         if self.placements < 1 or self.tries < 1:
@@ -66,7 +74,8 @@ class PlacementResult:
         placements: verified placements (at most M).
         failures: counts of rejected candidates by reason, and "exhausted" when the strategy ran dry.
         tries: candidates checked.
-        timings_ms: segmentation, osrm, query and total [ms].
+        timings_ms: segmentation, osrm, query and total [ms]; the query's share spent in the
+            reaching-motion check (motion) and the robustness score (robustness).
         terrain: the segmented scene.
         osrm: the OSRM.
     """
@@ -143,27 +152,51 @@ def place(
             cache[key] = Environment(robot, _obstacles(terrain, seg, s))
         env = cache[key]
     arm = robot.arm(rmap.info.arm)
+    motion = None
+    if s.motion is not None:  # the path to the pre-grasp must also avoid the grasped object
+        full = (
+            env
+            if not ignore
+            else (environments or {}).get(key) or Environment(robot, _obstacles(terrain, seg, s))
+        )
+        motion = MotionChecker(robot, arm, full, env if ignore else None, s.motion)
     verifier = Verifier(arm, DampedLeastSquaresIK(arm), env, T_targets,
-                        {r.id: terrain.graph.nodes[r.id]["polygon"] for r in seg.regions}, outline)  # fmt: skip
+                        {r.id: terrain.graph.nodes[r.id]["polygon"] for r in seg.regions}, outline,
+                        motion=motion)  # fmt: skip
+    rs = s.robustness
+    estimator = RobustnessEstimator(arm, env, T_targets, rs) if rs.samples > 0 else None
     t3 = time.perf_counter()
     placements: list[Placement] = []
     tries = 0
+    wanted = max(s.placements, rs.pool) if rs.rank == "robustness" else s.placements
     candidates = strategy.candidates(osrm, rmap, rng)
-    while tries < s.tries and len(placements) < s.placements:
+    robustness_s = 0.0
+    while tries < s.tries and len(placements) < wanted:
         candidate = next(candidates, None)
         if candidate is None:
             verifier.failures["exhausted"] += 1
             break
         tries += 1
         placement = verifier.check(candidate, rng)
+        if placement is not None and estimator is not None:
+            t = time.perf_counter()
+            placement = estimator.scored(placement)
+            robustness_s += time.perf_counter() - t
+            if placement.robustness is not None and placement.robustness.rate < rs.minimum:
+                verifier.failures["robustness"] += 1
+                placement = None
         if placement is not None:
             placements.append(placement)
+    if rs.rank == "robustness":
+        placements = rank_by_robustness(placements)[: s.placements]
     t4 = time.perf_counter()
     timings = {
         "segmentation": (t1 - t0) * 1e3,
         "osrm": osrm.build_ms,
         "collision_setup": (t3 - t2) * 1e3,
         "query": (t4 - t3) * 1e3,
+        "motion": motion.elapsed_s * 1e3 if motion is not None else 0.0,
+        "robustness": robustness_s * 1e3,
         "total": (t4 - t0) * 1e3,
     }
     return PlacementResult(placements, verifier.failures, tries, timings, terrain, osrm)

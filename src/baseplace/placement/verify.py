@@ -1,8 +1,10 @@
 """The one verification every placement method uses before it returns a pose (seed 000 Alg. 2).
 
 A candidate base pose is accepted only if (1) its footprint lies inside the polygon of its
-planar region (when it has one), (2) IK reaches every target from it, and (3) the whole robot at
-each IK configuration is free of self-collision and of the obstacle voxels.
+planar region (when it has one), (2) IK reaches every target from it, (3) the whole robot at
+each IK configuration is free of self-collision and of the obstacle voxels, and, when a
+:class:`~baseplace.placement.motion.MotionChecker` is given, (4) the arm can move there from its
+stowed configuration without collision (rejection reason ``motion``).
 """
 
 from __future__ import annotations
@@ -15,12 +17,14 @@ import numpy as np
 from shapely.geometry import MultiPolygon, Polygon
 
 from baseplace.geometry.poses import FloatArray, invert_transforms
+from baseplace.placement.motion import MotionChecker, ReachingMotion
+from baseplace.placement.robustness import Robustness
 from baseplace.robots.ik import IKSolver
 from baseplace.robots.model import Arm
 from baseplace.terrain.polygons import footprint_inside
 from baseplace.world.environment import Environment
 
-Failure = Literal["footprint", "no_ik", "collision", "exhausted"]
+Failure = Literal["footprint", "no_ik", "collision", "motion", "exhausted"]
 
 
 @dataclass(frozen=True)
@@ -48,6 +52,9 @@ class Placement:
         reachability: the map's value at the pose.
         joints: per target, the arm joint values (n,) that reach it.
         joint_names: names of those joints.
+        motions: per target, the checked reaching motion (None when the check was off).
+        robustness: the score under base-pose error, if computed
+            (:mod:`baseplace.placement.robustness`).
     """
 
     T_world_base: FloatArray
@@ -55,6 +62,8 @@ class Placement:
     reachability: float
     joints: list[FloatArray]
     joint_names: tuple[str, ...]
+    motions: list[ReachingMotion] | None = None
+    robustness: Robustness | None = None
 
     @property
     def yaw(self) -> float:
@@ -74,6 +83,7 @@ class Verifier:
         polygons: region id -> polygon, for the footprint test.
         outline: (F, 2) footprint in the base frame.
         failures: counts per failure reason.
+        motion: the reaching-motion check, or None to skip it.
     """
 
     arm: Arm
@@ -83,6 +93,7 @@ class Verifier:
     polygons: dict[int, Polygon | MultiPolygon]
     outline: FloatArray
     failures: Counter[str] = field(default_factory=Counter)
+    motion: MotionChecker | None = None
 
     def check(self, candidate: Candidate, rng: np.random.Generator) -> Placement | None:
         """The verified placement, or None (the reason is counted in ``failures``)."""
@@ -102,4 +113,14 @@ class Verifier:
             if self.environment.colliding_arm(self.arm, q, T):
                 self.failures["collision"] += 1
                 return None
-        return Placement(T.copy(), candidate.region, candidate.reachability, joints, self.arm.joint_names)
+        motions = None
+        if self.motion is not None:
+            motions = []
+            for q, target in zip(joints, self.targets, strict=True):
+                motion = self.motion.check(q, T, target, seed=int(rng.integers(2**31 - 1)))
+                if motion is None:
+                    self.failures["motion"] += 1
+                    return None
+                motions.append(motion)
+        return Placement(T.copy(), candidate.region, candidate.reachability, joints, self.arm.joint_names,
+                         motions)  # fmt: skip
