@@ -31,6 +31,7 @@ from baseplace.robots.model import Arm
 from baseplace.world.environment import Environment
 
 if TYPE_CHECKING:
+    from baseplace.placement.candidates import RadialCandidate
     from baseplace.placement.verify import Placement
 
 ERROR_DISTRIBUTIONS = ("gaussian", "box")
@@ -261,6 +262,34 @@ class RobustnessEstimator:
         return dataclasses.replace(placement, robustness=self.score(placement.T_world_base, placement.joints))
 
 
+def score_candidates(
+    arm: Arm,
+    environment: Environment,
+    grasps: ArrayLike,
+    candidates: list[RadialCandidate],
+    settings: RobustnessSettings | None = None,
+) -> list[RadialCandidate]:
+    """Verified seed-004 candidates (each with its grasp index and joints) with their robustness.
+
+    Args:
+        arm: the arm.
+        environment: the verification's collision model.
+        grasps: (K, 4, 4) the world grasp poses the candidates' ``grasp`` indices refer to.
+        candidates: verified candidates.
+        settings: robustness settings (one estimator, hence one set of error draws, per grasp).
+    """
+    G = np.asarray(grasps, dtype=float).reshape(-1, 4, 4)
+    estimators: dict[int, RobustnessEstimator] = {}
+    out = []
+    for c in candidates:
+        if c.grasp < 0 or c.joints is None:
+            raise InputError("robustness needs verified candidates (with a grasp index and joints)")
+        if c.grasp not in estimators:
+            estimators[c.grasp] = RobustnessEstimator(arm, environment, G[c.grasp], settings)
+        out.append(dataclasses.replace(c, robustness=estimators[c.grasp].score(c.T_world_base, [c.joints])))
+    return out
+
+
 def rank_by_robustness(placements: list[Placement]) -> list[Placement]:
     """Placements by robustness rate, then the lower confidence bound, then reachability; best first."""
 
@@ -279,5 +308,6 @@ __all__ = [
     "RobustnessSettings",
     "perturbed",
     "rank_by_robustness",
+    "score_candidates",
     "wilson_interval",
 ]
