@@ -95,12 +95,16 @@ def test_same_scene_without_the_wall_passes_with_a_valid_motion(tiago, wall_scen
     np.testing.assert_allclose(m.path[0], stowed_configuration(tiago, arm))
     np.testing.assert_allclose(m.approach[-1], placement.joints[0])
     np.testing.assert_allclose(m.path[-1], m.approach[0])
-    # Oracle: pinocchio FK. The approach runs straight along the TCP's x axis, 8 cm, ending on the grasp.
+    # Oracle: pinocchio FK. The approach runs straight along the TCP's x axis, ending on the grasp.
     tcp = np.array([_tcp(tiago, arm, qa) for qa in m.approach])
     np.testing.assert_allclose(tcp[-1], target, atol=1e-3)
     back = (target[:3, 3] - tcp[:, :3, 3]) @ target[:3, 0]
     lateral = np.linalg.norm((target[:3, 3] - tcp[:, :3, 3]) - back[:, None] * target[:3, 0], axis=1)
-    assert back[0] == pytest.approx(0.08, abs=1e-3) and np.all(np.diff(back) < 0) and lateral.max() < 1e-3
+    assert (
+        back[0] == pytest.approx(MotionSettings().pregrasp_distance, abs=1e-3)
+        and np.all(np.diff(back) < 0)
+        and lateral.max() < 1e-3
+    )
     for T in tcp:
         np.testing.assert_allclose(T[:3, :3], target[:3, :3], atol=5e-3)
     # Oracle: the full-configuration collision check on the densified path (not the arm-pruned one).

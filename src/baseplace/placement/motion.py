@@ -75,21 +75,28 @@ class MotionSettings:
 
     Attributes:
         pregrasp_distance: the pre-grasp lies this far back from the grasp along the approach
-            axis [m]; the last segment, the straight approach, is this long.
-        approach_step: Cartesian step along the approach line [m]; each step is IK + collision.
+            axis [m]; the last segment, the straight approach, is this long. 0.15 m, as MoveIt
+            pick pipelines' usual pre-grasp approach: the whole hand, fingers open (TIAGo's
+            ``hand_safety_box`` reaches 0.2 m ahead of the wrist), must be clear of the object
+            there, since only the approach may touch it.
+        approach_step: Cartesian step along the approach line [m]; each step is IK + collision
+            (0.01 m: below the 25 mm obstacle voxels).
         max_joint_step: largest joint change between two approach steps [rad or m]; a larger
             one means the IK jumped branches, so the arm would not move straight.
         joint_resolution: the joint path is checked at states at most this far apart
             (Euclidean in joint space [rad]).
         time_limit: OMPL planning time for one joint path [s]; no path in it rejects the placement.
+        approach_restarts: other pre-grasp IK solutions tried when the approach cannot start
+            from the verified grasp configuration.
         q_start: start arm configuration (n,), e.g. the robot's current one; default: stowed.
     """
 
-    pregrasp_distance: float = 0.08
-    approach_step: float = 0.005
+    pregrasp_distance: float = 0.15
+    approach_step: float = 0.01
     max_joint_step: float = 0.2
     joint_resolution: float = 0.05
     time_limit: float = 1.0
+    approach_restarts: int = 4
     q_start: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
@@ -103,6 +110,8 @@ class MotionSettings:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise InputError(f"motion setting {name} must be a finite number > 0, got {value}")
+        if self.approach_restarts < 0:
+            raise InputError(f"approach_restarts must be >= 0, got {self.approach_restarts}")
 
 
 @dataclass(frozen=True)
@@ -113,7 +122,8 @@ class ReachingMotion:
         path: (P, n) joint waypoints from the start configuration to the pre-grasp; consecutive
             waypoints are joined by straight joint-space lines (checked every ``joint_resolution``).
         approach: (A, n) joint configurations along the straight Cartesian approach, pre-grasp
-            first, the verified grasp configuration last.
+            first, the grasp configuration last (the verified one, or another that passed the
+            same checks when the approach could not start from it).
         planned: True if OMPL planned the path; False if the straight joint-space line was free.
     """
 
@@ -198,6 +208,7 @@ class MotionChecker:
         self.q_start = q0
         self.axis = approach_axis(robot, arm)
         self._ik = DampedLeastSquaresIK(arm)
+        self._ik_any = DampedLeastSquaresIK(arm, restarts=20)
         self._hand_free = ObstaclesExceptHand(environment, arm) if approach_environment is not None else None
         self.elapsed_s = 0.0
         """Time spent in :meth:`check` so far [s]."""
@@ -213,33 +224,54 @@ class MotionChecker:
         return not self._hand_free.colliding(q, T_world_base)
 
     def approach(
-        self, q_grasp: ArrayLike, T_base_tcp: FloatArray, T_world_base: FloatArray
+        self, q_grasp: ArrayLike, T_base_tcp: FloatArray, T_world_base: FloatArray, seed: int = 0
     ) -> FloatArray | None:
         """(A, n) configurations along the straight approach, pre-grasp first, or None.
 
-        Walks from the grasp configuration back along the approach axis, IK seeded with the last
-        step; fails on an IK failure, a joint jump above ``max_joint_step`` or a collision.
+        First walks from the verified grasp configuration back along the approach axis, IK seeded
+        with the last step, so that the motion ends in that configuration. When that fails (the
+        configuration sits against a joint limit the retreat needs), up to ``approach_restarts``
+        other IK solutions of the pre-grasp are walked forward to the grasp instead; the motion
+        then ends in another grasp configuration, checked the same way. A walk fails on an IK
+        failure, a joint jump above ``max_joint_step`` or a collision.
         """
         s = self.settings
         n_steps = max(1, math.ceil(s.pregrasp_distance / s.approach_step))
-        q = np.asarray(q_grasp, dtype=float)
-        if not self._approach_free(q, T_world_base):
-            return None
-        steps = [q]
-        # seeds: the last step, then small perturbations of it (DLS stalls against a joint limit)
-        jitter = np.random.default_rng(0).normal(0.0, 0.05, size=(4, self.arm.n_joints))
-        for k in range(1, n_steps + 1):
+        line = []
+        for k in range(n_steps + 1):  # grasp first, pre-grasp last
             T = T_base_tcp.copy()
             T[:3, 3] -= (k / n_steps) * s.pregrasp_distance * (T_base_tcp[:3, :3] @ self.axis)
+            line.append(T)
+        q = np.asarray(q_grasp, dtype=float)
+        if self._approach_free(q, T_world_base):
+            back = self._walk(q, line[1:], T_world_base)
+            if back is not None:
+                return back[::-1]
+        rng = np.random.default_rng(seed)
+        for _ in range(s.approach_restarts):
+            q_pre = self._ik_any.solve(line[-1], rng, q_seed=self.arm.sample(rng, 1)[0])
+            if q_pre is None or not self._approach_free(q_pre, T_world_base):
+                continue
+            forward = self._walk(q_pre, line[-2::-1], T_world_base)
+            if forward is not None:
+                return forward
+        return None
+
+    def _walk(self, q0: FloatArray, poses: list[FloatArray], T_world_base: FloatArray) -> FloatArray | None:
+        """(len(poses) + 1, n) configurations from ``q0`` through the TCP ``poses``, or None."""
+        # seeds: the last step, then small perturbations of it (DLS stalls against a joint limit)
+        jitter = np.random.default_rng(0).normal(0.0, 0.05, size=(4, self.arm.n_joints))
+        q, steps = q0, [q0]
+        for T in poses:
             seeds = np.clip(np.vstack([q, q + jitter]), self.arm.lower, self.arm.upper)
             q_next = self._ik.solve_from(T, seeds)
-            if q_next is None or np.max(np.abs(q_next - q)) > s.max_joint_step:
+            if q_next is None or np.max(np.abs(q_next - q)) > self.settings.max_joint_step:
                 return None
             q = q_next
             if not self._approach_free(q, T_world_base):
                 return None
             steps.append(q)
-        return np.array(steps[::-1])
+        return np.array(steps)
 
     def _line_free(self, a: FloatArray, b: FloatArray, T_world_base: FloatArray) -> bool:
         n = max(1, math.ceil(float(np.linalg.norm(b - a)) / self.settings.joint_resolution))
@@ -315,7 +347,7 @@ class MotionChecker:
         try:
             T_base = np.asarray(T_world_base, dtype=float)
             T_base_tcp = invert_transforms(T_base) @ np.asarray(T_world_tcp, dtype=float)
-            approach = self.approach(q_grasp, T_base_tcp, T_base)
+            approach = self.approach(q_grasp, T_base_tcp, T_base, seed)
             if approach is None:
                 return None
             path, planned = self.joint_path(approach[0], T_base, seed)

@@ -116,11 +116,12 @@ class Verifier:
         motions = None
         if self.motion is not None:
             motions = []
-            for q, target in zip(joints, self.targets, strict=True):
-                motion = self.motion.check(q, T, target, seed=int(rng.integers(2**31 - 1)))
+            for k, target in enumerate(self.targets):
+                motion = self.motion.check(joints[k], T, target, seed=int(rng.integers(2**31 - 1)))
                 if motion is None:
                     self.failures["motion"] += 1
                     return None
                 motions.append(motion)
+                joints[k] = motion.approach[-1]  # the motion may end in another checked grasp configuration
         return Placement(T.copy(), candidate.region, candidate.reachability, joints, self.arm.joint_names,
                          motions)  # fmt: skip
