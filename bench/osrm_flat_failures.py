@@ -43,7 +43,7 @@ from baseplace.demo import cached_map
 from baseplace.errors import BaseplaceError
 from baseplace.geometry.poses import FloatArray, invert_transforms
 from baseplace.geometry.surface_poses import plane_base_poses
-from baseplace.placement.pipeline import PlaceSettings, _obstacles, place
+from baseplace.placement.pipeline import SEED_000_CHECKS, PlaceSettings, _obstacles, place
 from baseplace.placement.verify import Candidate, Verifier
 from baseplace.reachability.build import BuildSettings
 from baseplace.reachability.rmap import ReachabilityMap
@@ -101,7 +101,7 @@ def reproduce_scene(
         out: dict[str, Any] = {"scene": k, "grasp": i, "reachable_index": reachable}
         try:
             query_rng = np.random.default_rng([s.seed, CLASS_INDEX, k, reachable, len(strategy)])
-            query = PlaceSettings(strategy=strategy, tries=s.tries)
+            query = PlaceSettings(strategy=strategy, tries=s.tries, **SEED_000_CHECKS)
             res = place(robot, rmap, points, grasp, query, query_rng, terrain=terrain,
                         environments=environments, ignore=[sphere])  # fmt: skip
         except BaseplaceError as exc:
@@ -218,7 +218,7 @@ def dense_truth(
     grasp, sphere = run.grasps[i], run.spheres[i]
     terrain, seg = run.terrain, run.terrain.segmentation
     # the environment and verifier exactly as place() builds them (strategy MR, ignore=[sphere])
-    s = PlaceSettings(strategy="MR", tries=ExperimentSettings().tries)
+    s = PlaceSettings(strategy="MR", tries=ExperimentSettings().tries, **SEED_000_CHECKS)
     obstacles = _obstacles(terrain, seg, s)
     centres = obstacles.centres
     allowed = np.linalg.norm(centres - np.asarray(sphere[0], dtype=float), axis=1) <= sphere[1]

@@ -11,6 +11,7 @@ import math
 import time
 from collections import Counter
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -30,6 +31,10 @@ from baseplace.terrain.polygons import footprint_outline
 from baseplace.terrain.segmentation import Segmentation
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import SUPPORT_DIST, Environment, obstacle_voxels
+
+SEED_000_CHECKS: dict[str, Any] = {"motion": None, "robustness": RobustnessSettings(samples=0)}
+"""PlaceSettings overrides for seed 000's verification alone (IK + collision at the exact pose),
+as its experiments measure it: ``PlaceSettings(..., **SEED_000_CHECKS)``."""
 
 
 @dataclass(frozen=True)
