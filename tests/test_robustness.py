@@ -94,3 +94,40 @@ def test_robustness_agrees_with_an_independent_check_and_drops_at_the_edge_of_re
     before = len(estimator._cache)
     assert estimator.score(pose_from_xyz_rpy([-0.7, 0, 0, 0, 0, 0])).rate == rates[0]
     assert len(estimator._cache) == before
+
+
+def test_place_scores_ranks_and_filters_placements_by_robustness(tiago):
+    from baseplace.placement.motion import stowed_configuration
+    from baseplace.placement.pipeline import PlaceSettings, place
+    from baseplace.reachability.build import BuildSettings, build_map
+    from baseplace.sim.scenes import Plane, Scene, SceneSettings
+
+    rmap = build_map(tiago, None, BuildSettings(samples=3_000_000, seed=2))
+    floor = Plane(0, "floor", (0.0, 0.0), (6.0, 6.0), 0.0, 0.0, 0.0, 0.0)
+    points = Scene(SceneSettings(n_planes=0, extent=(6.0, 6.0), with_box=False), (floor,)).sample_cloud(
+        np.random.default_rng(5), sigma=0.01
+    )
+    target = pose_from_xyz_rpy([1.0, 0.5, 0.75, 0.0, math.pi / 2, 0.0])
+    ranked = RobustnessSettings(samples=16, rank="robustness", pool=3)
+    res = place(tiago, rmap, points, target, PlaceSettings(placements=2, tries=100, robustness=ranked),
+                np.random.default_rng(1))  # fmt: skip
+    assert len(res.placements) == 2, dict(res.failures)
+    rates = [p.robustness.rate for p in res.placements if p.robustness is not None]
+    assert len(rates) == 2 and rates[0] >= rates[1]
+    data = tiago.model.createData()
+    arm = tiago.arm()
+    for p in res.placements:
+        assert p.motions is not None
+        (m,) = p.motions
+        np.testing.assert_allclose(m.path[0], stowed_configuration(tiago, arm))
+        np.testing.assert_allclose(m.approach[-1], p.joints[0])
+        pin.framesForwardKinematics(tiago.model, data, arm.to_pinocchio(p.joints[0], tiago.q_reference))
+        base = data.oMf[tiago.model.getFrameId(arm.base_frame)]
+        tcp = p.T_world_base @ (base.inverse() * data.oMf[tiago.model.getFrameId(arm.tcp_frame)]).homogeneous
+        np.testing.assert_allclose(tcp[:3, 3], target[:3, 3], atol=2e-4)
+    assert res.timings_ms["motion"] > 0 and res.timings_ms["robustness"] > 0
+    strict = RobustnessSettings(samples=16, minimum=0.99)
+    res = place(tiago, rmap, points, target, PlaceSettings(placements=2, tries=100, robustness=strict),
+                np.random.default_rng(1))  # fmt: skip
+    assert all(p.robustness is not None and p.robustness.rate >= 0.99 for p in res.placements)
+    assert res.failures["robustness"] + len(res.placements) >= 1
