@@ -499,3 +499,38 @@ def test_inspect_table_bad_input():
         run("experiment", "inspect-table", "--objects", "0,9"), 2, "object counts from 1 to 8"
     )
     assert_one_line_error(run("experiment", "inspect-table", "--seed", "-1"), 2, "--seed")
+
+
+def test_candidates_reaching_motion_and_robustness_in_the_json(tiago_map_file):
+    from baseplace.placement.motion import stowed_configuration
+    from baseplace.robots.model import Robot
+    from conftest import SHARED
+
+    yaml = str(SHARED / "maps" / "tb3_sandbox.yaml")
+    common = (
+        "candidates",
+        "--occupancy",
+        yaml,
+        "--object",
+        "-1.025 -0.775 0.6",
+        "--map",
+        str(tiago_map_file),
+    )
+    proc = run(*common, "--robustness-samples", "16", "--rank-by-robustness", "--json")
+    assert proc.returncode == 0, proc.stderr
+    rows = json.loads(proc.stdout)["candidates"]
+    arm = Robot("tiago").arm()
+    rates = [c["robustness"]["rate"] for c in rows]
+    assert rows
+    assert rates == sorted(rates, reverse=True)
+    for c in rows:
+        low, high = c["robustness"]["ci95"]
+        assert c["robustness"]["samples"] == 16 and low <= c["robustness"]["rate"] <= high
+        (m,) = c["motion"]
+        np.testing.assert_allclose(m["path"][0], stowed_configuration(Robot("tiago"), arm), atol=1e-5)
+        np.testing.assert_allclose(m["approach"][-1], [c["joints"][j] for j in arm.joint_names], atol=1e-5)
+    proc = run(*common, "--no-motion-check", "--robustness-samples", "0", "--json")
+    assert proc.returncode == 0, proc.stderr
+    assert all("motion" not in c and "robustness" not in c for c in json.loads(proc.stdout)["candidates"])
+    assert_one_line_error(run(*common, "--min-robustness", "1.5"), 2, "minimum robustness")
+    assert_one_line_error(run(*common, "--error-model", "box", "--xy-tolerance", "0"), 2, "xy_tolerance")

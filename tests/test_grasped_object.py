@@ -272,9 +272,12 @@ def test_pcl_mug_side_grasp_through_the_cli(tiago, tiago_map, tmp_path, capsys):
         str(map_file),
         "--json",
     ]
-    # side grasp from the camera's side, 11 cm above the table: placed
+    # side grasp from the camera's side, 11 cm above the table: placed. The reaching motion (issue
+    # 20) is off: this test is about the grasped-object model at the grasp; the straight approach
+    # to it rejects every candidate here (a finger of the hand touches the table beside the mug,
+    # the surface under the object, which stays an obstacle).
     target = pose_from_xyz_rpy([0.06, 0.45, -0.42, 0.0, 0.0, math.pi / 2])
-    assert main([*base, "--target", "0.06 0.45 -0.42 0 0 1.5708"]) == 0
+    assert main([*base, "--no-motion-check", "--target", "0.06 0.45 -0.42 0 0 1.5708"]) == 0
     out = json.loads(capsys.readouterr().out)
     found = out["object"]["allowed"]
     assert found["source"] == "auto" and math.dist(found["center"][:2], [0.06, 0.605]) < 0.03  # the mug
@@ -289,7 +292,7 @@ def test_pcl_mug_side_grasp_through_the_cli(tiago, tiago_map, tmp_path, capsys):
                   * data.oMf[tiago.model.getFrameId(arm.tcp_frame)]).homogeneous  # fmt: skip
     assert np.linalg.norm((np.array(p["base_pose"]) @ T_base_tcp)[:3, 3] - target[:3, 3]) < 0.01
     # 2 cm lower the hand's safety box reaches the table top: exit 3 naming the link and the support
-    assert main([*base, "--target", "0.06 0.45 -0.44 0 0 1.5708", "--tries", "40"]) == 3
+    assert main([*base, "--no-motion-check", "--target", "0.06 0.45 -0.44 0 0 1.5708", "--tries", "40"]) == 3
     line = capsys.readouterr().err.strip()
     assert "\n" not in line and "touched support" in line and "link hand_" in line
 

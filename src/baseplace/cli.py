@@ -652,7 +652,8 @@ def cmd_place(args: argparse.Namespace) -> int:
     targets = np.stack([parse_pose6(t) for t in args.target])
     grasped = parse_grasped_object(args.object)
     settings = PlaceSettings(strategy=args.strategy, placements=args.placements, tries=args.tries,
-                             resolution=args.resolution)  # fmt: skip
+                             resolution=args.resolution, motion=_motion_settings(args),
+                             robustness=_robustness_settings(args))  # fmt: skip
     out = _out_path(args.out)
     mcap = _out_path(args.mcap, (".mcap",), "--mcap")
     robot = Robot(args.robot)
@@ -716,6 +717,7 @@ def cmd_place(args: argparse.Namespace) -> int:
             "roll_pitch_yaw": [round(float(v), 5) for v in matrix_to_rpy(T[:3, :3])],
             "region": p.region, "reachability": round(p.reachability, 5),
             "joints": [dict(zip(p.joint_names, np.round(q, 6).tolist(), strict=True)) for q in p.joints],
+            **_motion_and_robustness_json(p.motions, p.robustness),
         })  # fmt: skip
         if route is not None:
             placements[-1]["path"] = {"poses": np.round(route.poses, 4).tolist(), "length": round(route.length, 3),
@@ -767,7 +769,7 @@ def cmd_place(args: argparse.Namespace) -> int:
              f"{result.timings_ms['total']:.0f} ms)"]  # fmt: skip
     for row in placements:
         lines.append(f"  x={row['x']:.3f} y={row['y']:.3f} z={row['z']:.3f} yaw={row['yaw']:.3f} "
-                     f"region {row['region']} reachability {row['reachability']:.3f}")  # fmt: skip
+                     f"region {row['region']} reachability {row['reachability']:.3f}{_robust_text(row)}")  # fmt: skip
     if out is not None:
         lines.append(f"wrote {out}")
     if mcap is not None:
@@ -794,6 +796,40 @@ def _write_mcap(path: Path, args: argparse.Namespace, terrain: Any = None, **pos
                         rings.append(np.c_[xy, r.height_at(xy)])
             regions.append((r.id, rings))
     write_result_mcap(path, ResultMessages(args.world_frame, stamp, regions=regions, **poses))
+
+
+def _motion_settings(args: argparse.Namespace) -> Any:
+    """The reaching-motion check of --no-motion-check (None: off)."""
+    from baseplace.placement.motion import MotionSettings
+
+    return None if args.no_motion_check else MotionSettings()
+
+
+def _robustness_settings(args: argparse.Namespace) -> Any:
+    """Robustness settings from the --robustness-* and error-model options."""
+    from baseplace.placement.robustness import BaseErrorModel, RobustnessSettings
+
+    error = BaseErrorModel(args.error_model, args.sigma_xy, math.radians(args.sigma_yaw_deg),
+                           args.xy_tolerance, args.yaw_tolerance)  # fmt: skip
+    return RobustnessSettings(args.robustness_samples, error,
+                              "robustness" if args.rank_by_robustness else "reachability",
+                              args.min_robustness, seed=args.seed)  # fmt: skip
+
+
+def _motion_and_robustness_json(motions: Any, robustness: Any) -> dict[str, Any]:
+    """The joint waypoints of each target's reaching motion and the robustness score, if any."""
+    out: dict[str, Any] = {}
+    if motions is not None:
+        out["motion"] = [{"path": np.round(m.path, 5).tolist(), "approach": np.round(m.approach, 5).tolist(),
+                          "planned": m.planned} for m in motions]  # fmt: skip
+    if robustness is not None:
+        out["robustness"] = robustness.as_dict()
+    return out
+
+
+def _robust_text(row: dict[str, Any]) -> str:
+    r = row.get("robustness")
+    return "" if r is None else f" robustness {r['rate']:.2f} [{r['ci95'][0]:.2f}, {r['ci95'][1]:.2f}]"
 
 
 def _place_timings(timings: dict[str, float], terrain: Any, routes: list[Any]) -> dict[str, float]:
@@ -854,6 +890,7 @@ def cmd_candidates(args: argparse.Namespace) -> int:
 
     out = _out_path(args.png, what="--png")
     mcap = _out_path(args.mcap, (".mcap",), "--mcap")
+    robust = _robustness_settings(args)
     p_o = _parse_xyz(args.object, "--object")
     robot_pose = _base_xyyaw(args.robot_pose) if args.robot_pose is not None else None
     grid = _grid(args)
@@ -879,6 +916,18 @@ def cmd_candidates(args: argparse.Namespace) -> int:
         voxels, voxels, grasped if isinstance(grasped, GraspedObject) else None
     )
     environment = Environment(robot, groups, grasped=object_voxels, hand_arm=args.arm)
+    motion = None
+    motion_settings = _motion_settings(args)
+    # the way to the pre-grasp must avoid the object too: only the hand may touch it, at the end
+    if motion_settings is not None:
+        from baseplace.placement.motion import MotionChecker, transit_environment
+
+        transit = transit_environment(robot, groups, object_voxels)
+        arm = robot.arm(rmap.info.arm)
+        if transit is None:
+            motion = MotionChecker(robot, arm, environment, None, motion_settings)
+        else:
+            motion = MotionChecker(robot, arm, transit, environment, motion_settings)
     standoff = grasp_standoff(robot) if args.standoff is None else args.standoff
     approach = robot.arm(rmap.info.arm).approach_axis  # the TCP axis out of the hand, from the robot file
     grasps = grasp_poses(p_o, n=16, top_down=True, standoff=standoff, approach_axis=approach)
@@ -888,14 +937,25 @@ def cmd_candidates(args: argparse.Namespace) -> int:
         search = radial_search(p_o, settings, points, grid)
         rejected += [(r.xy, str(r.reason)) for r in search.rejected]
         verified, failed = verify_candidates(
-            robot, rmap.info.arm, search.candidates, grasps, environment, rng
+            robot, rmap.info.arm, search.candidates, grasps, environment, rng, motion
         )
         rejected += [((c.pose.x, c.pose.y), why) for c, why in failed]
     else:
-        verified = irm_candidates(robot, rmap, p_o, grasps, environment, grid, IrmSettings(), rng)
+        verified = irm_candidates(robot, rmap, p_o, grasps, environment, grid, IrmSettings(), rng, motion)
+    if robust.samples > 0:
+        from baseplace.placement.robustness import score_candidates
+
+        verified = score_candidates(robot.arm(rmap.info.arm), environment, grasps, verified, robust)
+        too_low = [c for c in verified if c.robustness is not None and c.robustness.rate < robust.minimum]
+        rejected += [((c.pose.x, c.pose.y), "robustness") for c in too_low]
+        verified = [c for c in verified if c not in too_low]
     start = robot_pose if robot_pose is not None else np.r_[p_o[:2], 0.0]
     costs = motion_costs(verified, p_o, BasePose(*start)) if verified else np.zeros(0)
     order = np.argsort(costs, kind="stable")
+    if robust.rank == "robustness":  # most robust first, motion cost breaks ties
+        order = np.lexsort(
+            (costs, np.array([-(c.robustness.rate if c.robustness else 0.0) for c in verified]))
+        )
     ranked = [verified[i] for i in order]
     route = None
     if robot_pose is not None and ranked:
@@ -911,7 +971,8 @@ def cmd_candidates(args: argparse.Namespace) -> int:
         {"x": round(c.pose.x, 4), "y": round(c.pose.y, 4), "yaw": round(c.pose.yaw, 4),
          "distance": round(c.distance, 4), "motion_cost": round(float(costs[i]), 4), "method": c.method,
          "reachability": round(c.reachability, 5), "grasp": grasps[c.grasp].round(5).tolist(),
-         "joints": dict(zip(c.joint_names, np.round(c.joints, 6).tolist(), strict=True)) if c.joints is not None else {}}
+         "joints": dict(zip(c.joint_names, np.round(c.joints, 6).tolist(), strict=True)) if c.joints is not None else {},
+         **_motion_and_robustness_json(None if c.motion is None else [c.motion], c.robustness)}
         for i, c in zip(order, ranked, strict=True)
     ]  # fmt: skip
     obj: dict[str, Any] = {
@@ -942,9 +1003,12 @@ def cmd_candidates(args: argparse.Namespace) -> int:
             f"no verified candidate ({args.method}); {len(rejected)} positions rejected "
             f"({', '.join(sorted({why for _, why in rejected})) or 'none tried'})"
         )
-    lines = [f"{len(ranked)} verified {args.method} candidate(s), best first (motion cost):"]
+    lines = [
+        f"{len(ranked)} verified {args.method} candidate(s), best first ({robust.rank if robust.rank == 'robustness' else 'motion cost'}):"
+    ]
     lines += [
-        f"  x={r['x']:.3f} y={r['y']:.3f} yaw={r['yaw']:.3f} cost {r['motion_cost']:.2f} m" for r in rows
+        f"  x={r['x']:.3f} y={r['y']:.3f} yaw={r['yaw']:.3f} cost {r['motion_cost']:.2f} m{_robust_text(r)}"
+        for r in rows
     ]
     _emit(args, obj, "\n".join(lines))
     return 0
@@ -1305,6 +1369,32 @@ def cmd_occupancy(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_motion_and_robustness_arguments(p: argparse.ArgumentParser) -> None:
+    """Options of the reaching-motion check and the robustness score (place, candidates)."""
+    p.add_argument("--no-motion-check", action="store_true",
+                   help="skip the reaching-motion check (stowed -> pre-grasp path, straight approach)")  # fmt: skip
+    p.add_argument("--robustness-samples", type=_nonneg_int, default=64,
+                   help="base-error draws scoring each placement (0: no score; default 64)")  # fmt: skip
+    p.add_argument("--rank-by-robustness", action="store_true",
+                   help="return the most robust placements first (default: the method's order)")  # fmt: skip
+    p.add_argument("--min-robustness", type=float, default=0.0,
+                   help="reject placements whose robustness is below this fraction (default 0)")  # fmt: skip
+    p.add_argument("--error-model", default="gaussian", choices=["gaussian", "box"],
+                   help="base error: gaussian (sigmas, within the tolerances) or uniform in the box")  # fmt: skip
+    p.add_argument(
+        "--sigma-xy", type=float, default=0.03, help="base position error sigma [m] (default 0.03)"
+    )
+    p.add_argument(
+        "--sigma-yaw-deg", type=float, default=2.0, help="base heading error sigma [deg] (default 2)"
+    )
+    p.add_argument(
+        "--xy-tolerance", type=float, default=0.25, help="goal xy tolerance [m] (Nav2 default 0.25)"
+    )
+    p.add_argument(
+        "--yaw-tolerance", type=float, default=0.25, help="goal yaw tolerance [rad] (Nav2 default 0.25)"
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``baseplace`` command."""
     parser = _Parser(
@@ -1393,6 +1483,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--object", default="auto", help=OBJECT_HELP)
     p.add_argument("--floor", type=_finite_float, default=None,
                    help="add a floor plane at this height [m] (z up) under and around a cloud that shows none")  # fmt: skip
+    _add_motion_and_robustness_arguments(p)
 
     p = command("candidates", "base placement candidates around an object (seed 004)", cmd_candidates)
     p.add_argument("--occupancy", default=None, help="occupancy grid: map_server YAML (or --bag --map-topic)")
@@ -1415,6 +1506,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_bag_args(p)
     p.add_argument("--object-shape", default="auto",
                    help=OBJECT_HELP.replace("first target's grasp point", "--object position"))  # fmt: skip
+    _add_motion_and_robustness_arguments(p)
 
     p = command(
         "navigate", "a base path across the planar regions of a scanned scene (seed 000 V)", cmd_navigate

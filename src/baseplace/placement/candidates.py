@@ -45,6 +45,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError
 from baseplace.geometry.poses import BasePose, FloatArray
+from baseplace.placement.motion import ReachingMotion
+from baseplace.placement.robustness import Robustness
 from baseplace.reachability.rmap import ReachabilityMap
 from baseplace.robots.model import Robot
 from baseplace.world.gridnav import OBSTACLE, GridNavigator, blocked_by_inflation
@@ -158,6 +160,8 @@ class RadialCandidate:
         grasp: index of the grasp pose the joints reach (IRM only), else -1.
         joints: (n,) arm joint values that reach that grasp, verified (IRM only), else None.
         joint_names: names of those joints.
+        motion: the checked reaching motion to that grasp, when the motion check ran.
+        robustness: the score under base error, when computed.
     """
 
     pose: BasePose
@@ -168,6 +172,8 @@ class RadialCandidate:
     grasp: int = -1
     joints: FloatArray | None = None
     joint_names: tuple[str, ...] = ()
+    motion: ReachingMotion | None = None
+    robustness: Robustness | None = None
 
     @property
     def xy(self) -> FloatArray:

@@ -19,6 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 from baseplace.errors import InputError
 from baseplace.geometry.poses import BasePose, FloatArray, pose_from_xyz_rpy, rotation_taking
 from baseplace.placement.candidates import RadialCandidate, _object, occupancy_risk
+from baseplace.placement.motion import MotionChecker
 from baseplace.placement.verify import Candidate, Verifier
 from baseplace.reachability.rmap import ReachabilityMap
 from baseplace.robots.ik import DampedLeastSquaresIK
@@ -121,6 +122,7 @@ def irm_candidates(
     occupancy: OccupancyGrid | None = None,
     settings: IrmSettings | None = None,
     rng: np.random.Generator | None = None,
+    motion: MotionChecker | None = None,
 ) -> list[RadialCandidate]:
     """Base placements ranked by inverse reachability and verified by IK + collision.
 
@@ -142,6 +144,7 @@ def irm_candidates(
         occupancy: occupancy grid for the footprint test, or None.
         settings: search settings.
         rng: randomness for IK restarts (default: seed 0).
+        motion: also check the reaching motion (:mod:`baseplace.placement.motion`), or None.
 
     Returns:
         Verified candidates, best reachability first (possibly empty); each carries the grasp
@@ -178,7 +181,7 @@ def irm_candidates(
     arm = robot.arm(rmap.info.arm)
     ik = DampedLeastSquaresIK(arm)
     outline = footprint_outline(robot.spec.footprint_radius, robot.spec.footprint_polygon)
-    verifiers = [Verifier(arm, ik, env, g[None], {}, outline) for g in G]
+    verifiers = [Verifier(arm, ik, env, g[None], {}, outline, motion=motion) for g in G]
     found: list[RadialCandidate] = []
     checks = 0
     for i in np.argsort(-best, kind="stable"):
@@ -195,7 +198,8 @@ def irm_candidates(
                 pose = BasePose(float(poses[i, 0]), float(poses[i, 1]), float(poses[i, 2]))
                 found.append(RadialCandidate(pose, float(math.dist(poses[i, :2], p[:2])), -1, "irm",
                                              float(values[k, i]), int(k), placement.joints[0],
-                                             placement.joint_names))  # fmt: skip
+                                             placement.joint_names,
+                                             placement.motions[0] if placement.motions else None))  # fmt: skip
                 break
     return found
 
@@ -216,18 +220,21 @@ def verify_candidates(
     grasps: ArrayLike,
     environment: Environment,
     rng: np.random.Generator,
+    motion: MotionChecker | None = None,
 ) -> tuple[list[RadialCandidate], list[tuple[RadialCandidate, str]]]:
     """Run the shared verification on candidates of any method: IK for one of the grasps + collision.
 
+    With ``motion``, the reaching motion to the grasp is checked too.
+
     Returns:
-        (verified candidates carrying their grasp index and joints, rejected ones with the
-        verifier's reason "no_ik" or "collision").
+        (verified candidates carrying their grasp index, joints and motion, rejected ones with the
+        verifier's reason for the grasp that got furthest: "motion", "collision" or "no_ik").
     """
     G = np.asarray(grasps, dtype=float).reshape(-1, 4, 4)
     arm = robot.arm(arm_name)
     ik = DampedLeastSquaresIK(arm)
     outline = footprint_outline(robot.spec.footprint_radius, robot.spec.footprint_polygon)
-    verifiers = [Verifier(arm, ik, environment, g[None], {}, outline) for g in G]
+    verifiers = [Verifier(arm, ik, environment, g[None], {}, outline, motion=motion) for g in G]
     usable = np.flatnonzero(hand_feasible(robot, arm_name, G, environment))
     verified: list[RadialCandidate] = []
     rejected: list[tuple[RadialCandidate, str]] = []
@@ -238,10 +245,11 @@ def verify_candidates(
             placement = verifier.check(Candidate(c.T_world_base, -1, c.reachability), rng)
             if placement is not None:
                 verified.append(dataclasses.replace(c, grasp=int(k), joints=placement.joints[0],
-                                                    joint_names=placement.joint_names))  # fmt: skip
+                                                    joint_names=placement.joint_names,
+                                                    motion=placement.motions[0] if placement.motions else None))  # fmt: skip
                 break
             reasons.extend(verifier.failures.elements())
             verifier.failures.clear()
         else:
-            rejected.append((c, "collision" if "collision" in reasons else "no_ik"))
+            rejected.append((c, next((r for r in ("motion", "collision") if r in reasons), "no_ik")))
     return verified, rejected

@@ -1,10 +1,12 @@
 """Placement generation end to end (seed 000, Algorithm 2).
 
 cloud -> planar regions -> obstacle voxels (support removed) -> OSRM -> strategy candidates ->
-verification (footprint, IK per target, collision) -> at most M placements within N tries.
+verification (footprint, IK per target, collision, reaching motion) -> robustness to base error
+-> at most M placements within N tries.
 
 Only the hand may touch the grasped object (:mod:`baseplace.world.grasped_object`), given or found
-at the first target's grasp point; the surface under it and everything else are obstacles.
+at the first target's grasp point, and only in the reaching motion's final approach; the surface
+under it and everything else are obstacles.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import math
 import time
 from collections import Counter
 from dataclasses import dataclass, field
+from typing import Any
 
 import cv2
 import numpy as np
@@ -20,7 +23,9 @@ from numpy.typing import ArrayLike
 
 from baseplace.errors import InputError
 from baseplace.geometry.poses import FloatArray
+from baseplace.placement.motion import MotionChecker, MotionSettings, transit_environment
 from baseplace.placement.osrm import OSRM, build_osrm, footprint_kernels
+from baseplace.placement.robustness import RobustnessEstimator, RobustnessSettings, rank_by_robustness
 from baseplace.placement.strategies import make_strategy
 from baseplace.placement.verify import Placement, Verifier
 from baseplace.reachability.rmap import ReachabilityMap
@@ -32,6 +37,10 @@ from baseplace.terrain.segmentation import Segmentation
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import SUPPORT_DIST, Environment, contact_groups, obstacle_voxels
 from baseplace.world.grasped_object import GraspedObject, find_grasped_object
+
+SEED_000_CHECKS: dict[str, Any] = {"motion": None, "robustness": RobustnessSettings(samples=0)}
+"""PlaceSettings overrides for seed 000's verification alone (IK + collision at the exact pose),
+as its experiments measure it: ``PlaceSettings(..., **SEED_000_CHECKS)``."""
 
 
 @dataclass(frozen=True)
@@ -46,6 +55,9 @@ class PlaceSettings:
         gamma_max: largest angle between the base's forward axis and the targets [rad].
         support_dist: voxels this close to their region's plane are support, not obstacles [m].
         resolution: height-map cell [m]; None: chosen from the cloud (terrain.diagnose.auto_resolution).
+        motion: the reaching-motion check (:mod:`baseplace.placement.motion`), None: off.
+        robustness: the score under base error and whether to rank by it or require a minimum
+            (:mod:`baseplace.placement.robustness`).
     """
 
     strategy: str = "MR"
@@ -55,6 +67,8 @@ class PlaceSettings:
     gamma_max: float = math.pi / 4
     support_dist: float = SUPPORT_DIST
     resolution: float | None = None
+    motion: MotionSettings | None = field(default_factory=MotionSettings)
+    robustness: RobustnessSettings = field(default_factory=RobustnessSettings)
 
     def __post_init__(self) -> None:
         if self.placements < 1 or self.tries < 1:
@@ -73,7 +87,8 @@ class PlacementResult:
         tries: candidates checked.
         timings_ms: segmentation, osrm, collision_setup (the grasped object and the obstacle
             OcTrees), query (candidates and verification), request_to_placement (all but the
-            segmentation: seed 000's t_a) and total [ms].
+            segmentation: seed 000's t_a) and total [ms]; the query's share spent in the
+            reaching-motion check (motion) and the robustness score (robustness).
         terrain: the segmented scene.
         osrm: the OSRM.
         contacts: per (robot link, what it touched), the candidates rejected for it
@@ -150,30 +165,53 @@ def place(
     t2 = time.perf_counter()
     obj, note = _grasped_object(robot, rmap.info.arm, points, T_targets, grasped)
     key = "floor" if s.strategy == "orm" else "regions"
+    transit = None
     if obj is not None:  # obstacles depend on the grasped object: no reuse across queries
         groups, object_voxels = contact_groups(terrain.voxels, _obstacles(terrain, seg, s, outline), obj)
         env = Environment(robot, groups, grasped=object_voxels, hand_arm=rmap.info.arm)
+        if s.motion is not None:  # on the way to the pre-grasp the hand may not touch it either
+            transit = transit_environment(robot, groups, object_voxels)
     else:
         cache = environments if environments is not None else {}
         if key not in cache:
             cache[key] = Environment(robot, _obstacles(terrain, seg, s, outline))
         env = cache[key]
     arm = robot.arm(rmap.info.arm)
+    motion = None
+    if s.motion is not None:  # only the final approach may touch the grasped object, with the hand
+        if transit is None:  # no grasped object: nothing may be touched anywhere
+            motion = MotionChecker(robot, arm, env, None, s.motion)
+        else:
+            motion = MotionChecker(robot, arm, transit, env, s.motion)
     verifier = Verifier(arm, DampedLeastSquaresIK(arm), env, T_targets,
-                        {r.id: terrain.graph.nodes[r.id]["polygon"] for r in seg.regions}, outline)  # fmt: skip
+                        {r.id: terrain.graph.nodes[r.id]["polygon"] for r in seg.regions}, outline,
+                        motion=motion)  # fmt: skip
+    rs = s.robustness
+    estimator = RobustnessEstimator(arm, env, T_targets, rs) if rs.samples > 0 else None
     t3 = time.perf_counter()
     placements: list[Placement] = []
     tries = 0
+    wanted = max(s.placements, rs.pool) if rs.rank == "robustness" else s.placements
     candidates = strategy.candidates(osrm, rmap, rng)
-    while tries < s.tries and len(placements) < s.placements:
+    robustness_s = 0.0
+    while tries < s.tries and len(placements) < wanted:
         candidate = next(candidates, None)
         if candidate is None:
             verifier.failures["exhausted"] += 1
             break
         tries += 1
         placement = verifier.check(candidate, rng)
+        if placement is not None and estimator is not None:
+            t = time.perf_counter()
+            placement = estimator.scored(placement)
+            robustness_s += time.perf_counter() - t
+            if placement.robustness is not None and placement.robustness.rate < rs.minimum:
+                verifier.failures["robustness"] += 1
+                placement = None
         if placement is not None:
             placements.append(placement)
+    if rs.rank == "robustness":
+        placements = rank_by_robustness(placements)[: s.placements]
     t4 = time.perf_counter()
     timings = {
         "segmentation": (t1 - t0) * 1e3,
@@ -181,6 +219,8 @@ def place(
         "collision_setup": (t3 - t2) * 1e3,
         "query": (t4 - t3) * 1e3,
         "request_to_placement": (t4 - t1) * 1e3,
+        "motion": motion.elapsed_s * 1e3 if motion is not None else 0.0,
+        "robustness": robustness_s * 1e3,
         "total": (t4 - t0) * 1e3,
     }
     return PlacementResult(placements, verifier.failures, tries, timings, terrain, osrm, verifier.contacts,

@@ -1,8 +1,10 @@
 """The one verification every placement method uses before it returns a pose (seed 000 Alg. 2).
 
 A candidate base pose is accepted only if (1) its footprint lies inside the polygon of its
-planar region (when it has one), (2) IK reaches every target from it, and (3) the whole robot at
-each IK configuration is free of self-collision and of the obstacle voxels.
+planar region (when it has one), (2) IK reaches every target from it, (3) the whole robot at
+each IK configuration is free of self-collision and of the obstacle voxels, and, when a
+:class:`~baseplace.placement.motion.MotionChecker` is given, (4) the arm can move there from its
+stowed configuration without collision (rejection reason ``motion``).
 """
 
 from __future__ import annotations
@@ -15,12 +17,14 @@ import numpy as np
 from shapely.geometry import MultiPolygon, Polygon
 
 from baseplace.geometry.poses import FloatArray, invert_transforms
+from baseplace.placement.motion import MotionChecker, ReachingMotion
+from baseplace.placement.robustness import Robustness
 from baseplace.robots.ik import IKSolver
 from baseplace.robots.model import Arm
 from baseplace.terrain.polygons import footprint_inside
 from baseplace.world.environment import Environment
 
-Failure = Literal["footprint", "no_ik", "collision", "exhausted"]
+Failure = Literal["footprint", "no_ik", "collision", "motion", "exhausted"]
 
 
 @dataclass(frozen=True)
@@ -48,6 +52,9 @@ class Placement:
         reachability: the map's value at the pose.
         joints: per target, the arm joint values (n,) that reach it.
         joint_names: names of those joints.
+        motions: per target, the checked reaching motion (None when the check was off).
+        robustness: the score under base-pose error, if computed
+            (:mod:`baseplace.placement.robustness`).
     """
 
     T_world_base: FloatArray
@@ -55,6 +62,8 @@ class Placement:
     reachability: float
     joints: list[FloatArray]
     joint_names: tuple[str, ...]
+    motions: list[ReachingMotion] | None = None
+    robustness: Robustness | None = None
 
     @property
     def yaw(self) -> float:
@@ -78,6 +87,7 @@ class Verifier:
             (what: an obstacle group such as "support" or "obstacle", "grasped_object" for a link
             other than the hand, or "self: <link>").
         rejected: per rejected candidate, (x, y) [m], the reason and its first contact (or None).
+        motion: the reaching-motion check, or None to skip it.
     """
 
     arm: Arm
@@ -89,6 +99,7 @@ class Verifier:
     failures: Counter[str] = field(default_factory=Counter)
     contacts: Counter[tuple[str, str]] = field(default_factory=Counter)
     rejected: list[tuple[tuple[float, float], str, tuple[str, str] | None]] = field(default_factory=list)
+    motion: MotionChecker | None = None
 
     def check(self, candidate: Candidate, rng: np.random.Generator) -> Placement | None:
         """The verified placement, or None (the reason is counted in ``failures``)."""
@@ -110,7 +121,18 @@ class Verifier:
                 self.contacts.update(contacts)
                 self._reject(T, "collision", contacts[0] if contacts else None)
                 return None
-        return Placement(T.copy(), candidate.region, candidate.reachability, joints, self.arm.joint_names)
+        motions = None
+        if self.motion is not None:
+            motions = []
+            for k, target in enumerate(self.targets):
+                motion = self.motion.check(joints[k], T, target, seed=int(rng.integers(2**31 - 1)))
+                if motion is None:
+                    self._reject(T, "motion")
+                    return None
+                motions.append(motion)
+                joints[k] = motion.approach[-1]  # the motion may end in another checked grasp configuration
+        return Placement(T.copy(), candidate.region, candidate.reachability, joints, self.arm.joint_names,
+                         motions)  # fmt: skip
 
     def _reject(self, T: FloatArray, reason: str, contact: tuple[str, str] | None = None) -> None:
         self.failures[reason] += 1

@@ -189,12 +189,29 @@ class DampedLeastSquaresIK:
         return q[0] if attempts[0] >= 0 else None
 
     def solve_batch(
-        self, T_base_tcp: ArrayLike, rng: np.random.Generator
+        self, T_base_tcp: ArrayLike, rng: np.random.Generator, q_seed: ArrayLike | None = None
     ) -> tuple[FloatArray, NDArray[np.bool_]]:
-        """Solve (N, 4, 4) poses in parallel; returns q (N, n) and success (N,)."""
+        """Solve (N, 4, 4) poses in parallel; returns q (N, n) and success (N,).
+
+        ``q_seed`` (n,), if given, is every pose's first attempt (default: mid-range).
+        """
         T = _check_poses(T_base_tcp)
-        q, attempts = self._run(T, self._seeds(rng, len(T), None))
+        q, attempts = self._run(T, self._seeds(rng, len(T), q_seed))
         return q, attempts >= 0
+
+    def solve_from(self, T_base_tcp: ArrayLike, seeds: ArrayLike) -> FloatArray | None:
+        """Joint values (n,) reaching ``T_base_tcp`` (4, 4), or None; IK that stays near given configurations.
+
+        Tries the (R, n) ``seeds`` in order (no random restarts) and returns the first that converges.
+        """
+        T = _check_poses(T_base_tcp)[0]
+        arm = self.arm
+        S = np.ascontiguousarray(np.asarray(seeds, dtype=float).reshape(-1, arm.n_joints))
+        q = np.zeros(arm.n_joints)
+        attempt = _solve_one(T, S, arm.placements, arm.axes, arm.kinds, arm.T_last_tcp, arm.lower,
+                             arm.upper, arm.continuous, self.max_iterations, self.tol_position,
+                             self.tol_rotation, self.damping, q)  # fmt: skip
+        return q if attempt >= 0 else None
 
     def solve_world(
         self,

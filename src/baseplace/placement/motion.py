@@ -1,0 +1,355 @@
+"""The reaching motion: a collision-free arm path from the stowed configuration to the grasp.
+
+Seed 004 (section 4) reports that grasps from a fixed base pose failed by "hitting the table while
+reaching": a placement whose final configuration is free can still be unreachable in motion. This
+check, run after the shared verification (:class:`~baseplace.placement.verify.Verifier`), asks for
+
+1. a joint-space path from the start configuration (the robot's stowed one, or a given current
+   one) to a pre-grasp configuration, planned with OMPL's RRTConnect after a straight joint-space
+   line is tried first; every state is checked with the same whole-robot collision model as the
+   verification (:meth:`Environment.colliding_arm`), the grasped object included for every link;
+2. a straight approach from the pre-grasp, ``pregrasp_distance`` back along the TCP's approach
+   axis, to the grasp: the Cartesian line is followed in ``approach_step`` steps by IK seeded with
+   the previous step (walked backwards from the verified grasp configuration, so the motion ends in
+   exactly that configuration) and each step is checked. Only here may the robot touch the
+   grasped object, and only with the hand: the steps are checked against ``approach_environment``,
+   an :class:`Environment` built with ``grasped=`` (:mod:`baseplace.world.grasped_object`), whose
+   grasped-object voxels every link but the hand must clear. In the transit (part 1) nothing may
+   be touched: ``environment`` has the grasped object as an ordinary obstacle group
+   (:func:`transit_environment`).
+
+The result is the joint waypoints of both parts (:class:`ReachingMotion`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import gc
+import math
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from baseplace.errors import InputError
+from baseplace.geometry.poses import FloatArray, invert_transforms
+from baseplace.robots.ik import DampedLeastSquaresIK
+from baseplace.robots.model import Arm, Robot
+from baseplace.terrain.voxels import VoxelMap
+from baseplace.world.environment import GRASPED, Environment
+
+# Stowed ("home"/"tucked") arm configurations of the built-in robots, in the arm's joint order
+# (torso first): PAL's TIAGo home motion and the PR2's pr2_tuck_arms values.
+_STOWED: dict[tuple[str, str], tuple[float, ...]] = {
+    ("tiago", "arm"): (0.15, 0.20, -1.34, -0.20, 1.94, -1.57, 1.37, 0.0),
+    ("pr2", "right"): (0.0, -0.023593, 1.10728, -1.5566882, -2.124408, -1.4175, -1.8417, 0.21436),
+    ("pr2", "left"): (0.0, 0.06024, 1.248526, 1.78907, -1.683386, -1.7343417, -0.0962141, -0.0864053),
+}
+
+
+def stowed_configuration(robot: Robot, arm: Arm) -> FloatArray:
+    """The arm's stowed joint values (n,): the robot's home pose, else its reference values in limits."""
+    values = _STOWED.get((robot.name, arm.name))
+    if values is not None and len(values) == arm.n_joints:
+        return np.array(values, dtype=float)
+    return np.clip(arm.from_pinocchio(robot.q_reference), arm.lower, arm.upper)
+
+
+def approach_axis(arm: Arm) -> FloatArray:
+    """Unit (3,) axis of the TCP frame along which the hand moves onto a grasp.
+
+    The arm's ``approach_axis`` from the robot file (+x for the built-in robots' TCP frames).
+    """
+    axis = np.asarray(arm.approach_axis, dtype=float)
+    norm = float(np.linalg.norm(axis))
+    if axis.shape != (3,) or not math.isfinite(norm) or norm < 1e-9:
+        raise InputError(
+            f"approach axis of arm {arm.name!r} must be a non-zero 3-vector, got {axis.tolist()}"
+        )
+    return axis / norm
+
+
+def transit_environment(
+    robot: Robot, groups: Mapping[str, VoxelMap], grasped: VoxelMap | None
+) -> Environment | None:
+    """The collision model of the transit to the pre-grasp, where nothing may be touched.
+
+    ``groups`` and ``grasped`` are what the verification's :class:`Environment` was built from
+    (:func:`~baseplace.world.environment.contact_groups`); here the grasped object is one more
+    obstacle group, checked against every link, the hand's included. None when there is no
+    grasped object: the verification's environment already allows no contact.
+    """
+    if grasped is None or len(grasped) == 0:
+        return None
+    return Environment(robot, {**groups, GRASPED: grasped})
+
+
+@dataclass(frozen=True)
+class MotionSettings:
+    """How the reaching motion is checked.
+
+    Attributes:
+        pregrasp_distance: the pre-grasp lies this far back from the grasp along the approach
+            axis [m]; the last segment, the straight approach, is this long. 0.15 m, as MoveIt
+            pick pipelines' usual pre-grasp approach: the whole hand, fingers open (TIAGo's
+            ``hand_safety_box`` reaches 0.2 m ahead of the wrist), must be clear of the object
+            there, since only the approach may touch it.
+        approach_step: Cartesian step along the approach line [m]; each step is IK + collision
+            (0.01 m: below the 25 mm obstacle voxels).
+        max_joint_step: largest joint change between two approach steps [rad or m]; a larger
+            one means the IK jumped branches, so the arm would not move straight.
+        joint_resolution: the joint path is checked at states at most this far apart
+            (Euclidean in joint space [rad]).
+        time_limit: OMPL planning time for one joint path [s]; no path in it rejects the placement.
+        approach_restarts: other pre-grasp IK solutions tried when the approach cannot start
+            from the verified grasp configuration.
+        q_start: start arm configuration (n,), e.g. the robot's current one; default: stowed.
+    """
+
+    pregrasp_distance: float = 0.15
+    approach_step: float = 0.01
+    max_joint_step: float = 0.2
+    joint_resolution: float = 0.05
+    time_limit: float = 1.0
+    approach_restarts: int = 4
+    q_start: tuple[float, ...] | None = None
+
+    def __post_init__(self) -> None:
+        for name in (
+            "pregrasp_distance",
+            "approach_step",
+            "max_joint_step",
+            "joint_resolution",
+            "time_limit",
+        ):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise InputError(f"motion setting {name} must be a finite number > 0, got {value}")
+        if self.approach_restarts < 0:
+            raise InputError(f"approach_restarts must be >= 0, got {self.approach_restarts}")
+
+
+@dataclass(frozen=True)
+class ReachingMotion:
+    """A checked reaching motion for one target.
+
+    Attributes:
+        path: (P, n) joint waypoints from the start configuration to the pre-grasp; consecutive
+            waypoints are joined by straight joint-space lines (checked every ``joint_resolution``).
+        approach: (A, n) joint configurations along the straight Cartesian approach, pre-grasp
+            first, the grasp configuration last (the verified one, or another that passed the
+            same checks when the approach could not start from it).
+        planned: True if OMPL planned the path; False if the straight joint-space line was free.
+    """
+
+    path: FloatArray
+    approach: FloatArray
+    planned: bool
+
+    @property
+    def waypoints(self) -> FloatArray:
+        """(P + A - 1, n) the whole motion, start to grasp."""
+        return np.concatenate([self.path, self.approach[1:]])
+
+
+class MotionChecker:
+    """Checks the reaching motion of verified placements (see the module docstring).
+
+    Args:
+        robot: the robot.
+        arm: the arm that reaches.
+        environment: the whole-robot collision model of the transit, where nothing may be touched
+            (the grasped object, if any, an obstacle of every link: :func:`transit_environment`).
+        approach_environment: the model of the straight approach, where only the hand may touch
+            the grasped object (an :class:`Environment` built with ``grasped=``, as the
+            verification's); default: ``environment`` (no contact allowed).
+        settings: motion settings.
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        arm: Arm,
+        environment: Environment,
+        approach_environment: Environment | None = None,
+        settings: MotionSettings | None = None,
+    ) -> None:
+        self.robot = robot
+        self.arm = arm
+        self.environment = environment
+        self.approach_environment = approach_environment
+        self.settings = settings or MotionSettings()
+        s = self.settings
+        q0 = stowed_configuration(robot, arm) if s.q_start is None else np.asarray(s.q_start, dtype=float)
+        if q0.shape != (arm.n_joints,) or not np.all(np.isfinite(q0)) or not arm.within_limits(q0):
+            raise InputError(
+                f"start configuration must be {arm.n_joints} finite joint values within the limits "
+                f"of {list(arm.joint_names)}, got {q0.tolist()}"
+            )
+        self.q_start = q0
+        self.axis = approach_axis(arm)
+        self._ik = DampedLeastSquaresIK(arm)
+        self._ik_any = DampedLeastSquaresIK(arm, restarts=20)
+        self.elapsed_s = 0.0
+        """Time spent in :meth:`check` so far [s]."""
+
+    def _free(self, q: FloatArray, T_world_base: FloatArray) -> bool:
+        return not self.environment.colliding_arm(self.arm, q, T_world_base)
+
+    def _approach_free(self, q: FloatArray, T_world_base: FloatArray) -> bool:
+        if self.approach_environment is None:
+            return self._free(q, T_world_base)
+        return not self.approach_environment.colliding_arm(self.arm, q, T_world_base)
+
+    def approach(
+        self, q_grasp: ArrayLike, T_base_tcp: FloatArray, T_world_base: FloatArray, seed: int = 0
+    ) -> FloatArray | None:
+        """(A, n) configurations along the straight approach, pre-grasp first, or None.
+
+        First walks from the verified grasp configuration back along the approach axis, IK seeded
+        with the last step, so that the motion ends in that configuration. When that fails (the
+        configuration sits against a joint limit the retreat needs), up to ``approach_restarts``
+        other IK solutions of the pre-grasp are walked forward to the grasp instead; the motion
+        then ends in another grasp configuration, checked the same way. A walk fails on an IK
+        failure, a joint jump above ``max_joint_step`` or a collision.
+        """
+        s = self.settings
+        n_steps = max(1, math.ceil(s.pregrasp_distance / s.approach_step))
+        line = []
+        for k in range(n_steps + 1):  # grasp first, pre-grasp last
+            T = T_base_tcp.copy()
+            T[:3, 3] -= (k / n_steps) * s.pregrasp_distance * (T_base_tcp[:3, :3] @ self.axis)
+            line.append(T)
+        q = np.asarray(q_grasp, dtype=float)
+        if self._approach_free(q, T_world_base):
+            back = self._walk(q, line[1:], T_world_base)
+            if back is not None:
+                return back[::-1]
+        rng = np.random.default_rng(seed)
+        for _ in range(s.approach_restarts):
+            q_pre = self._ik_any.solve(line[-1], rng, q_seed=self.arm.sample(rng, 1)[0])
+            if q_pre is None or not self._approach_free(q_pre, T_world_base):
+                continue
+            forward = self._walk(q_pre, line[-2::-1], T_world_base)
+            if forward is not None:
+                return forward
+        return None
+
+    def _walk(self, q0: FloatArray, poses: list[FloatArray], T_world_base: FloatArray) -> FloatArray | None:
+        """(len(poses) + 1, n) configurations from ``q0`` through the TCP ``poses``, or None."""
+        # seeds: the last step, then small perturbations of it (DLS stalls against a joint limit)
+        jitter = np.random.default_rng(0).normal(0.0, 0.05, size=(4, self.arm.n_joints))
+        q, steps = q0, [q0]
+        for T in poses:
+            seeds = np.clip(np.vstack([q, q + jitter]), self.arm.lower, self.arm.upper)
+            q_next = self._ik.solve_from(T, seeds)
+            if q_next is None or np.max(np.abs(q_next - q)) > self.settings.max_joint_step:
+                return None
+            q = q_next
+            if not self._approach_free(q, T_world_base):
+                return None
+            steps.append(q)
+        return np.array(steps)
+
+    def _line_free(self, a: FloatArray, b: FloatArray, T_world_base: FloatArray) -> bool:
+        n = max(1, math.ceil(float(np.linalg.norm(b - a)) / self.settings.joint_resolution))
+        return all(self._free(a + (b - a) * (k / n), T_world_base) for k in range(1, n + 1))
+
+    def joint_path(
+        self, q_goal: FloatArray, T_world_base: FloatArray, seed: int
+    ) -> tuple[FloatArray | None, bool]:
+        """Collision-free joint waypoints (P, n) from the start configuration to ``q_goal``, or None.
+
+        Also returns whether OMPL planned them (False: the straight joint-space line was free).
+        """
+        q0 = self.q_start
+        if not self._free(q0, T_world_base) or not self._free(q_goal, T_world_base):
+            return None, False
+        if self._line_free(q0, q_goal, T_world_base):
+            return np.array([q0, q_goal]), False
+        return self._rrt(q0, q_goal, T_world_base, seed), True
+
+    def _rrt(
+        self, q0: FloatArray, q_goal: FloatArray, T_world_base: FloatArray, seed: int
+    ) -> FloatArray | None:
+        from ompl import base as ob
+        from ompl import geometric as og
+        from ompl import util as ou
+
+        arm, n = self.arm, self.arm.n_joints
+        ou.setLogLevel(ou.LOG_NONE)
+        ou.RNG.setSeed(seed + 1)  # OMPL takes seeds > 0
+        try:
+            space = ob.RealVectorStateSpace(n)
+            bounds = ob.RealVectorBounds(n)
+            for i in range(n):
+                bounds.setLow(i, float(arm.lower[i]))
+                bounds.setHigh(i, float(arm.upper[i]))
+            space.setBounds(bounds)
+            setup = og.SimpleSetup(space)
+
+            def valid(state: object) -> bool:
+                return self._free(np.array([state[i] for i in range(n)]), T_world_base)  # type: ignore[index]
+
+            setup.setStateValidityChecker(valid)
+            info = setup.getSpaceInformation()
+            info.setStateValidityCheckingResolution(self.settings.joint_resolution / space.getMaximumExtent())
+            a, b = space.allocState(), space.allocState()
+            for i in range(n):
+                a[i], b[i] = float(q0[i]), float(q_goal[i])
+            setup.setStartAndGoalStates(a, b, 1e-6)
+            setup.setPlanner(og.RRTConnect(info))
+            solved = setup.solve(self.settings.time_limit)
+            if not solved or not setup.haveExactSolutionPath():
+                return None
+            setup.simplifySolution(min(0.25, self.settings.time_limit))  # shortcutting: bounded time
+            states = setup.getSolutionPath().getStates()
+            path = np.array([[s[i] for i in range(n)] for s in states])
+        finally:
+            gc.collect()  # the validity callback forms a cycle with the setup
+        path[0], path[-1] = q0, q_goal
+        return path
+
+    def check(
+        self, q_grasp: ArrayLike, T_world_base: ArrayLike, T_world_tcp: ArrayLike, seed: int = 0
+    ) -> ReachingMotion | None:
+        """The reaching motion to a verified grasp configuration, or None if there is none.
+
+        Args:
+            q_grasp: (n,) the verified arm configuration at the grasp.
+            T_world_base: (4, 4) base pose.
+            T_world_tcp: (4, 4) the grasp (TCP target) in the world.
+            seed: OMPL's random seed.
+        """
+        t0 = time.perf_counter()
+        try:
+            T_base = np.asarray(T_world_base, dtype=float)
+            T_base_tcp = invert_transforms(T_base) @ np.asarray(T_world_tcp, dtype=float)
+            approach = self.approach(q_grasp, T_base_tcp, T_base, seed)
+            if approach is None:
+                return None
+            path, planned = self.joint_path(approach[0], T_base, seed)
+            if path is None:
+                return None
+            return ReachingMotion(path, approach, planned)
+        finally:
+            self.elapsed_s += time.perf_counter() - t0
+
+
+def with_start(settings: MotionSettings, q_start: ArrayLike | None) -> MotionSettings:
+    """``settings`` with another start configuration (None: stowed)."""
+    q = None if q_start is None else tuple(float(v) for v in np.asarray(q_start, dtype=float).ravel())
+    return dataclasses.replace(settings, q_start=q)
+
+
+__all__ = [
+    "MotionChecker",
+    "MotionSettings",
+    "ReachingMotion",
+    "approach_axis",
+    "stowed_configuration",
+    "transit_environment",
+    "with_start",
+]

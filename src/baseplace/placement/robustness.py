@@ -1,0 +1,313 @@
+"""Robustness of a placement to the navigation error of the base.
+
+A navigation stack stops near its goal, not on it: Nav2's goal checker accepts any pose within
+``xy_goal_tolerance`` (default 0.25 m) and ``yaw_goal_tolerance`` (0.25 rad) of the goal, and a
+well-tuned base lands a few centimetres and degrees off. A placement verified at the exact pose
+(seed 000 Alg. 2, seed 004 Alg. 2) may fail from the pose the robot actually reaches. Following
+action-related places (Stulp et al., "Learning and reasoning with action-related places for robust
+mobile manipulation", JAIR 2012), each verified placement is scored by its success probability
+under that error: the fraction of base poses drawn from a :class:`BaseErrorModel` around it from
+which every target is still reachable (IK, seeded with the nominal configuration) and the whole
+robot there is collision-free, with a Wilson score interval for the estimate.
+
+The error draws are fixed per estimator (common random numbers), so placements of one query are
+compared on the same draws; IK runs batched over the draws, and results are cached per drawn pose.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from baseplace.errors import InputError, unknown
+from baseplace.geometry.poses import FloatArray, invert_transforms
+from baseplace.robots.ik import DampedLeastSquaresIK
+from baseplace.robots.model import Arm
+from baseplace.world.environment import Environment
+
+if TYPE_CHECKING:
+    from baseplace.placement.candidates import RadialCandidate
+    from baseplace.placement.verify import Placement
+
+ERROR_DISTRIBUTIONS = ("gaussian", "box")
+
+
+@dataclass(frozen=True)
+class BaseErrorModel:
+    """Where the base stops when sent to a goal pose: offsets in x, y [m] (world) and heading [rad].
+
+    Attributes:
+        distribution: ``gaussian``: independent normal offsets in x, y and yaw, redrawn when they
+            leave the tolerance box (the goal checker would not stop there); ``box``: uniform over
+            the tolerance box (a Nav2 goal checker's worst case, no tuning assumed).
+        sigma_xy: standard deviation of the x and the y offset [m] (default 3 cm).
+        sigma_yaw: standard deviation of the heading offset [rad] (default 2 deg).
+        xy_tolerance: the base stops within this distance of the goal [m] (Nav2 default 0.25).
+        yaw_tolerance: and within this heading difference [rad] (Nav2 default 0.25).
+    """
+
+    distribution: Literal["gaussian", "box"] = "gaussian"
+    sigma_xy: float = 0.03
+    sigma_yaw: float = math.radians(2.0)
+    xy_tolerance: float = 0.25
+    yaw_tolerance: float = 0.25
+
+    def __post_init__(self) -> None:
+        if self.distribution not in ERROR_DISTRIBUTIONS:
+            raise unknown("base error distribution", self.distribution, ERROR_DISTRIBUTIONS)
+        for name in ("sigma_xy", "sigma_yaw"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise InputError(f"{name} must be a finite number >= 0, got {value}")
+        for name in ("xy_tolerance", "yaw_tolerance"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise InputError(f"{name} must be a finite number > 0, got {value}")
+        if self.yaw_tolerance > math.pi:
+            raise InputError(f"yaw_tolerance must be <= pi rad, got {self.yaw_tolerance}")
+
+    def sample(self, rng: np.random.Generator, n: int) -> FloatArray:
+        """(n, 3) offsets (dx [m], dy [m], dyaw [rad]) within the tolerance box."""
+        out = np.empty((0, 3))
+        while len(out) < n:
+            m = 2 * (n - len(out)) + 8
+            if self.distribution == "box":
+                r = self.xy_tolerance * np.sqrt(rng.random(m))
+                phi = rng.uniform(-math.pi, math.pi, m)
+                d = np.column_stack(
+                    [r * np.cos(phi), r * np.sin(phi), rng.uniform(-1, 1, m) * self.yaw_tolerance]
+                )
+            else:
+                d = rng.normal(0.0, 1.0, (m, 3)) * [self.sigma_xy, self.sigma_xy, self.sigma_yaw]
+            keep = (np.hypot(d[:, 0], d[:, 1]) <= self.xy_tolerance) & (np.abs(d[:, 2]) <= self.yaw_tolerance)
+            out = np.concatenate([out, d[keep]])
+        return out[:n]
+
+
+def perturbed(T_world_base: ArrayLike, offsets: ArrayLike) -> FloatArray:
+    """(S, 4, 4) base poses: ``T_world_base`` (4, 4) moved by (S, 3) world offsets (dx, dy, dyaw)."""
+    T = np.asarray(T_world_base, dtype=float)
+    d = np.asarray(offsets, dtype=float).reshape(-1, 3)
+    c, s = np.cos(d[:, 2]), np.sin(d[:, 2])
+    Rz = np.zeros((len(d), 4, 4))
+    Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1] = c, -s, s, c
+    Rz[:, 2, 2] = Rz[:, 3, 3] = 1.0
+    out = T @ Rz  # heading error about the base's own z axis
+    out[:, 0, 3] += d[:, 0]
+    out[:, 1, 3] += d[:, 1]
+    return out
+
+
+def wilson_interval(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """Wilson score interval (low, high) of a binomial proportion; z = 1.96: 95 %."""
+    if n <= 0:
+        return 0.0, 1.0
+    p = successes / n
+    denom = 1.0 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+@dataclass(frozen=True)
+class Robustness:
+    """A placement's success rate under base error.
+
+    Attributes:
+        successes: error draws from which every target was reached without collision.
+        samples: error draws.
+        low: lower end of the Wilson interval of the rate.
+        high: upper end.
+    """
+
+    successes: int
+    samples: int
+    low: float
+    high: float
+
+    @property
+    def rate(self) -> float:
+        """The success rate: successes / samples (0 when there are no samples)."""
+        return self.successes / self.samples if self.samples else 0.0
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON form."""
+        return {"rate": round(self.rate, 4), "ci95": [round(self.low, 4), round(self.high, 4)],
+                "successes": self.successes, "samples": self.samples}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class RobustnessSettings:
+    """How placements are scored and chosen by robustness.
+
+    Attributes:
+        samples: error draws per placement (0: no score).
+        error: the base error model.
+        rank: ``reachability`` (the strategy's order, the seeds') or ``robustness``: verify
+            ``pool`` placements and return the ``placements`` most robust.
+        minimum: reject placements whose rate is below this (reason ``robustness``).
+        pool: verified placements collected before ranking by robustness (at least the number
+            asked for).
+        ik_restarts: random IK restarts per draw after the attempt from the nominal configuration.
+        z: normal quantile of the confidence interval (1.96: 95 %).
+        seed: seed of the error draws.
+    """
+
+    samples: int = 64
+    error: BaseErrorModel = field(default_factory=BaseErrorModel)
+    rank: Literal["reachability", "robustness"] = "reachability"
+    minimum: float = 0.0
+    pool: int = 5
+    ik_restarts: int = 4
+    z: float = 1.96
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.rank not in ("reachability", "robustness"):
+            raise unknown("placement ranking", self.rank, ("reachability", "robustness"))
+        if self.samples < 0 or self.pool < 1 or self.ik_restarts < 0:
+            raise InputError(
+                f"need samples >= 0, pool >= 1, ik_restarts >= 0; got {self.samples}, {self.pool}, {self.ik_restarts}"
+            )
+        if not (0.0 <= self.minimum <= 1.0):
+            raise InputError(f"minimum robustness must be in [0, 1], got {self.minimum}")
+        if (self.rank == "robustness" or self.minimum > 0) and self.samples == 0:
+            raise InputError("ranking by or requiring robustness needs samples > 0")
+        if not (math.isfinite(self.z) and self.z > 0):
+            raise InputError(f"z must be > 0, got {self.z}")
+
+
+class RobustnessEstimator:
+    """Scores base poses by the fraction of error draws that still reach every target.
+
+    Args:
+        arm: the arm.
+        environment: the whole-robot collision model of the verification.
+        targets: (K, 4, 4) world TCP targets.
+        settings: samples, error model, IK restarts, seed.
+        resolution: drawn poses are cached on this grid ([m] in x, y; [rad] in yaw).
+    """
+
+    def __init__(
+        self,
+        arm: Arm,
+        environment: Environment,
+        targets: ArrayLike,
+        settings: RobustnessSettings | None = None,
+        resolution: float = 1e-3,
+    ) -> None:
+        self.arm = arm
+        self.environment = environment
+        self.targets = np.asarray(targets, dtype=float).reshape(-1, 4, 4)
+        self.settings = settings or RobustnessSettings()
+        self.offsets = self.settings.error.sample(
+            np.random.default_rng(self.settings.seed), self.settings.samples
+        )
+        self._ik = DampedLeastSquaresIK(arm, restarts=self.settings.ik_restarts)
+        self._rng = np.random.default_rng(self.settings.seed + 1)
+        self._resolution = resolution
+        self._cache: dict[tuple[int, int, int], bool] = {}
+
+    def _key(self, T: FloatArray) -> tuple[int, int, int]:
+        yaw = math.atan2(T[1, 0], T[0, 0])
+        return (
+            round(T[0, 3] / self._resolution),
+            round(T[1, 3] / self._resolution),
+            round(yaw / self._resolution),
+        )
+
+    def successes(
+        self, T_world_base: ArrayLike, q_seeds: list[FloatArray] | None = None
+    ) -> NDArray[np.bool_]:
+        """(S,) per error draw: every target reached by IK, and the robot there collision-free.
+
+        Args:
+            T_world_base: (4, 4) nominal base pose.
+            q_seeds: per target, the nominal arm configuration (n,) that seeds the IK.
+        """
+        poses = perturbed(T_world_base, self.offsets)
+        keys = [self._key(T) for T in poses]
+        todo = [i for i, k in enumerate(keys) if k not in self._cache]
+        if todo:
+            ok = np.ones(len(todo), dtype=bool)
+            T_base_world = invert_transforms(poses[todo])
+            for k, target in enumerate(self.targets):
+                live = np.flatnonzero(ok)
+                if len(live) == 0:
+                    break
+                seed = None if q_seeds is None else q_seeds[k]
+                q, found = self._ik.solve_batch(T_base_world[live] @ target, self._rng, seed)
+                for j, row in enumerate(live.tolist()):
+                    ok[row] = bool(found[j]) and not self.environment.colliding_arm(
+                        self.arm, q[j], poses[todo[row]]
+                    )
+            for i, value in zip(todo, ok.tolist(), strict=True):
+                self._cache[keys[i]] = value
+        return np.array([self._cache[k] for k in keys], dtype=bool)
+
+    def score(self, T_world_base: ArrayLike, q_seeds: list[FloatArray] | None = None) -> Robustness:
+        """The :class:`Robustness` of a base pose (4, 4)."""
+        ok = self.successes(T_world_base, q_seeds)
+        k, n = int(ok.sum()), len(ok)
+        low, high = wilson_interval(k, n, self.settings.z)
+        return Robustness(k, n, low, high)
+
+    def scored(self, placement: Placement) -> Placement:
+        """The placement with its robustness filled in."""
+        return dataclasses.replace(placement, robustness=self.score(placement.T_world_base, placement.joints))
+
+
+def score_candidates(
+    arm: Arm,
+    environment: Environment,
+    grasps: ArrayLike,
+    candidates: list[RadialCandidate],
+    settings: RobustnessSettings | None = None,
+) -> list[RadialCandidate]:
+    """Verified seed-004 candidates (each with its grasp index and joints) with their robustness.
+
+    Args:
+        arm: the arm.
+        environment: the verification's collision model.
+        grasps: (K, 4, 4) the world grasp poses the candidates' ``grasp`` indices refer to.
+        candidates: verified candidates.
+        settings: robustness settings (one estimator, hence one set of error draws, per grasp).
+    """
+    G = np.asarray(grasps, dtype=float).reshape(-1, 4, 4)
+    estimators: dict[int, RobustnessEstimator] = {}
+    out = []
+    for c in candidates:
+        if c.grasp < 0 or c.joints is None:
+            raise InputError("robustness needs verified candidates (with a grasp index and joints)")
+        if c.grasp not in estimators:
+            estimators[c.grasp] = RobustnessEstimator(arm, environment, G[c.grasp], settings)
+        out.append(dataclasses.replace(c, robustness=estimators[c.grasp].score(c.T_world_base, [c.joints])))
+    return out
+
+
+def rank_by_robustness(placements: list[Placement]) -> list[Placement]:
+    """Placements by robustness rate, then the lower confidence bound, then reachability; best first."""
+
+    def key(p: Placement) -> tuple[float, float, float]:
+        r = p.robustness
+        return (-(r.rate if r else 0.0), -(r.low if r else 0.0), -p.reachability)
+
+    return sorted(placements, key=key)
+
+
+__all__ = [
+    "ERROR_DISTRIBUTIONS",
+    "BaseErrorModel",
+    "Robustness",
+    "RobustnessEstimator",
+    "RobustnessSettings",
+    "perturbed",
+    "rank_by_robustness",
+    "score_candidates",
+    "wilson_interval",
+]

@@ -1,0 +1,124 @@
+from __future__ import annotations
+
+import coal
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from baseplace.geometry.poses import pose_from_xyz_rpy
+from baseplace.placement.motion import MotionChecker, MotionSettings, stowed_configuration
+from baseplace.placement.verify import Candidate, Verifier
+from baseplace.robots.ik import DampedLeastSquaresIK
+from baseplace.terrain.polygons import footprint_outline
+from baseplace.terrain.voxels import VoxelMap
+from baseplace.world.environment import Environment
+
+RES = 0.025
+TARGET = [0.75, -0.15, 0.85, 0.0, 0.0, 0.0]  # side grasp in front of the base, TCP x forward
+
+
+def _empty() -> VoxelMap:
+    return VoxelMap(RES, np.zeros((0, 3), dtype=np.int64))
+
+
+def _tcp(robot, arm, q):
+    """Oracle: pinocchio FK of the TCP in the base frame."""
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, arm.to_pinocchio(q, robot.q_reference))
+    base = data.oMf[robot.model.getFrameId(arm.base_frame)]
+    return (base.inverse() * data.oMf[robot.model.getFrameId(arm.tcp_frame)]).homogeneous
+
+
+@pytest.fixture(scope="module")
+def wall_scene(tiago):
+    """A wall across the wrist of the grasp configuration, with a hole cut 1.5 cm around the arm.
+
+    The final configuration is free (the hole clears it), but the hand (its safety box is
+    0.2 x 0.115 x 0.18 m) is beyond the wall and cannot pass the wrist-sized hole: every path
+    from the stowed configuration, hand on the robot's side, runs into the wall.
+    """
+    arm = tiago.arm()
+    target = pose_from_xyz_rpy(TARGET)
+    q = DampedLeastSquaresIK(arm).solve(target, np.random.default_rng(0))
+    assert q is not None
+    ys, zs = np.arange(-1.5, 1.5, RES), np.arange(0.0, 1.8, RES)
+    wall = np.array([[x, y, z] for x in (0.68, 0.705) for y in ys for z in zs])
+    centres = VoxelMap.from_points(wall, RES).centres
+    env0 = Environment(tiago, _empty())
+    data, gdata = tiago.model.createData(), pin.GeometryData(env0.geom)
+    pin.updateGeometryPlacements(tiago.model, data, env0.geom, gdata, arm.to_pinocchio(q, tiago.q_reference))
+    near = np.flatnonzero((np.abs(centres[:, 1] + 0.15) < 0.3) & (np.abs(centres[:, 2] - 0.85) < 0.3))
+    box, request = coal.Box(RES, RES, RES), coal.DistanceRequest()
+    keep = np.ones(len(centres), dtype=bool)
+    for k, obj in enumerate(env0.geom.geometryObjects):
+        M = gdata.oMg[k]
+        if M.translation[0] < 0.55:
+            continue
+        for i in near[keep[near]]:
+            d = coal.distance(obj.geometry, coal.Transform3s(M.rotation, M.translation), box,
+                              coal.Transform3s(np.eye(3), centres[i]), request, coal.DistanceResult())  # fmt: skip
+            if d < 0.015:
+                keep[i] = False
+    hole = centres[~keep]
+    assert 5 < len(hole) < 80  # a hole around the wrist, not a missing wall
+    return target, q, VoxelMap.from_points(centres[keep], RES), env0
+
+
+def test_caged_path_is_rejected_with_reason_motion(tiago, wall_scene):
+    target, q, wall, _ = wall_scene
+    arm = tiago.arm()
+    env = Environment(tiago, wall)
+    outline = footprint_outline(tiago.spec.footprint_radius, None)
+    # Independent of the motion check: the final configuration and the stowed one are both free.
+    assert not env.colliding(arm.to_pinocchio(q, tiago.q_reference), np.eye(4))
+    assert not env.colliding(arm.to_pinocchio(stowed_configuration(tiago, arm), tiago.q_reference), np.eye(4))
+    plain = Verifier(arm, DampedLeastSquaresIK(arm), env, target[None], {}, outline)
+    assert plain.check(Candidate(np.eye(4), -1, 0.0), np.random.default_rng(0)) is not None
+    # a short approach (3 cm) that stays clear of the wall: what is blocked is the way from stowed
+    settings = MotionSettings(pregrasp_distance=0.03, time_limit=1.5)
+    motion = MotionChecker(tiago, arm, env, settings=settings)
+    assert motion.approach(q, target, np.eye(4)) is not None
+    checked = Verifier(arm, DampedLeastSquaresIK(arm), env, target[None], {}, outline, motion=motion)
+    assert checked.check(Candidate(np.eye(4), -1, 0.0), np.random.default_rng(0)) is None
+    assert dict(checked.failures) == {"motion": 1}
+
+
+def test_same_scene_without_the_wall_passes_with_a_valid_motion(tiago, wall_scene):
+    target, _, _, env0 = wall_scene
+    arm = tiago.arm()
+    outline = footprint_outline(tiago.spec.footprint_radius, None)
+    motion = MotionChecker(tiago, arm, env0)
+    verifier = Verifier(arm, DampedLeastSquaresIK(arm), env0, target[None], {}, outline, motion=motion)
+    placement = verifier.check(Candidate(np.eye(4), -1, 0.0), np.random.default_rng(0))
+    assert placement is not None and placement.motions is not None
+    m = placement.motions[0]
+    np.testing.assert_allclose(m.path[0], stowed_configuration(tiago, arm))
+    np.testing.assert_allclose(m.approach[-1], placement.joints[0])
+    np.testing.assert_allclose(m.path[-1], m.approach[0])
+    # Oracle: pinocchio FK. The approach runs straight along the TCP's x axis, ending on the grasp.
+    tcp = np.array([_tcp(tiago, arm, qa) for qa in m.approach])
+    np.testing.assert_allclose(tcp[-1], target, atol=1e-3)
+    back = (target[:3, 3] - tcp[:, :3, 3]) @ target[:3, 0]
+    lateral = np.linalg.norm((target[:3, 3] - tcp[:, :3, 3]) - back[:, None] * target[:3, 0], axis=1)
+    assert (
+        back[0] == pytest.approx(MotionSettings().pregrasp_distance, abs=1e-3)
+        and np.all(np.diff(back) < 0)
+        and lateral.max() < 1e-3
+    )
+    for T in tcp:
+        np.testing.assert_allclose(T[:3, :3], target[:3, :3], atol=5e-3)
+    # Oracle: the full-configuration collision check on the densified path (not the arm-pruned one).
+    for a, b in zip(m.waypoints[:-1], m.waypoints[1:], strict=True):
+        for s in np.linspace(0, 1, 6):
+            qs = arm.to_pinocchio(a + s * (b - a), tiago.q_reference)
+            assert not env0.colliding(qs, np.eye(4))
+
+
+def test_motion_settings_and_start_configuration_are_checked(tiago):
+    from baseplace.errors import InputError
+
+    env = Environment(tiago, _empty())
+    with pytest.raises(InputError, match="pregrasp_distance"):
+        MotionSettings(pregrasp_distance=-0.1)
+    with pytest.raises(InputError, match="start configuration"):
+        MotionChecker(tiago, tiago.arm(), env, settings=MotionSettings(q_start=(0.0,) * 3))
