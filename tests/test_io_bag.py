@@ -34,14 +34,15 @@ T_BASE_CAMERA[:3, :3] = Rotation.from_euler("xyz", [0.1, -0.3, 0.2]).as_matrix()
 T_BASE_CAMERA[:3, 3] = [0.1, 0.0, 1.1]
 
 
-# The target: TIAGo's hand straight above the mug, top-down, ready to grasp it (a pre-grasp pose).
-# The mug (its points more than 1.5 cm above the table) stands at about (4.60, 7.585); its rim and a
-# small stereo artefact beside it reach z = 0.878. TIAGo's fingers (at q_reference) reach 0.245 m
-# beyond arm_tool_link, so at z = 1.16 they are 3 cm above both. A lower top-down target such as
-# (4.6, 7.7, 0.95) puts the fingertips at 0.705, into the table top (0.74), an obstacle for every
-# link; a grasp of the mug itself is blocked at every approach by that artefact, 3.5 cm from the
-# mug's nearest point and inside TIAGo's hand safety box.
-TARGET = "4.6 7.585 1.16 0 1.5708 0"
+# The target: TIAGo's hand top-down above the table top (z = 0.74), beside the mug, which stands at
+# about (4.60, 7.585) with its rim at z = 0.878. TIAGo's fingers (at q_reference) reach 0.245 m beyond
+# arm_tool_link, so at z = 1.02 the fingertips are 3.5 cm above the table, and the hand safety box
+# (20 x 18 x 12 cm) stays clear of the mug. The reaching-motion check (on by default) needs the
+# pre-grasp 0.15 m above it reachable too: the earlier target above the mug (z = 1.16) put the
+# pre-grasp out of TIAGo's reach (every candidate rejected with reason motion). A grasp of the mug
+# itself is blocked at every approach by a small stereo artefact 3.5 cm from the mug's nearest point,
+# inside the hand safety box (docs/ros.md).
+TARGET = "4.45 7.80 1.02 0 1.5708 0"
 
 
 def _base_at(dx: float) -> np.ndarray:
@@ -158,7 +159,7 @@ def test_place_from_a_bag_through_the_cli(bags, map_file, tmp_path, capsys, tiag
     cloud_tree = coal.makeOctree(np.ascontiguousarray(cloud), 0.01)
     T_target = np.eye(4)
     T_target[:3, :3] = Rotation.from_euler("ZYX", [0.0, 1.5708, 0.0]).as_matrix()
-    T_target[:3, 3] = [4.6, 7.585, 1.16]
+    T_target[:3, 3] = [4.45, 7.80, 1.02]
     for p in result["placements"]:
         T = np.array(p["base_pose"])
         # the base stands on the grid's free floor: z = 0 (within a voxel) and its whole footprint free
@@ -203,7 +204,7 @@ def test_place_from_a_bag_through_the_cli(bags, map_file, tmp_path, capsys, tiag
         T[:3, 3] = [msg.pose.position.x, msg.pose.position.y, msg.pose.position.z]
         np.testing.assert_allclose(T, np.array(p["base_pose"]), atol=2e-6)
     (targets,) = msgs["/baseplace/targets"]
-    assert [targets.poses[0].position.x, targets.poses[0].position.y] == pytest.approx([4.6, 7.585])
+    assert [targets.poses[0].position.x, targets.poses[0].position.y] == pytest.approx([4.45, 7.80])
     (markers,) = msgs["/baseplace/regions"]
     assert len({m.id // 100 for m in markers.markers}) == result["regions"]
 
