@@ -304,8 +304,11 @@ class MotionChecker:
             solved = setup.solve(self.settings.time_limit)
             if not solved or not setup.haveExactSolutionPath():
                 return None
-            setup.simplifySolution(min(0.25, self.settings.time_limit))  # shortcutting: bounded time
-            states = setup.getSolutionPath().getStates()
+            solution = setup.getSolutionPath()
+            # shortcutting until no improvement, not for a time budget: the same seed gives the
+            # same path however loaded the machine is
+            og.PathSimplifier(info).simplifyMax(solution)
+            states = solution.getStates()
             path = np.array([[s[i] for i in range(n)] for s in states])
         finally:
             gc.collect()  # the validity callback forms a cycle with the setup
