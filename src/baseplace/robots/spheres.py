@@ -30,8 +30,8 @@ from baseplace.robots.model import PRISMATIC, Arm, Robot
 
 DEFAULT_MARGIN = 0.005  # m, added to every sphere radius
 _SURFACE_SAMPLES = 3000  # random surface points per mesh, on top of vertices and edge midpoints
-_MAX_SPHERES = 24  # per geometry
-_TARGET_RADIUS = 0.03  # m: parts are split until their sphere is this small
+_MAX_SPHERES = 8  # per geometry
+_TARGET_RADIUS = 0.06  # m: parts are split until their sphere is this small
 
 
 def _surface_points(geometry: Any, rng: np.random.Generator) -> tuple[NDArray[np.float64], float]:
@@ -120,8 +120,14 @@ class SphereModel:
         sphere_radius: (S,) radius [m].
         geom_joint, geom_center, geom_radius: the same for one bounding sphere per geometry (G,).
         geom_pairs: (P, 2) geometry pairs checked (indices into the G geometries).
-        pair_start: (P + 1,) where each geometry pair's sphere pairs start in ``sphere_pairs``.
-        sphere_pairs: (M, 2) sphere pairs, indices into the S spheres.
+        sphere_pairs: (M, 2) sphere pairs checked, indices into the S spheres.
+        cluster_center, cluster_radius: (n + 1, 3), (n + 1,) a bound of all spheres each arm
+            joint moves (row 0: the fixed part), in that joint's frame.
+        cluster_pairs: (K, 2) joint pairs (-1 the fixed part) with geometry pairs to check.
+        cluster_pair_start: (K + 1,) where each cluster pair's geometry pairs start in
+            ``geom_pairs`` (sorted by cluster pair).
+        geom_first: (G + 1,) where each geometry's spheres start (they are contiguous).
+        allowed: (S, S) True for the sphere pairs in ``sphere_pairs``.
     """
 
     def __init__(
@@ -221,9 +227,30 @@ class SphereModel:
         self.geom_joint = np.array(g_joint, dtype=np.int64)
         self.geom_center = np.array(g_local, dtype=float).reshape(-1, 3)
         self.geom_radius = np.array(g_rad, dtype=float)
-        self.geom_pairs = np.array(geom_pairs, dtype=np.int64).reshape(-1, 2)
-        self.pair_start = np.array(pair_start, dtype=np.int64)
         self.sphere_pairs = np.array(sphere_pairs, dtype=np.int64).reshape(-1, 2)
+        # Geometry pairs grouped by the pair of arm joints that move them ("clusters", -1 the
+        # fixed part), so one bound check per cluster pair skips all of its geometry pairs.
+        gp = np.array(geom_pairs, dtype=np.int64).reshape(-1, 2)
+        joint_of = self.geom_joint
+        key = np.stack([joint_of[gp[:, 0]], joint_of[gp[:, 1]]], axis=1)
+        order = np.lexsort((key[:, 1], key[:, 0]))
+        self.geom_pairs, key = gp[order], key[order]
+        n = arm.n_joints + 1
+        self.cluster_center = np.zeros((n, 3))
+        self.cluster_radius = np.zeros(n)
+        for c in range(-1, arm.n_joints):
+            sel = self.sphere_joint == c
+            if sel.any():
+                C, r = self.sphere_center[sel], rad[sel]
+                bc = (C.min(axis=0) + C.max(axis=0)) / 2
+                self.cluster_center[c + 1] = bc
+                self.cluster_radius[c + 1] = float((np.linalg.norm(C - bc, axis=1) + r).max())
+        starts = [0] + [i for i in range(1, len(key)) if tuple(key[i]) != tuple(key[i - 1])] + [len(key)]
+        self.cluster_pairs = np.array([key[i] for i in starts[:-1]], dtype=np.int64).reshape(-1, 2)
+        self.cluster_pair_start = np.array(starts if len(key) else [0], dtype=np.int64)
+        self.geom_first = np.array([r.start for r in g_spheres] + [len(rad)], dtype=np.int64)
+        self.allowed = np.zeros((len(rad), len(rad)), dtype=np.bool_)
+        self.allowed[self.sphere_pairs[:, 0], self.sphere_pairs[:, 1]] = True
         self.n_exact_pairs = len(pairs)
 
     def colliding_arm(self, arm: Arm, q_arm: ArrayLike) -> NDArray[np.bool_]:
@@ -239,7 +266,8 @@ class SphereModel:
         a = self.arm
         _colliding_batch(Q, a.placements, a.axes, a.kinds, self.sphere_joint, self.sphere_center,
                          self.sphere_radius, self.geom_joint, self.geom_center, self.geom_radius,
-                         self.geom_pairs, self.pair_start, self.sphere_pairs, out)  # fmt: skip
+                         self.geom_pairs, self.geom_first, self.allowed, self.cluster_center,
+                         self.cluster_radius, self.cluster_pairs, self.cluster_pair_start, out)  # fmt: skip
         return out
 
 
@@ -306,33 +334,71 @@ def _place(joint, local, F, out):
                 )
 
 
+@nb.njit(cache=True, inline="always")
+def _place_one(j, local, F, out):
+    if j < 0:
+        out[0], out[1], out[2] = local[0], local[1], local[2]
+    else:
+        for a in range(3):
+            out[a] = F[j, a, 0] * local[0] + F[j, a, 1] * local[1] + F[j, a, 2] * local[2] + F[j, a, 3]
+
+
 @nb.njit(cache=True, parallel=True)
 def _colliding_batch(Q, placements, axes, kinds, s_joint, s_local, s_rad, g_joint, g_local, g_rad,
-                     geom_pairs, pair_start, sphere_pairs, out):  # fmt: skip
+                     geom_pairs, geom_first, allowed, cl_local, cl_rad, cl_pairs, cl_start, out):  # fmt: skip
+    """Self-collision of each configuration by the sphere model, in blocks of 256 per thread.
+
+    Per configuration: cluster bounds, geometry bounds, each sphere against the other geometry's
+    bound, then sphere against sphere; spheres are placed only when their geometry's bound is hit.
+    """
     n_block = 256
     n_blocks = (Q.shape[0] + n_block - 1) // n_block
     for blk in nb.prange(n_blocks):
         F = np.empty((Q.shape[1], 3, 4))
         gc = np.empty((g_joint.shape[0], 3))
         sc = np.empty((s_joint.shape[0], 3))
+        placed = np.full(g_joint.shape[0], -1, dtype=np.int64)
+        cc = np.empty((cl_rad.shape[0], 3))
         R, NR, M, t = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)), np.empty(3)
         for i in range(blk * n_block, min(Q.shape[0], (blk + 1) * n_block)):
             _joint_frames(Q[i], placements, axes, kinds, F, R, t, NR, M)
             _place(g_joint, g_local, F, gc)
-            _place(s_joint, s_local, F, sc)
+            for c in range(cl_rad.shape[0]):
+                _place_one(c - 1, cl_local[c], F, cc[c])
             hit = False
-            for p in range(geom_pairs.shape[0]):
-                a, b = geom_pairs[p, 0], geom_pairs[p, 1]
-                dx, dy, dz = gc[a, 0] - gc[b, 0], gc[a, 1] - gc[b, 1], gc[a, 2] - gc[b, 2]
-                r = g_rad[a] + g_rad[b]
+            for k in range(cl_pairs.shape[0]):
+                ca, cb = cl_pairs[k, 0] + 1, cl_pairs[k, 1] + 1
+                dx, dy, dz = cc[ca, 0] - cc[cb, 0], cc[ca, 1] - cc[cb, 1], cc[ca, 2] - cc[cb, 2]
+                r = cl_rad[ca] + cl_rad[cb]
                 if dx * dx + dy * dy + dz * dz >= r * r:
                     continue
-                for m in range(pair_start[p], pair_start[p + 1]):
-                    u, v = sphere_pairs[m, 0], sphere_pairs[m, 1]
-                    dx, dy, dz = sc[u, 0] - sc[v, 0], sc[u, 1] - sc[v, 1], sc[u, 2] - sc[v, 2]
-                    r = s_rad[u] + s_rad[v]
-                    if dx * dx + dy * dy + dz * dz < r * r:
-                        hit = True
+                for p in range(cl_start[k], cl_start[k + 1]):
+                    a, b = geom_pairs[p, 0], geom_pairs[p, 1]
+                    dx, dy, dz = gc[a, 0] - gc[b, 0], gc[a, 1] - gc[b, 1], gc[a, 2] - gc[b, 2]
+                    r = g_rad[a] + g_rad[b]
+                    if dx * dx + dy * dy + dz * dz >= r * r:
+                        continue
+                    for g in (a, b):
+                        if placed[g] != i:
+                            placed[g] = i
+                            for u in range(geom_first[g], geom_first[g + 1]):
+                                _place_one(s_joint[u], s_local[u], F, sc[u])
+                    for u in range(geom_first[a], geom_first[a + 1]):
+                        dx, dy, dz = sc[u, 0] - gc[b, 0], sc[u, 1] - gc[b, 1], sc[u, 2] - gc[b, 2]
+                        r = s_rad[u] + g_rad[b]
+                        if dx * dx + dy * dy + dz * dz >= r * r:
+                            continue
+                        for v in range(geom_first[b], geom_first[b + 1]):
+                            if not allowed[u, v]:
+                                continue
+                            dx, dy, dz = sc[u, 0] - sc[v, 0], sc[u, 1] - sc[v, 1], sc[u, 2] - sc[v, 2]
+                            r = s_rad[u] + s_rad[v]
+                            if dx * dx + dy * dy + dz * dz < r * r:
+                                hit = True
+                                break
+                        if hit:
+                            break
+                    if hit:
                         break
                 if hit:
                     break
