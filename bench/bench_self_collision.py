@@ -1,6 +1,6 @@
 """Self-collision in the build kernel: the sphere model (robots/spheres.py) against coal.
 
-For TIAGo and a Franka Panda (example-robot-data, TCP panda_hand_tcp), on random arm
+For TIAGo, TIAGo dual (right arm, the left one at its reference) and a Franka Panda (example-robot-data, TCP panda_hand_tcp), on random arm
 configurations (seed 7, disjoint from the model's calibration seed [19, 0]):
 - false-free rate: the sphere check passes, coal finds a collision (target <= 0.5 %);
 - false-colliding rate: the sphere check rejects, coal finds the robot free;
@@ -59,7 +59,7 @@ def main() -> None:
         "| robot | spheres | pairs | false-free | false-colliding | coal colliding | FK+bin M/s | spheres M/s | build with self-collision M/s | coal k/s |"
     )
     print("|---|---|---|---|---|---|---|---|---|---|")
-    for robot in (Robot("tiago"), panda()):
+    for robot in (Robot("tiago"), Robot("tiago_dual"), panda()):
         print(row(robot, args.configs), flush=True)
 
 

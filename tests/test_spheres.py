@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from baseplace.robots.collision import SelfCollision
 from baseplace.robots.model import Robot
 from baseplace.robots.spheres import SphereModel
 
 
-def test_sphere_model_misses_few_coal_collisions_on_tiago() -> None:
-    robot = Robot("tiago")
+@pytest.mark.parametrize("name", ["tiago", "tiago_dual"])  # dual: the other arm at its reference
+def test_sphere_model_misses_few_coal_collisions(name: str) -> None:
+    robot = Robot(name)
     arm = robot.arm()
     model = SphereModel(robot)
     exact = SelfCollision(robot, num_threads=1)
