@@ -8,7 +8,7 @@ configurations (seed 7, disjoint from the model's calibration seed [19, 0]):
   build without self-collision, the baseline), the sphere check alone, and both (the
   self-collision-aware build), with coal's rate on a few hundred configurations.
 
-Usage: python bench/bench_self_collision.py [--configs 100000]
+Usage: python bench/bench_self_collision.py [--configs 100000] [--robots tiago,tiago_dual,panda]
 """
 
 from __future__ import annotations
@@ -54,12 +54,14 @@ def median_rate(fn, n: int, repeats: int = 3) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--configs", type=int, default=100_000)
+    parser.add_argument("--robots", default="tiago,tiago_dual,panda", help="comma-separated")
     args = parser.parse_args()
     print(
         "| robot | spheres | pairs | false-free | false-colliding | coal colliding | FK+bin M/s | spheres M/s | build with self-collision M/s | coal k/s |"
     )
     print("|---|---|---|---|---|---|---|---|---|---|")
-    for robot in (Robot("tiago"), Robot("tiago_dual"), panda()):
+    for name in args.robots.split(","):
+        robot = panda() if name == "panda" else Robot(name)
         print(row(robot, args.configs), flush=True)
 
 
