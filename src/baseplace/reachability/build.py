@@ -47,7 +47,7 @@ class BuildSettings:
         seed: random seed; the same seed gives the same map.
         voxel_size: position resolution [m] (seed 000: 0.05).
         orientation_resolution: largest orientation bin width [rad] (seed 000: 0.8).
-        self_collision: drop self-colliding samples (coal; slow, ~1e3 samples/s for TIAGo).
+        self_collision: drop self-colliding samples (conservative sphere model, ``robots/spheres.py``).
         manipulability: keep the best Yoshikawa manipulability sqrt(det(J J^T)) per cell.
     """
 
@@ -146,9 +146,9 @@ class MapAccumulator:
         self._kernels = arm_kernels(self.arm)
         self._checker = None
         if settings.self_collision:
-            from baseplace.robots.collision import SelfCollision
+            from baseplace.robots.spheres import SphereModel  # coal stays the oracle (tests)
 
-            self._checker = SelfCollision(robot)
+            self._checker = SphereModel(robot, self.arm.name)
 
     @property
     def n_chunks(self) -> int:

@@ -1,0 +1,415 @@
+"""A conservative sphere model of a robot's links for self-collision checks in the build kernel.
+
+The exact check (``collision.py``: coal on the collision meshes) costs ~1 ms per configuration,
+which makes a self-collision-aware map build 100x slower than one without. Here every collision
+geometry is covered by a few spheres fitted to points on its surface (mesh vertices, edge
+midpoints and area-weighted surface samples; box corners; cylinder rims), each grown by a
+per-robot ``margin``, plus one bounding sphere per geometry for an early out. The compiled kernel
+walks the arm's chain (the same ``placements``/``axes``/``kinds`` as ``fk.py``), moves the
+spheres and tests only the pairs the exact model tests: the SRDF/adjacency-pruned pairs of
+:class:`~baseplace.robots.collision.SelfCollision` whose relative pose changes with the arm.
+Every other joint, the other arm of a dual-arm robot included, stays at the robot's reference
+configuration. Sphere pairs that already overlap at the reference configuration (where the exact
+model says the pair is free) are spurious contacts of the cover near shared joints and are left
+out; the measured false-free rate against coal (``bench/bench_self_collision.py``,
+``tests/test_spheres.py``) is what certifies the model.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numba as nb
+import numpy as np
+import pinocchio as pin
+from numpy.typing import ArrayLike, NDArray
+
+from baseplace.robots.collision import SelfCollision
+from baseplace.robots.model import PRISMATIC, Arm, Robot
+
+DEFAULT_MARGIN = 0.005  # m, added to every sphere radius
+_SURFACE_SAMPLES = 3000  # random surface points per mesh, on top of vertices and edge midpoints
+_MAX_SPHERES = 8  # per geometry
+_TARGET_RADIUS = 0.06  # m: parts are split until their sphere is this small
+
+
+def _surface_points(geometry: Any, rng: np.random.Generator) -> tuple[NDArray[np.float64], float]:
+    """Points (P, 3) in the geometry frame and a radius every point is grown by."""
+    kind = type(geometry).__name__
+    if kind == "Sphere":
+        return np.zeros((1, 3)), float(geometry.radius)
+    if kind == "Box":
+        h = np.asarray(geometry.halfSide, dtype=float)
+        return np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * h, 0.0
+    if kind in ("Cylinder", "Capsule"):
+        r, hl = float(geometry.radius), float(geometry.halfLength)
+        if kind == "Capsule":
+            return np.array(
+                [[0.0, 0.0, -hl], [0.0, 0.0, hl]] + [[0, 0, z] for z in np.linspace(-hl, hl, 9)]
+            ), r
+        m = 32  # a 32-gon circumscribing the rim circle
+        a = np.linspace(0.0, 2 * math.pi, m, endpoint=False)
+        rr = r / math.cos(math.pi / m)
+        zs = np.linspace(-hl, hl, 9)
+        ring = np.stack([rr * np.cos(a), rr * np.sin(a)], axis=1)
+        pts = [np.column_stack([ring, np.full(m, z)]) for z in zs]
+        return np.concatenate(pts), 0.0
+    if kind.startswith("BVHModel") or kind.startswith("Convex"):
+        V: NDArray[np.float64] = np.asarray(geometry.vertices(), dtype=np.float64).reshape(-1, 3)
+        n_tris = int(geometry.num_tris)
+        tris = [geometry.tri_indices(i) for i in range(n_tris)]
+        T = np.array([[t[0], t[1], t[2]] for t in tris], dtype=np.int64).reshape(-1, 3)
+        if len(T) == 0:
+            return V, 0.0
+        A, B, C = V[T[:, 0]], V[T[:, 1]], V[T[:, 2]]
+        area = 0.5 * np.linalg.norm(np.cross(B - A, C - A), axis=1)
+        p = area / area.sum() if area.sum() > 0 else None
+        k = rng.choice(len(T), size=_SURFACE_SAMPLES, p=p)
+        u, v = rng.random(_SURFACE_SAMPLES), rng.random(_SURFACE_SAMPLES)
+        flip = u + v > 1
+        u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
+        S = A[k] + u[:, None] * (B[k] - A[k]) + v[:, None] * (C[k] - A[k])
+        mids = np.concatenate([(A + B) / 2, (B + C) / 2, (C + A) / 2])
+        return np.concatenate([V, mids, S]), 0.0
+    raise ValueError(f"no sphere cover for collision geometry of type {kind}")
+
+
+def fit_spheres(points: NDArray[np.float64], grow: float, margin: float) -> NDArray[np.float64]:
+    """Spheres (k, 4) = (center xyz, radius) covering ``points`` each grown by ``grow``.
+
+    The points are halved along their principal axis, recursively, until each part's sphere
+    (about its bounding-box centre, through its farthest point) has a radius of at most
+    ``_TARGET_RADIUS`` or ``_MAX_SPHERES`` spheres are reached.
+    """
+    parts = [points]
+    done: list[NDArray[np.float64]] = []
+    while parts and len(parts) + len(done) < _MAX_SPHERES:
+        parts.sort(key=lambda P: -_sphere_of(P)[3])
+        P = parts.pop(0)
+        if _sphere_of(P)[3] <= _TARGET_RADIUS or len(P) < 2:
+            done.append(P)
+            continue
+        X = P - P.mean(axis=0)
+        _, _, Vt = np.linalg.svd(X[:: max(1, len(X) // 500)], full_matrices=False)
+        s = X @ Vt[0]
+        mid = (s.min() + s.max()) / 2
+        lo, hi = P[s <= mid], P[s > mid]
+        if len(lo) == 0 or len(hi) == 0:
+            done.append(P)
+            continue
+        parts += [lo, hi]
+    spheres = np.array([_sphere_of(P) for P in done + parts])
+    spheres[:, 3] += grow + margin
+    return spheres
+
+
+def _sphere_of(P: NDArray[np.float64]) -> NDArray[np.float64]:
+    c = (P.min(axis=0) + P.max(axis=0)) / 2
+    return np.array([*c, float(np.linalg.norm(P - c, axis=1).max())])
+
+
+class SphereModel:
+    """The sphere cover of the geometries an arm moves and of those it can hit.
+
+    Attributes:
+        arm: the arm.
+        margin: [m] added to every sphere radius.
+        sphere_joint: (S,) arm joint index that moves each sphere, -1 for fixed in the base frame.
+        sphere_center: (S, 3) center in that joint's frame (or the base frame) [m].
+        sphere_radius: (S,) radius [m].
+        geom_joint, geom_center, geom_radius: the same for one bounding sphere per geometry (G,).
+        geom_pairs: (P, 2) geometry pairs checked (indices into the G geometries).
+        sphere_pairs: (M, 2) sphere pairs checked, indices into the S spheres.
+        cluster_center, cluster_radius: (n + 1, 3), (n + 1,) a bound of all spheres each arm
+            joint moves (row 0: the fixed part), in that joint's frame.
+        cluster_pairs: (K, 2) joint pairs (-1 the fixed part) with geometry pairs to check.
+        cluster_pair_start: (K + 1,) where each cluster pair's geometry pairs start in
+            ``geom_pairs`` (sorted by cluster pair).
+        geom_first: (G + 1,) where each geometry's spheres start (they are contiguous).
+        allowed: (S, S) True for the sphere pairs in ``sphere_pairs``.
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        arm_name: str | None = None,
+        margin: float = DEFAULT_MARGIN,
+        calibration: int = 400,
+    ) -> None:
+        self.robot = robot
+        self.arm = arm = robot.arm(arm_name)
+        self.margin = margin
+        exact = SelfCollision(robot, num_threads=1)
+        model, geom = exact.model, exact.geom
+        q_ref = robot.q_reference
+        data = model.createData()
+        pin.forwardKinematics(model, data, q_ref)
+        pin.updateFramePlacements(model, data)
+        gdata = pin.GeometryData(geom)
+        pin.updateGeometryPlacements(model, data, geom, gdata)
+        base_inv = data.oMf[model.getFrameId(arm.base_frame)].inverse()
+        arm_ids = [model.getJointId(j) for j in arm.joint_names]
+
+        def group(joint: int) -> int:
+            supports = set(model.supports[joint])
+            return max((i for i, j in enumerate(arm_ids) if j in supports), default=-1)
+
+        arm_geom = exact._arm_geometry_data(arm)
+        pairs = [
+            (int(p.first), int(p.second))
+            for k, p in enumerate(geom.collisionPairs)
+            if arm_geom.activeCollisionPairs[k]
+        ]
+        used = sorted({g for pair in pairs for g in pair})
+        index = {g: i for i, g in enumerate(used)}
+        rng = np.random.default_rng(0)
+        s_joint: list[int] = []
+        s_local: list[NDArray[np.float64]] = []
+        s_rad: list[float] = []
+        g_joint: list[int] = []
+        g_local: list[NDArray[np.float64]] = []
+        g_rad: list[float] = []
+        g_spheres: list[range] = []
+        for g in used:
+            obj = geom.geometryObjects[g]
+            pts, grow = _surface_points(obj.geometry, rng)
+            pts = pts * np.asarray(obj.meshScale) if obj.meshScale is not None else pts
+            sph = fit_spheres(pts, grow, margin)
+            j = group(obj.parentJoint)
+            frame = base_inv * data.oMi[arm_ids[j]] if j >= 0 else pin.SE3.Identity()
+            T = frame.inverse() * base_inv * gdata.oMg[g]  # geometry in its moving frame
+            centers = sph[:, :3] @ T.rotation.T + T.translation
+            first = len(s_rad)
+            for c, r in zip(centers, sph[:, 3], strict=True):
+                s_joint.append(j)
+                s_local.append(c)
+                s_rad.append(r)
+            g_spheres.append(range(first, len(s_rad)))
+            # bounding sphere of the geometry's spheres
+            bc = (centers.min(axis=0) + centers.max(axis=0)) / 2
+            g_joint.append(j)
+            g_local.append(bc)
+            g_rad.append(float((np.linalg.norm(centers - bc, axis=1) + sph[:, 3]).max()))
+        rad = np.array(s_rad)
+        s_joint_a = np.array(s_joint, dtype=np.int64)
+        s_local_a = np.array(s_local, dtype=float).reshape(-1, 3)
+        candidates = np.array(
+            [(i, j) for a, b in pairs for i in g_spheres[index[a]] for j in g_spheres[index[b]]],
+            dtype=np.int64,
+        ).reshape(-1, 2)
+        # Sphere pairs that overlap where the exact model says the robot is free (at the reference
+        # configuration and at calibration samples) are artefacts of the cover: hollow meshes
+        # nested in each other, parts near a shared joint. They are left out.
+        Qc = np.vstack(
+            [arm.from_pinocchio(q_ref)[None], arm.sample(np.random.default_rng([19, 0]), calibration)]
+        )
+        free = ~exact.colliding_arm(arm, Qc)
+        centers = np.empty((len(Qc), len(rad), 3))
+        _sphere_centers(
+            Qc[free], arm.placements, arm.axes, arm.kinds, s_joint_a, s_local_a, centers[: free.sum()]
+        )
+        spurious = np.zeros(len(candidates), dtype=bool)
+        for C in centers[: free.sum()]:
+            d = np.linalg.norm(C[candidates[:, 0]] - C[candidates[:, 1]], axis=1)
+            spurious |= d < rad[candidates[:, 0]] + rad[candidates[:, 1]]
+        ok = {(int(i), int(j)) for i, j in candidates[~spurious]}
+        geom_pairs, pair_start, sphere_pairs = [], [0], []
+        for a, b in pairs:
+            kept = [(i, j) for i in g_spheres[index[a]] for j in g_spheres[index[b]] if (i, j) in ok]
+            if kept:
+                geom_pairs.append((index[a], index[b]))
+                sphere_pairs.extend(kept)
+                pair_start.append(len(sphere_pairs))
+        self.sphere_joint = np.array(s_joint, dtype=np.int64)
+        self.sphere_center = np.array(s_local, dtype=float).reshape(-1, 3)
+        self.sphere_radius = rad
+        self.geom_joint = np.array(g_joint, dtype=np.int64)
+        self.geom_center = np.array(g_local, dtype=float).reshape(-1, 3)
+        self.geom_radius = np.array(g_rad, dtype=float)
+        self.sphere_pairs = np.array(sphere_pairs, dtype=np.int64).reshape(-1, 2)
+        # Geometry pairs grouped by the pair of arm joints that move them ("clusters", -1 the
+        # fixed part), so one bound check per cluster pair skips all of its geometry pairs.
+        gp = np.array(geom_pairs, dtype=np.int64).reshape(-1, 2)
+        joint_of = self.geom_joint
+        key = np.stack([joint_of[gp[:, 0]], joint_of[gp[:, 1]]], axis=1)
+        order = np.lexsort((key[:, 1], key[:, 0]))
+        self.geom_pairs, key = gp[order], key[order]
+        n = arm.n_joints + 1
+        self.cluster_center = np.zeros((n, 3))
+        self.cluster_radius = np.zeros(n)
+        for c in range(-1, arm.n_joints):
+            sel = self.sphere_joint == c
+            if sel.any():
+                C, r = self.sphere_center[sel], rad[sel]
+                bc = (C.min(axis=0) + C.max(axis=0)) / 2
+                self.cluster_center[c + 1] = bc
+                self.cluster_radius[c + 1] = float((np.linalg.norm(C - bc, axis=1) + r).max())
+        starts = [0] + [i for i in range(1, len(key)) if tuple(key[i]) != tuple(key[i - 1])] + [len(key)]
+        self.cluster_pairs = np.array([key[i] for i in starts[:-1]], dtype=np.int64).reshape(-1, 2)
+        self.cluster_pair_start = np.array(starts if len(key) else [0], dtype=np.int64)
+        self.geom_first = np.array([r.start for r in g_spheres] + [len(rad)], dtype=np.int64)
+        self.allowed = np.zeros((len(rad), len(rad)), dtype=np.bool_)
+        self.allowed[self.sphere_pairs[:, 0], self.sphere_pairs[:, 1]] = True
+        self.n_exact_pairs = len(pairs)
+
+    def colliding_arm(self, arm: Arm, q_arm: ArrayLike) -> NDArray[np.bool_]:
+        """Self-collision (N,) of (N, n) arm configurations by the sphere model.
+
+        Other joints stay at their reference values; the same call as
+        :meth:`SelfCollision.colliding_arm`.
+        """
+        if arm.name != self.arm.name:
+            raise ValueError(f"sphere model is for arm {self.arm.name!r}, not {arm.name!r}")
+        Q = np.ascontiguousarray(np.asarray(q_arm, dtype=float).reshape(-1, arm.n_joints))
+        out = np.empty(len(Q), dtype=np.bool_)
+        a = self.arm
+        _colliding_batch(Q, a.placements, a.axes, a.kinds, self.sphere_joint, self.sphere_center,
+                         self.sphere_radius, self.geom_joint, self.geom_center, self.geom_radius,
+                         self.geom_pairs, self.geom_first, self.allowed, self.cluster_center,
+                         self.cluster_radius, self.cluster_pairs, self.cluster_pair_start, out)  # fmt: skip
+        return out
+
+
+@nb.njit(cache=True, inline="always")
+def _joint_frames(q, placements, axes, kinds, F, R, t, NR, M):
+    """Frames (n, 3, 4) of every arm joint in the base frame, after the joint's motion.
+
+    R, NR, M (3, 3) and t (3,) are scratch space.
+    """
+    t[0], t[1], t[2] = 0.0, 0.0, 0.0
+    for a in range(3):
+        for b in range(3):
+            R[a, b] = 1.0 if a == b else 0.0
+    for i in range(q.shape[0]):
+        P = placements[i]
+        t0 = t[0] + R[0, 0] * P[0, 3] + R[0, 1] * P[1, 3] + R[0, 2] * P[2, 3]
+        t1 = t[1] + R[1, 0] * P[0, 3] + R[1, 1] * P[1, 3] + R[1, 2] * P[2, 3]
+        t2 = t[2] + R[2, 0] * P[0, 3] + R[2, 1] * P[1, 3] + R[2, 2] * P[2, 3]
+        t[0], t[1], t[2] = t0, t1, t2
+        for a in range(3):
+            for b in range(3):
+                NR[a, b] = R[a, 0] * P[0, b] + R[a, 1] * P[1, b] + R[a, 2] * P[2, b]
+        ax, ay, az = axes[i, 0], axes[i, 1], axes[i, 2]
+        if kinds[i] == PRISMATIC:
+            for a in range(3):
+                t[a] += q[i] * (NR[a, 0] * ax + NR[a, 1] * ay + NR[a, 2] * az)
+            for a in range(3):
+                for b in range(3):
+                    R[a, b] = NR[a, b]
+        else:
+            c, s = math.cos(q[i]), math.sin(q[i])
+            C = 1.0 - c
+            M[0, 0] = c + ax * ax * C
+            M[0, 1] = ax * ay * C - az * s
+            M[0, 2] = ax * az * C + ay * s
+            M[1, 0] = ay * ax * C + az * s
+            M[1, 1] = c + ay * ay * C
+            M[1, 2] = ay * az * C - ax * s
+            M[2, 0] = az * ax * C - ay * s
+            M[2, 1] = az * ay * C + ax * s
+            M[2, 2] = c + az * az * C
+            for a in range(3):
+                for b in range(3):
+                    R[a, b] = NR[a, 0] * M[0, b] + NR[a, 1] * M[1, b] + NR[a, 2] * M[2, b]
+        for a in range(3):
+            for b in range(3):
+                F[i, a, b] = R[a, b]
+            F[i, a, 3] = t[a]
+
+
+@nb.njit(cache=True, inline="always")
+def _place(joint, local, F, out):
+    for k in range(joint.shape[0]):
+        j = joint[k]
+        if j < 0:
+            out[k, 0], out[k, 1], out[k, 2] = local[k, 0], local[k, 1], local[k, 2]
+        else:
+            for a in range(3):
+                out[k, a] = (
+                    F[j, a, 0] * local[k, 0]
+                    + F[j, a, 1] * local[k, 1]
+                    + F[j, a, 2] * local[k, 2]
+                    + F[j, a, 3]
+                )
+
+
+@nb.njit(cache=True, inline="always")
+def _place_one(j, local, F, out):
+    if j < 0:
+        out[0], out[1], out[2] = local[0], local[1], local[2]
+    else:
+        for a in range(3):
+            out[a] = F[j, a, 0] * local[0] + F[j, a, 1] * local[1] + F[j, a, 2] * local[2] + F[j, a, 3]
+
+
+@nb.njit(cache=True, parallel=True)
+def _colliding_batch(Q, placements, axes, kinds, s_joint, s_local, s_rad, g_joint, g_local, g_rad,
+                     geom_pairs, geom_first, allowed, cl_local, cl_rad, cl_pairs, cl_start, out):  # fmt: skip
+    """Self-collision of each configuration by the sphere model, in blocks of 256 per thread.
+
+    Per configuration: cluster bounds, geometry bounds, each sphere against the other geometry's
+    bound, then sphere against sphere; spheres are placed only when their geometry's bound is hit.
+    """
+    n_block = 256
+    n_blocks = (Q.shape[0] + n_block - 1) // n_block
+    for blk in nb.prange(n_blocks):
+        F = np.empty((Q.shape[1], 3, 4))
+        gc = np.empty((g_joint.shape[0], 3))
+        sc = np.empty((s_joint.shape[0], 3))
+        placed = np.full(g_joint.shape[0], -1, dtype=np.int64)
+        cc = np.empty((cl_rad.shape[0], 3))
+        R, NR, M, t = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)), np.empty(3)
+        for i in range(blk * n_block, min(Q.shape[0], (blk + 1) * n_block)):
+            _joint_frames(Q[i], placements, axes, kinds, F, R, t, NR, M)
+            _place(g_joint, g_local, F, gc)
+            for c in range(cl_rad.shape[0]):
+                _place_one(c - 1, cl_local[c], F, cc[c])
+            hit = False
+            for k in range(cl_pairs.shape[0]):
+                ca, cb = cl_pairs[k, 0] + 1, cl_pairs[k, 1] + 1
+                dx, dy, dz = cc[ca, 0] - cc[cb, 0], cc[ca, 1] - cc[cb, 1], cc[ca, 2] - cc[cb, 2]
+                r = cl_rad[ca] + cl_rad[cb]
+                if dx * dx + dy * dy + dz * dz >= r * r:
+                    continue
+                for p in range(cl_start[k], cl_start[k + 1]):
+                    a, b = geom_pairs[p, 0], geom_pairs[p, 1]
+                    dx, dy, dz = gc[a, 0] - gc[b, 0], gc[a, 1] - gc[b, 1], gc[a, 2] - gc[b, 2]
+                    r = g_rad[a] + g_rad[b]
+                    if dx * dx + dy * dy + dz * dz >= r * r:
+                        continue
+                    for g in (a, b):
+                        if placed[g] != i:
+                            placed[g] = i
+                            for u in range(geom_first[g], geom_first[g + 1]):
+                                _place_one(s_joint[u], s_local[u], F, sc[u])
+                    for u in range(geom_first[a], geom_first[a + 1]):
+                        dx, dy, dz = sc[u, 0] - gc[b, 0], sc[u, 1] - gc[b, 1], sc[u, 2] - gc[b, 2]
+                        r = s_rad[u] + g_rad[b]
+                        if dx * dx + dy * dy + dz * dz >= r * r:
+                            continue
+                        for v in range(geom_first[b], geom_first[b + 1]):
+                            if not allowed[u, v]:
+                                continue
+                            dx, dy, dz = sc[u, 0] - sc[v, 0], sc[u, 1] - sc[v, 1], sc[u, 2] - sc[v, 2]
+                            r = s_rad[u] + s_rad[v]
+                            if dx * dx + dy * dy + dz * dz < r * r:
+                                hit = True
+                                break
+                        if hit:
+                            break
+                    if hit:
+                        break
+                if hit:
+                    break
+            out[i] = hit
+
+
+@nb.njit(cache=True, parallel=True)
+def _sphere_centers(Q, placements, axes, kinds, s_joint, s_local, out):
+    """Sphere centres (N, S, 3) in the base frame for (N, n) configurations."""
+    for i in nb.prange(Q.shape[0]):
+        F = np.empty((Q.shape[1], 3, 4))
+        R, NR, M, t = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)), np.empty(3)
+        _joint_frames(Q[i], placements, axes, kinds, F, R, t, NR, M)
+        _place(s_joint, s_local, F, out[i])
