@@ -246,6 +246,8 @@ class SphereModel:
                 self.cluster_center[c + 1] = bc
                 self.cluster_radius[c + 1] = float((np.linalg.norm(C - bc, axis=1) + r).max())
         starts = [0] + [i for i in range(1, len(key)) if tuple(key[i]) != tuple(key[i - 1])] + [len(key)]
+        if not len(key):  # no pair to check (e.g. an SRDF that disables them all)
+            starts = [0]
         self.cluster_pairs = np.array([key[i] for i in starts[:-1]], dtype=np.int64).reshape(-1, 2)
         self.cluster_pair_start = np.array(starts if len(key) else [0], dtype=np.int64)
         self.geom_first = np.array([r.start for r in g_spheres] + [len(rad)], dtype=np.int64)
