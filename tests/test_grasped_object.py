@@ -295,6 +295,11 @@ def test_pcl_mug_side_grasp_through_the_cli(tiago, tiago_map, tmp_path, capsys):
     assert main([*base, "--no-motion-check", "--target", "0.06 0.45 -0.44 0 0 1.5708", "--tries", "40"]) == 3
     line = capsys.readouterr().err.strip()
     assert "\n" not in line and "touched support" in line and "link hand_" in line
+    # with the reaching motion on (the default) the same side grasp is rejected, and the one line
+    # names the link and what it touched on the way
+    assert main([*base, "--target", "0.06 0.45 -0.42 0 0 1.5708", "--tries", "20"]) == 3
+    line = capsys.readouterr().err.strip()
+    assert "\n" not in line and "'motion'" in line and "link hand_" in line and " during the " in line
 
 
 def test_contacts_name_exactly_the_links_that_touch(tiago):

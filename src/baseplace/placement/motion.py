@@ -194,6 +194,21 @@ class MotionChecker:
         self._ik_any = DampedLeastSquaresIK(arm, restarts=20)
         self.elapsed_s = 0.0
         """Time spent in :meth:`check` so far [s]."""
+        self.last_contacts: list[tuple[str, str]] = []
+        """Why the last :meth:`check` failed, when a collision blocked it: (robot link, what it
+        touched, tagged "during the approach" or "during the transit"); empty otherwise (IK, or
+        no path found)."""
+        self._blocked: tuple[FloatArray, str] | None = None
+
+    def _explain(self, T_world_base: FloatArray) -> None:
+        """Fill :attr:`last_contacts` from the configuration that blocked the last check, if any."""
+        if self._blocked is None:
+            return
+        q, stage = self._blocked
+        environment = self.environment
+        if stage == "approach" and self.approach_environment is not None:
+            environment = self.approach_environment
+        self.last_contacts = _contacts_of(environment, self.arm, q, T_world_base, stage)
 
     def _free(self, q: FloatArray, T_world_base: FloatArray) -> bool:
         return not self.environment.colliding_arm(self.arm, q, T_world_base)
@@ -223,7 +238,9 @@ class MotionChecker:
             T[:3, 3] -= (k / n_steps) * s.pregrasp_distance * (T_base_tcp[:3, :3] @ self.axis)
             line.append(T)
         q = np.asarray(q_grasp, dtype=float)
-        if self._approach_free(q, T_world_base):
+        if not self._approach_free(q, T_world_base):
+            self._blocked = (q, "approach")
+        else:
             back = self._walk(q, line[1:], T_world_base)
             if back is not None:
                 return back[::-1]
@@ -249,6 +266,7 @@ class MotionChecker:
                 return None
             q = q_next
             if not self._approach_free(q, T_world_base):
+                self._blocked = (q, "approach")
                 return None
             steps.append(q)
         return np.array(steps)
@@ -265,8 +283,10 @@ class MotionChecker:
         Also returns whether OMPL planned them (False: the straight joint-space line was free).
         """
         q0 = self.q_start
-        if not self._free(q0, T_world_base) or not self._free(q_goal, T_world_base):
-            return None, False
+        for q in (q0, q_goal):
+            if not self._free(q, T_world_base):
+                self._blocked = (q, "transit")
+                return None, False
         if self._line_free(q0, q_goal, T_world_base):
             return np.array([q0, q_goal]), False
         return self._rrt(q0, q_goal, T_world_base, seed), True
@@ -327,18 +347,24 @@ class MotionChecker:
             seed: OMPL's random seed.
         """
         t0 = time.perf_counter()
+        self.last_contacts, self._blocked = [], None
         try:
             T_base = np.asarray(T_world_base, dtype=float)
             T_base_tcp = invert_transforms(T_base) @ np.asarray(T_world_tcp, dtype=float)
             approach = self.approach(q_grasp, T_base_tcp, T_base, seed)
-            if approach is None:
-                return None
-            path, planned = self.joint_path(approach[0], T_base, seed)
-            if path is None:
+            path, planned = (None, False) if approach is None else self.joint_path(approach[0], T_base, seed)
+            if approach is None or path is None:
+                self._explain(T_base)
                 return None
             return ReachingMotion(path, approach, planned)
         finally:
             self.elapsed_s += time.perf_counter() - t0
+
+
+def _contacts_of(environment: Environment, arm: Arm, q: FloatArray, T_world_base: FloatArray, stage: str
+                 ) -> list[tuple[str, str]]:  # fmt: skip
+    pairs = dict.fromkeys(environment.contacts_arm(arm, q, T_world_base))  # one per pair, in order
+    return [(link, f"{what} during the {stage}") for link, what in pairs]
 
 
 def with_start(settings: MotionSettings, q_start: ArrayLike | None) -> MotionSettings:

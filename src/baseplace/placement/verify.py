@@ -127,7 +127,9 @@ class Verifier:
             for k, target in enumerate(self.targets):
                 motion = self.motion.check(joints[k], T, target, seed=int(rng.integers(2**31 - 1)))
                 if motion is None:
-                    self._reject(T, "motion")
+                    blocked = self.motion.last_contacts
+                    self.contacts.update(blocked)
+                    self._reject(T, "motion", blocked[0] if blocked else None)
                     return None
                 motions.append(motion)
                 joints[k] = motion.approach[-1]  # the motion may end in another checked grasp configuration
