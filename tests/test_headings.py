@@ -7,37 +7,20 @@ must give the same result.
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import math
 import os
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from baseplace.cli import main
 from baseplace.errors import InputError
 from baseplace.geometry.poses import BasePose, parse_base_pose, wrap_angle
 from conftest import DATA, SHARED
+from conftest import run_cli as run
 
 TWO_PI = 2.0 * math.pi
-
-
-def run(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
-    """The CLI in this process (saves the interpreter's start per call); stdout and stderr captured."""
-    out, err = io.StringIO(), io.StringIO()
-    saved = dict(os.environ)
-    os.environ.update(env or {})
-    try:
-        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-            code = main(list(args))
-    finally:
-        os.environ.clear()
-        os.environ.update(saved)
-    return subprocess.CompletedProcess(list(args), code, out.getvalue(), err.getvalue())
 
 
 def test_wrap_angle_lands_in_the_half_open_range():

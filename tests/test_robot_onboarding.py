@@ -7,46 +7,28 @@ by hand (obstacle voxels placed against the base body).
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import math
-import os
 import shutil
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 import pytest
 
-from baseplace.cli import main
 from baseplace.errors import InputError
 from baseplace.robots.check import check_robot
 from baseplace.robots.codegen import arm_kernels
 from baseplace.robots.fk import forward_kinematics
 from baseplace.robots.model import Robot
 from baseplace.robots.spec import example_robot_data_dir, load_spec
+from conftest import run_cli as run
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"
 ERD = example_robot_data_dir() / "example-robot-data" / "robots"
 UR5_URDF = ERD / "ur_description" / "urdf" / "ur5_robot.urdf"
 PANDA_URDF = ERD / "panda_description" / "urdf" / "panda.urdf"
-
-
-def run(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
-    """The CLI in this process (saves the interpreter's start per call); stdout and stderr captured."""
-    out, err = io.StringIO(), io.StringIO()
-    saved = dict(os.environ)
-    os.environ.update(env or {})
-    try:
-        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-            code = main(list(args))
-    finally:
-        os.environ.clear()
-        os.environ.update(saved)
-    return subprocess.CompletedProcess(list(args), code, out.getvalue(), err.getvalue())
 
 
 def _pinocchio_mounted_fk(urdf: Path, root: str, xyz, rpy, tcp: str, joint_names, Q) -> np.ndarray:
