@@ -12,8 +12,8 @@ import argparse
 import json
 from pathlib import Path
 
-from baseplace.sim.fusion_experiment import fusion_trial, run_fusion_experiment
 from baseplace.viz.regions import plot_regions
+from baseplace_experiments.fusion_experiment import fusion_trial, run_fusion_experiment
 
 ROOT = Path(__file__).resolve().parents[1]
 

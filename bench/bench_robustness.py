@@ -2,7 +2,7 @@
 
 Protocol (fixed before any run):
 
-* Scene: the table-grid scene of seed 004 (``sim/table_grid.py``): a 0.8 x 1.8 m table, a bottle on
+* Scene: the table-grid scene of seed 004 (``baseplace_experiments/table_grid.py``): a 0.8 x 1.8 m table, a bottle on
   one of the 3 x 4 cells (uniform +-5 cm in the cell), noise-free cloud, 25 mm collision voxels,
   the bottle's own points removed for the hand (its allowed contact).
 * Candidates: the IRM-verified method (``irm_candidates``, 16 side + 16 top-down grasps), with the
@@ -47,16 +47,16 @@ from baseplace.reachability.build import BuildSettings, build_map
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Robot
 from baseplace.sim.scenes import SceneSettings, generate_scene
-from baseplace.sim.table_grid import (
+from baseplace.terrain.pipeline import terrain_from_points
+from baseplace.terrain.voxels import VoxelMap
+from baseplace.world.environment import Environment
+from baseplace_experiments.table_grid import (
     TableGridSettings,
     object_cloud,
     table_cloud,
     table_occupancy,
     without_object,
 )
-from baseplace.terrain.pipeline import terrain_from_points
-from baseplace.terrain.voxels import VoxelMap
-from baseplace.world.environment import Environment
 from common import report
 
 POOL = 6

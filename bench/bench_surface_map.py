@@ -45,7 +45,9 @@ from baseplace.placement.surface_sampling import SurfaceSampler
 from baseplace.placement.surface_storage import load_surface_map, save_surface_map
 from baseplace.reachability.build import BuildSettings
 from baseplace.robots.model import Robot
-from baseplace.sim.surface_truth import (
+from baseplace.terrain.polygons import footprint_in_world, footprint_outline
+from baseplace.viz.surface import plot_sampling_comparison, plot_surface_map, sample_spread
+from baseplace_experiments.surface_truth import (
     SEEDS,
     PointMapCalibration,
     SurfaceTruth,
@@ -54,8 +56,6 @@ from baseplace.sim.surface_truth import (
     poses_near_surface,
     validate,
 )
-from baseplace.terrain.polygons import footprint_in_world, footprint_outline
-from baseplace.viz.surface import plot_sampling_comparison, plot_surface_map, sample_spread
 from common import median_time, report
 
 TABLE = "0,0;1.4,0;1.4,0.65;0,0.65"

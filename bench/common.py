@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from baseplace.sim.results import RunClock, write_results
+from baseplace_experiments.results import RunClock, write_results
 
 RESULTS = Path(__file__).parent / "results"
 STARTED = RunClock()
@@ -30,7 +30,7 @@ def median_time(fn: Callable[[], Any], repeats: int = 5) -> float:
 def report(name: str, result: dict[str, Any], **provenance: Any) -> None:
     """Print a result and store it whole as bench/results/NAME.json, with its provenance.
 
-    Keyword arguments go to :func:`baseplace.sim.results.provenance` (seeds, split, protocol ...).
+    Keyword arguments go to :func:`baseplace_experiments.results.provenance` (seeds, split, protocol ...).
     """
     RESULTS.mkdir(exist_ok=True)
     whole = write_results(RESULTS / f"{name}.json", {"benchmark": name, **result}, STARTED, **provenance)

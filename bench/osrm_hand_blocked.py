@@ -21,15 +21,15 @@ from baseplace.demo import cached_map
 from baseplace.placement.pipeline import PlaceSettings, _obstacles
 from baseplace.reachability.build import BuildSettings
 from baseplace.robots.model import Robot
-from baseplace.sim.osrm_experiment import (
+from baseplace.terrain.polygons import footprint_outline
+from baseplace.world.environment import HandFilter, contact_groups
+from baseplace_experiments.osrm_experiment import (
     SCENE_CLASSES,
     ExperimentSettings,
     _class_name,
     experiment_scene,
     grasp_candidates,
 )
-from baseplace.terrain.polygons import footprint_outline
-from baseplace.world.environment import HandFilter, contact_groups
 
 
 def main() -> None:

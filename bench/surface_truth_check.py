@@ -19,7 +19,7 @@ from baseplace.demo import cached_map
 from baseplace.placement.surface_map import build_surface_map
 from baseplace.reachability.build import BuildSettings
 from baseplace.robots.model import Robot
-from baseplace.sim.surface_truth import SEEDS, SurfaceTruth, agreement, poses_near_surface, validate
+from baseplace_experiments.surface_truth import SEEDS, SurfaceTruth, agreement, poses_near_surface, validate
 from bench_surface_map import ARM, HEIGHT, ORIENTATIONS, RESOLUTION, TABLE
 from common import report
 

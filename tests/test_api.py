@@ -14,6 +14,7 @@ MODULES = [
     "baseplace.terrain",
     "baseplace.sim",
     "baseplace.io",
+    "baseplace_experiments.results",
 ]
 
 

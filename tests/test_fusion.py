@@ -9,12 +9,12 @@ import pytest
 
 from baseplace.errors import InputError
 from baseplace.sim.camera import CameraSettings, depth_cloud, look_at
-from baseplace.sim.fusion_experiment import fusion_trial
 from baseplace.sim.scenes import SceneSettings, generate_scene
 from baseplace.terrain.fusion import FusionSettings, PosedCloud, fuse_clouds
 from baseplace.terrain.io import load_cloud
 from baseplace.world.grid_scene import grid_points
 from baseplace.world.occupancy import OccupancyGrid
+from baseplace_experiments.fusion_experiment import fusion_trial
 
 
 def _wall_and_floor(rng: np.random.Generator, transient: bool, n: int = 40_000) -> np.ndarray:

@@ -12,7 +12,9 @@ import shapely
 from baseplace.errors import InputError
 from baseplace.geometry.poses import BasePose
 from baseplace.placement.surface_map import build_surface_map
-from baseplace.planning.inspect_task import (
+from baseplace.reachability.build import BuildSettings, build_map
+from baseplace.terrain.polygons import footprint_in_world, footprint_outline
+from baseplace_experiments.inspect_task import (
     SEED002_TABLE,
     ReachCheck,
     TaskSettings,
@@ -21,8 +23,6 @@ from baseplace.planning.inspect_task import (
     run_inspect_experiment,
     run_inspect_task,
 )
-from baseplace.reachability.build import BuildSettings, build_map
-from baseplace.terrain.polygons import footprint_in_world, footprint_outline
 
 
 @pytest.fixture(scope="module")

@@ -9,9 +9,9 @@ import shapely
 from baseplace.errors import InputError, NothingFoundError
 from baseplace.navigation.navmap import navigation_map
 from baseplace.navigation.planners import PLANNERS, plan_path
-from baseplace.sim.navigation_experiment import path_violations, run_navigation_experiment
 from baseplace.sim.scenes import Plane, Scene, SceneObject, SceneSettings
 from baseplace.terrain.pipeline import terrain_from_points
+from baseplace_experiments.navigation_experiment import path_violations, run_navigation_experiment
 
 RADIUS = 0.3
 SLOPE = math.tan(math.radians(8))
@@ -93,7 +93,7 @@ def test_navigation_experiment_smoke():
 def test_true_traversability_on_the_demo_scene():
     """The ground-truth oracle: the platform is reached up the ramp only; its rim is off limits."""
     from baseplace.demo import demo_scene
-    from baseplace.sim.navigation_experiment import TrueTraversability
+    from baseplace_experiments.navigation_experiment import TrueTraversability
 
     truth = TrueTraversability(demo_scene(), radius=0.3, max_step=0.04)
     floor, platform = (-3.5, 0.0), (1.6, 0.0)

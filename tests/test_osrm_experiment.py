@@ -8,8 +8,8 @@ import pytest
 from baseplace.geometry.poses import pose_from_xyz_rpy
 from baseplace.reachability.build import BuildSettings, build_map
 from baseplace.robots.fk import forward_kinematics
-from baseplace.sim.osrm_experiment import GroundTruth, grasp_candidates
 from baseplace.sim.scenes import Plane, Scene, SceneSettings, generate_scene
+from baseplace_experiments.osrm_experiment import GroundTruth, grasp_candidates
 
 
 def test_ground_truth_oracle_accepts_fk_targets_and_rejects_unreachable(tiago):
@@ -61,8 +61,8 @@ def test_grasp_planner_turns_down_hands_in_true_solids_only(tiago):
     """The planner checks the open hand against the true shapes (coal), never against voxels."""
     import coal
 
-    from baseplace.sim.osrm_experiment import _hand_touches, true_solids
     from baseplace.world.environment import HandFilter
+    from baseplace_experiments.osrm_experiment import _hand_touches, true_solids
 
     rng = np.random.default_rng(5)
     scene = generate_scene(
@@ -90,7 +90,7 @@ def test_grasp_planner_turns_down_hands_in_true_solids_only(tiago):
 
 
 def test_incline_only_scene_reachable_only_from_the_incline(tiago):
-    from baseplace.sim.osrm_experiment import ExperimentSettings, GroundTruth, experiment_scene
+    from baseplace_experiments.osrm_experiment import ExperimentSettings, GroundTruth, experiment_scene
 
     rmap = build_map(tiago, None, BuildSettings(samples=300_000))
     _, scene, _, _ = experiment_scene(ExperimentSettings(seed=3), 7, 0)
@@ -106,7 +106,7 @@ def test_incline_only_scene_reachable_only_from_the_incline(tiago):
 
 
 def test_experiment_smoke_flat_scene(tiago):
-    from baseplace.sim.osrm_experiment import (
+    from baseplace_experiments.osrm_experiment import (
         DEV_SEEDS,
         HELD_OUT_SEEDS,
         ExperimentSettings,
@@ -131,7 +131,7 @@ def test_experiment_smoke_flat_scene(tiago):
 @pytest.mark.slow  # ~75 s: a cluster start and two workers loading TIAGo; run with -m slow
 def test_experiment_scenes_on_a_two_worker_cluster_match_a_local_run(tiago, tiago_map):
     from baseplace.reachability.distributed import connect
-    from baseplace.sim.osrm_experiment import ExperimentSettings, run_osrm_experiment
+    from baseplace_experiments.osrm_experiment import ExperimentSettings, run_osrm_experiment
 
     settings = ExperimentSettings(grasps_per_scene=2, tries=30)
     classes = (("flat", 0),)

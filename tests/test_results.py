@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from baseplace.errors import InputError
-from baseplace.sim.results import RunClock, SeedSplit, write_results
 from baseplace.sim.scenes import SceneSettings, generate_scene
-from baseplace.sim.segmentation_eval import noisy_height_map
+from baseplace_experiments.results import RunClock, SeedSplit, write_results
+from baseplace_experiments.segmentation_eval import noisy_height_map
 
 
 def test_results_file_holds_command_commit_seeds_and_time(tmp_path):

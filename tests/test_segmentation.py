@@ -8,13 +8,13 @@ import pytest
 from baseplace.errors import InputError
 from baseplace.geometry.surface_poses import plane_base_poses
 from baseplace.sim.scenes import SceneSettings, generate_scene, truth_grid
-from baseplace.sim.segmentation_eval import score_segmentation
 from baseplace.terrain.graph import build_region_graph
 from baseplace.terrain.heightmap import HeightMap
 from baseplace.terrain.io import load_cloud, load_transform
 from baseplace.terrain.pipeline import make_segmenter, terrain_from_points
 from baseplace.terrain.polygons import footprint_inside, footprint_outline
 from baseplace.terrain.voxels import VoxelMap
+from baseplace_experiments.segmentation_eval import score_segmentation
 from conftest import SHARED
 
 

@@ -93,7 +93,7 @@ def test_arm_combination_is_max_and_min(pr2, pr2_maps):
 
 def test_surface_map_agrees_with_ik_ground_truth(pr2):
     """R_S against the share of table points that IK reaches (an independent oracle)."""
-    from baseplace.sim.surface_truth import SurfaceTruth
+    from baseplace_experiments.surface_truth import SurfaceTruth
 
     rmap = build_map(pr2, "right", BuildSettings(samples=10_000_000, seed=1))
     smap = build_surface_map(pr2, {"right": rmap}, "0,0;0.6,0;0.6,0.4;0,0.4", 0.74, resolution=0.05)

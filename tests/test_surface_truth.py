@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from baseplace.errors import InputError
-from baseplace.sim.surface_truth import PointMapCalibration, agreement
+from baseplace_experiments.surface_truth import PointMapCalibration, agreement
 
 
 def test_calibration_recovers_a_known_scale_and_keeps_zero_poses_zero():

@@ -9,7 +9,9 @@ import pytest
 
 from baseplace.geometry.poses import BasePose
 from baseplace.robots.ik import DampedLeastSquaresIK
-from baseplace.sim.table_grid import (
+from baseplace.terrain.voxels import VoxelMap
+from baseplace.viz.table_grid import plot_table_grid
+from baseplace_experiments.table_grid import (
     CHOSEN,
     DEV_CHOICES,
     METHODS,
@@ -28,8 +30,6 @@ from baseplace.sim.table_grid import (
     true_table,
     without_object,
 )
-from baseplace.terrain.voxels import VoxelMap
-from baseplace.viz.table_grid import plot_table_grid
 
 SETTINGS = TableGridSettings()
 

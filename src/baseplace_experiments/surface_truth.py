@@ -27,8 +27,8 @@ from baseplace.placement.surface_map import SurfaceMap, surface_grid
 from baseplace.placement.surface_sampling import furniture_voxels
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Robot
-from baseplace.sim.results import SeedSplit
 from baseplace.world.environment import Environment
+from baseplace_experiments.results import SeedSplit
 
 
 class SurfaceTruth:

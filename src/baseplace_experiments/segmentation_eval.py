@@ -30,12 +30,12 @@ from typing import Any
 import numpy as np
 
 from baseplace.errors import unknown
-from baseplace.sim.results import SeedSplit
 from baseplace.sim.scenes import SIZE_CLASSES, Scene, SceneSettings, generate_scene, truth_grid
 from baseplace.terrain.heightmap import HeightMap, smooth_nan
 from baseplace.terrain.pipeline import make_segmenter
 from baseplace.terrain.segmentation import Segmentation
 from baseplace.terrain.voxels import VoxelMap
+from baseplace_experiments.results import SeedSplit
 
 NOISE_MODELS = ("heightmap", "cloud")
 """Where the noise goes: the height map (seed 000 VI) or the dense cloud's z."""

@@ -70,11 +70,11 @@ from baseplace.reachability.rmap import ReachabilityMap
 from baseplace.robots.collision import SelfCollision, load_collision_model
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Robot
-from baseplace.sim.results import SeedSplit
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import Environment
 from baseplace.world.gridnav import GridNavigator
 from baseplace.world.occupancy import FREE, OCCUPIED, OccupancyGrid
+from baseplace_experiments.results import SeedSplit
 
 METHODS = ("baseline", "radial", "irm")
 PAPER_TABLE1: dict[tuple[int, int], dict[str, tuple[int, int]]] = {  # seed 004 Table 1: (success, failure)

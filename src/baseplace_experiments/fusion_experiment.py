@@ -15,7 +15,7 @@ scene got the walls of a room, so that rays return as in a room and not into the
 * **union**: the three clouds concatenated; **fused**: the clouds inserted into one OctoMap with
   ray casting (:func:`baseplace.terrain.fusion.fuse_clouds`: 25 mm, octomap's default sensor
   model: hit 0.7, miss 0.4), its occupied voxel centres; both segmented by the robust segmenter at
-  5 cm cells and scored by :func:`baseplace.sim.segmentation_eval.score_segmentation`.
+  5 cm cells and scored by :func:`baseplace_experiments.segmentation_eval.score_segmentation`.
 * also counted: voxels more than 10 cm above every true surface within 2.5 cm (noise, outliers,
   the person), inside the scene.
 * the sensor model: octomap's default (miss 0.4) and, chosen on the development scene between
@@ -33,10 +33,10 @@ import numpy as np
 
 from baseplace.sim.camera import CameraSettings, depth_cloud, look_at
 from baseplace.sim.scenes import Scene, SceneObject, SceneSettings, generate_scene
-from baseplace.sim.segmentation_eval import SegmentationScore, score_segmentation
 from baseplace.terrain.fusion import FusionSettings, PosedCloud, fuse_clouds, posed
 from baseplace.terrain.pipeline import Terrain, terrain_from_points
 from baseplace.terrain.voxels import VoxelMap
+from baseplace_experiments.segmentation_eval import SegmentationScore, score_segmentation
 
 CLASSES = ("small", "medium")
 MODELS = {"fused": FusionSettings(), "fused_miss_0.35": FusionSettings(prob_miss=0.35)}
