@@ -7,8 +7,8 @@ stands on (its *support*), a tray's rim, the neighbouring objects, and the objec
 link that is not the hand.
 
 The object is given explicitly (a box, an upright cylinder, a point set) or found from the grasp
-(:func:`find_grasped_object`): the cloud's connected cluster at the grasp point, above the surface
-it stands on.
+(:func:`find_grasped_object`): the cloud's cluster at the grasp point, points linked by distance
+(never by a grid, so the frame of the cloud does not matter), above the surface it stands on.
 """
 
 from __future__ import annotations
@@ -19,7 +19,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import ndimage
 
 from baseplace.errors import InputError
 from baseplace.geometry.poses import FloatArray
@@ -221,21 +220,164 @@ class AutoSettings:
     """How :func:`find_grasped_object` cuts the object out of the cloud.
 
     Attributes:
-        cell: edge of the fine voxels the cluster grows through [m]; at most half the smallest
-            gap between two objects that must stay apart (1.5 cm: a 3 cm gap stays open).
+        link: two points closer than this [m] belong to the same cluster; less than the smallest
+            gap between two objects that must stay apart (2 cm: a 3 cm gap always stays open,
+            whatever the cloud's frame).
+        spacing: the cloud is thinned to points at least this far apart [m] before linking (each
+            point keeps the thinned point that covers it); gaps up to ``link - 2 spacing`` are
+            always bridged.
         seed_radius: the cluster starts at the cloud's point nearest the grasp point, within this [m].
-        max_size: largest horizontal extent of an object [m]; a layer wider than this under the
-            grasp point is its support.
+        max_size: largest horizontal extent (diameter) of an object [m]; when the cluster grows
+            wider than this on the way down, it has reached the object's support.
+        support_gap: points less than this [m] above the height where the support joins are the
+            support's surface (and its noise): they stay obstacles.
+        step: height step [m] of the search for the support.
         depth: how far below the grasp point the object may reach [m].
         voxel_size: the collision voxels' edge [m]: the object keeps only the points in collision
             voxels that hold no other point.
     """
 
-    cell: float = 0.015
+    link: float = 0.02
+    spacing: float = 0.004
     seed_radius: float = 0.06
     max_size: float = 0.3
+    support_gap: float = 0.015
+    step: float = 0.002
     depth: float = 0.6
     voxel_size: float = 0.025
+
+    def __post_init__(self) -> None:
+        values = (
+            self.link,
+            self.spacing,
+            self.seed_radius,
+            self.max_size,
+            self.step,
+            self.depth,
+            self.voxel_size,
+        )
+        if not all(math.isfinite(v) and v > 0 for v in values) or not (0 <= self.support_gap < self.depth):
+            raise InputError(f"auto-object settings must be positive lengths [m], got {self}")
+        if 2 * self.spacing >= self.link:
+            raise InputError(f"spacing ({self.spacing} m) must be under half the link ({self.link} m)")
+
+
+def grasped_cluster(
+    points: ArrayLike, grasp_point: ArrayLike, settings: AutoSettings | None = None
+) -> NDArray[np.bool_] | None:
+    """(N,) True for the points of the object at ``grasp_point`` (3,), above the surface it stands on.
+
+    Points (N, 3) [m] of a z-up world cloud are linked when they lie within ``link`` of each other
+    (after thinning to ``spacing``); the cluster is grown from the point nearest the grasp point.
+    Going down from there in ``step``s, the cluster of the points above each height is followed
+    until its horizontal diameter exceeds ``max_size``: there the support (a table top, a tray
+    bottom) has joined. The object is the cluster just above that height, less the points within
+    ``support_gap`` above it. Only distances and heights relative to the start point enter, so
+    the result does not change when the cloud is shifted or turned about z.
+
+    Returns:
+        The mask, or None when no point lies within ``seed_radius`` of the grasp point, the grasp
+        point lies on the support itself, or the cluster is wider than ``max_size``.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    s = settings or AutoSettings()
+    g = _vector(grasp_point, 3, "grasp point")
+    p = np.asarray(points, dtype=float).reshape(-1, 3)
+    reach = s.max_size + s.link
+    near = np.all(np.isfinite(p), axis=1)
+    near[near] = (np.hypot(p[near, 0] - g[0], p[near, 1] - g[1]) <= reach) & (
+        np.abs(p[near, 2] - g[2] + (s.depth - s.max_size) / 2) <= (s.depth + s.max_size) / 2
+    )
+    index = np.flatnonzero(near)
+    local = p[index]
+    if len(local) == 0:
+        return None
+    d = np.linalg.norm(local - g, axis=1)
+    start = int(np.argmin(d))
+    if d[start] > s.seed_radius:
+        return None
+    keep, owner = _thin(local, s.spacing)
+    thin = local[keep]
+    pairs = cKDTree(thin).query_pairs(s.link, output_type="ndarray")
+    n = len(thin)
+    graph = coo_matrix((np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])), shape=(n, n)).tocsr()
+    seed = int(owner[start])
+    z_seed = float(thin[seed, 2])
+
+    def cluster(floor: float) -> NDArray[np.bool_]:
+        """The thinned points linked to the seed through points at or above ``floor``."""
+        above = np.flatnonzero(thin[:, 2] >= floor)
+        out = np.zeros(n, dtype=bool)
+        where = np.searchsorted(above, seed)
+        if where == len(above) or above[where] != seed:
+            return out
+        _, labels = connected_components(graph[above][:, above], directed=False)
+        out[above[labels == labels[where]]] = True
+        return out
+
+    # the cluster only grows as the floor goes down: bisect for the first floor where it is too wide
+    steps = int(s.depth / s.step)
+    lo, hi = 0, steps + 1  # cluster(z_seed - k step) is narrow for k < lo, too wide for k >= hi
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if _diameter(thin[cluster(z_seed - mid * s.step), :2]) > s.max_size:
+            hi = mid
+        else:
+            lo = mid + 1
+    if hi <= steps:  # the support joins at this height
+        if hi == 0:
+            return None  # the grasp point lies on the support (a table top, a wall)
+        floor = z_seed - hi * s.step + s.support_gap
+    else:
+        floor = z_seed - s.depth
+    mine = cluster(floor)
+    if not mine.any() or _diameter(thin[mine, :2]) > s.max_size:
+        return None
+    chosen = mine[owner] & (local[:, 2] >= floor)
+    out = np.zeros(len(p), dtype=bool)
+    out[index[chosen]] = True
+    return out
+
+
+def _thin(points: FloatArray, spacing: float) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Greedy thinning in the points' order: (kept indices (K,), the kept point covering each point (N,)).
+
+    A point is kept unless an earlier kept point lies within ``spacing``; each point's owner is
+    (the position in the kept indices of) the first kept point within ``spacing``, itself when
+    kept. Depends on distances and the order only, never on a grid.
+    """
+    from scipy.spatial import cKDTree
+
+    n = len(points)
+    tree = cKDTree(points)
+    nearest = tree.query(points, k=2)[0][:, 1] if n > 1 else np.full(n, np.inf)
+    owner = np.where(nearest > spacing, np.arange(n), -1)  # a point with no neighbour keeps itself
+    for i in np.flatnonzero(owner < 0).tolist():
+        if owner[i] >= 0:  # covered by an earlier kept point
+            continue
+        ball = np.asarray(tree.query_ball_point(points[i], spacing), dtype=np.intp)
+        owner[ball[owner[ball] < 0]] = i
+    kept = np.flatnonzero(owner == np.arange(n))
+    return kept, np.searchsorted(kept, owner)
+
+
+def _diameter(xy: FloatArray) -> float:
+    """The largest distance [m] between two of the points (M, 2); 0 for fewer than two."""
+    if len(xy) < 2:
+        return 0.0
+    from scipy.spatial import ConvexHull, QhullError
+
+    try:
+        xy = xy[ConvexHull(xy).vertices]
+    except QhullError:  # collinear or too few: the extreme points along the main direction
+        axis = np.linalg.svd(xy - xy.mean(axis=0), full_matrices=False)[2][0]
+        t = xy @ axis
+        xy = xy[[int(np.argmin(t)), int(np.argmax(t))]]
+    diff = xy[:, None, :] - xy[None, :, :]
+    return float(np.sqrt((diff**2).sum(axis=-1)).max())
 
 
 def find_grasped_object(
@@ -243,70 +385,24 @@ def find_grasped_object(
 ) -> GraspedObject | None:
     """The object at ``grasp_point`` (3,): the cloud's cluster there, above the surface it stands on.
 
-    The points (N, 3) [m] of a z-up world cloud near the grasp point go into fine voxels
-    (``cell``). From the voxel nearest the grasp point, layer by layer downwards, the object's
-    horizontal section is followed (8-connected, overlapping the section above) until a layer's
-    section grows wider than ``max_size``: that layer is the support. The object is the
-    26-connected cluster of the start voxel in the layers above the support, less the layer just
-    above it (noise of the support's surface). Its points are those in collision voxels that hold
-    no other point, so that the support and the neighbours stay obstacles.
+    The points (N, 3) [m] of a z-up world cloud that :func:`grasped_cluster` finds, less those in
+    collision voxels (``voxel_size``, on the obstacles' world grid) that also hold a point of
+    anything else, so that the support and the neighbours stay obstacles.
 
     Returns:
-        The object (kind "points", source "auto"), or None when no point lies within
-        ``seed_radius`` of the grasp point or the cluster is wider than ``max_size`` (the grasp
-        point is on a large surface, which stays an obstacle).
+        The object (kind "points", source "auto"), or None when :func:`grasped_cluster` finds
+        none or every voxel of the cluster is shared with something else.
     """
     s = settings or AutoSettings()
-    g = _vector(grasp_point, 3, "grasp point")
+    mask = grasped_cluster(points, grasp_point, s)
+    if mask is None:
+        return None
     p = np.asarray(points, dtype=float).reshape(-1, 3)
-    p = p[np.all(np.isfinite(p), axis=1)]
-    near = (np.abs(p[:, 0] - g[0]) <= s.max_size) & (np.abs(p[:, 1] - g[1]) <= s.max_size)
-    near &= (p[:, 2] >= g[2] - s.depth) & (p[:, 2] <= g[2] + s.max_size)
-    local = p[near]
-    if len(local) == 0:
-        return None
-    d = np.linalg.norm(local - g, axis=1)
-    if d.min() > s.seed_radius:
-        return None
-    lo = np.floor(local.min(axis=0) / s.cell).astype(np.int64) - 1
-    idx = np.floor(local / s.cell).astype(np.int64) - lo
-    shape = tuple(int(v) for v in idx.max(axis=0) + 2)
-    occ = np.zeros(shape, dtype=bool)
-    occ[idx[:, 0], idx[:, 1], idx[:, 2]] = True
-    seed = idx[int(np.argmin(d))]
-    support_level = _support_level(occ, seed, s.max_size / s.cell)
-    above = occ.copy()
-    above[:, :, : support_level + 2] = False  # the support's layer and the one above it
-    labels, _ = ndimage.label(above, structure=np.ones((3, 3, 3), dtype=bool))
-    lab = labels[seed[0], seed[1], seed[2]]
-    if lab == 0:  # the grasp point sits on the support itself
-        return None
-    mine = labels[idx[:, 0], idx[:, 1], idx[:, 2]] == lab
-    extent = local[mine, :2].max(axis=0) - local[mine, :2].min(axis=0)
-    if float(extent.max()) > s.max_size:  # a table top or a wall, not an object in the hand
-        return None
-    keys = np.floor(local / s.voxel_size).astype(np.int64)
+    lo, hi = p[mask].min(axis=0) - s.voxel_size, p[mask].max(axis=0) + s.voxel_size
+    around = np.all((p >= lo) & (p <= hi), axis=1)  # only these can share a voxel with the object
+    keys = np.floor(p[around] / s.voxel_size).astype(np.int64)
+    mine = mask[around]
     mixed = rows_in(keys[mine], np.unique(keys[~mine], axis=0))
     if mixed.all():
         return None
-    return GraspedObject.from_points(local[mine][~mixed], source="auto")
-
-
-def _support_level(occ: NDArray[np.bool_], seed: NDArray[np.int64], max_cells: float) -> int:
-    """The z index of the first layer below ``seed`` whose section under the object is wider than ``max_cells``."""
-    eight = np.ones((3, 3), dtype=bool)
-    labels, _ = ndimage.label(occ[:, :, seed[2]], structure=eight)
-    section = labels == labels[seed[0], seed[1]]
-    for z in range(seed[2] - 1, -1, -1):
-        layer = occ[:, :, z]
-        labels, _ = ndimage.label(layer, structure=eight)
-        under = np.unique(labels[ndimage.binary_dilation(section, eight) & layer])
-        under = under[under > 0]
-        if len(under) == 0:
-            continue  # a gap (unseen underside): keep the section from above
-        grown = np.isin(labels, under)
-        rows, cols = np.nonzero(grown)
-        if max(rows.max() - rows.min(), cols.max() - cols.min()) + 1 > max_cells:
-            return z
-        section = grown
-    return -2
+    return GraspedObject.from_points(p[around][mine][~mixed], source="auto")
