@@ -20,7 +20,7 @@ def _pct(v: float | None) -> str:
 def main(path: str) -> None:
     with open(path) as f:
         result = json.load(f)
-    run = result["run"]
+    run = result.get("provenance") or result["run"]  # "run": files written before the one provenance writer
     print(f"`{run['command']}` at commit {run['commit']}, seed {result['seed']} ({result['seed_role']}), "
           f"{run['wall_time_s'] / 60:.1f} min\n")  # fmt: skip
     print("| scene | strategy | queries | N=1 | N=3 | N=10 | N=100 (paper) | on incline | t_RM [ms] | t_a [ms] | t_s [ms] "

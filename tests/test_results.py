@@ -107,3 +107,20 @@ def test_experiment_bad_input_is_one_line(args, fragment, tmp_path):
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and fragment in lines[0], proc.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+def test_osrm_experiment_writes_the_same_provenance_as_every_experiment(tiago_map, tmp_path, capsys):
+    """One provenance writer: the osrm experiment's results file carries the block the others do."""
+    from baseplace.cli import main
+    from baseplace.reachability.storage import save_map
+
+    map_file, path = tmp_path / "tiago.rmap", tmp_path / "osrm.json"
+    save_map(tiago_map, map_file)
+    assert main(["experiment", "osrm", "--map", str(map_file), "--scenes", "1", "--grasps", "2", "--flat-only",
+                 "--tries", "3", "--dev", "--results", str(path), "--json"]) == 0  # fmt: skip
+    stored = json.loads(path.read_text())
+    assert stored == json.loads(capsys.readouterr().out)
+    prov = stored["provenance"]
+    assert set(prov) >= {"command", "commit", "dirty", "finished_utc", "wall_time_s", "seeds", "seeds_used"}
+    assert prov["split"] == "dev" and prov["seeds_used"] == [1000] and "run" not in stored
+    assert prov["seeds"] == {"dev": [1000], "held_out": [2026]} and "Tables I and II" in prov["protocol"][0]

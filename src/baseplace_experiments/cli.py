@@ -101,13 +101,16 @@ def _results_path(path: str | None) -> Path | None:
 def _write_results(
     path: Path | None, result: dict[str, Any], clock: Any, lines: list[str], **provenance: Any
 ) -> dict[str, Any]:
-    """Write ``result`` whole to the --results file (if one was given) and say so in ``lines``."""
-    if path is None:
-        return result
-    from baseplace_experiments.results import write_results
+    """``result`` with its provenance (:mod:`baseplace_experiments.results`, the one writer).
 
+    Written whole to the --results file when one was given (and said so in ``lines``).
+    """
+    from baseplace_experiments import results
+
+    if path is None:
+        return {**result, "provenance": results.provenance(clock, **provenance)}
     lines.append(f"wrote {path}")
-    return write_results(path, result, clock, **provenance)
+    return results.write_results(path, result, clock, **provenance)
 
 
 def cmd_experiment_segmentation(args: argparse.Namespace) -> int:
@@ -263,28 +266,25 @@ def cmd_experiment_table_grid(args: argparse.Namespace) -> int:
 
 def cmd_experiment_osrm(args: argparse.Namespace) -> int:
     """Seed 000 Tables I and II on generated scenes (protocol: baseplace_experiments.osrm_experiment)."""
-    import time
-
-    from baseplace.files import atomic_write
     from baseplace.reachability.storage import load_map
     from baseplace.robots.model import Robot
+    from baseplace_experiments import osrm_experiment
     from baseplace_experiments.osrm_experiment import (
-        DEV_SEEDS,
         SCENE_CLASSES,
+        SEEDS,
         ExperimentSettings,
-        checkout_commit,
         run_osrm_experiment,
-        run_record,
     )
+    from baseplace_experiments.results import RunClock
 
+    clock = RunClock()
     if args.scenes < 1 or args.grasps < 1:
         raise InputError(f"--scenes and --grasps must be >= 1, got {args.scenes} and {args.grasps}")
-    out, results_path = _out_path(args.out), _out_path(args.results, (".json",), "--results")
-    seed = DEV_SEEDS[0] if args.dev else args.seed
+    out, results_path = _out_path(args.out), _results_path(args.results)
+    seed = SEEDS.dev[0] if args.dev else args.seed
     robot = Robot(args.robot)
     rmap = load_map(args.map, robot) if args.map else _default_map(args, robot)
     classes = SCENE_CLASSES if not args.flat_only else SCENE_CLASSES[:1]
-    started, commit = time.perf_counter(), checkout_commit()
     settings = ExperimentSettings(grasps_per_scene=args.grasps, seed=seed, tries=args.tries)
     with _Progress(args, args.scenes * len(classes), "osrm experiment", "scenes") as bar:
         if args.scheduler is None:
@@ -296,15 +296,11 @@ def cmd_experiment_osrm(args: argparse.Namespace) -> int:
                 result = run_osrm_experiment(
                     robot, rmap, args.scenes, settings, classes, bar.step, client, args.robot
                 )
-    result["run"] = run_record(sys.argv, time.perf_counter() - started, commit)
     if out is not None:
         from baseplace.viz.experiments import plot_failure_rates
 
         plot_failure_rates(result["rows"], out)
         result["png"] = str(out)
-    if results_path is not None:
-        with atomic_write(results_path, "results file") as tmp:
-            tmp.write_text(json.dumps(result, indent=1) + "\n")
     lines = [
         f"{'scene':<16} {'strategy':<8} {'queries':>7} {'N=1':>6} {'N=3':>6} {'N=10':>6} {'N=100':>6} {'paper':>6} "
         f"{'incline':>7} {'t_RM ms':>9} {'t_a ms':>10} {'t_s ms':>10}"
@@ -318,9 +314,10 @@ def cmd_experiment_osrm(args: argparse.Namespace) -> int:
         paper, incline = _cell(r["paper_success_rate"], ".1f"), _cell(r["on_inclined_plane"], ".0f", "%")
         lines.append(f"{r['scene']:<16} {r['strategy']:<8} {r['queries']:>7} {at[0]:>6} {at[1]:>6} {at[2]:>6} "
                      f"{at[3]:>6} {paper:>6} {incline:>7} {f(r['t_RM_ms']):>9} {f(r['t_a_ms']):>10} {f(r['t_s_ms']):>10}")  # fmt: skip
-    lines.append(f"seed {seed} ({result['seed_role']}), {result['run']['wall_time_s']:.0f} s")
-    if results_path is not None:
-        lines.append(f"wrote {results_path}")
+    lines.append(f"seed {seed} ({result['seed_role']}), {clock.seconds:.0f} s")
+    split = result["seed_role"] if result["seed_role"] in ("dev", "held-out") else None
+    result = _write_results(results_path, result, clock, lines, seeds=SEEDS, split=split, used_seeds=[seed],
+                            protocol=(osrm_experiment.__doc__ or "").strip())  # fmt: skip
     _emit(args, result, "\n".join(lines))
     return 0
 

@@ -49,6 +49,7 @@ from baseplace.terrain.pipeline import Terrain, terrain_from_points
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import HandFilter
 from baseplace.world.grasped_object import GraspedObject
+from baseplace_experiments.results import SeedSplit
 
 SCENE_CLASSES = (
     ("flat", 0),
@@ -64,6 +65,8 @@ DEV_SEEDS = (1000,)
 """Seeds the experiment's parameters were chosen on (never reported as the tables)."""
 HELD_OUT_SEEDS = (2026,)
 """Seeds the reported tables come from; disjoint from :data:`DEV_SEEDS`."""
+SEEDS = SeedSplit(DEV_SEEDS, HELD_OUT_SEEDS)
+"""Both, as recorded in the results file's provenance."""
 BUDGETS = (1, 3, 10, 100)
 """Candidate budgets N at which success is reported."""
 PAPER = {  # seed 000 Tables I and II: success rate [%]
@@ -478,34 +481,6 @@ def run_osrm_experiment(
     return {"rows": rows, "tries": s.tries, "budgets": list(BUDGETS), "seed": s.seed, "seed_role": role,
             "dev_seeds": list(DEV_SEEDS), "held_out_seeds": list(HELD_OUT_SEEDS),
             "settings": dataclasses.asdict(s)}  # fmt: skip
-
-
-def checkout_commit() -> str | None:
-    """The commit of the checkout this module runs from, with "+dirty" when tracked files differ."""
-    import subprocess
-    from pathlib import Path
-
-    here = Path(__file__).resolve().parent
-    try:
-        commit = subprocess.run(["git", "-C", str(here), "rev-parse", "HEAD"], capture_output=True, text=True,
-                                check=True, timeout=10).stdout.strip()  # fmt: skip
-        dirty = subprocess.run(["git", "-C", str(here), "status", "--porcelain", "--untracked-files=no"],
-                               capture_output=True, text=True, check=True, timeout=10).stdout.strip()  # fmt: skip
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return commit + ("+dirty" if dirty else "")
-
-
-def run_record(argv: list[str], wall_time_s: float, commit: str | None) -> dict[str, Any]:
-    """Where a results file came from: command line, commit, finish time (UTC), wall time [s].
-
-    Take ``commit`` with :func:`checkout_commit` before the run starts.
-    """
-    import datetime
-
-    return {"command": " ".join(["baseplace", *argv[1:]]) if argv else "", "commit": commit,
-            "finished_utc": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
-            "wall_time_s": round(wall_time_s, 1)}  # fmt: skip
 
 
 def _class_name(size_class: str, n_planes: int) -> str:
