@@ -29,7 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError, unknown
 from baseplace.files import atomic_write
-from baseplace.geometry.poses import FloatArray, pose_from_xyz_rpy
+from baseplace.geometry.poses import FloatArray
 
 SIZE_CLASSES = {"small": (1.0, 1.5), "medium": (1.5, 2.0), "large": (2.0, 2.5)}
 """Side lengths [m] of the inclined planes' footprints per size class (seed 000, VI-A)."""
@@ -310,11 +310,6 @@ class SceneObject:
     def radius(self) -> float:
         """Radius [m] of the xy circle enclosing the footprint."""
         return math.hypot(self.size[0], self.size[1]) / 2 if self.shape == "cube" else self.size[0] / 2
-
-    @property
-    def T_world_object(self) -> FloatArray:
-        """Pose (4, 4) of the object frame (centroid, z up) in the world."""
-        return pose_from_xyz_rpy([*self.center, 0.0, 0.0, self.yaw])
 
     def contains(self, xy: ArrayLike) -> NDArray[np.bool_]:
         """Whether xy points (N, 2) lie in the footprint; shape (N,)."""
