@@ -40,7 +40,7 @@ from baseplace.placement.pointing import pointed_object, pointing_ray, ray_box_d
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import Environment
-from baseplace.world.gridnav import GridNavigator, path_length, plan_path
+from baseplace.world.gridnav import GridNavigator, path_length
 from baseplace.world.occupancy import OccupancyGrid, load_occupancy
 from conftest import SHARED
 
@@ -361,7 +361,7 @@ def test_grid_planner_goes_around_a_wall():
     grid = _grid(_wall, n=60)
     radius = 0.15
     start, goal = (0.525, 0.525), (2.525, 0.525)  # cell centres
-    path = plan_path(grid, start, goal, radius)
+    path = GridNavigator(grid, radius).plan(start, goal)
     assert path is not None and np.allclose(path[0], start) and np.allclose(path[-1], goal)
     assert path[:, 1].max() > 1.4  # over the wall's end
     obstacles = _occupied_squares(grid)
@@ -380,17 +380,17 @@ def test_grid_planner_goes_around_a_wall():
 def test_grid_planner_errors_and_no_path():
     grid = _grid(_wall, n=60)
     with pytest.raises(InputError, match=r"^start .*in an obstacle"):
-        plan_path(grid, (1.55, 0.5), (2.5, 0.5), 0.15)
+        GridNavigator(grid, 0.15).plan((1.55, 0.5), (2.5, 0.5))
     with pytest.raises(InputError, match=r"^start .*outside the map"):
-        plan_path(grid, (-0.5, 0.5), (2.5, 0.5), 0.15)
+        GridNavigator(grid, 0.15).plan((-0.5, 0.5), (2.5, 0.5))
     with pytest.raises(InputError, match=r"^goal .*too close to an obstacle"):
-        plan_path(grid, (0.5, 0.5), (1.7, 0.5), 0.15)
+        GridNavigator(grid, 0.15).plan((0.5, 0.5), (1.7, 0.5))
     closed = _grid(lambda X, Y: (X > 1.5) & (X < 1.6), n=60)
-    assert plan_path(closed, (0.5, 0.5), (2.5, 0.5), 0.15) is None
+    assert GridNavigator(closed, 0.15).plan((0.5, 0.5), (2.5, 0.5)) is None
     unknown = OccupancyGrid(np.where(grid.data == 0, -1, grid.data).astype(np.int8), RES)
     with pytest.raises(InputError, match="unknown"):
-        plan_path(unknown, (0.5, 0.5), (2.5, 0.5), 0.15)
-    assert plan_path(unknown, (0.5, 0.5), (2.5, 0.5), 0.15, allow_unknown=True) is not None
+        GridNavigator(unknown, 0.15).plan((0.5, 0.5), (2.5, 0.5))
+    assert GridNavigator(unknown, 0.15, allow_unknown=True).plan((0.5, 0.5), (2.5, 0.5)) is not None
 
 
 def test_grid_travel_matches_planned_length():

@@ -43,7 +43,7 @@ def blocked_by_inflation(
 
     True off the map, on an obstacle cell, on an unknown cell (unless ``allow_unknown``) and on a
     cell whose centre lies within ``radius`` [m] of an obstacle cell centre: exactly the cells the
-    planner of :func:`plan_path` cannot enter.
+    planner of :meth:`GridNavigator.plan` cannot enter.
     """
     pts = np.asarray(xy, dtype=float).reshape(-1, 2)
     v = grid.value_at(pts)
@@ -113,6 +113,9 @@ class GridNavigator:
     def plan(self, start_xy: ArrayLike, goal_xy: ArrayLike) -> FloatArray | None:
         """The shortest 8-connected path from start to goal, or None when the goal cannot be reached.
 
+        None rather than an error, because the pickup loop tries the next candidate; the scanned
+        scene's planner, :func:`baseplace.navigation.planners.plan_path`, raises instead.
+
         Args:
             start_xy: (2,) start position in the map frame [m].
             goal_xy: (2,) goal position [m].
@@ -167,17 +170,6 @@ class GridNavigator:
         return self.plan((start.x, start.y), (goal.x, goal.y))
 
 
-def plan_path(
-    grid: OccupancyGrid, start_xy: ArrayLike, goal_xy: ArrayLike, radius: float, allow_unknown: bool = False
-) -> FloatArray | None:
-    """Shortest path for a disc robot of ``radius`` [m] on ``grid``: (N, 2) waypoints [m] or None.
-
-    See :meth:`GridNavigator.plan`; raises :class:`InputError` for a start or goal the robot
-    cannot stand on.
-    """
-    return GridNavigator(grid, radius, allow_unknown).plan(start_xy, goal_xy)
-
-
 def path_length(path: ArrayLike) -> float:
     """Length [m] of a polyline (N, 2) or (N, 3): the sum of its segment lengths."""
     p = np.asarray(path, dtype=float)
@@ -186,4 +178,4 @@ def path_length(path: ArrayLike) -> float:
     return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
 
 
-__all__ = ["OBSTACLE", "GridNavigator", "blocked_by_inflation", "path_length", "plan_path"]
+__all__ = ["OBSTACLE", "GridNavigator", "blocked_by_inflation", "path_length"]
