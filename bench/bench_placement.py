@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from baseplace.geometry.poses import pose_from_xyz_rpy
-from baseplace.placement.pipeline import SEED_000_CHECKS, PlaceSettings, place
+from baseplace.placement.pipeline import POSE_ONLY_CHECKS, PlaceSettings, place
 from baseplace.reachability.build import BuildSettings, build_map
 from baseplace.reachability.storage import load_map
 from baseplace.robots.model import Robot
@@ -43,11 +43,11 @@ def main() -> None:
     result: dict[str, object] = {"scene": "flat, box with objects, sigma 25 mm", "target": target[:3, 3].round(3).tolist(),
                                  "queries": args.queries, "tries": args.tries}  # fmt: skip
     for strategy in ("MR", "TO", "MRTO", "orm", "random", "grid"):
-        place(robot, rmap, points, target, PlaceSettings(strategy=strategy, tries=5, **SEED_000_CHECKS), np.random.default_rng(99),
+        place(robot, rmap, points, target, PlaceSettings(strategy=strategy, tries=5, **POSE_ONLY_CHECKS), np.random.default_rng(99),
               terrain=terrain)  # warm-up: compile, lookup tables  # fmt: skip
         t_rm, t_a, t_s, ok, failures = [], [], [], 0, {}
         for q in range(args.queries):
-            res = place(robot, rmap, points, target, PlaceSettings(strategy=strategy, tries=args.tries, **SEED_000_CHECKS),
+            res = place(robot, rmap, points, target, PlaceSettings(strategy=strategy, tries=args.tries, **POSE_ONLY_CHECKS),
                         np.random.default_rng(q), terrain=terrain)  # fmt: skip
             t_rm.append(res.timings_ms["osrm"])
             t_a.append(res.timings_ms["query"])

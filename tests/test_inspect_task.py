@@ -15,7 +15,7 @@ from baseplace.placement.surface_map import build_surface_map
 from baseplace.reachability.build import BuildSettings, build_map
 from baseplace.terrain.polygons import footprint_in_world, footprint_outline
 from baseplace_experiments.inspect_task import (
-    SEED002_TABLE,
+    INSPECT_TABLE,
     ReachCheck,
     TaskSettings,
     place_objects,
@@ -32,7 +32,7 @@ def pr2_maps(pr2):
 
 @pytest.fixture(scope="module")
 def table(pr2, pr2_maps):
-    return build_surface_map(pr2, pr2_maps, *SEED002_TABLE, resolution=0.05, orientations=16, combine="any")
+    return build_surface_map(pr2, pr2_maps, *INSPECT_TABLE, resolution=0.05, orientations=16, combine="any")
 
 
 def _tcp_in_world(robot, arm, q, pose: BasePose) -> np.ndarray:

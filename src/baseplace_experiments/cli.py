@@ -150,7 +150,7 @@ def cmd_experiment_segmentation(args: argparse.Namespace) -> int:
         for alg, o in run["overall"].items():
             lines.append(f"overall {alg}: {100 * o['cell_accuracy']:.2f}% cells, {o['mean_normal_error_deg']:.3f}° "
                          f"mean normal error, {o['missed_planes']} planes missed ({o['scenes']} scenes)")  # fmt: skip
-    lines.append(f"seed 000 VI: {100 * PAPER['cell_accuracy']:.1f}% cells, {PAPER['mean_normal_error_deg']}° "
+    lines.append(f"Birr et al. VI: {100 * PAPER['cell_accuracy']:.1f}% cells, {PAPER['mean_normal_error_deg']}° "
                  "(noise on the height map)")  # fmt: skip
     result = _write_results(results, result, clock, lines, seeds=SEEDS, split=split, used_seeds=[seed],
                             protocol=(segmentation_eval.__doc__ or "").strip())  # fmt: skip
@@ -182,10 +182,10 @@ def cmd_experiment_navigation(args: argparse.Namespace) -> int:
 
 
 def cmd_experiment_inspect_table(args: argparse.Namespace) -> int:
-    """Seed 002's inspect-every-object task: predefined vs sampled poses with a PDDL planner."""
+    """Hertle and Nebel's inspect-every-object task (IV-B): predefined vs sampled poses with a PDDL planner."""
     from baseplace.placement.surface_map import build_surface_map
     from baseplace.robots.model import Robot
-    from baseplace_experiments.inspect_task import SEED002_TABLE, run_inspect_experiment
+    from baseplace_experiments.inspect_task import INSPECT_TABLE, run_inspect_experiment
     from baseplace_experiments.results import RunClock
 
     clock = RunClock()
@@ -195,7 +195,7 @@ def cmd_experiment_inspect_table(args: argparse.Namespace) -> int:
     results = _results_path(args.results)
     robot = Robot("pr2")
     rmaps = {arm: _default_map(args, robot, arm) for arm in ("left", "right")}
-    smap = build_surface_map(robot, rmaps, *SEED002_TABLE, combine="any")
+    smap = build_surface_map(robot, rmaps, *INSPECT_TABLE, combine="any")
     with _Progress(args, 5 * len(counts) * args.runs, "inspect-table experiment", "runs") as bar:
         result = run_inspect_experiment(
             robot, rmaps, smap, tuple(counts), args.runs, args.seed, progress=bar.step
@@ -212,7 +212,7 @@ def cmd_experiment_inspect_table(args: argparse.Namespace) -> int:
 
 
 def cmd_experiment_table_grid(args: argparse.Namespace) -> int:
-    """Seed 004's table-grid experiment: fixed pose vs radial vs IRM-verified placements."""
+    """Saini et al.'s table-grid experiment (section 4): fixed pose vs radial vs IRM-verified placements."""
     from baseplace.reachability.storage import load_map
     from baseplace.robots.model import Robot
     from baseplace_experiments import table_grid
@@ -257,7 +257,7 @@ def cmd_experiment_table_grid(args: argparse.Namespace) -> int:
                      f"{cell.get('feasible', '-')!s:>8}")  # fmt: skip
     totals = result["totals"]
     lines.append("success rate: " + ", ".join(f"{m} {totals[m]['rate']:.1f}%" for m in ("radial", "irm", "baseline"))
-                 + " (seed 004 with an HSR: proposed 81.7%, baseline 40%)")  # fmt: skip
+                 + " (Saini et al. with an HSR: proposed 81.7%, baseline 40%)")  # fmt: skip
     result = _write_results(results, result, clock, lines, seeds=seeds, split=split, used_seeds=[seed],
                             protocol=(table_grid.__doc__ or "").strip())  # fmt: skip
     _emit(args, result, "\n".join(lines))
@@ -265,7 +265,7 @@ def cmd_experiment_table_grid(args: argparse.Namespace) -> int:
 
 
 def cmd_experiment_osrm(args: argparse.Namespace) -> int:
-    """Seed 000 Tables I and II on generated scenes (protocol: baseplace_experiments.osrm_experiment)."""
+    """Birr et al.'s Tables I and II on generated scenes (protocol: baseplace_experiments.osrm_experiment)."""
     from baseplace.reachability.storage import load_map
     from baseplace.robots.model import Robot
     from baseplace_experiments import osrm_experiment
@@ -333,15 +333,19 @@ def add_experiment_commands(sub: Any) -> None:
         return p
 
     experiment = sub.add_parser(
-        "experiment", help="reproduce the seeds' experiments", description="experiments"
+        "experiment",
+        help="reproduce the papers' experiments on generated scenes",
+        description="The papers' experiments: Birr et al., oriented surface reachability maps (segmentation, "
+        "navigation, osrm); Hertle and Nebel, inverse surface reachability maps (inspect-table); Saini et al., "
+        "robot placement for object grasping (table-grid).",
     )
     exp_sub = experiment.add_subparsers(
         dest="experiment", metavar="EXPERIMENT", parser_class=type(experiment)
     )
     exp_sub.required = True
-    p = command("segmentation", "segmentation accuracy, baseline vs robust (seed 000 VI)",
+    p = command("segmentation", "segmentation accuracy, baseline vs robust (Birr et al. VI)",
                 cmd_experiment_segmentation, exp_sub,
-                "Scenes per size class x {2, 4} planes, sigma 25 mm on the height map (seed 000 VI) or on "
+                "Scenes per size class x {2, 4} planes, sigma 25 mm on the height map (Birr et al. VI) or on "
                 "the cloud; share of cells on their true plane and normal error.")  # fmt: skip
     p.add_argument("--scenes", type=int, default=10, help="scenes per class and plane count (default 10)")
     p.add_argument("--noise", default="heightmap,cloud",
@@ -351,7 +355,7 @@ def add_experiment_commands(sub: Any) -> None:
     p.add_argument("--seed", type=_nonneg_int, default=None, help="random seed (default: the split's)")
     p.add_argument("--results", default=None, help="write the results file (JSON with provenance) here")
 
-    p = command("table-grid", "fixed pose vs radial vs IRM-verified on a 3 x 4 table grid (seed 004)",
+    p = command("table-grid", "fixed pose vs radial vs IRM-verified on a 3 x 4 table grid (Saini et al.)",
                 cmd_experiment_table_grid, exp_sub,
                 "The seed's 0.74 x 0.8 x 1.8 m table, 20 cm cells, object-pose noise; the methods see a noisy "
                 "cloud and the grid; success = a collision-free IK grasp of the true bottle exists from the chosen "
@@ -369,12 +373,12 @@ def add_experiment_commands(sub: Any) -> None:
                    help="radial method's surface margin [m] (default: the value chosen on the dev seeds)")  # fmt: skip
     p.add_argument("--top-below", type=float, default=None,
                    help="IRM method's top-down grasps this far below the top [m] (default: chosen on dev)")  # fmt: skip
-    p.add_argument("--out", default=None, help="PNG of the success heat maps (as seed 004 Fig. 4)")
+    p.add_argument("--out", default=None, help="PNG of the success heat maps (as Saini et al. Fig. 4)")
     p.add_argument("--results", default=None, help="write the results file (JSON with provenance) here")
 
-    p = command("inspect-table", "predefined vs sampled poses for a PDDL inspect task (seed 002)",
+    p = command("inspect-table", "predefined vs sampled poses for a PDDL inspect task (Hertle and Nebel)",
                 cmd_experiment_inspect_table, exp_sub,
-                "PR2 inspects every object on seed 002's table (1.4 x 0.65 m); Fast Downward plans with 1-4 "
+                "PR2 inspects every object on Hertle and Nebel's table (1.4 x 0.65 m); Fast Downward plans with 1-4 "
                 "predefined poses or with poses the surface map's generator adds while planning. Needs "
                 "pip install 'baseplace[planning]'.")  # fmt: skip
     p.add_argument("--objects", type=_int_list, default=[1, 2, 3, 4],
@@ -383,7 +387,7 @@ def add_experiment_commands(sub: Any) -> None:
     p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
     p.add_argument("--results", default=None, help="write the results file (JSON with provenance) here")
 
-    p = command("navigation", "RRTConnect vs region-graph paths on multi-level scenes (seed 000 V)",
+    p = command("navigation", "RRTConnect vs region-graph paths on multi-level scenes (Birr et al. V)",
                 cmd_experiment_navigation, exp_sub,
                 "{small, medium, large} x {2, 4} plane scenes; success, path length, time and ledge crossings "
                 "checked against the true height field.")  # fmt: skip
@@ -392,7 +396,7 @@ def add_experiment_commands(sub: Any) -> None:
     p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
     p.add_argument("--results", default=None, help="write the results file (JSON with provenance) here")
 
-    p = command("osrm", "placement success and timing, seed 000 Tables I and II", cmd_experiment_osrm, exp_sub,
+    p = command("osrm", "placement success and timing, Birr et al. Tables I and II", cmd_experiment_osrm, exp_sub,
                 "Flat, {small, medium, large} x {2, 4} plane and incline-only scenes with a tray of objects; "
                 "success at N = 1, 3, 10, 100 over grasps reachable by IK from some valid pose; only the hand "
                 "may touch the grasped object.")  # fmt: skip

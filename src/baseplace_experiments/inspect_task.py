@@ -47,7 +47,7 @@ from baseplace.terrain.polygons import footprint_outline
 from baseplace.world.environment import Environment
 
 MODES = ("predefined", "sampled")
-SEED002_TABLE = ("0,0;1.4,0;1.4,0.65;0,0.65", 0.74)
+INSPECT_TABLE = ("0,0;1.4,0;1.4,0.65;0,0.65", 0.74)
 """Seed 002's table: polygon [m] and height [m]."""
 PAPER_TABLE1 = {  # seed 002 Table I: total execution time [min] on a PR2 per number of objects; None: unsolved
     "1 pose": [7.9, None, None, None], "2 poses": [8.6, 19.5, None, None],

@@ -40,7 +40,7 @@ from shapely.geometry import Polygon
 from baseplace.errors import BaseplaceError
 from baseplace.geometry.poses import FloatArray, invert_transforms, pose_from_xyz_rpy
 from baseplace.geometry.surface_poses import plane_base_poses
-from baseplace.placement.pipeline import SEED_000_CHECKS, PlaceSettings, place
+from baseplace.placement.pipeline import POSE_ONLY_CHECKS, PlaceSettings, place
 from baseplace.reachability.rmap import ReachabilityMap
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Robot
@@ -374,7 +374,7 @@ def osrm_scene(
         for name, st in stats.items():
             st.n += 1
             try:
-                res = place(robot, rmap, points, grasp, PlaceSettings(strategy=name, tries=s.tries, **SEED_000_CHECKS),
+                res = place(robot, rmap, points, grasp, PlaceSettings(strategy=name, tries=s.tries, **POSE_ONLY_CHECKS),
                             np.random.default_rng([s.seed, class_index, k, reachable, len(name)]), terrain=terrain,
                             grasped=obj)  # fmt: skip
             except BaseplaceError as exc:  # e.g. no region in reach: a failure of that query

@@ -38,9 +38,10 @@ from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import SUPPORT_DIST, Environment, contact_groups, obstacle_voxels
 from baseplace.world.grasped_object import GraspedObject, find_grasped_object
 
-SEED_000_CHECKS: dict[str, Any] = {"motion": None, "robustness": RobustnessSettings(samples=0)}
-"""PlaceSettings overrides for seed 000's verification alone (IK + collision at the exact pose),
-as its experiments measure it: ``PlaceSettings(..., **SEED_000_CHECKS)``."""
+POSE_ONLY_CHECKS: dict[str, Any] = {"motion": None, "robustness": RobustnessSettings(samples=0)}
+"""PlaceSettings overrides that check the placement's pose alone (IK + collision at the exact pose,
+no reaching motion, no robustness score), as seed 000's experiments measure it:
+``PlaceSettings(..., **POSE_ONLY_CHECKS)``."""
 
 
 @dataclass(frozen=True)
