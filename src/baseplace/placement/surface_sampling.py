@@ -54,6 +54,11 @@ class SampledPose:
     reachability: float
     score: float
 
+    @property
+    def pose(self) -> BasePose:
+        """The pose as the library's base-pose type (``yaw`` = ``theta``)."""
+        return BasePose(self.x, self.y, self.theta)
+
 
 def discount(
     candidates: FloatArray, previous: FloatArray, scales: tuple[float, ...] = DISCOUNT_SCALES

@@ -16,7 +16,7 @@ from typing import Literal
 import numpy as np
 from shapely.geometry import MultiPolygon, Polygon
 
-from baseplace.geometry.poses import FloatArray, invert_transforms
+from baseplace.geometry.poses import BasePose, FloatArray, invert_transforms
 from baseplace.placement.motion import MotionChecker, ReachingMotion
 from baseplace.placement.robustness import Robustness
 from baseplace.robots.ik import IKSolver
@@ -69,6 +69,11 @@ class Placement:
     def yaw(self) -> float:
         """Heading of the base x axis projected on the xy plane [rad]."""
         return float(np.arctan2(self.T_world_base[1, 0], self.T_world_base[0, 0]))
+
+    @property
+    def pose(self) -> BasePose:
+        """The pose projected on the floor (x, y, yaw), the type every base pose converts to."""
+        return BasePose.from_matrix(self.T_world_base)
 
 
 @dataclass

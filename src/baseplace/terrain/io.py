@@ -16,7 +16,7 @@ import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import BinaryIO
+from typing import Any, BinaryIO
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -71,6 +71,11 @@ class Cloud:
 
     def __len__(self) -> int:
         return len(self.points)
+
+    def __array__(self, dtype: Any = None, copy: bool | None = None) -> FloatArray:
+        """The (N, 3) points, so that every function taking points (ArrayLike) takes a Cloud too."""
+        points = self.points if dtype is None else self.points.astype(dtype, copy=False)
+        return points.copy() if copy else points
 
     def transformed(self, T_world_sensor: ArrayLike) -> Cloud:
         """The same cloud in the world frame: ``p_world = T_world_sensor @ p_sensor``.
