@@ -28,3 +28,15 @@ def test_every_public_name_imports(module):
 def test_errors_share_one_root():
     assert issubclass(baseplace.InputError, baseplace.BaseplaceError)
     assert issubclass(baseplace.NothingFoundError, baseplace.BaseplaceError)
+
+
+def test_the_library_never_imports_the_experiments():
+    """Experiments import the library, never the reverse; only the CLI registers their commands."""
+    from pathlib import Path
+
+    src = Path(baseplace.__file__).parent
+    importers = sorted(
+        str(p.relative_to(src)) for p in src.rglob("*.py") if "baseplace_experiments" in p.read_text()
+    )
+    assert importers == ["cli.py"]
+    assert not list(src.glob("sim/*experiment*.py")) and not (src / "sim" / "results.py").exists()
