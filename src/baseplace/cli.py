@@ -409,7 +409,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 
 def cmd_view(args: argparse.Namespace) -> int:
-    """Serve the interactive 3D viewer of a result (the demo's by default) until Ctrl-C."""
+    """Serve the interactive 3D viewer of any result (the demo's by default) until Ctrl-C."""
     from baseplace.viz.viewer import serve
 
     if not (0 <= args.port <= 65535):
@@ -1668,10 +1668,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="scene seed (default 2026, the held-out seed the reported tables use)")  # fmt: skip
     p.add_argument("--out", default=None, help="PNG of the failure reasons (Fig. 5)")
 
-    p = command("view", "interactive 3D viewer of a result in the browser (viser)", cmd_view)
+    p = command("view", "interactive 3D viewer of any result in the browser (viser)", cmd_view)
     p.add_argument(
-        "result", nargs="?", default=None, help="result JSON with view data (default: out/demo.json)"
-    )
+        "result", nargs="?", default=None,
+        help="the --json of place, candidates, surface-map, surface-sample, navigate, segment or demo, "
+        "with the inputs it names (default: out/demo.json)",
+    )  # fmt: skip
     p.add_argument("--port", type=int, default=8080, help="port (default 8080; 0: any free port)")
     p.add_argument(
         "--host", default="127.0.0.1", help="address to bind (default 127.0.0.1: this machine only)"
