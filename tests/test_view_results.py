@@ -105,6 +105,15 @@ def test_every_kind_is_read_with_its_inputs(results):
     obj = json.loads(results["candidates"].read_text())
     assert len(cand.candidates) == len(obj["candidates"]) and len(cand.rejected) == len(obj["rejected"])
     assert inputs.grid is not None and cand.object_xyz is not None and cand.robots[0].motion is not None
+    # an up vector for --transform and a --floor are applied as the command applied them
+    (results["place"].parent / "up.json").write_text(
+        json.dumps({**json.loads(results["place"].read_text()), "inputs": {
+            "cloud": str(results["place"].parent / "flat.ply"), "transform": "0 -1 0"}, "floor": -0.5})
+    )  # fmt: skip
+    turned, inputs_up, _ = open_view(results["place"].parent / "up.json")
+    assert turned.inputs.floor == -0.5 and turned.inputs.clouds[0][1] == "0 -1 0"
+    floor = np.abs(inputs_up.points[:, 2] + 0.5) < 1e-6
+    assert floor.any() and np.ptp(inputs_up.points[~floor][:, 1]) < 0.3  # the flat scene now stands upright
     seg, _, _ = open_view(results["segment"])
     assert len(seg.regions) == len(json.loads(results["segment"].read_text())["regions"]) >= 2
     assert len(seg.traversable) >= 1
@@ -224,6 +233,10 @@ def test_bad_results_and_missing_inputs_are_one_line_errors(results, tmp_path):
     fails({**place, "inputs": {"cloud": "gone/scan.pcd"}}, "written by `baseplace place`", "cloud gone/scan.pcd",
           "--cloud", "does not exist")  # fmt: skip
     fails({k: v for k, v in place.items() if k != "inputs"}, "baseplace place result", "names no cloud")
+    fails({**place, "inputs": {"bag": "run.mcap", "cloud_topic": ["/head/points"]}}, "ROS recording run.mcap",
+          "--cloud")  # fmt: skip
+    fails({**place, "inputs": {**place["inputs"], "transform": "T_world_cam.txt"}}, "transform T_world_cam.txt",
+          "--transform")  # fmt: skip
     bad = json.loads(json.dumps(place))
     bad["placements"][0]["base_pose"] = [[1, 0], [0, 1]]
     fails(bad, "placement 1 base_pose", r"shape (4, 4)")

@@ -109,12 +109,14 @@ class Inputs:
         occupancy: the occupancy grid's map_server YAML, if any.
         surface_map: the surface map file (``surface-map``'s output), if any.
         view_data: the demo's view data ``.npz``, if any.
+        floor: height [m] of the floor plane added under a cloud that shows none (``--floor``).
     """
 
     clouds: list[tuple[Path, str | None]] = field(default_factory=list)
     occupancy: Path | None = None
     surface_map: Path | None = None
     view_data: Path | None = None
+    floor: float | None = None
 
 
 @dataclass(frozen=True)
@@ -302,7 +304,7 @@ def _inputs(obj: dict[str, Any]) -> dict[str, Any]:
     """The echoed inputs, and the per-command top-level keys that named them before."""
     merged: dict[str, Any] = {}
     for key in ("cloud", "clouds", "transform", "transforms", "occupancy", "grid", "map", "surface_map",
-                "view_data"):  # fmt: skip
+                "view_data", "floor", "bag"):  # fmt: skip
         if key in obj:
             merged[key] = obj[key]
     echoed = obj.get("inputs")
@@ -340,17 +342,35 @@ class _Resolver:
         )
 
 
+def _is_vector(text: str) -> bool:
+    """An up vector "ux uy uz" rather than a transform file's name."""
+    try:
+        return len([float(v) for v in text.replace(",", " ").split()]) == 3
+    except ValueError:
+        return False
+
+
+def _is_recording(name: str) -> bool:
+    """A ROS recording: a bag or MCAP file, or a rosbag2 directory."""
+    return name.endswith((".bag", ".mcap", ".db3")) or Path(name).is_dir()
+
+
 def _resolve_inputs(obj: dict[str, Any], source: Path, kind: str) -> Inputs:
     given = _inputs(obj)
     resolve = _Resolver(source, kind)
     clouds_named = _paths_of(given.get("clouds", given.get("cloud")))
-    clouds_named = [c for c in clouds_named if not c.endswith((".bag", ".mcap", ".db3")) and Path(c).suffix]
+    recordings = [c for c in [*clouds_named, *_paths_of(given.get("bag"))] if _is_recording(c)]
+    if recordings:
+        raise InputError(
+            f"{source} was written by `{COMMANDS[kind]}` from the ROS recording {recordings[0]} (--bag); the "
+            f"viewer reads clouds and grids from files: export them (.pcd, map_server .yaml) and rerun with --cloud"
+        )
     transforms = given.get("transforms", given.get("transform"))
     transforms = transforms if isinstance(transforms, list) else [transforms] * len(clouds_named)
     clouds = []
     for name, spec in zip(clouds_named, transforms + [None] * len(clouds_named), strict=False):
         spec = spec if isinstance(spec, str) else None
-        if spec is not None and Path(spec).suffix and not Path(spec).exists():
+        if spec is not None and not _is_vector(spec):
             spec = str(resolve(spec, "transform", "--transform"))
         clouds.append((resolve(name, "cloud", "--cloud"), spec))
     occupancy = _paths_of(given.get("occupancy", given.get("grid")))
@@ -367,6 +387,7 @@ def _resolve_inputs(obj: dict[str, Any], source: Path, kind: str) -> Inputs:
         surface_map=resolve(smap[0], "surface map", "--map" if kind == "surface_samples" else "--out")
         if smap else None,
         view_data=resolve(view_data[0], "view data", "view_data") if view_data else None,
+        floor=float(given["floor"]) if isinstance(given.get("floor"), (int, float)) else None,
     )  # fmt: skip
 
 

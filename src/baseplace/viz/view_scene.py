@@ -100,6 +100,10 @@ def load_inputs(view: ResultView, robot_name: str, segment: bool) -> SceneInputs
             cloud = load_cloud(path)
             parts.append(cloud.transformed(load_transform(spec)).points if spec is not None else cloud.points)
         full = np.concatenate(parts).astype(np.float64)
+        if view.inputs.floor is not None:
+            from baseplace.placement.pipeline import with_floor
+
+            full = with_floor(full, view.inputs.floor)
         if segment:
             from baseplace.terrain.pipeline import terrain_from_points
 

@@ -408,7 +408,7 @@ def _camera(server: viser.ViserServer, view: ResultView, inputs: SceneInputs, la
         else:
             pts = np.zeros((1, 3))
     centre = (pts.min(axis=0) + pts.max(axis=0)) / 2
-    size = max(float(np.ptp(pts[:, :2], axis=0).max()) if len(pts) > 1 else 3.0, 3.0)
+    size = max(float(np.ptp(pts[:, :2], axis=0).max()) if len(pts) > 1 else 3.0, 2.2 if focus else 3.0)
     look = centre if not focus else 0.65 * centre + 0.35 * focus[0]
     direction = np.array([-0.55, -0.75, 0.65])
     if view.paths and len(view.paths[0]) >= 2 and focus:
