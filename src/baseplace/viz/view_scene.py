@@ -59,6 +59,8 @@ TCP_RGB = (220, 40, 200)
 GHOST_RGBA = (0.3, 0.62, 1.0, 0.35)
 OBJECT_RGB = (0, 200, 210)
 SURFACE_RGB = (150, 110, 230)
+MARKER_LIFT = 0.05
+"""Candidate and rejected positions are drawn this far above the ground [m]."""
 MOTION_STEPS = 8
 """Straight joint-space segments between waypoints are drawn and played in this many steps."""
 
@@ -444,7 +446,11 @@ def build_scene(
 
     planar = view.kind in ("candidates", "surface_samples", "navigate")  # poses on the ground, no z
     if len(view.candidates):
-        z = ground(inputs, view.candidates[:, :2]) + 0.02 if planar else np.full(len(view.candidates), 0.02)
+        z = (
+            ground(inputs, view.candidates[:, :2]) + MARKER_LIFT
+            if planar
+            else np.full(len(view.candidates), MARKER_LIFT)
+        )
         rank = np.linspace(1.0, 0.45, len(view.candidates))[:, None]
         rgb = np.round(np.array(CANDIDATE_RGB) * rank + 255 * (1 - rank) * np.array([0.0, 0.35, 0.0])).astype(
             np.uint8
@@ -456,7 +462,7 @@ def build_scene(
                                   colors=np.repeat(rgb[:, None], 2, axis=1), thickness=3.0, thickness_units="screen"),
         ]  # fmt: skip
     if len(view.rejected):
-        z = ground(inputs, view.rejected) + 0.02
+        z = ground(inputs, view.rejected) + MARKER_LIFT
         layers["rejected"] = api.add_point_cloud(
             "/rejected",
             np.c_[view.rejected, z].astype(np.float32),
