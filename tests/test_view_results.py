@@ -253,3 +253,20 @@ def test_bad_results_and_missing_inputs_are_one_line_errors(results, tmp_path):
     fails({**cand, "robot": None}, "names no robot")
     proc = run_cli("view", str(tmp_path / "nothing.json"))
     assert proc.returncode == 2 and "does not exist" in proc.stderr and "--json" in proc.stderr
+
+
+def test_a_robot_file_is_read_from_the_result(results, tmp_path):
+    """A robot given as a file (--robot FILE) is drawn from that file, found as written or next to the JSON."""
+    spec = ROOT / "tests" / "data" / "planar3.toml"
+    obj = json.loads(results["candidates"].read_text())
+    (tmp_path / "planar3.toml").write_text(spec.read_text())
+    (tmp_path / "r.json").write_text(
+        json.dumps({**obj, "robot": {"name": "planar3"}, "inputs": {"robot": "planar3.toml"}})
+    )
+    view = read_result(tmp_path / "r.json")
+    assert view.robot == str(tmp_path / "planar3.toml")
+    (tmp_path / "r.json").write_text(json.dumps({**obj, "inputs": {"robot": "robots/arm.toml"}}))
+    with pytest.raises(
+        InputError, match=r"from the robot file robots/arm.toml \(--robot\), which does not exist"
+    ):
+        read_result(tmp_path / "r.json")

@@ -392,13 +392,17 @@ def _resolve_inputs(obj: dict[str, Any], source: Path, kind: str) -> Inputs:
 
 
 def _robot(obj: dict[str, Any]) -> tuple[str | None, str | None]:
-    """(robot name or file, arm) from a robot string or object."""
+    """(robot name or robot file, arm): the robot file the command read (``--robot FILE``), else the name."""
     robot = obj.get("robot")
     arm = obj.get("arm")
+    echoed = obj.get("inputs", {}).get("robot") if isinstance(obj.get("inputs"), dict) else None
     if isinstance(robot, dict):
         arm = robot.get("arm", arm)
-        name = robot.get("file") or robot.get("path") or robot.get("name")
-        robot = name
+        robot = next(
+            (robot[k] for k in ("file", "path", "source", "name") if isinstance(robot.get(k), str)), None
+        )
+    if isinstance(echoed, str) and echoed:
+        robot = echoed
     return (robot if isinstance(robot, str) and robot else None), (arm if isinstance(arm, str) else None)
 
 
@@ -456,6 +460,8 @@ def read_result(path: str | Path, arm_joints: tuple[str, ...] = ()) -> ResultVie
     else:
         note = ""
     robot, arm = _robot(obj)
+    if robot is not None and (Path(robot).suffix or "/" in robot):  # a robot file, not a built-in name
+        robot = str(_Resolver(path, kind)(robot, "robot file", "--robot"))
     inputs = _resolve_inputs(obj, path, kind)
     robots: list[RobotPose] = []
     candidates = np.zeros((0, 3))
