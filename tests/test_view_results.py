@@ -270,3 +270,23 @@ def test_a_robot_file_is_read_from_the_result(results, tmp_path):
         InputError, match=r"from the robot file robots/arm.toml \(--robot\), which does not exist"
     ):
         read_result(tmp_path / "r.json")
+
+
+def test_navigation_path_and_robot_stand_on_the_scanned_ground(results):
+    """The robot at the goal and the path are drawn on the surfaces of the generated scene (its ground truth)."""
+    from test_navigation import _ramp_scene
+
+    truth = _ramp_scene(with_object=True)
+    server = serve(results["navigate"], port=0, block=False)
+    try:
+        layers = server.baseplace_layers
+        segments = np.asarray(layers["paths"][0].points, dtype=np.float64).reshape(-1, 3)
+    finally:
+        server.stop()
+    goal = layers["robot_pose"][:3, 3]
+    assert goal[:2] == pytest.approx([1.7, 0.6], abs=1e-3)
+    assert (
+        goal[2] == pytest.approx(float(truth.height(goal[None, :2])[0]), abs=0.03) and goal[2] > 0.3
+    )  # up the ramp
+    lift = segments[:, 2] - truth.height(segments[:, :2])
+    assert np.all(np.abs(lift - 0.08) < 0.04), lift.round(3)  # PATH_LIFT above the true surface everywhere
