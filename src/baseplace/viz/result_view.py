@@ -129,8 +129,9 @@ class ResultView:
         robot: robot name or robot-file path (what ``Robot()`` takes), if the result names one.
         arm: the arm that reaches, if named.
         inputs: the input files it names.
-        robots: robot poses; the first is drawn with its meshes (and motion), the others as frames.
-        candidates: (K, 3) other ranked base poses (x, y, yaw) drawn as arrows, best first.
+        robots: robot poses (placements, candidates best first, ...): the viewer draws the robot and
+            its motion at one of them, the first unless picked.
+        candidates: (K, 3) ranked base poses (x, y, yaw) drawn as arrows, best first.
         rejected: (R, 2) rejected base positions (x, y) [m].
         paths: base paths, each (N, 3) (x, y, yaw) [m, rad].
         targets: (4, 4) TCP target poses in the world.
@@ -491,8 +492,7 @@ def read_result(path: str | Path, arm_joints: tuple[str, ...] = ()) -> ResultVie
         rows = obj.get("candidates", [])
         if not isinstance(rows, list) or not all(isinstance(c, dict) for c in rows):
             raise r.fail("candidates must be a list of objects")
-        if rows:
-            robots.append(_robot_pose(rows[0], r, "candidate 1", arm_joints))
+        robots += [_robot_pose(c, r, f"candidate {i + 1}", arm_joints) for i, c in enumerate(rows)]
         poses = [r.pose(c, f"candidate {i + 1}") for i, c in enumerate(rows)]
         candidates = np.array([[T[0, 3], T[1, 3], math.atan2(T[1, 0], T[0, 0])] for T in poses]).reshape(
             -1, 3

@@ -474,11 +474,11 @@ def build_scene(
     robot_poses = [
         rp.T_world_base.copy() if not planar else _on_ground(rp.T_world_base, inputs) for rp in view.robots
     ]
-    for i, T in enumerate(robot_poses[1:], start=1):
+    for i, T in enumerate(robot_poses[1:] if view.kind == "place" else [], start=1):
         layers[f"placement_{i}"] = api.add_frame(f"/placements/placement_{i}", wxyz=_wxyz(T), position=T[:3, 3],
                                                  axes_length=0.3, axes_radius=0.015)  # fmt: skip
     if view.robots and robot is not None:
-        _draw_robot(server, view, robot_poses[0], load_robot_model(robot), layers)
+        layers["robot_layer"] = RobotLayer(server, view, robot_poses, load_robot_model(robot), layers)
     return layers
 
 
@@ -488,43 +488,116 @@ def _on_ground(T: FloatArray, inputs: SceneInputs) -> FloatArray:
     return out
 
 
-def _draw_robot(server: viser.ViserServer, view: ResultView, T: FloatArray, model: RobotModel,
-                layers: dict[str, Any]) -> None:  # fmt: skip
-    """The first robot with its meshes; its reaching motion as the TCP's path, copies and a player."""
-    first = view.robots[0]
-    final = model.configuration(first.joints)
-    layers["robot"], layers["urdf"] = _add_robot(server, model, T, final, "/robot")
-    layers["robot_pose"] = T
-    motion = first.motion
-    if motion is None:
-        return
-    unknown = sorted(set(motion.joint_names) - set(model.urdf.actuated_joint_names))
-    if unknown:
-        raise InputError(
-            f"{view.source}: the motion moves joints {unknown} that robot {model.spec.name!r} lacks"
+class RobotLayer:
+    """The robot with its meshes at one of the result's robot poses, and that pose's reaching motion.
+
+    A *Show* drop-down picks the placement or candidate when the result has several; the motion is
+    drawn as the TCP's path and translucent copies of the moving links at the start and pre-grasp
+    configurations, and played by a slider and a Play button (the robot starts at the grasp).
+    """
+
+    def __init__(self, server: viser.ViserServer, view: ResultView, poses: list[FloatArray], model: RobotModel,
+                 layers: dict[str, Any]) -> None:  # fmt: skip
+        self.server, self.view, self.poses, self.model, self.layers = server, view, poses, model, layers
+        for rp in view.robots:
+            if rp.motion is not None:
+                unknown = sorted(set(rp.motion.joint_names) - set(model.urdf.actuated_joint_names))
+                if unknown:
+                    raise InputError(
+                        f"{view.source}: the motion of {rp.label} moves joints {unknown} that robot "
+                        f"{model.spec.name!r} lacks"
+                    )
+        self.frame, self.urdf = _add_robot(
+            server, model, poses[0], model.configuration(view.robots[0].joints), "/robot"
         )
-    cfgs = motion_configurations(model, first.joints, motion)
-    frame = tcp_frame(model, view, motion)
-    if frame is not None:
-        tcp = model.link_poses(T, cfgs, frame)[:, :3, 3]
-        layers["tcp_points"] = tcp
-        segs = np.stack([tcp[:-1], tcp[1:]], axis=1).astype(np.float32)
-        layers["tcp_path"] = server.scene.add_line_segments("/motion/tcp_path", segs, colors=TCP_RGB, thickness=7.0,
-                                                            thickness_units="screen")  # fmt: skip
-    ghosts = []
-    moving = _moving_links(model, motion.joint_names)
-    for name, k in {"start": 0, "pregrasp": motion.pregrasp * MOTION_STEPS}.items():
-        if k < len(cfgs) - 1:
-            frame, copy = _add_robot(server, model, T, cfgs[k], f"/motion/{name}", GHOST_RGBA)
-            # only what the motion moves: a copy of the still base would tint the robot drawn in it.
-            # Mesh nodes are named by their path of links (viser's ViserUrdf keeps them in _meshes).
-            for mesh in list(getattr(copy, "_meshes", [])):
-                if not moving.intersection(mesh.name.split("/")):
-                    mesh.remove()
-            ghosts.append(frame)
-    layers["ghosts"] = ghosts
-    model.urdf.update_cfg(final)
-    _player(server, layers["urdf"], model, cfgs)
+        layers["robot"], layers["urdf"] = self.frame, self.urdf
+        self.cfgs: list[dict[str, float]] = []
+        self.motion_nodes: list[Any] = []
+        self.lock = threading.Lock()
+        self.slider: Any = None
+        self.show_motion: Any = None
+        if len(view.robots) > 1:
+            labels = tuple(rp.label for rp in view.robots)
+            pick = server.gui.add_dropdown("Show", labels, initial_value=labels[0])
+            pick.on_update(lambda _: self.show(labels.index(pick.value)))
+        if any(rp.motion is not None for rp in view.robots):
+            with server.gui.add_folder("Reaching motion"):
+                self.show_motion = server.gui.add_checkbox("Path and copies", initial_value=True)
+                self.slider = server.gui.add_slider("Step", min=0, max=1, step=1, initial_value=1)
+                play = server.gui.add_button("Play")
+            self.show_motion.on_update(lambda _: self._set_motion_visible(bool(self.show_motion.value)))
+            self.slider.on_update(lambda _: self._step(int(self.slider.value)))
+            play.on_click(lambda _: self._play())
+        self.show(0)
+
+    def show(self, i: int) -> None:
+        """Put the robot at robot pose ``i`` in its final configuration and draw that pose's motion."""
+        with self.lock:
+            rp, T = self.view.robots[i], self.poses[i]
+            T_root = self.model.T_world_root(T)
+            self.frame.wxyz, self.frame.position = _wxyz(T_root), T_root[:3, 3]
+            final = self.model.configuration(rp.joints)
+            self.urdf.update_cfg(self.model.vector(final))
+            self.layers["robot_pose"] = T
+            for node in self.motion_nodes:
+                node.remove()
+            self.motion_nodes = []
+            self.layers["ghosts"] = []
+            self.layers.pop("tcp_path", None)
+            self.layers.pop("tcp_points", None)
+            self.cfgs = (
+                [final] if rp.motion is None else motion_configurations(self.model, rp.joints, rp.motion)
+            )
+            if rp.motion is not None:
+                self._draw_motion(T, rp.motion)
+            self.model.urdf.update_cfg(final)
+        if self.slider is not None:
+            self.slider.max = max(len(self.cfgs) - 1, 1)
+            self.slider.value = len(self.cfgs) - 1
+        if self.show_motion is not None:
+            self._set_motion_visible(bool(self.show_motion.value))
+
+    def _draw_motion(self, T: FloatArray, motion: Motion) -> None:
+        scene = self.server.scene
+        frame = tcp_frame(self.model, self.view, motion)
+        if frame is not None:
+            tcp = self.model.link_poses(T, self.cfgs, frame)[:, :3, 3]
+            segs = np.stack([tcp[:-1], tcp[1:]], axis=1).astype(np.float32)
+            line = scene.add_line_segments("/motion/tcp_path", segs, colors=TCP_RGB, thickness=7.0,
+                                           thickness_units="screen")  # fmt: skip
+            self.layers["tcp_points"], self.layers["tcp_path"] = tcp, line
+            self.motion_nodes.append(line)
+        moving = _moving_links(self.model, motion.joint_names)
+        for name, k in {"start": 0, "pregrasp": motion.pregrasp * MOTION_STEPS}.items():
+            if k < len(self.cfgs) - 1:
+                root, copy = _add_robot(
+                    self.server, self.model, T, self.cfgs[k], f"/motion/{name}", GHOST_RGBA
+                )
+                # only what the motion moves: a copy of the still base would tint the robot drawn in it.
+                # Mesh nodes are named by their path of links (viser's ViserUrdf keeps them in _meshes).
+                meshes = getattr(copy, "_meshes", [])
+                for mesh in list(meshes):
+                    if not moving.intersection(mesh.name.split("/")):
+                        mesh.remove()
+                        meshes.remove(mesh)
+                self.layers["ghosts"].append(root)
+                self.motion_nodes.append(root)  # removing it removes the copy beneath it
+
+    def _set_motion_visible(self, visible: bool) -> None:
+        for node in [self.layers.get("tcp_path"), *self.layers.get("ghosts", [])]:
+            if node is not None:
+                node.visible = visible
+
+    def _step(self, k: int) -> None:
+        with self.lock:
+            if self.cfgs:
+                self.urdf.update_cfg(self.model.vector(self.cfgs[min(k, len(self.cfgs) - 1)]))
+
+    def _play(self) -> None:
+        n = len(self.cfgs)
+        for k in range(n):
+            self.slider.value = k
+            time.sleep(2.0 / max(n, 1))
 
 
 def _moving_links(model: RobotModel, joints: tuple[str, ...]) -> set[str]:
@@ -540,23 +613,3 @@ def _moving_links(model: RobotModel, joints: tuple[str, ...]) -> set[str]:
             out.add(link)
             todo.extend(children.get(link, []))
     return out
-
-
-def _player(server: viser.ViserServer, robot: Any, model: RobotModel, cfgs: list[dict[str, float]]) -> None:
-    """A slider over the motion's configurations and a Play button (the robot starts at the grasp)."""
-    folder = server.gui.add_folder("Reaching motion")
-    with folder:
-        slider = server.gui.add_slider("Step", min=0, max=len(cfgs) - 1, step=1, initial_value=len(cfgs) - 1)
-        play = server.gui.add_button("Play")
-    lock = threading.Lock()
-
-    @slider.on_update
-    def _(_: Any) -> None:
-        with lock:
-            robot.update_cfg(model.vector(cfgs[int(slider.value)]))
-
-    @play.on_click
-    def _(_: Any) -> None:
-        for k in range(len(cfgs)):
-            slider.value = k  # type: ignore[misc]
-            time.sleep(2.0 / max(len(cfgs), 1))

@@ -432,7 +432,6 @@ def _gui(server: viser.ViserServer, layers: dict[str, Any], view: ResultView, ro
         "OSRM heat map": [layers.get("heatmap")],
         "Surface map": layers.get("surface_map", []),
         "Robot": [layers.get("robot")],
-        "Reaching motion": [layers.get("tcp_path"), *layers.get("ghosts", [])],
         "Candidates": layers.get("candidates", []),
         "Rejected": [layers.get("rejected")],
         "Path": layers.get("paths", []),
