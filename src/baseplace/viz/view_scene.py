@@ -59,7 +59,7 @@ TCP_RGB = (220, 40, 200)
 GHOST_RGBA = (0.3, 0.62, 1.0, 0.35)
 OBJECT_RGB = (0, 200, 210)
 SURFACE_RGB = (150, 110, 230)
-MARKER_LIFT = 0.05
+MARKER_LIFT = 0.1
 """Candidate and rejected positions are drawn this far above the ground [m]."""
 MOTION_STEPS = 8
 """Straight joint-space segments between waypoints are drawn and played in this many steps."""
