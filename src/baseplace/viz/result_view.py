@@ -456,10 +456,10 @@ def read_result(path: str | Path, arm_joints: tuple[str, ...] = ()) -> ResultVie
         )
     kind = _kind(obj, path)
     r = _Reader(path, kind)
-    if isinstance(obj.get("error"), str):
-        note = f"{COMMANDS[kind]} failed: {obj['error']}"
-    else:
-        note = ""
+    error = obj.get("error")
+    if isinstance(error, dict):
+        error = error.get("message")
+    note = f"{COMMANDS[kind]} failed: {error}" if isinstance(error, str) and error else ""
     robot, arm = _robot(obj)
     if robot is not None and (Path(robot).suffix or "/" in robot):  # a robot file, not a built-in name
         robot = str(_Resolver(path, kind)(robot, "robot file", "--robot"))
