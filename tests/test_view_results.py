@@ -239,8 +239,18 @@ def test_bad_results_and_missing_inputs_are_one_line_errors(results, tmp_path):
     fails({"kind": "teleport"}, "unknown result kind 'teleport'", "place, candidates")
     place = json.loads(results["place"].read_text())
     fails({**place, "inputs": {"cloud": "gone/scan.pcd"}}, "written by `baseplace place`", "cloud gone/scan.pcd",
-          "--cloud", "does not exist")  # fmt: skip
-    fails({k: v for k, v in place.items() if k != "inputs"}, "baseplace place result", "names no cloud")
+          "does not exist", "give it to the viewer with --cloud FILE")  # fmt: skip
+    fails({k: v for k, v in place.items() if k != "inputs"}, "baseplace place result", "names no cloud",
+          "--cloud FILE")  # fmt: skip
+    # ... which the viewer then takes on its command line, as it takes a moved file
+    bare = tmp_path / "bare.json"
+    bare.write_text(json.dumps({k: v for k, v in place.items() if k != "inputs"}))
+    view, inputs, _ = open_view(bare, {"cloud": place["inputs"]["cloud"], "robot": None})
+    assert view.inputs.clouds[0][0] == Path(place["inputs"]["cloud"]) and len(inputs.points)
+    proc = run_cli("view", str(bare), "--cloud", str(tmp_path / "moved.ply"))
+    assert proc.returncode == 2 and "moved.ply given to the viewer (--cloud) does not exist" in proc.stderr, (
+        proc.stderr
+    )
     fails({**place, "inputs": {"bag": "run.mcap", "cloud_topic": ["/head/points"]}}, "ROS recording run.mcap",
           "--cloud")  # fmt: skip
     fails({**place, "inputs": {**place["inputs"], "transform": "T_world_cam.txt"}}, "transform T_world_cam.txt",

@@ -325,21 +325,30 @@ def _paths_of(value: Any) -> list[str]:
     return []
 
 
+_VIEWER_OPTION = {"cloud": "--cloud", "transform": "--transform", "occupancy grid": "--occupancy",
+                  "surface map": "--surface-map", "robot file": "--robot"}  # fmt: skip
+
+
 class _Resolver:
     """Input files: as written (relative to the working directory), else next to the JSON."""
 
-    def __init__(self, source: Path, kind: str) -> None:
+    def __init__(self, source: Path, kind: str, given_here: Iterable[str] = ()) -> None:
         self.source = source
         self.kind = kind
+        self.given_here = set(given_here)
 
     def __call__(self, name: str, what: str, option: str) -> Path:
         p = Path(name)
         for candidate in (p, self.source.parent / p) if not p.is_absolute() else (p,):
             if candidate.exists():
                 return candidate
+        mine = _VIEWER_OPTION.get(what)
+        if name in self.given_here:
+            raise InputError(f"the {what} {name} given to the viewer ({mine}) does not exist")
+        hint = f"give it to the viewer with {mine} FILE" if mine else "rerun that command"
         raise InputError(
             f"{self.source} was written by `{COMMANDS[self.kind]}` from the {what} {name} ({option}), "
-            f"which does not exist here; run the viewer where that command ran, or rerun it"
+            f"which does not exist here; {hint}"
         )
 
 
@@ -356,9 +365,9 @@ def _is_recording(name: str) -> bool:
     return name.endswith((".bag", ".mcap", ".db3")) or Path(name).is_dir()
 
 
-def _resolve_inputs(obj: dict[str, Any], source: Path, kind: str) -> Inputs:
-    given = _inputs(obj)
-    resolve = _Resolver(source, kind)
+def _resolve_inputs(obj: dict[str, Any], source: Path, kind: str, given_here: dict[str, Any]) -> Inputs:
+    given = {**_inputs(obj), **{k: v for k, v in given_here.items() if v is not None}}
+    resolve = _Resolver(source, kind, [p for v in given_here.values() for p in _paths_of(v)])
     clouds_named = _paths_of(given.get("clouds", given.get("cloud")))
     recordings = [c for c in [*clouds_named, *_paths_of(given.get("bag"))] if _is_recording(c)]
     if recordings:
@@ -431,12 +440,17 @@ def _robot_pose(p: dict[str, Any], r: _Reader, what: str, arm_joints: tuple[str,
     return RobotPose(T, joints, motion, what)
 
 
-def read_result(path: str | Path, arm_joints: tuple[str, ...] = ()) -> ResultView:
+def read_result(
+    path: str | Path, arm_joints: tuple[str, ...] = (), given: dict[str, Any] | None = None
+) -> ResultView:
     """Parse what the viewer draws from a result JSON and resolve the inputs it names.
 
     Args:
         path: the result JSON (the ``--json`` object of a command, or the demo's ``out/demo.json``).
         arm_joints: the arm's joint names, for motions whose joints the result does not name.
+        given: input files given to the viewer, in place of those the result names (keys
+            ``cloud`` (list of paths), ``transform`` (list), ``floor``, ``occupancy``, ``surface_map``,
+            ``robot``; None values are ignored): for a result that names none, or whose files moved.
 
     Raises:
         InputError: the file is missing, not a result, of a kind with nothing to draw, malformed,
@@ -461,9 +475,11 @@ def read_result(path: str | Path, arm_joints: tuple[str, ...] = ()) -> ResultVie
         error = error.get("message")
     note = f"{COMMANDS[kind]} failed: {error}" if isinstance(error, str) and error else ""
     robot, arm = _robot(obj)
+    if given and isinstance(given.get("robot"), str):
+        robot = given["robot"]
     if robot is not None and (Path(robot).suffix or "/" in robot):  # a robot file, not a built-in name
         robot = str(_Resolver(path, kind)(robot, "robot file", "--robot"))
-    inputs = _resolve_inputs(obj, path, kind)
+    inputs = _resolve_inputs(obj, path, kind, {k: v for k, v in (given or {}).items() if k != "robot"})
     robots: list[RobotPose] = []
     candidates = np.zeros((0, 3))
     rejected = np.zeros((0, 2))
@@ -486,7 +502,9 @@ def read_result(path: str | Path, arm_joints: tuple[str, ...] = ()) -> ResultVie
         if obj.get("path") is not None:
             paths.append(r.xyyaw(obj["path"], "path"))
         if inputs.view_data is None and not inputs.clouds and not inputs.occupancy:
-            raise r.fail("names no cloud or occupancy grid (inputs); rerun it with this version of baseplace")
+            raise r.fail(
+                "names no cloud or occupancy grid; give the cloud with --cloud FILE (and --transform, --floor as the command got them)"
+            )
         note = note or f"{len(robots)} placement(s)"
     elif kind == "candidates":
         rows = obj.get("candidates", [])
@@ -516,7 +534,7 @@ def read_result(path: str | Path, arm_joints: tuple[str, ...] = ()) -> ResultVie
             if not paths:
                 paths.append(s[None])
         if inputs.occupancy is None:
-            raise r.fail("names no occupancy grid (--occupancy); rerun it with this version of baseplace")
+            raise r.fail("names no occupancy grid; give it with --occupancy MAP.yaml")
         note = note or f"{len(rows)} candidate(s), {len(rejected)} rejected"
     elif kind == "navigate":
         paths.append(r.xyyaw(obj.get("poses", obj.get("path")), "path"))
@@ -524,14 +542,14 @@ def read_result(path: str | Path, arm_joints: tuple[str, ...] = ()) -> ResultVie
             x, y, yaw = paths[0][-1]
             robots.append(RobotPose(_planar(x, y, 0.0, yaw), {}, None, "goal"))
         if not inputs.clouds and inputs.occupancy is None:
-            raise r.fail("names no cloud (--cloud); rerun it with this version of baseplace")
+            raise r.fail("names no cloud; give it with --cloud FILE (and --transform as the command got it)")
         length = obj.get("length")
         if isinstance(obj.get("path"), dict):
             length = obj["path"].get("length", length)
         note = note or (f"path of {length:.2f} m" if isinstance(length, (int, float)) else "path")
     elif kind in ("surface_samples", "surface_map"):
         if inputs.surface_map is None:
-            raise r.fail("names no surface map file (--map); rerun it with this version of baseplace")
+            raise r.fail("names no surface map file; give it with --surface-map FILE")
         rows = obj.get("poses", obj.get("samples", []))
         if kind == "surface_samples":
             if not isinstance(rows, list) or not all(isinstance(c, dict) for c in rows):
@@ -549,7 +567,7 @@ def read_result(path: str | Path, arm_joints: tuple[str, ...] = ()) -> ResultVie
     elif kind == "segment":
         regions, traversable, blocked = _regions(obj, r)
         if not inputs.clouds:
-            raise r.fail("names no cloud (cloud.path); rerun it with this version of baseplace")
+            raise r.fail("names no cloud; give it with --cloud FILE")
         note = note or f"{len(regions)} planar region(s)"
     return ResultView(
         kind=kind, source=path, robot=robot, arm=arm, inputs=inputs, robots=robots, candidates=candidates,

@@ -465,8 +465,15 @@ def _robot_to_draw(view: ResultView, inputs: SceneInputs) -> str | None:
     return robot
 
 
-def open_view(result_json: str | Path) -> tuple[ResultView, SceneInputs, str | None]:
+def open_view(
+    result_json: str | Path, given: dict[str, Any] | None = None
+) -> tuple[ResultView, SceneInputs, str | None]:
     """Read a result and load the inputs it names (what :func:`serve` shows), without a server.
+
+    Args:
+        result_json: the result.
+        given: input files given to the viewer in place of the result's (see
+            :func:`baseplace.viz.result_view.read_result`).
 
     Raises:
         InputError: the result is not one the viewer shows, or an input is missing or malformed.
@@ -474,7 +481,7 @@ def open_view(result_json: str | Path) -> tuple[ResultView, SceneInputs, str | N
     from baseplace.viz.result_view import read_result
     from baseplace.viz.view_scene import load_inputs
 
-    view = read_result(result_json)
+    view = read_result(result_json, given=given)
     robot = view.robot
     # segment the cloud for the regions and ground heights, unless the result carries its own
     segment = view.kind in ("place", "navigate") and view.inputs.view_data is None
@@ -487,6 +494,7 @@ def serve(
     host: str = "127.0.0.1",
     port: int = 8080,
     block: bool = True,
+    given: dict[str, Any] | None = None,
 ) -> viser.ViserServer:
     """Serve the 3D view of a result JSON (the demo's ``out/demo.json`` if None).
 
@@ -497,6 +505,8 @@ def serve(
         port: TCP port; 0 picks a free one (see ``server.get_port()``).
         block: wait until Ctrl-C, then stop the server; False returns the running server at once
             (call ``.stop()`` on it); its scene layers are in ``server.baseplace_layers``.
+        given: input files given to the viewer in place of the result's: ``cloud`` and
+            ``transform`` (lists), ``floor``, ``occupancy``, ``surface_map``, ``robot``.
 
     Returns:
         The viser server (already stopped when ``block`` is True).
@@ -512,7 +522,7 @@ def serve(
     path = DEFAULT_RESULT if result_json is None else Path(result_json)
     if result_json is None and not path.is_file():
         raise InputError(f"result {path} does not exist; run `baseplace demo` first, or give a result JSON")
-    view, inputs, robot = open_view(path)
+    view, inputs, robot = open_view(path, given)
     _check_port(host, port)
     with contextlib.redirect_stdout(io.StringIO()):  # viser's banner; serve prints its own line
         server = viser.ViserServer(host=host, port=port, label="baseplace", verbose=False)
