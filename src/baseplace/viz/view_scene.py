@@ -507,10 +507,8 @@ class RobotLayer:
                         f"{view.source}: the motion of {rp.label} moves joints {unknown} that robot "
                         f"{model.spec.name!r} lacks"
                     )
-        self.frame, self.urdf = _add_robot(
-            server, model, poses[0], model.configuration(view.robots[0].joints), "/robot"
-        )
-        layers["robot"], layers["urdf"] = self.frame, self.urdf
+        self.frame: Any = None
+        self.urdf: Any = None
         self.cfgs: list[dict[str, float]] = []
         self.motion_nodes: list[Any] = []
         self.lock = threading.Lock()
@@ -534,10 +532,11 @@ class RobotLayer:
         """Put the robot at robot pose ``i`` in its final configuration and draw that pose's motion."""
         with self.lock:
             rp, T = self.view.robots[i], self.poses[i]
-            T_root = self.model.T_world_root(T)
-            self.frame.wxyz, self.frame.position = _wxyz(T_root), T_root[:3, 3]
             final = self.model.configuration(rp.joints)
-            self.urdf.update_cfg(self.model.vector(final))
+            if self.frame is not None:
+                T_root = self.model.T_world_root(T)
+                self.frame.wxyz, self.frame.position = _wxyz(T_root), T_root[:3, 3]
+                self.urdf.update_cfg(self.model.vector(final))
             self.layers["robot_pose"] = T
             for node in self.motion_nodes:
                 node.remove()
@@ -550,6 +549,9 @@ class RobotLayer:
             )
             if rp.motion is not None:
                 self._draw_motion(T, rp.motion)
+            if self.frame is None:  # the robot's meshes last: the lighter layers reach the browser first
+                self.frame, self.urdf = _add_robot(self.server, self.model, T, final, "/robot")
+                self.layers["robot"], self.layers["urdf"] = self.frame, self.urdf
             self.model.urdf.update_cfg(final)
         if self.slider is not None:
             self.slider.max = max(len(self.cfgs) - 1, 1)
