@@ -308,3 +308,52 @@ def test_navigation_path_and_robot_stand_on_the_scanned_ground(results):
     )  # up the ramp
     lift = segments[:, 2] - truth.height(segments[:, :2])
     assert np.all(np.abs(lift - 0.08) < 0.04), lift.round(3)  # PATH_LIFT above the true surface everywhere
+
+
+def _as_schema_1(obj: dict, kind: str) -> dict:
+    """A command's JSON reshaped as docs/results.md of the jobs lane describes the one result schema
+    (``baseplace.result/1``): envelope, robot object, inputs echoed, poses as 4x4 plus x, y, z, yaw."""
+
+    def pose(x: float, y: float, yaw: float, z: float = 0.0) -> dict:
+        c, s = np.cos(yaw), np.sin(yaw)
+        T = [[c, -s, 0, x], [s, c, 0, y], [0, 0, 1, z], [0, 0, 0, 1]]
+        return {"base_pose": T, "x": x, "y": y, "z": z, "yaw": float(np.arctan2(s, c))}
+
+    out = {k: v for k, v in obj.items() if k not in ("robot", "inputs", "occupancy", "out", "png", "mcap")}
+    robot = obj.get("robot")
+    name = robot["name"] if isinstance(robot, dict) else robot
+    out.update(schema="baseplace.result/1", kind=kind, timings_ms={"total": 1.0}, failures={}, error=None,
+               exit_code=0, outputs={}, inputs=dict(obj.get("inputs", {})),
+               robot=None if name is None else {"name": name, "urdf": "tiago.urdf", "base_frame": "base_footprint",
+                                                "arm": "arm", "tcp_frames": {"arm": "arm_tool_link"}})  # fmt: skip
+    if obj.get("occupancy") is not None:
+        out["inputs"]["occupancy"] = obj["occupancy"]
+    if kind == "candidates":
+        out["candidates"] = [{**c, **pose(c["x"], c["y"], c["yaw"])} for c in obj["candidates"]]
+        out["robot_pose"] = pose(*obj["robot_pose"])
+    if kind == "surface_samples":
+        out["poses"] = [{**{k: v for k, v in p.items() if k != "theta"}, **pose(p["x"], p["y"], p["theta"])}
+                        for p in obj["poses"]]  # fmt: skip
+    if kind == "navigate":
+        out["start"], out["goal"] = pose(*obj["start"]), pose(*obj["goal"])
+    if kind == "surface_map":
+        out["outputs"] = {"surface_map": obj["out"]}
+    return out
+
+
+@pytest.mark.parametrize(
+    "kind", ["place", "candidates", "navigate", "segment", "surface_map", "surface_samples"]
+)
+def test_the_one_result_schema_is_read_as_the_command_json(results, kind, tmp_path):
+    """The same result in the shape of the one schema draws the same scene."""
+    obj = json.loads(results[kind].read_text())
+    (tmp_path / "r.json").write_text(json.dumps(_as_schema_1(obj, kind)))
+    old, new = read_result(results[kind]), read_result(tmp_path / "r.json")
+    assert new.kind == old.kind == kind and new.robot == old.robot and new.inputs == old.inputs
+    assert len(new.robots) == len(old.robots) and len(new.paths) == len(old.paths)
+    for a, b in zip(old.robots, new.robots, strict=True):
+        np.testing.assert_allclose(a.T_world_base, b.T_world_base, atol=1e-6)
+        assert a.joints == b.joints and (a.motion is None) == (b.motion is None)
+    for a, b in zip(old.paths, new.paths, strict=True):
+        np.testing.assert_allclose(a, b, atol=1e-9)
+    np.testing.assert_allclose(old.candidates, new.candidates, atol=1e-6)

@@ -388,8 +388,9 @@ def _resolve_inputs(obj: dict[str, Any], source: Path, kind: str, given_here: di
     smap = _paths_of(given.get("surface_map"))
     if kind == "surface_samples" and not smap:
         smap = _paths_of(given.get("map"))
-    if kind == "surface_map" and not smap:
-        smap = _paths_of(obj.get("out"))
+    if kind == "surface_map" and not smap:  # the file it wrote: outputs.surface_map (schema 1), else out
+        outputs: dict[str, Any] = obj["outputs"] if isinstance(obj.get("outputs"), dict) else {}
+        smap = _paths_of(outputs.get("surface_map", obj.get("out")))
     view_data = _paths_of(given.get("view_data"))
     return Inputs(
         clouds=clouds,
