@@ -366,7 +366,12 @@ def _is_recording(name: str) -> bool:
 
 
 def _resolve_inputs(obj: dict[str, Any], source: Path, kind: str, given_here: dict[str, Any]) -> Inputs:
-    given = {**_inputs(obj), **{k: v for k, v in given_here.items() if v is not None}}
+    here = {k: v for k, v in given_here.items() if v is not None}
+    echoed = _inputs(obj)
+    for one, many in (("cloud", "clouds"), ("transform", "transforms")):
+        if one in here:  # the viewer's --cloud/--transform replace the result's, in either spelling
+            echoed.pop(many, None)
+    given = {**echoed, **here}
     resolve = _Resolver(source, kind, [p for v in given_here.values() for p in _paths_of(v)])
     clouds_named = _paths_of(given.get("clouds", given.get("cloud")))
     recordings = [c for c in [*clouds_named, *_paths_of(given.get("bag"))] if _is_recording(c)]
