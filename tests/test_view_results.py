@@ -148,6 +148,13 @@ def test_drawn_motion_follows_pinocchio_forward_kinematics(results, kind):
                 assert np.linalg.norm(tcp[-1] - np.array(obj["candidates"][i]["grasp"])[:3, 3]) < 0.01
             # the pre-grasp copy stands back along the approach, before the straight part begins
             assert len(layers["ghosts"]) == 2 and np.linalg.norm(tcp[motion.pregrasp * 8] - tcp[-1]) > 0.02
+            # the slider moves the drawn robot along the motion: at step 0 its TCP is at the start
+            shown = layers["robot_layer"]
+            shown._step(0)
+            urdf = shown.model.urdf
+            T_tcp = shown.model.T_world_root(T_world_base) @ urdf.get_transform(arm.tcp_frame, urdf.base_link)
+            np.testing.assert_allclose(T_tcp[:3, 3], tcp[0], atol=1e-6)
+            assert np.linalg.norm(tcp[0] - tcp[-1]) > 0.05
     finally:
         server.stop()
     assert len(view.robots) >= 2
