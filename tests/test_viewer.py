@@ -23,10 +23,8 @@ from baseplace.terrain.pipeline import terrain_from_points
 from baseplace.terrain.polygons import footprint_outline
 from baseplace.viz import viewer
 from baseplace.viz.viewer import (
-    DEFAULT_RESULT,
     ViewData,
     load_view_data,
-    read_result,
     save_view_data,
     serve,
     view_data_from,
@@ -130,37 +128,6 @@ def test_view_data_errors(scene_data, tmp_path):
     with pytest.raises(InputError, match="same"):
         ViewData("tiago", scene_data.points, (0.0, 0.0), 0.05, scene_data.labels, scene_data.heights,
                  scene_data.planes, scene_data.osrm[:-1])  # fmt: skip
-
-
-def test_read_result_layouts_and_errors(scene_data, tmp_path, monkeypatch):
-    path = write_result(tmp_path, scene_data)
-    scene = read_result(path)
-    assert scene.robot == "tiago" and scene.view_data == tmp_path / "scene_view.npz"
-    assert len(scene.base_poses) == 1 and scene.joints["arm_4_joint"] == 1.92
-    assert len(scene.paths) == 1 and scene.paths[0].shape == (3, 3) and len(scene.targets) == 1
-
-    place = {"robot": {"name": "tiago"}, "targets": [DEMO_TARGET], "view_data": str(tmp_path / "scene_view.npz"),
-             "placements": [{"base_pose": BASE_POSE, "joints": [JOINTS], "path": {"poses": [[0, 0, 0], [1, 0, 0]]}},
-                            {"base_pose": BASE_POSE, "joints": [JOINTS]}]}  # fmt: skip
-    (tmp_path / "place.json").write_text(json.dumps(place))
-    scene = read_result(tmp_path / "place.json")
-    assert len(scene.base_poses) == 2 and len(scene.paths) == 1 and scene.joints == JOINTS
-
-    monkeypatch.chdir(tmp_path)
-    with pytest.raises(InputError, match=r"run `baseplace demo` first"):
-        read_result(DEFAULT_RESULT)
-    (tmp_path / "broken.json").write_text("{")
-    with pytest.raises(InputError, match="cannot read result"):
-        read_result(tmp_path / "broken.json")
-    (tmp_path / "old.json").write_text(json.dumps({"robot": "tiago", "placement": {"base_pose": BASE_POSE}}))
-    with pytest.raises(InputError, match="names no view data"):
-        read_result(tmp_path / "old.json")
-    bad_pose = dict(place, placements=[{"base_pose": [[1, 0], [0, 1]]}])
-    (tmp_path / "bad.json").write_text(json.dumps(bad_pose))
-    with pytest.raises(InputError, match=r"shape \(4, 4\)"):
-        read_result(tmp_path / "bad.json")
-    with pytest.raises(InputError, match="scene_view.npz does not exist"):
-        serve(write_result(tmp_path, scene_data, view_data="missing/scene_view.npz"), port=0, block=False)
 
 
 def test_geometry_helpers(scene_data):

@@ -1,25 +1,28 @@
-"""Interactive 3D viewer of a placement result, in the browser (viser).
+"""Interactive 3D viewer of any baseplace result, in the browser (viser).
 
-``baseplace view [RESULT.json]`` serves a three.js scene over HTTP and websocket: the point cloud
-(coloured by height), the planar regions (one colour each, at their plane heights), the OSRM heat
-map (reachability summed over orientations, viridis, zeros hidden), the robot with its URDF meshes
-at the placement's base pose and joint values, the target and the base path.
+``baseplace view RESULT.json`` serves a three.js scene over HTTP and websocket. It reads the
+``--json`` object of ``place``, ``candidates``, ``surface-map``, ``surface-sample``, ``navigate``,
+``segment`` or ``demo`` (:mod:`baseplace.viz.result_view`) and the inputs that object names (cloud,
+occupancy grid, surface map, robot), and draws them (:mod:`baseplace.viz.view_scene`):
 
-The result JSON (``baseplace demo``'s ``out/demo.json``, or ``baseplace place --json``'s object)
-gives the robot, the placement and the path; the rest comes from a *view data* file the JSON names
-under the key ``"view_data"``: a path relative to the JSON's directory (or absolute) to an ``.npz``
-written by :func:`save_view_data`. Producers make it with :func:`view_data_from` in one call::
+* place / demo: the cloud (grey-blue by height) and its planar regions, the robot with its URDF
+  meshes at the first placement's base pose and joint values, its reaching motion (the TCP's path,
+  translucent copies at the start and pre-grasp configurations, a slider and Play button over the
+  joint waypoints), the other placements as frames, targets and base paths;
+* candidates: the occupancy grid, the cloud if any, the object, the ranked candidates (arrows, best
+  darkest) with the robot and its motion at the best one, the rejected positions and the path;
+* surface-map / surface-sample: the surface map's R_S heat map, the working surface, the samples
+  (arrows) and the robot at the best one;
+* navigate: the cloud, its regions, the path and the robot at the goal;
+* segment: the cloud and the regions and borders of the JSON.
+
+The demo's result also names a *view data* file (key ``"view_data"``, relative to the JSON's
+directory or absolute): an ``.npz`` written by :func:`save_view_data` with the segmented scene and
+the OSRM heat map, made in one call::
 
     data = view_data_from(terrain, result.osrm, points, robot_name)
     save_view_data(out_dir / "demo_view.npz", data)
     obj["view_data"] = "demo_view.npz"
-
-Result JSON fields read (both layouts are accepted):
-
-* demo: ``"placement": {"base_pose": 4x4, "joints": {name: value}}``, ``"path": {"poses": (N, 3)}``,
-  ``"target": "x y z roll pitch yaw"``;
-* place: ``"placements": [{"base_pose", "joints": [{name: value}, ...], "path"?}]``,
-  ``"targets": [...]``; the first placement is shown with the robot, the others as frames.
 
 The server binds to 127.0.0.1 unless told otherwise; it exposes the scene to whoever can reach
 the port.
@@ -31,7 +34,6 @@ import contextlib
 import errno
 import io
 import itertools
-import json
 import math
 import socket
 import sys
@@ -53,6 +55,8 @@ if TYPE_CHECKING:
     from baseplace.placement.osrm import OSRM
     from baseplace.robots.spec import RobotSpec
     from baseplace.terrain.pipeline import Terrain
+    from baseplace.viz.result_view import ResultView
+    from baseplace.viz.view_scene import SceneInputs
 
 DEFAULT_RESULT = Path("out") / "demo.json"
 """What ``baseplace view`` shows without an argument: the demo's result."""
@@ -228,110 +232,6 @@ def load_view_data(path: str | Path) -> ViewData:
 
 
 # ----------------------------------------------------------------------------------------------
-# The result JSON
-
-
-@dataclass(frozen=True)
-class ResultScene:
-    """What the viewer draws from a result JSON.
-
-    Attributes:
-        robot: the robot's name in the JSON, if any (the view data's robot is loaded).
-        base_poses: (4, 4) world poses of the base frame; the first gets the robot's meshes.
-        joints: joint name -> value of the first placement (other joints: the spec's reference).
-        paths: (N, 3) base paths (x, y, yaw).
-        targets: (4, 4) target poses.
-        view_data: path of the view data file.
-    """
-
-    robot: str | None
-    base_poses: list[NDArray[np.float64]]
-    joints: dict[str, float]
-    paths: list[NDArray[np.float64]]
-    targets: list[NDArray[np.float64]]
-    view_data: Path
-
-
-def _matrix(value: Any, shape: tuple[int, ...], what: str, source: Path) -> NDArray[np.float64]:
-    try:
-        arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise InputError(f"{source}: {what} is not numeric") from None
-    if arr.ndim != len(shape) or any(s not in (-1, a) for s, a in zip(shape, arr.shape, strict=True)):
-        raise InputError(f"{source}: {what} must have shape {shape}, got {arr.shape}")
-    if not np.isfinite(arr).all():
-        raise InputError(f"{source}: {what} has non-finite values")
-    return arr
-
-
-def _joints(value: Any, source: Path) -> dict[str, float]:
-    if isinstance(value, list):  # place: one configuration per target; show the first
-        value = value[0] if value else {}
-    if not isinstance(value, dict) or not all(
-        isinstance(k, str) and isinstance(v, (int, float)) for k, v in value.items()
-    ):
-        raise InputError(f"{source}: placement joints must be an object of joint name -> number")
-    return {k: float(v) for k, v in value.items()}
-
-
-def read_result(path: Path) -> ResultScene:
-    """Parse what the viewer needs from a demo or place result JSON.
-
-    Raises:
-        InputError: the file is missing or malformed, or names no view data.
-    """
-    from baseplace.geometry.poses import parse_pose6
-
-    if not path.is_file():
-        hint = "; run `baseplace demo` first" if path == DEFAULT_RESULT else ""
-        raise InputError(f"result {path} does not exist{hint}")
-    try:
-        obj = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputError(f"cannot read result {path}: {exc}") from None
-    if not isinstance(obj, dict):
-        raise InputError(f"{path}: expected a JSON object, got {type(obj).__name__}")
-    rel = obj.get("view_data")
-    if not isinstance(rel, str) or not rel:
-        redo = "rerun `baseplace demo`" if "placement" in obj else "rerun the command that wrote it"
-        raise InputError(
-            f"{path} names no view data (key 'view_data'); {redo} with this version of baseplace"
-        )
-    view_data = Path(rel) if Path(rel).is_absolute() else path.parent / rel
-
-    robot = obj.get("robot")
-    if isinstance(robot, dict):
-        robot = robot.get("name")
-    robot = robot if isinstance(robot, str) else None
-
-    if "placement" in obj:
-        placements = [obj["placement"]]
-    elif "placements" in obj:
-        placements = obj["placements"]
-    else:
-        raise InputError(f"{path}: no 'placement' or 'placements'")
-    if not isinstance(placements, list) or not all(isinstance(p, dict) for p in placements):
-        raise InputError(f"{path}: placements must be objects")
-    base_poses, paths = [], []
-    for i, p in enumerate(placements):
-        base_poses.append(_matrix(p.get("base_pose"), (4, 4), f"placement {i} base_pose", path))
-        if isinstance(p.get("path"), dict):
-            paths.append(_matrix(p["path"].get("poses"), (-1, 3), f"placement {i} path poses", path))
-    joints = _joints(placements[0].get("joints", {}), path) if placements else {}
-    if isinstance(obj.get("path"), dict):
-        paths.append(_matrix(obj["path"].get("poses"), (-1, 3), "path poses", path))
-    texts = obj.get("targets", [obj["target"]] if "target" in obj else [])
-    targets = []
-    for t in texts if isinstance(texts, list) else []:
-        if isinstance(t, str):
-            try:
-                targets.append(parse_pose6(t))
-            except InputError:
-                pass  # a target the viewer cannot parse is left out, not an error
-    return ResultScene(robot, base_poses, joints, paths, targets, view_data)
-
-
-# ----------------------------------------------------------------------------------------------
 # Geometry for the browser
 
 
@@ -474,145 +374,45 @@ def _check_port(host: str, port: int) -> None:
             raise InputError(f"cannot serve on {host}:{port}: {exc.strerror or exc}") from None
 
 
-def build_scene(server: viser.ViserServer, scene: ResultScene, data: ViewData) -> dict[str, Any]:
-    """Add the cloud, regions, heat map, robot, targets and paths to ``server``'s scene.
+def _camera(server: viser.ViserServer, view: ResultView, inputs: SceneInputs, layers: dict[str, Any]) -> None:
+    """Look at the robot (or the result's poses) from behind the path's start, high enough to see the map."""
+    from baseplace.viz.view_scene import ground
 
-    Returns:
-        name -> scene handle(s) of each layer (for the GUI toggles and tests).
-    """
-    import viser.transforms as vtf
-    import yourdfpy
-    from viser.extras import ViserUrdf
-
-    from baseplace.robots.spec import load_spec
-    from baseplace.robots.urdf import robot_urdf
-
-    api = server.scene
-    api.set_up_direction("+z")
-    layers: dict[str, Any] = {}
-
-    pts = data.points
-    if len(pts):
-        lo, hi = np.percentile(pts[:, 2], [2, 98])
-        shade = 0.3 + 0.5 * np.clip((pts[:, 2] - lo) / max(float(hi - lo), 1e-6), 0.0, 1.0)
-        colors = _colormap("bone", shade)  # grey-blue by height: colour is kept for regions and heat map
-        layers["cloud"] = api.add_point_cloud(
-            "/cloud", pts, colors, point_size=0.015, point_shape="rounded", precision="float32"
+    robot_pose = layers.get("robot_pose")
+    focus = [robot_pose[:3, 3]] if robot_pose is not None else []
+    # with a robot, frame it and what it reaches for; paths may lead far away
+    extent = [] if focus else [np.c_[p[:, :2], ground(inputs, p[:, :2])] for p in view.paths]
+    extent += [np.c_[view.candidates[:, :2], np.zeros(len(view.candidates))]] if len(view.candidates) else []
+    extent += [T[None, :3, 3] for T in [rp.T_world_base for rp in view.robots[1:]]]
+    extent += [T[None, :3, 3] for T in view.targets]
+    if view.object_xyz is not None:
+        extent.append(view.object_xyz[None])
+    if inputs.surface is not None:
+        extent.append(
+            np.c_[inputs.surface.polygon, np.full(len(inputs.surface.polygon), inputs.surface.height)]
         )
-
-    regions = []
-    palette = _colormap("tab20", (np.arange(20) + 0.5) / 20)
-    rows, cols, stride = _cells(data.labels >= 0)
-    for rid in range(len(data.planes)):
-        sel = data.labels[rows, cols] == rid
-        if not sel.any():
-            continue
-        verts, faces = cell_quads(data, rows[sel], cols[sel], REGION_LIFT, stride)
-        r, g, b = (int(c) for c in palette[(2 * rid + rid // 10) % 20])
-        regions.append(
-            api.add_mesh_simple(
-                f"/regions/region_{rid}", verts, faces, color=(r, g, b), opacity=0.8, side="double",
-                cast_shadow=False, receive_shadow=False,
-            )
-        )  # fmt: skip
-    layers["regions"] = regions
-
-    vmax = float(data.osrm.max(initial=0.0))
-    if vmax > 0:
-        import trimesh
-
-        rows, cols, stride = _cells(data.osrm > 0)
-        verts, faces = cell_quads(data, rows, cols, HEATMAP_LIFT, stride)
-        rgb = _colormap("viridis", data.osrm[rows, cols] / vmax)
-        rgba = np.repeat(np.c_[rgb, np.full(len(rgb), 255, dtype=np.uint8)], 4, axis=0)
-        mesh = trimesh.Trimesh(verts, faces, vertex_colors=rgba, process=False)
-        layers["heatmap"] = api.add_mesh_trimesh("/heatmap", mesh, cast_shadow=False, receive_shadow=False)
-
-    for i, T in enumerate(scene.targets):
-        layers[f"target_{i}"] = api.add_frame(
-            f"/targets/target_{i}", wxyz=vtf.SO3.from_matrix(_orthonormal(T[:3, :3])).wxyz,
-            position=T[:3, 3], axes_length=0.15, axes_radius=0.012,
-        )  # fmt: skip
-
-    paths: list[Any] = []
-    for i, poses in enumerate(scene.paths):
-        xy = densify(poses)
-        if len(xy) < 2:
-            continue
-        p3 = np.c_[xy, height_at(data, xy) + PATH_LIFT]
-        segs = np.stack([p3[:-1], p3[1:]], axis=1).astype(np.float32)
-        paths.append(
-            api.add_line_segments(
-                f"/paths/path_{i}", segs, colors=(255, 120, 0), thickness=4.0, thickness_units="screen"
-            )
-        )
-        paths.append(
-            api.add_icosphere(f"/paths/start_{i}", radius=0.07, color=(255, 120, 0), position=tuple(p3[0]))
-        )
-    layers["paths"] = paths
-
-    robot_name = scene.robot or data.robot
-    spec = load_spec(data.robot)  # the view data's name or robot-file path, which Robot() takes
-    for i, T in enumerate(scene.base_poses[1:], start=1):
-        layers[f"placement_{i}"] = api.add_frame(
-            f"/placements/placement_{i}", wxyz=vtf.SO3.from_matrix(_orthonormal(T[:3, :3])).wxyz,
-            position=T[:3, 3], axes_length=0.3, axes_radius=0.015,
-        )  # fmt: skip
-    if scene.base_poses:
-        from baseplace.robots.collision import check_mesh_paths
-
-        check_mesh_paths(spec)  # meshes only from the robot's package folders (docs/security.md)
-        try:
-            urdf = yourdfpy.URDF.load(  # the robot file's URDF: meshes resolved, a mounted arm on its base
-                io.StringIO(robot_urdf(spec).xml), build_scene_graph=True, load_meshes=True,
-                filename_handler=_package_handler(spec),
-            )  # fmt: skip
-        except InputError:
-            raise
-        except Exception as exc:  # yourdfpy raises bare ValueError, KeyError, OSError, lxml errors
-            raise InputError(f"cannot load the URDF {spec.urdf} of robot {spec.name!r}: {exc}") from None
-        cfg = joint_configuration(spec, scene.joints, list(urdf.actuated_joint_names))
-        urdf.update_cfg(cfg)
-        if spec.base_frame in urdf.link_map:
-            T_root_base = np.asarray(urdf.get_transform(spec.base_frame, urdf.base_link), dtype=np.float64)
+    for region in view.regions:
+        extent += [np.c_[ext, np.zeros(len(ext))] for ext, _ in region.polygons]
+    pts = np.concatenate([np.atleast_2d(f) for f in focus + extent]) if focus or extent else np.zeros((0, 3))
+    if not len(pts):
+        if inputs.data is not None:
+            h, w = inputs.data.labels.shape
+            o, res = inputs.data.origin, inputs.data.resolution
+            pts = np.array([[o[0], o[1], 0.0], [o[0] + w * res, o[1] + h * res, 0.0]])
+        elif len(inputs.points):
+            pts = np.percentile(inputs.points, [5, 95], axis=0)
+        elif inputs.grid is not None:
+            g = inputs.grid
+            pts = np.array([[*g.origin[:2], 0.0], [g.origin[0] + g.width * g.resolution,
+                                                   g.origin[1] + g.height * g.resolution, 0.0]])  # fmt: skip
         else:
-            T_root_base = np.eye(4)
-        T = scene.base_poses[0] @ np.linalg.inv(T_root_base)
-        frame = api.add_frame(
-            "/robot",
-            wxyz=vtf.SO3.from_matrix(_orthonormal(T[:3, :3])).wxyz,
-            position=T[:3, 3],
-            show_axes=False,
-        )
-        viser_urdf = ViserUrdf(server, urdf, root_node_name="/robot")
-        viser_urdf.update_cfg(np.array([cfg[n] for n in urdf.actuated_joint_names]))
-        layers["robot"] = frame
-        layers["urdf"] = viser_urdf
-
-    _camera(server, scene, data)
-    _gui(server, layers, scene, robot_name)
-    return layers
-
-
-def _camera(server: viser.ViserServer, scene: ResultScene, data: ViewData) -> None:
-    """Look at the placement from behind the path's start, high enough to see the heat map."""
-    focus = [T[:3, 3] for T in scene.base_poses[:1]]
-    extent = [np.c_[p[:, :2], height_at(data, p[:, :2])] for p in scene.paths]
-    pts = np.concatenate([np.atleast_2d(f) for f in focus + extent]) if focus or extent else None
-    if pts is None or not len(pts):
-        h, w = data.labels.shape
-        centre = np.array(
-            [data.origin[0] + w * data.resolution / 2, data.origin[1] + h * data.resolution / 2, 0.0]
-        )
-        size = max(h, w) * data.resolution
-    else:
-        centre = (pts.min(axis=0) + pts.max(axis=0)) / 2
-        size = float(np.ptp(pts[:, :2], axis=0).max()) if len(pts) > 1 else 3.0
-    size = max(size, 3.0)
+            pts = np.zeros((1, 3))
+    centre = (pts.min(axis=0) + pts.max(axis=0)) / 2
+    size = max(float(np.ptp(pts[:, :2], axis=0).max()) if len(pts) > 1 else 3.0, 2.2 if focus else 3.0)
     look = centre if not focus else 0.65 * centre + 0.35 * focus[0]
     direction = np.array([-0.55, -0.75, 0.65])
-    if scene.paths and len(scene.paths[0]) >= 2 and focus:
-        d = scene.paths[0][0, :2] - focus[0][:2]
+    if view.paths and len(view.paths[0]) >= 2 and focus:
+        d = view.paths[0][0, :2] - focus[0][:2]
         if np.hypot(*d) > 1e-6:
             d = d / np.hypot(*d)
             side = np.array([-d[1], d[0]])
@@ -623,13 +423,17 @@ def _camera(server: viser.ViserServer, scene: ResultScene, data: ViewData) -> No
     server.initial_camera.position = np.asarray(look + direction * 1.05 * size, dtype=np.float64)
 
 
-def _gui(server: viser.ViserServer, layers: dict[str, Any], scene: ResultScene, robot: str) -> None:
-    """Checkboxes that show and hide each layer, and a line about the placement."""
+def _gui(server: viser.ViserServer, layers: dict[str, Any], view: ResultView, robot: str | None) -> None:
+    """Checkboxes that show and hide each layer, and a line about the result."""
     groups = {
         "Point cloud": [layers.get("cloud")],
+        "Occupancy grid": [layers.get("occupancy")],
         "Planar regions": layers.get("regions", []),
         "OSRM heat map": [layers.get("heatmap")],
+        "Surface map": layers.get("surface_map", []),
         "Robot": [layers.get("robot")],
+        "Candidates": layers.get("candidates", []),
+        "Rejected": [layers.get("rejected")],
         "Path": layers.get("paths", []),
     }
     for label, handles in groups.items():
@@ -643,41 +447,82 @@ def _gui(server: viser.ViserServer, layers: dict[str, Any], scene: ResultScene, 
                 h.visible = box.value
 
         box.on_update(toggle)
-    if scene.base_poses:
-        T = scene.base_poses[0]
+    text = f"**{view.command}**: {view.summary}"
+    T = layers.get("robot_pose")
+    if T is not None:
         yaw = math.degrees(math.atan2(T[1, 0], T[0, 0]))
-        server.gui.add_markdown(
-            f"**{robot}** at x = {T[0, 3]:.2f} m, y = {T[1, 3]:.2f} m, z = {T[2, 3]:.2f} m, yaw = {yaw:.0f}°"
+        text += f"; **{robot}** at x = {T[0, 3]:.2f} m, y = {T[1, 3]:.2f} m, z = {T[2, 3]:.2f} m, yaw = {yaw:.0f}°"
+    server.gui.add_markdown(text)
+
+
+def _robot_to_draw(view: ResultView, inputs: SceneInputs) -> str | None:
+    """The robot name or file to draw: the result's, else the view data's; None when nothing needs one."""
+    robot = view.robot or (inputs.data.robot if view.inputs.view_data is not None and inputs.data else None)
+    if view.robots and robot is None:
+        raise InputError(
+            f"{view.source} ({view.command} result) names no robot; rerun it with this version of baseplace"
         )
+    return robot
+
+
+def open_view(
+    result_json: str | Path, given: dict[str, Any] | None = None
+) -> tuple[ResultView, SceneInputs, str | None]:
+    """Read a result and load the inputs it names (what :func:`serve` shows), without a server.
+
+    Args:
+        result_json: the result.
+        given: input files given to the viewer in place of the result's (see
+            :func:`baseplace.viz.result_view.read_result`).
+
+    Raises:
+        InputError: the result is not one the viewer shows, or an input is missing or malformed.
+    """
+    from baseplace.viz.result_view import read_result
+    from baseplace.viz.view_scene import load_inputs
+
+    view = read_result(result_json, given=given)
+    robot = view.robot
+    # segment the cloud for the regions and ground heights, unless the result carries its own
+    segment = view.kind in ("place", "navigate") and view.inputs.view_data is None
+    inputs = load_inputs(view, robot or "", segment)
+    return view, inputs, _robot_to_draw(view, inputs)
 
 
 def serve(
-    result_json: Path | None = None,
+    result_json: str | Path | None = None,
     host: str = "127.0.0.1",
     port: int = 8080,
     block: bool = True,
+    given: dict[str, Any] | None = None,
 ) -> viser.ViserServer:
     """Serve the 3D view of a result JSON (the demo's ``out/demo.json`` if None).
 
     Args:
-        result_json: a demo or place result naming its view data (key ``"view_data"``).
+        result_json: the ``--json`` object of place, candidates, surface-map, surface-sample,
+            navigate, segment or demo, saved to a file; the inputs it names are read too.
         host: interface to bind; 127.0.0.1 (this machine only) unless told otherwise.
         port: TCP port; 0 picks a free one (see ``server.get_port()``).
         block: wait until Ctrl-C, then stop the server; False returns the running server at once
-            (call ``.stop()`` on it).
+            (call ``.stop()`` on it); its scene layers are in ``server.baseplace_layers``.
+        given: input files given to the viewer in place of the result's: ``cloud`` and
+            ``transform`` (lists), ``floor``, ``occupancy``, ``surface_map``, ``robot``.
 
     Returns:
         The viser server (already stopped when ``block`` is True).
 
     Raises:
-        InputError: the result or its view data is missing or malformed, the URDF does not load,
-            or the port is in use.
+        InputError: the result is missing, not a result or malformed, an input it names is
+            missing, the URDF does not load, or the port is in use.
     """
     import viser
 
+    from baseplace.viz.view_scene import build_scene
+
     path = DEFAULT_RESULT if result_json is None else Path(result_json)
-    scene = read_result(path)
-    data = load_view_data(scene.view_data)
+    if result_json is None and not path.is_file():
+        raise InputError(f"result {path} does not exist; run `baseplace demo` first, or give a result JSON")
+    view, inputs, robot = open_view(path, given)
     _check_port(host, port)
     with contextlib.redirect_stdout(io.StringIO()):  # viser's banner; serve prints its own line
         server = viser.ViserServer(host=host, port=port, label="baseplace", verbose=False)
@@ -685,14 +530,18 @@ def serve(
         server.stop()
         raise InputError(f"port {port} on {host} is in use; pick another with --port")
     try:
-        build_scene(server, scene, data)
+        layers = build_scene(server, view, inputs, robot)
+        _camera(server, view, inputs, layers)
+        _gui(server, layers, view, robot)
+        server.baseplace_layers = layers
     except BaseException:
         server.stop()
         raise
     if not block:
         return server
     shown = f"[{host}]" if ":" in host else host
-    print(f"baseplace view: http://{shown}:{server.get_port()}/ ({path}); Ctrl-C to stop", file=sys.stderr)
+    print(f"baseplace view: http://{shown}:{server.get_port()}/ ({path}, {view.command} result); Ctrl-C to stop",
+          file=sys.stderr)  # fmt: skip
     try:
         while True:
             time.sleep(3600)
