@@ -176,7 +176,7 @@ def place(
     obj, note = _grasped_object(robot, rmap.info.arm, points, T_targets, grasped, cache)
     key = "floor" if s.strategy == "orm" else "regions"
     if cache is None:
-        cache = SceneCache(points, terrain)  # this query only
+        cache = SceneCache(points, terrain, s.resolution)  # this query only
     obstacles = cache.shared(("obstacles", key, s.resolution, s.support_dist, outline.tobytes()),
                              lambda: _obstacles(terrain, seg, s, outline))  # fmt: skip
     transit = None
@@ -197,8 +197,7 @@ def place(
             environments[key] = Environment(robot, obstacles)
         env = environments[key]
     else:
-        env = cache.shared(("environment", robot, key, s.resolution, s.support_dist, outline.tobytes()),
-                           lambda: Environment(robot, obstacles))  # fmt: skip
+        env = scene_environment(robot, cache, s)
     arm = robot.arm(rmap.info.arm)
     motion = None
     if s.motion is not None:  # only the final approach may touch the grasped object, with the hand
@@ -248,6 +247,22 @@ def place(
     }
     return PlacementResult(placements, verifier.failures, tries, timings, terrain, osrm, verifier.contacts,
                            verifier.rejected, obj, note)  # fmt: skip
+
+
+def scene_environment(robot: Robot, cache: SceneCache, settings: PlaceSettings | None = None) -> Environment:
+    """The collision environment of a scene without a grasped object, made once per cache.
+
+    What :func:`place` uses when nothing may be touched; call it when a scene arrives so that
+    its first query finds the obstacle OcTree built.
+    """
+    s = settings or PlaceSettings()
+    terrain = cache.terrain(s.resolution)
+    outline = footprint_outline(robot.spec.footprint_radius, robot.spec.footprint_polygon)
+    key = "floor" if s.strategy == "orm" else "regions"
+    obstacles = cache.shared(("obstacles", key, s.resolution, s.support_dist, outline.tobytes()),
+                             lambda: _obstacles(terrain, terrain.segmentation, s, outline))  # fmt: skip
+    return cache.shared(("environment", robot, key, s.resolution, s.support_dist, outline.tobytes()),
+                        lambda: Environment(robot, obstacles))  # fmt: skip
 
 
 def with_floor(points: ArrayLike, z: float, margin: float = 2.0, spacing: float = 0.02) -> FloatArray:

@@ -46,16 +46,19 @@ class SceneCache:
 
     Args:
         points: (N, 3) z-up world cloud of the scene [m] (non-finite rows are dropped).
-        terrain: a segmentation of the same cloud, if already made (for ``resolution`` None).
+        terrain: a segmentation of the same cloud, if already made.
+        resolution: the height-map cell ``terrain`` was made with (None: chosen from the cloud).
     """
 
-    def __init__(self, points: ArrayLike, terrain: Terrain | None = None) -> None:
+    def __init__(
+        self, points: ArrayLike, terrain: Terrain | None = None, resolution: float | None = None
+    ) -> None:
         self._raw = np.asarray(points, dtype=float).reshape(-1, 3)
         self._points: FloatArray | None = None
         self._by_x: FloatArray | None = None
         self._terrains: dict[float | None, Terrain] = {}
         if terrain is not None:
-            self._terrains[None] = terrain
+            self._terrains[resolution] = terrain
         self._shared: dict[Hashable, Any] = {}
         self._objects: OrderedDict[Hashable, Any] = OrderedDict()
         self.hits = 0
