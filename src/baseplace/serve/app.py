@@ -211,10 +211,10 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
                   lifespan=lifespan)  # fmt: skip
     app.state.service = st
 
-    async def run(fn: Callable[..., Any], *args: Any) -> Any:
-        """Run a job on the worker thread, within the time limit."""
+    async def run(fn: Callable[..., Any], *args: Any, lookup: bool = False) -> Any:
+        """Run a job on the worker thread (a read-only lookup: on the lookup threads), within the time limit."""
         loop = asyncio.get_running_loop()
-        future = loop.run_in_executor(st.executor, functools.partial(fn, *args))
+        future = loop.run_in_executor(st.lookups if lookup else st.executor, functools.partial(fn, *args))
         try:
             return await asyncio.wait_for(asyncio.shield(future), settings.timeout_s)
         except asyncio.TimeoutError:
@@ -306,7 +306,7 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
 
     @app.post("/reach", summary="baseplace reach --json on the robot's default map")
     async def reach(req: ReachRequest) -> dict[str, Any]:
-        return await run(jobs.reach, st, req.model_dump())
+        return await run(jobs.reach, st, req.model_dump(), lookup=st.is_warm(req.robot, req.arm))
 
     @app.post("/candidates", summary="baseplace candidates --json on an uploaded scene with a grid")
     async def candidates(req: CandidatesRequest) -> dict[str, Any]:

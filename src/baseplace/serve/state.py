@@ -92,6 +92,8 @@ class ServiceState:
         self.settings = settings
         self.started = time.time()
         self.executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="baseplace-job")
+        # map lookups only read the map: they need not wait behind a placement
+        self.lookups = ThreadPoolExecutor(max_workers=2, thread_name_prefix="baseplace-lookup")
         self.folder = Path(tempfile.mkdtemp(prefix="baseplace-serve-"))
         self._robots: dict[str, Any] = {}
         self._maps: dict[tuple[str, str | None], Any] = {}
@@ -134,6 +136,10 @@ class ServiceState:
         self._maps[(robot.name, rmap.info.arm)] = rmap
         if rmap.info.arm == robot.spec.default_arm:
             self._maps[(robot.name, None)] = rmap
+
+    def is_warm(self, robot: str, arm: str | None) -> bool:
+        """True when the robot and its map for ``arm`` are loaded (lookups may then run beside jobs)."""
+        return (robot, arm) in self._maps
 
     # ---- scenes ----
     def add_scene(self, data: bytes, fmt: str) -> Scene:
@@ -199,5 +205,6 @@ class ServiceState:
 
     def close(self) -> None:
         """Stop the worker after the job it runs, and delete the scenes' files."""
+        self.lookups.shutdown(wait=True, cancel_futures=True)
         self.executor.shutdown(wait=True, cancel_futures=True)
         shutil.rmtree(self.folder, ignore_errors=True)
