@@ -69,3 +69,21 @@ def test_each_grasped_object_gets_its_own_allowed_contact(tiago, tiago_map):
         assert not res.placements and any(
             link.startswith("hand") and what == "obstacle" for link, what in res.contacts
         )
+
+
+def test_a_robot_and_its_collision_model_are_freed_with_it():
+    # a long-running service builds robots; their self-collision checkers must not outlive them
+    import gc
+    import weakref
+
+    from baseplace.robots.model import Robot
+    from baseplace.terrain.voxels import VoxelMap
+    from baseplace.world.environment import Environment
+
+    robot = Robot("tiago")
+    env = Environment(robot, VoxelMap.from_points(np.zeros((1, 3))))
+    assert env.colliding(robot.q_reference, np.eye(4)) in (True, False)
+    alive = weakref.ref(robot)
+    del robot, env
+    gc.collect()
+    assert alive() is None
