@@ -212,9 +212,14 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
     app.state.service = st
 
     async def run(fn: Callable[..., Any], *args: Any, lookup: bool = False) -> Any:
-        """Run a job on the worker thread (a read-only lookup: on the lookup threads), within the time limit."""
+        """Run a job on its thread within the time limit.
+
+        Placements and scenes on the worker, a read-only lookup on the lookup threads, a CLI
+        command on the command thread.
+        """
         loop = asyncio.get_running_loop()
-        future = loop.run_in_executor(st.lookups if lookup else st.executor, functools.partial(fn, *args))
+        pool = st.lookups if lookup else st.commands if fn is jobs.run_command else st.executor
+        future = loop.run_in_executor(pool, functools.partial(fn, *args))
         try:
             return await asyncio.wait_for(asyncio.shield(future), settings.timeout_s)
         except asyncio.TimeoutError:

@@ -3,8 +3,9 @@
 Robots are built once per name (their collision model and pair tables with them), maps loaded
 once per (robot, arm), and each uploaded scene keeps its cloud, its segmentation and its
 obstacle set and collision environments (:class:`~baseplace.placement.scene_cache.SceneCache`).
-All computing runs on one worker thread (:attr:`ServiceState.executor`): pinocchio's data and
-coal's trees are not shared between threads, and the machine's cores go to numba and coal.
+Placements run on one worker thread (:attr:`ServiceState.executor`): pinocchio's data and coal's
+trees are not shared between threads. Map lookups run on two more (``lookups``), and the CLI
+commands run for the service, which build their own robots and maps, on one more (``commands``).
 """
 
 from __future__ import annotations
@@ -94,6 +95,8 @@ class ServiceState:
         self.executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="baseplace-job")
         # map lookups only read the map: they need not wait behind a placement
         self.lookups = ThreadPoolExecutor(max_workers=2, thread_name_prefix="baseplace-lookup")
+        # the CLI's commands build their own robots and maps: one at a time, beside the placements
+        self.commands = ThreadPoolExecutor(max_workers=1, thread_name_prefix="baseplace-command")
         self.folder = Path(tempfile.mkdtemp(prefix="baseplace-serve-"))
         self._robots: dict[str, Any] = {}
         self._maps: dict[tuple[str, str | None], Any] = {}
@@ -206,5 +209,6 @@ class ServiceState:
     def close(self) -> None:
         """Stop the worker after the job it runs, and delete the scenes' files."""
         self.lookups.shutdown(wait=True, cancel_futures=True)
+        self.commands.shutdown(wait=True, cancel_futures=True)
         self.executor.shutdown(wait=True, cancel_futures=True)
         shutil.rmtree(self.folder, ignore_errors=True)
