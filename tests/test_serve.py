@@ -156,6 +156,13 @@ def test_oversized_requests_get_413_and_the_server_keeps_answering(tiago, tiago_
         assert c.get("/health").status_code == 200
 
 
+def test_the_public_names_resolve():
+    import baseplace.serve
+
+    for name in baseplace.serve.__all__:
+        assert getattr(baseplace.serve, name) is not None, name
+
+
 def test_health_openapi_and_docs(client):
     h = client.get("/health").json()
     assert h["status"] == "ok" and h["rss_mb"] > 0
