@@ -232,3 +232,27 @@ def test_a_request_over_the_time_limit_gets_504_and_the_next_one_an_answer(tiago
         r = c.post("/scenes", params={"format": "npy"}, content=npy_bytes(tray_points))
         assert r.status_code == 504 and "longer than" in r.json()["error"]
         assert c.get("/health").status_code == 200
+
+
+def test_a_grid_is_read_as_map_server_reads_it_and_a_bad_one_keeps_the_last(client, scene_id, tmp_path):
+    import cv2
+
+    from baseplace.world.occupancy import load_occupancy
+
+    image = np.full((40, 60), 254, np.uint8)
+    image[:10, :20] = 0  # first image row: the top of the map (max y)
+    ok, png = cv2.imencode(".png", image)
+    assert ok
+    params = {"resolution": 0.1, "format": "png", "origin_x": -3.0, "origin_y": -2.0}
+    r = client.post(f"/scenes/{scene_id}/grid", params=params, content=png.tobytes())
+    assert r.status_code == 200, r.text
+    # oracle: the same image and YAML read from files by the loader the CLI uses
+    (tmp_path / "m.png").write_bytes(png.tobytes())
+    (tmp_path / "m.yaml").write_text("image: m.png\nresolution: 0.1\norigin: [-3.0, -2.0, 0.0]\nnegate: 0\n"
+                                     "occupied_thresh: 0.65\nfree_thresh: 0.196\n")  # fmt: skip
+    assert r.json()["data"] == load_occupancy(tmp_path / "m.yaml").to_json()["data"]
+    bad = client.post(f"/scenes/{scene_id}/grid", params=params, content=b"not an image")
+    assert bad.status_code == 400 and "cannot read map image" in bad.json()["error"]
+    assert bad.json()["error"].startswith(scene_id + "/")  # the scene's file, no path of the server
+    again = client.post(f"/scenes/{scene_id}/grid", params=params, content=png.tobytes())
+    assert again.json()["data"] == r.json()["data"]

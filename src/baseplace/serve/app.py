@@ -227,15 +227,16 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
 
     @app.exception_handler(BaseplaceError)
     async def _baseplace_error(request: Request, exc: BaseplaceError) -> JSONResponse:
+        message = str(exc).replace(str(st.folder) + "/", "")  # the scene's files, not the server's paths
         if isinstance(exc, UnknownSceneError):
-            return JSONResponse({"error": str(exc)}, status_code=404)
+            return JSONResponse({"error": message}, status_code=404)
         if isinstance(exc, jobs.CommandError) and exc.exit_code == 3:
             report = dict(exc.report or {})
-            report.update(found=False, error=str(exc))
+            report.update(found=False, error=message)
             return JSONResponse(report, status_code=200)
         if isinstance(exc, jobs.CommandError) and exc.exit_code not in (2, 3):
-            return JSONResponse({"error": str(exc)}, status_code=500)
-        return JSONResponse({"error": str(exc)}, status_code=400)
+            return JSONResponse({"error": message}, status_code=500)
+        return JSONResponse({"error": message}, status_code=400)
 
     @app.exception_handler(_Timeout)
     async def _timeout(request: Request, exc: _Timeout) -> JSONResponse:
@@ -322,7 +323,7 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
             *jobs.scene_files(scene, req.use_cloud, "--occupancy"),
             *jobs.option_argv(fields),
         ]
-        report = await run(jobs.run_command, argv)
+        report = await run(jobs.run_command, argv, str(st.folder))
         report["scene_id"] = scene.id
         return report
 
@@ -334,7 +335,7 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
             *jobs.scene_files(scene, True, ""),
             *jobs.option_argv(req.model_dump(exclude={"scene_id"})),
         ]
-        report = await run(jobs.run_command, argv)
+        report = await run(jobs.run_command, argv, str(st.folder))
         report["scene_id"] = scene.id
         return report
 
@@ -346,7 +347,7 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
         path = st.folder / "surface" / f"{sid}.smap"
         path.parent.mkdir(mode=0o700, exist_ok=True)
         argv = ["surface-map", "--out", str(path), *jobs.option_argv(req.model_dump())]
-        report = await run(jobs.run_command, argv)
+        report = await run(jobs.run_command, argv, str(st.folder))
         report["surface_map_id"] = sid
         return report
 
@@ -364,7 +365,9 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
             grid = jobs.scene_files(st.scene(req.scene_id), False, "--occupancy")
         fields = req.model_dump(exclude={"surface_map_id", "scene_id"})
         return await run(
-            jobs.run_command, ["surface-sample", "--map", str(path), *grid, *jobs.option_argv(fields)]
+            jobs.run_command,
+            ["surface-sample", "--map", str(path), *grid, *jobs.option_argv(fields)],
+            str(st.folder),
         )
 
     app.add_middleware(

@@ -143,8 +143,12 @@ def segment(scene: Scene, resolution: float | None) -> dict[str, Any]:
     return result
 
 
-def run_command(argv: list[str]) -> dict[str, Any]:
-    """Run ``baseplace ARGV --json`` in this process: its JSON, or :class:`CommandError` with its error line."""
+def run_command(argv: list[str], folder: str | None = None) -> dict[str, Any]:
+    """Run ``baseplace ARGV --json`` in this process: its JSON, or :class:`CommandError` with its error line.
+
+    ``folder``: the service's own folder, cut from the answer's paths (they name the scene's
+    files as ``SCENE_ID/...``, never a path of the server).
+    """
     from baseplace.cli import main
 
     out, err = io.StringIO(), io.StringIO()
@@ -153,9 +157,13 @@ def run_command(argv: list[str]) -> dict[str, Any]:
             code = main([*argv, "--json"])
         except SystemExit as exc:  # argparse: a bad option value
             code = int(exc.code) if isinstance(exc.code, int) else 2
-    lines = [line for line in err.getvalue().splitlines() if line.startswith("error: ")]
+    stdout, stderr = out.getvalue(), err.getvalue()
+    if folder:
+        stdout = stdout.replace(json.dumps(folder + "/")[1:-1], "").replace(folder + "/", "")
+        stderr = stderr.replace(folder + "/", "")
+    lines = [line for line in stderr.splitlines() if line.startswith("error: ")]
     report = None
-    text = out.getvalue().strip()
+    text = stdout.strip()
     if text:
         with contextlib.suppress(ValueError):
             report = json.loads(text.splitlines()[-1])
@@ -204,14 +212,22 @@ def add_grid(scene: Scene, image: bytes, suffix: str, meta: dict[str, Any]) -> d
         raise InputError(f"unknown grid image format {suffix!r}; valid: pgm, png")
     if not image:
         raise InputError("the upload is empty: send the grid image as the request body")
-    (scene.folder / f"grid.{suffix}").write_bytes(image)
+    import uuid
+
+    name = f"grid-{uuid.uuid4().hex[:8]}"  # a new grid never breaks the one the scene has until it is read
+    image_path, yaml_path = scene.folder / f"{name}.{suffix}", scene.folder / f"{name}.yaml"
+    image_path.write_bytes(image)
     origin = [float(meta["origin_x"]), float(meta["origin_y"]), float(meta["origin_yaw"])]
-    doc = {"image": f"grid.{suffix}", "resolution": float(meta["resolution"]), "origin": origin,
+    doc = {"image": image_path.name, "resolution": float(meta["resolution"]), "origin": origin,
            "negate": int(bool(meta["negate"])), "occupied_thresh": float(meta["occupied_thresh"]),
            "free_thresh": float(meta["free_thresh"]), "mode": str(meta["mode"])}  # fmt: skip
-    yaml_path = scene.folder / "grid.yaml"
     yaml_path.write_text(json.dumps(doc) + "\n")  # JSON is YAML
-    grid = load_occupancy(yaml_path)
+    try:
+        grid = load_occupancy(yaml_path)
+    except BaseException:
+        image_path.unlink(missing_ok=True)
+        yaml_path.unlink(missing_ok=True)
+        raise
     scene.grid_yaml = yaml_path
     report: dict[str, Any] = grid.to_json()
     report["scene_id"] = scene.id
