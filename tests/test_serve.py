@@ -256,3 +256,31 @@ def test_a_grid_is_read_as_map_server_reads_it_and_a_bad_one_keeps_the_last(clie
     assert bad.json()["error"].startswith(scene_id + "/")  # the scene's file, no path of the server
     again = client.post(f"/scenes/{scene_id}/grid", params=params, content=png.tobytes())
     assert again.json()["data"] == r.json()["data"]
+
+
+def test_a_ros_recording_is_a_scene_with_its_cloud_and_grid(client, tmp_path):
+    from baseplace.io.bag import read_bag
+    from test_io_bag import _write
+
+    bag = tmp_path / "rec.bag"
+    _write(bag, "ros1")  # the mug cloud on a moving base, tf, and the depot map
+    params = {"format": "bag", "cloud_topic": "/head/points", "map_topic": "/map"}
+    r = client.post("/scenes", params=params, content=bag.read_bytes())
+    assert r.status_code == 200, r.text
+    out = r.json()
+    # oracle: the recording read from the file by the CLI's reader
+    truth = read_bag(bag, ["/head/points"], "/map")
+    assert out["points"] == len(truth.world_points()) and out["grid"] is True
+    from baseplace.world.occupancy import load_occupancy
+
+    held = load_occupancy(client.app.state.service.scene(out["scene_id"]).grid_yaml)  # as the CLI reads it
+    assert np.array_equal(held.data, truth.grid.data) and held.resolution == truth.grid.resolution
+    assert np.allclose(held.origin, truth.grid.origin)
+    seg = client.get(f"/scenes/{out['scene_id']}/segmentation").json()
+    assert seg["cloud"]["points"] == len(truth.world_points())
+    again = client.post(f"/scenes/{out['scene_id']}/grid", params={"resolution": 0.05}, content=b"")
+    assert again.status_code == 400  # an empty grid upload, and the recording's grid stays
+    r = client.post("/scenes", params={"format": "bag"}, content=bag.read_bytes())
+    assert r.status_code == 400 and "cloud topic" in r.json()["error"]
+    r = client.post("/scenes", params={**params, "cloud_topic": "/nope"}, content=bag.read_bytes())
+    assert r.status_code == 400 and "/nope" in r.json()["error"] and "\n" not in r.json()["error"]

@@ -12,7 +12,7 @@ import asyncio
 import functools
 import time
 from collections.abc import Callable
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from fastapi import FastAPI, Query, Request
@@ -257,16 +257,37 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
                 "scenes": len(st.scene_ids()), "requests": st.requests, "rss_mb": round(_rss_mb(), 1),
                 "robots_warm": sorted(st._robots)}  # fmt: skip
 
-    @app.post("/scenes", summary="upload a cloud (body: the file) once; later requests name its scene_id")
+    @app.post(
+        "/scenes",
+        summary="upload a cloud or a ROS recording (body: the file) once; later requests name its scene_id",
+    )
     async def upload_scene(
         request: Request,
-        format: Literal["ply", "pcd", "npy", "xyz"] = Query(..., description="cloud file format"),
+        format: Literal["ply", "pcd", "npy", "xyz", "mcap", "bag"] = Query(
+            ..., description="cloud file format, or a recording: rosbag2 .mcap file, ROS 1 .bag"
+        ),
+        cloud_topic: Annotated[
+            list[str] | None, Query(description="recordings: PointCloud2 topic(s)")
+        ] = None,
+        map_topic: str | None = Query(
+            None, description="recordings: an OccupancyGrid topic, the scene's grid"
+        ),
+        world_frame: str = Query("map", max_length=200, description="recordings: the frame of the scene"),
+        bag_clouds: Literal["last", "first", "all"] = Query(
+            "last", description="recordings: which cloud messages"
+        ),
     ) -> dict[str, Any]:
         data = await request.body()
-        scene = await run(st.add_scene, data, format)
+        bag = {
+            "cloud_topics": cloud_topic or [],
+            "map_topic": map_topic,
+            "world_frame": world_frame,
+            "clouds": bag_clouds,
+        }
+        scene = await run(st.add_scene, data, format, bag)
         summary = await run(jobs.segment, scene, None)
         return {"scene_id": scene.id, "points": scene.points, "regions": len(summary["regions"]),
-                "timings_ms": summary["timings_ms"]}  # fmt: skip
+                "grid": scene.grid_yaml is not None, "timings_ms": summary["timings_ms"]}  # fmt: skip
 
     @app.get("/scenes", summary="ids of the scenes held")
     async def list_scenes() -> dict[str, Any]:

@@ -232,3 +232,22 @@ def add_grid(scene: Scene, image: bytes, suffix: str, meta: dict[str, Any]) -> d
     report: dict[str, Any] = grid.to_json()
     report["scene_id"] = scene.id
     return report
+
+
+def add_grid_values(scene: Scene, grid: Any) -> None:
+    """Attach an :class:`~baseplace.world.occupancy.OccupancyGrid` (e.g. a recording's) as map_server files.
+
+    Written in map_server's ``raw`` mode (a pixel is the cell value, 255 unknown), which reads
+    back cell for cell.
+    """
+    import cv2
+
+    values = np.asarray(grid.data)
+    pixels = np.where((values >= 0) & (values <= 100), values, 255).astype(np.uint8)[::-1]
+    ok, png = cv2.imencode(".png", pixels)
+    if not ok:
+        raise InputError("cannot encode the recording's occupancy grid")
+    x, y, yaw = (float(v) for v in grid.origin)
+    meta = {"resolution": grid.resolution, "origin_x": x, "origin_y": y, "origin_yaw": yaw, "negate": False,
+            "occupied_thresh": 0.65, "free_thresh": 0.196, "mode": "raw"}  # fmt: skip
+    add_grid(scene, png.tobytes(), "png", meta)

@@ -28,6 +28,9 @@ from baseplace.errors import BaseplaceError, InputError
 CLOUD_FORMATS = ("ply", "pcd", "npy", "xyz")
 """Upload formats of a scene's cloud (the ``format`` query parameter)."""
 
+BAG_FORMATS = ("mcap", "bag")
+"""Upload formats of a ROS recording: a rosbag2 ``.mcap`` file or a ROS 1 ``.bag``."""
+
 
 class UnknownSceneError(BaseplaceError):
     """A request named a scene id the service does not hold (HTTP 404)."""
@@ -145,24 +148,43 @@ class ServiceState:
         return (robot, arm) in self._maps
 
     # ---- scenes ----
-    def add_scene(self, data: bytes, fmt: str) -> Scene:
-        """A scene from an uploaded cloud (worker thread): checked, saved, segmented."""
+    def add_scene(self, data: bytes, fmt: str, bag: dict[str, Any] | None = None) -> Scene:
+        """A scene from an uploaded cloud or recording (worker thread): checked, saved, segmented.
+
+        ``bag``: for a recording, ``cloud_topics``, ``map_topic``, ``world_frame`` and ``clouds``
+        as :func:`baseplace.io.bag.read_bag` takes them; its grid, if any, becomes the scene's.
+        """
         from baseplace.placement.scene_cache import SceneCache
         from baseplace.terrain.io import load_cloud
 
-        if fmt not in CLOUD_FORMATS:
-            raise InputError(f"unknown cloud format {fmt!r}; valid: {', '.join(CLOUD_FORMATS)}")
+        if fmt not in CLOUD_FORMATS + BAG_FORMATS:
+            raise InputError(f"unknown format {fmt!r}; valid: {', '.join(CLOUD_FORMATS + BAG_FORMATS)}")
         if not data:
-            raise InputError("the upload is empty: send the cloud file as the request body")
+            raise InputError("the upload is empty: send the cloud or recording file as the request body")
         scene_id = uuid.uuid4().hex[:16]
         folder = self.folder / scene_id
         folder.mkdir(mode=0o700)
+        grid = None
         try:
             upload = folder / f"upload.{fmt}"
             upload.write_bytes(data)
-            cloud = load_cloud(upload)  # the file checks of the CLI: declared sizes, corrupt files
+            if fmt in BAG_FORMATS:
+                from baseplace.io.bag import read_bag
+
+                b = bag or {}
+                if not b.get("cloud_topics"):
+                    raise InputError("with a recording, give the cloud topic: cloud_topic=/camera/points")
+                recording = read_bag(upload, b["cloud_topics"], b.get("map_topic"), b.get("world_frame", "map"),
+                                     b.get("clouds", "last"))  # fmt: skip
+                points = np.ascontiguousarray(recording.world_points(), dtype=np.float64)
+                if len(points) == 0:
+                    raise InputError("the recording's cloud topics hold no points")
+                grid = recording.grid
+            else:
+                points = np.ascontiguousarray(
+                    load_cloud(upload).points, dtype=np.float64
+                )  # the CLI's file checks
             upload.unlink()
-            points = np.ascontiguousarray(cloud.points, dtype=np.float64)
             np.save(folder / "cloud.npy", points, allow_pickle=False)
             cache = SceneCache(points)
             cache.terrain()  # the segmentation, once per scene
@@ -170,10 +192,14 @@ class ServiceState:
 
             for robot in list(self._robots.values()):  # the obstacle tree, before the first query
                 scene_environment(robot, cache)
+            scene = Scene(scene_id, folder, cache, len(points), f"upload.{fmt}")
+            if grid is not None:
+                from baseplace.serve.jobs import add_grid_values
+
+                add_grid_values(scene, grid)
         except BaseException:
             shutil.rmtree(folder, ignore_errors=True)
             raise
-        scene = Scene(scene_id, folder, cache, len(points), f"upload.{fmt}")
         with self._lock:
             self._scenes[scene_id] = scene
             while len(self._scenes) > self.settings.max_scenes:
