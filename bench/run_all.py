@@ -17,6 +17,8 @@ for script in [
     "bench_placement.py",
     "bench_surface_map.py",
     "bench_memory.py",
+    "bench_serve.py",
+    "bench_cold_start.py",
 ]:
     print(f"== {script}", flush=True)
     subprocess.run([sys.executable, str(HERE / script)], check=True, cwd=HERE)

@@ -1172,6 +1172,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     command("robots", "list the built-in robots, their arms and TCP frames", cmd_robots)
     _add_robot_commands(sub, command)
+    from baseplace.serve.command import add_serve_command
+
+    add_serve_command(command)
 
     p = command("build-map", "build a reachability map by random joint sampling", cmd_build_map)
     p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")

@@ -26,6 +26,7 @@ from baseplace.geometry.poses import FloatArray
 from baseplace.placement.motion import MotionChecker, MotionSettings, transit_environment
 from baseplace.placement.osrm import OSRM, build_osrm, footprint_kernels
 from baseplace.placement.robustness import RobustnessEstimator, RobustnessSettings, rank_by_robustness
+from baseplace.placement.scene_cache import SceneCache, object_key
 from baseplace.placement.strategies import make_strategy
 from baseplace.placement.verify import Placement, Verifier
 from baseplace.reachability.rmap import ReachabilityMap
@@ -37,6 +38,9 @@ from baseplace.terrain.segmentation import Segmentation
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import SUPPORT_DIST, Environment, contact_groups, obstacle_voxels
 from baseplace.world.grasped_object import GraspedObject, find_grasped_object
+
+NEAR_GRASP = 1.0
+"""Half-width [m] of the cloud window around the grasp point in which the grasped object is sought."""
 
 POSE_ONLY_CHECKS: dict[str, Any] = {"motion": None, "robustness": RobustnessSettings(samples=0)}
 """PlaceSettings overrides that check the placement's pose alone (IK + collision at the exact pose,
@@ -121,6 +125,7 @@ def place(
     terrain: Terrain | None = None,
     environments: dict[str, Environment] | None = None,
     grasped: GraspedObject | str | None = None,
+    cache: SceneCache | None = None,
 ) -> PlacementResult:
     """Find verified base placements from which the map's arm reaches every target.
 
@@ -139,6 +144,9 @@ def place(
             :class:`GraspedObject`, "auto" (the cloud's cluster at the first target's grasp point,
             :func:`find_grasped_object`; none if no point is near it) or None (nothing may be
             touched).
+        cache: what earlier queries in this scene built (segmentation, obstacle voxels, collision
+            environments, per grasped object too), reused and filled (:class:`SceneCache`);
+            ``points`` must be its cloud. Takes the place of ``terrain`` and ``environments``.
     """
     s = settings or PlaceSettings()
     rng = rng or np.random.default_rng(0)
@@ -147,6 +155,8 @@ def place(
         raise InputError("target pose contains NaN or infinity")
     strategy = make_strategy(s.strategy, s.gamma_max)
     t0 = time.perf_counter()
+    if cache is not None:
+        terrain = terrain or cache.terrain(s.resolution)
     terrain = terrain or terrain_from_points(points, resolution=s.resolution)
     seg = terrain.segmentation
     t1 = time.perf_counter()
@@ -164,19 +174,31 @@ def place(
             f"(bounding radius {size:.2f} m)"
         )
     t2 = time.perf_counter()
-    obj, note = _grasped_object(robot, rmap.info.arm, points, T_targets, grasped)
+    obj, note = _grasped_object(robot, rmap.info.arm, points, T_targets, grasped, cache)
     key = "floor" if s.strategy == "orm" else "regions"
+    if cache is None:
+        cache = SceneCache(points, terrain, s.resolution)  # this query only
+    obstacles = cache.shared(("obstacles", key, s.resolution, s.support_dist, outline.tobytes()),
+                             lambda: _obstacles(terrain, seg, s, outline))  # fmt: skip
     transit = None
-    if obj is not None:  # obstacles depend on the grasped object: no reuse across queries
-        groups, object_voxels = contact_groups(terrain.voxels, _obstacles(terrain, seg, s, outline), obj)
-        env = Environment(robot, groups, grasped=object_voxels, hand_arm=rmap.info.arm)
-        if s.motion is not None:  # on the way to the pre-grasp the hand may not touch it either
-            transit = transit_environment(robot, groups, object_voxels)
+    if obj is not None:  # the allowed contact: per grasped object, kept for the scene's next queries
+
+        def environments_for_object() -> tuple[Environment, Environment | None]:
+            groups, object_voxels = contact_groups(terrain.voxels, obstacles, obj)
+            hand = Environment(robot, groups, grasped=object_voxels, hand_arm=rmap.info.arm)
+            # on the way to the pre-grasp the hand may not touch it either
+            return hand, transit_environment(robot, groups, object_voxels)
+
+        env, transit = cache.per_object(
+            ("environment", robot, rmap.info.arm, key, s.resolution, s.support_dist, object_key(obj)),
+            environments_for_object,
+        )
+    elif environments is not None:
+        if key not in environments:
+            environments[key] = Environment(robot, obstacles)
+        env = environments[key]
     else:
-        cache = environments if environments is not None else {}
-        if key not in cache:
-            cache[key] = Environment(robot, _obstacles(terrain, seg, s, outline))
-        env = cache[key]
+        env = scene_environment(robot, cache, s)
     arm = robot.arm(rmap.info.arm)
     motion = None
     if s.motion is not None:  # only the final approach may touch the grasped object, with the hand
@@ -228,6 +250,22 @@ def place(
                            verifier.rejected, obj, note)  # fmt: skip
 
 
+def scene_environment(robot: Robot, cache: SceneCache, settings: PlaceSettings | None = None) -> Environment:
+    """The collision environment of a scene without a grasped object, made once per cache.
+
+    What :func:`place` uses when nothing may be touched; call it when a scene arrives so that
+    its first query finds the obstacle OcTree built.
+    """
+    s = settings or PlaceSettings()
+    terrain = cache.terrain(s.resolution)
+    outline = footprint_outline(robot.spec.footprint_radius, robot.spec.footprint_polygon)
+    key = "floor" if s.strategy == "orm" else "regions"
+    obstacles = cache.shared(("obstacles", key, s.resolution, s.support_dist, outline.tobytes()),
+                             lambda: _obstacles(terrain, terrain.segmentation, s, outline))  # fmt: skip
+    return cache.shared(("environment", robot, key, s.resolution, s.support_dist, outline.tobytes()),
+                        lambda: Environment(robot, obstacles))  # fmt: skip
+
+
 def with_floor(points: ArrayLike, z: float, margin: float = 2.0, spacing: float = 0.02) -> FloatArray:
     """The cloud (N, 3) plus a floor plane at height ``z`` [m] under and ``margin`` [m] around it.
 
@@ -249,7 +287,12 @@ def with_floor(points: ArrayLike, z: float, margin: float = 2.0, spacing: float 
 
 
 def _grasped_object(
-    robot: Robot, arm_name: str, points: ArrayLike, targets: FloatArray, grasped: GraspedObject | str | None
+    robot: Robot,
+    arm_name: str,
+    points: ArrayLike,
+    targets: FloatArray,
+    grasped: GraspedObject | str | None,
+    cache: SceneCache | None = None,
 ) -> tuple[GraspedObject | None, str]:
     """The object only the hand may touch, and how it was found."""
     if grasped is None:
@@ -264,7 +307,8 @@ def _grasped_object(
     point = (
         T[:3, 3] + grasp_standoff(robot) * T[:3, 0]
     )  # the grasp point, ahead of the TCP on its approach axis
-    found = find_grasped_object(points, point)
+    # the cluster lies within AutoSettings.max_size (0.3 m) of the grasp point: the cache's window is wider
+    found = find_grasped_object(points if cache is None else cache.points_near(point, NEAR_GRASP), point)
     if found is None:
         return None, f"auto: no object at the grasp point {np.round(point, 3).tolist()}"
     return found, f"auto: {len(found.points)} points at the grasp point {np.round(point, 3).tolist()}"

@@ -43,13 +43,26 @@ def _wrap(a: np.ndarray) -> np.ndarray:
     return (a + math.pi) % (2 * math.pi) - math.pi
 
 
-def _deviation(osrm: OSRM) -> np.ndarray:
-    """(H, W, l) |gamma - gamma_to_target| for every OSRM entry."""
-    _h, _w, _ = osrm.values.shape
-    rows, cols = np.nonzero(osrm.values.max(axis=2) > 0)
-    dev = np.full(osrm.values.shape, np.inf)
+def _box(osrm: OSRM) -> tuple[int, int, np.ndarray]:
+    """The OSRM's values inside the bounding box of the cells within reach (the only ones not 0).
+
+    Returns (first row, first column, (h, w, l) view); a 10 m scene's OSRM is mostly zeros, and
+    scanning the box only keeps a query's cost independent of the scene's size.
+    """
+    rows, cols = np.nonzero(osrm.near)
+    if len(rows) == 0:
+        return 0, 0, osrm.values[:0, :0]
+    r0, c0 = int(rows.min()), int(cols.min())
+    return r0, c0, osrm.values[r0 : int(rows.max()) + 1, c0 : int(cols.max()) + 1]
+
+
+def _deviation(osrm: OSRM, box: tuple[int, int, np.ndarray] | None = None) -> np.ndarray:
+    """|gamma - gamma_to_target| for every OSRM entry: (H, W, l), or the box's (h, w, l) if given."""
+    r0, c0, values = box if box is not None else (0, 0, osrm.values)
+    rows, cols = np.nonzero(values.max(axis=2) > 0) if values.size else (np.zeros(0, int), np.zeros(0, int))
+    dev = np.full(values.shape, np.inf)
     if len(rows):
-        g_to = osrm.gamma_to_target(rows, cols)
+        g_to = osrm.gamma_to_target(rows + r0, cols + c0)
         dev[rows, cols] = np.abs(_wrap(osrm.gammas[None, :] - g_to[:, None]))
     return dev
 
@@ -71,12 +84,16 @@ class MaximumReachability:
         self, osrm: OSRM, query: ReachabilityQuery, rng: np.random.Generator
     ) -> Iterator[Candidate]:
         """Entries above the threshold in random order, each once."""
-        v = osrm.values
+        box = _box(osrm)  # the same entries, in the same order, as over the whole OSRM
+        r0, c0, v = box
+        if v.size == 0:
+            return
         top = float(v.max())
-        ok = (v > self.threshold * top) & (_deviation(osrm) <= self.gamma_max) & (v > 0)
+        ok = (v > self.threshold * top) & (_deviation(osrm, box) <= self.gamma_max) & (v > 0)
         rows, cols, ls = np.nonzero(ok)
+        rows, cols = rows + r0, cols + c0
         for k in rng.permutation(len(rows)):
-            yield _candidate(osrm, rows[k], cols[k], osrm.gammas[ls[k]], v[rows[k], cols[k], ls[k]])
+            yield _candidate(osrm, rows[k], cols[k], osrm.gammas[ls[k]], osrm.values[rows[k], cols[k], ls[k]])
 
 
 @dataclass(frozen=True)

@@ -18,6 +18,7 @@ import numba as nb
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from baseplace.arrays import unique_ints, unique_inverse
 from baseplace.errors import InputError
 from baseplace.geometry.poses import FloatArray
 from baseplace.guards import check_alloc
@@ -86,7 +87,7 @@ class ReachabilityMap:
         """Largest horizontal distance [m] from the base origin to a reached voxel's far corner."""
         if len(self.cells) == 0:
             return 0.0
-        voxels = np.unique(self.cells // self.grid.n_orientations)
+        voxels = unique_ints(self.cells // self.grid.n_orientations)
         centres = self.grid.voxel_centre(voxels)
         return float(np.hypot(centres[:, 0], centres[:, 1]).max() + self.grid.voxel_size * math.sqrt(0.5))
 
@@ -105,7 +106,7 @@ class ReachabilityMap:
             self.grid.n_voxels * 4.0, "the lookup table of the map's grid", f"map of {self.info.robot}"
         )
         voxels, orient = np.divmod(self.cells, n_orient)
-        reached, row = np.unique(voxels, return_inverse=True)
+        reached, row = unique_inverse(voxels)
         offset = np.full(self.grid.n_voxels, -1, dtype=np.int32)
         offset[reached] = np.arange(len(reached), dtype=np.int32)
         blocks = np.zeros((len(reached), n_orient), dtype=np.float32)

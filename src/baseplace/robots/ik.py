@@ -175,6 +175,11 @@ class DampedLeastSquaresIK:
         arm = self.arm
         q_out = np.zeros((len(T), arm.n_joints))
         attempts = np.empty(len(T), dtype=np.int64)
+        if len(T) == 1:  # one pose (a verification): no thread team to start and wait for
+            attempts[0] = _solve_one(np.ascontiguousarray(T[0]), seeds[0], arm.placements, arm.axes, arm.kinds,
+                                     arm.T_last_tcp, arm.lower, arm.upper, arm.continuous, self.max_iterations,
+                                     self.tol_position, self.tol_rotation, self.damping, q_out[0])  # fmt: skip
+            return q_out, attempts
         _solve_batch(np.ascontiguousarray(T), seeds, arm.placements, arm.axes, arm.kinds,
                      arm.T_last_tcp, arm.lower, arm.upper, arm.continuous, self.max_iterations,
                      self.tol_position, self.tol_rotation, self.damping, q_out, attempts)  # fmt: skip

@@ -279,7 +279,8 @@ def _pcd_colors(data: np.ndarray, names: tuple[str, ...]) -> ColorArray | None:
 def _read_ply(path: Path) -> _Raw:
     from plyfile import PlyData
 
-    ply = PlyData.read(str(path), mmap=False)
+    # memory-mapped: one array read, not a Python loop per property (the declared size is checked already)
+    ply = PlyData.read(str(path), mmap="r")
     elements = [e.name for e in ply.elements]
     if "vertex" not in elements:
         raise InputError(f"PLY {path} has no 'vertex' element; elements: {', '.join(elements) or 'none'}")

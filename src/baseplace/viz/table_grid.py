@@ -25,7 +25,7 @@ def plot_table_grid(result: dict[str, Any], path: str | Path) -> None:
     brackets; cells not run are grey. Titles carry the overall rate and the seed's.
 
     Args:
-        result: the dict :func:`baseplace.sim.table_grid.run_table_grid` returned.
+        result: the dict :func:`baseplace_experiments.table_grid.run_table_grid` returned.
         path: output PNG, written atomically.
     """
     trials = int(result["trials"])

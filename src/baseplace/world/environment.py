@@ -12,7 +12,6 @@ its voxels are checked against every other link, and the surface under it stays 
 
 from __future__ import annotations
 
-import weakref
 from collections.abc import Iterable, Mapping
 
 import coal
@@ -75,14 +74,20 @@ def contact_groups(
     )
 
 
-_SELF_COLLISION: weakref.WeakKeyDictionary[Robot, SelfCollision] = weakref.WeakKeyDictionary()
+_SELF_COLLISION = "_baseplace_self_collision"
 
 
 def _self_collision(robot: Robot) -> SelfCollision:
-    """The robot's self-collision checker, loaded once per robot (environments are built per query)."""
-    if robot not in _SELF_COLLISION:
-        _SELF_COLLISION[robot] = SelfCollision(robot)
-    return _SELF_COLLISION[robot]
+    """The robot's self-collision checker (collision model and pair tables), built once per robot.
+
+    Kept on the robot itself, so it lives and dies with it: a WeakKeyDictionary would never let
+    go, since the checker holds the robot (a long-running service leaked one robot per request).
+    """
+    checker = getattr(robot, _SELF_COLLISION, None)
+    if checker is None:
+        checker = SelfCollision(robot)
+        setattr(robot, _SELF_COLLISION, checker)
+    return checker
 
 
 GRASPED = "grasped_object"

@@ -1,0 +1,111 @@
+"""What every placement query in one scene shares, built once (issue 18: per-query cost).
+
+A robot asks "where do I stand?" many times in the same scene. The segmentation, the obstacle
+voxels and the collision environment (its OcTrees) depend on the scene and, for the allowed
+contact, on the grasped object, never on the target: :class:`SceneCache` keeps them between
+queries of :func:`~baseplace.placement.pipeline.place`. The robot's own collision model and
+pair tables are cached per robot already (:mod:`baseplace.world.environment`).
+
+Environments carry mutable pinocchio data: one query at a time per cache (the service holds a
+lock per scene).
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections import OrderedDict
+from collections.abc import Callable, Hashable
+from typing import Any, TypeVar
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from baseplace.errors import InputError
+from baseplace.geometry.poses import FloatArray
+from baseplace.terrain.pipeline import Terrain, terrain_from_points
+from baseplace.world.grasped_object import GraspedObject
+
+T = TypeVar("T")
+
+OBJECT_ENVIRONMENTS = 8
+"""Collision environments kept per scene for distinct grasped objects (least recently used go)."""
+
+
+def object_key(obj: GraspedObject | None) -> str:
+    """A digest of what the allowed contact depends on: the object's kind, pose, size and points."""
+    if obj is None:
+        return "none"
+    h = hashlib.sha256(obj.kind.encode())
+    for a in (obj.center, obj.size, np.array([obj.yaw]), obj.points):
+        h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
+    return h.hexdigest()[:24]
+
+
+class SceneCache:
+    """One scene's segmentation, obstacle voxels and collision environments, kept between queries.
+
+    Args:
+        points: (N, 3) z-up world cloud of the scene [m] (non-finite rows are dropped).
+        terrain: a segmentation of the same cloud, if already made.
+        resolution: the height-map cell ``terrain`` was made with (None: chosen from the cloud).
+    """
+
+    def __init__(
+        self, points: ArrayLike, terrain: Terrain | None = None, resolution: float | None = None
+    ) -> None:
+        self._raw = np.asarray(points, dtype=float).reshape(-1, 3)
+        self._points: FloatArray | None = None
+        self._by_x: FloatArray | None = None
+        self._terrains: dict[float | None, Terrain] = {}
+        if terrain is not None:
+            self._terrains[resolution] = terrain
+        self._shared: dict[Hashable, Any] = {}
+        self._objects: OrderedDict[Hashable, Any] = OrderedDict()
+        self.hits = 0
+        self.misses = 0
+
+    @property
+    def points(self) -> FloatArray:
+        """The finite points (N, 3) of the cloud [m]."""
+        if self._points is None:
+            finite = np.all(np.isfinite(self._raw), axis=1)
+            self._points = self._raw if finite.all() else self._raw[finite]
+            if len(self._points) == 0:
+                raise InputError("the cloud has no finite points")
+        return self._points
+
+    def terrain(self, resolution: float | None = None) -> Terrain:
+        """The segmentation at this height-map cell [m] (None: chosen from the cloud), made once."""
+        if resolution not in self._terrains:
+            self._terrains[resolution] = terrain_from_points(self.points, resolution=resolution)
+        return self._terrains[resolution]
+
+    def points_near(self, xy: ArrayLike, half_width: float) -> FloatArray:
+        """The points (M, 3) whose x and y lie within ``half_width`` [m] of ``xy`` (2,)."""
+        if self._by_x is None:  # sorted by x once: a window is a slice, then a filter on y
+            self._by_x = self.points[np.argsort(self.points[:, 0], kind="stable")]
+        x, y = (float(v) for v in np.asarray(xy, dtype=float)[:2])
+        lo, hi = np.searchsorted(self._by_x[:, 0], [x - half_width, x + half_width], side="left")
+        slab = self._by_x[lo:hi]
+        return slab[np.abs(slab[:, 1] - y) <= half_width]
+
+    def shared(self, key: Hashable, make: Callable[[], T]) -> T:
+        """The value for ``key``, made by ``make()`` on first use and kept for the scene's life."""
+        if key in self._shared:
+            self.hits += 1
+        else:
+            self.misses += 1
+            self._shared[key] = make()
+        return self._shared[key]
+
+    def per_object(self, key: Hashable, make: Callable[[], T]) -> T:
+        """As :meth:`shared`, for values that depend on a grasped object: the last few are kept."""
+        if key in self._objects:
+            self.hits += 1
+            self._objects.move_to_end(key)
+        else:
+            self.misses += 1
+            self._objects[key] = make()
+            while len(self._objects) > OBJECT_ENVIRONMENTS:
+                self._objects.popitem(last=False)
+        return self._objects[key]

@@ -1,0 +1,445 @@
+"""``baseplace serve``: the HTTP/JSON front end (FastAPI on uvicorn), a thin translation to the jobs.
+
+Every answer is the CLI's JSON for the same inputs. Errors: ``{"error": "<the CLI's one line>"}``
+with 400 (bad input, the CLI's exit 2), 404 (unknown scene id), 413 (request too large), 422
+(a request that does not fit the schema), 504 (over the time limit); a job that ran and found
+nothing answers 200 with its JSON and ``"found": false`` plus ``"error"`` (the CLI's exit 3).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import functools
+import time
+from collections.abc import Callable
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from fastapi import FastAPI, Query, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from pydantic import BaseModel, ConfigDict, Field
+
+from baseplace.errors import BaseplaceError
+from baseplace.serve import jobs
+from baseplace.serve.state import ServeSettings, ServiceState, UnknownSceneError
+
+STRATEGIES = Literal["MR", "TO", "MRTO", "orm", "grid", "random"]
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class RobustnessFields(_Model):
+    """The CLI's reaching-motion and robustness options (``place``, ``candidates``)."""
+
+    no_motion_check: bool = Field(False, description="skip the reaching-motion check")
+    robustness_samples: int = Field(64, ge=0, le=4096, description="base-error draws per placement (0: none)")
+    rank_by_robustness: bool = Field(False, description="most robust placements first")
+    min_robustness: float = Field(0.0, ge=0.0, le=1.0, description="reject placements below this rate")
+    error_model: Literal["gaussian", "box"] = "gaussian"
+    sigma_xy: float = Field(0.03, ge=0.0, description="base position error sigma [m]")
+    sigma_yaw_deg: float = Field(2.0, ge=0.0, description="base heading error sigma [deg]")
+    xy_tolerance: float = Field(0.25, gt=0.0, description="goal xy tolerance [m]")
+    yaw_tolerance: float = Field(0.25, gt=0.0, description="goal yaw tolerance [rad]")
+
+
+class PlaceRequest(RobustnessFields):
+    """``baseplace place`` on an uploaded scene."""
+
+    scene_id: str = Field(..., max_length=64, description="id from POST /scenes")
+    targets: list[str] = Field(..., min_length=1, max_length=64,
+                               description='TCP targets "x y z roll pitch yaw" [m, rad]')  # fmt: skip
+    robot: str = Field("tiago", max_length=64, description="built-in robot name")
+    arm: str | None = Field(None, max_length=64, description="arm (default: the robot's default arm)")
+    strategy: STRATEGIES = "MR"
+    placements: int = Field(1, ge=1, le=100, description="M: placements to return")
+    tries: int = Field(100, ge=1, le=10_000, description="N: candidates to check at most")
+    seed: int = Field(0, ge=0, description="random seed")
+    object: str = Field("auto", max_length=200, description='"auto", "none", "box x y z sx sy sz [yaw]" ...')
+    resolution: float | None = Field(None, gt=0.0, le=1.0, description="height-map cell [m]")
+
+
+class CandidatesRequest(RobustnessFields):
+    """``baseplace candidates`` on an uploaded scene with a grid (seed 004)."""
+
+    scene_id: str = Field(..., max_length=64)
+    object: str = Field(..., max_length=100, description='object position "x y z" [m]')
+    robot_pose: str | None = Field(None, max_length=100, description='robot pose "x y yaw"')
+    method: Literal["radial", "irm"] = "radial"
+    robot: str = Field("tiago", max_length=64)
+    arm: str | None = Field(None, max_length=64)
+    standoff: float | None = Field(None, ge=0.0, le=1.0)
+    seed: int = Field(0, ge=0)
+    object_shape: str = Field("auto", max_length=200)
+    use_cloud: bool = Field(True, description="verify against the scene's cloud (else the grid alone)")
+
+
+class ReachRequest(_Model):
+    """``baseplace reach`` on the robot's default map: targets and bases paired row by row."""
+
+    targets: list[str] = Field(..., min_length=1, max_length=10_000)
+    bases: list[str] = Field(..., min_length=1, max_length=10_000, description='base poses "x y yaw"')
+    robot: str = Field("tiago", max_length=64)
+    arm: str | None = Field(None, max_length=64)
+
+
+class NavigateRequest(_Model):
+    """``baseplace navigate`` across the scene's planar regions (seed 000 V)."""
+
+    scene_id: str = Field(..., max_length=64)
+    start: str = Field(..., max_length=100)
+    goal: str = Field(..., max_length=100)
+    robot: str = Field("tiago", max_length=64)
+    planner: Literal["rrt", "regions"] = "rrt"
+    time_limit: float = Field(2.0, gt=0.0, le=60.0)
+    resolution: float | None = Field(None, gt=0.0, le=1.0)
+    seed: int = Field(0, ge=0)
+
+
+class SurfaceMapRequest(_Model):
+    """``baseplace surface-map``: where to stand to work on a whole surface (seed 002)."""
+
+    polygon: str = Field(..., max_length=10_000, description='"x1,y1;x2,y2;..." [m]')
+    height: float
+    robot: str = Field("tiago", max_length=64)
+    arms: str = Field("any", max_length=64)
+    resolution: float = Field(0.05, gt=0.0, le=1.0)
+    orientations: int = Field(16, ge=1, le=360)
+
+
+class SurfaceSamplesRequest(_Model):
+    """``baseplace surface-sample`` from a surface map made by POST /surface-map."""
+
+    surface_map_id: str = Field(..., max_length=64)
+    n: int = Field(5, ge=1, le=1000)
+    candidates: int = Field(40, ge=1, le=100_000)
+    no_discount: bool = False
+    seed: int = Field(0, ge=0)
+    scene_id: str | None = Field(
+        None, max_length=64, description="a scene whose grid is the operational area"
+    )
+
+
+class SizeLimit:
+    """ASGI middleware: refuse a body over ``limit`` bytes with 413, by header or while it streams.
+
+    Also counts requests (``state.requests``) and adds the server-side time as ``x-server-time-ms``.
+    """
+
+    def __init__(self, app: Any, limit: int, state: ServiceState) -> None:
+        self.app = app
+        self.limit = limit
+        self.state = state
+
+    async def __call__(self, scope: dict[str, Any], receive: Any, send: Any) -> None:
+        """Pass the request on, counting its body's bytes."""
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        self.state.requests += 1
+        t0 = time.perf_counter()
+        for name, value in scope.get("headers", []):
+            if name == b"content-length" and value.isdigit() and int(value) > self.limit:
+                await _send_json(send, 413, self._message(int(value)))
+                return
+        received = 0
+        started = False
+
+        async def limited_receive() -> dict[str, Any]:
+            nonlocal received
+            message: dict[str, Any] = await receive()
+            if message["type"] == "http.request":
+                received += len(message.get("body", b""))
+                if received > self.limit:
+                    raise _TooLarge(received)
+            return message
+
+        async def tracking_send(message: dict[str, Any]) -> None:
+            nonlocal started
+            if message["type"] == "http.response.start":
+                started = True
+                elapsed = f"{(time.perf_counter() - t0) * 1e3:.2f}".encode()
+                message = {
+                    **message,
+                    "headers": [*message.get("headers", []), (b"x-server-time-ms", elapsed)],
+                }
+            await send(message)
+
+        try:
+            await self.app(scope, limited_receive, tracking_send)
+        except _TooLarge as exc:
+            if not started:
+                await _send_json(send, 413, self._message(exc.size, streamed=True))
+
+    def _message(self, size: int, streamed: bool = False) -> str:
+        what = f"more than {size}" if streamed else f"{size}"
+        return (
+            f"request body of {what} bytes is over the limit of {self.limit} bytes (serve --max-request-mb)"
+        )
+
+
+class _TooLarge(Exception):
+    def __init__(self, size: int) -> None:
+        self.size = size
+
+
+async def _send_json(send: Any, status: int, error: str) -> None:
+    import json
+
+    body = json.dumps({"error": error}).encode()
+    await send({"type": "http.response.start", "status": status,
+                "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]})  # fmt: skip
+    await send({"type": "http.response.body", "body": body})
+
+
+def create_app(settings: ServeSettings | None = None, state: ServiceState | None = None) -> FastAPI:
+    """The service's ASGI app (robots warmed in its startup when ``settings.warm_up``)."""
+    settings = settings or ServeSettings()
+    st = state or ServiceState(settings)
+
+    async def lifespan(app: FastAPI) -> Any:
+        if settings.warm_up:
+            await asyncio.get_running_loop().run_in_executor(st.executor, functools.partial(warm_up, st))
+        yield
+        st.close()
+
+    app = FastAPI(title="baseplace", version=_version(),
+                  description="Where should a mobile manipulator stand? The CLI's jobs over HTTP/JSON; "
+                              "the answers are the CLI's --json output.",
+                  lifespan=lifespan)  # fmt: skip
+    app.state.service = st
+
+    async def run(fn: Callable[..., Any], *args: Any, lookup: bool = False) -> Any:
+        """Run a job on its thread within the time limit.
+
+        Placements and scenes on the worker, a read-only lookup on the lookup threads, a CLI
+        command on the command thread.
+        """
+        loop = asyncio.get_running_loop()
+        pool = st.lookups if lookup else st.commands if fn is jobs.run_command else st.executor
+        future = loop.run_in_executor(pool, functools.partial(fn, *args))
+        try:
+            return await asyncio.wait_for(asyncio.shield(future), settings.timeout_s)
+        except asyncio.TimeoutError:
+            raise _Timeout(settings.timeout_s) from None
+
+    @app.exception_handler(BaseplaceError)
+    async def _baseplace_error(request: Request, exc: BaseplaceError) -> JSONResponse:
+        message = str(exc).replace(str(st.folder) + "/", "")  # the scene's files, not the server's paths
+        if isinstance(exc, UnknownSceneError):
+            return JSONResponse({"error": message}, status_code=404)
+        if isinstance(exc, jobs.CommandError) and exc.exit_code == 3:
+            report = dict(exc.report or {})
+            report.update(found=False, error=message)
+            return JSONResponse(report, status_code=200)
+        if isinstance(exc, jobs.CommandError) and exc.exit_code not in (2, 3):
+            return JSONResponse({"error": message}, status_code=500)
+        return JSONResponse({"error": message}, status_code=400)
+
+    @app.exception_handler(_Timeout)
+    async def _timeout(request: Request, exc: _Timeout) -> JSONResponse:
+        return JSONResponse({"error": str(exc)}, status_code=504)
+
+    @app.exception_handler(RequestValidationError)
+    async def _invalid(request: Request, exc: RequestValidationError) -> JSONResponse:
+        first = exc.errors()[0] if exc.errors() else {}
+        where = ".".join(str(p) for p in first.get("loc", ()) if p != "body")
+        message = (
+            f"{where}: {first.get('msg', 'invalid request')}" if where else str(first.get("msg", "invalid"))
+        )
+        return JSONResponse({"error": message.replace("\n", " ")}, status_code=422)
+
+    @app.get("/health", summary="liveness, scenes held, resident memory")
+    async def health() -> dict[str, Any]:
+        return {"status": "ok", "version": _version(), "uptime_s": round(time.time() - st.started, 1),
+                "scenes": len(st.scene_ids()), "requests": st.requests, "rss_mb": round(_rss_mb(), 1),
+                "robots_warm": sorted(st._robots)}  # fmt: skip
+
+    @app.post(
+        "/scenes",
+        summary="upload a cloud or a ROS recording (body: the file) once; later requests name its scene_id",
+    )
+    async def upload_scene(
+        request: Request,
+        format: Literal["ply", "pcd", "npy", "xyz", "mcap", "bag"] = Query(
+            ..., description="cloud file format, or a recording: rosbag2 .mcap file, ROS 1 .bag"
+        ),
+        cloud_topic: Annotated[
+            list[str] | None, Query(description="recordings: PointCloud2 topic(s)")
+        ] = None,
+        map_topic: str | None = Query(
+            None, description="recordings: an OccupancyGrid topic, the scene's grid"
+        ),
+        world_frame: str = Query("map", max_length=200, description="recordings: the frame of the scene"),
+        bag_clouds: Literal["last", "first", "all"] = Query(
+            "last", description="recordings: which cloud messages"
+        ),
+    ) -> dict[str, Any]:
+        data = await request.body()
+        bag = {
+            "cloud_topics": cloud_topic or [],
+            "map_topic": map_topic,
+            "world_frame": world_frame,
+            "clouds": bag_clouds,
+        }
+        scene = await run(st.add_scene, data, format, bag)
+        summary = await run(jobs.segment, scene, None)
+        return {"scene_id": scene.id, "points": scene.points, "regions": len(summary["regions"]),
+                "grid": scene.grid_yaml is not None, "timings_ms": summary["timings_ms"]}  # fmt: skip
+
+    @app.get("/scenes", summary="ids of the scenes held")
+    async def list_scenes() -> dict[str, Any]:
+        return {"scenes": st.scene_ids()}
+
+    @app.delete("/scenes/{scene_id}", summary="forget a scene")
+    async def delete_scene(scene_id: str) -> dict[str, Any]:
+        st.drop_scene(scene_id)
+        return {"deleted": scene_id}
+
+    @app.post(
+        "/scenes/{scene_id}/grid", summary="attach an occupancy grid (body: PGM/PNG; map_server YAML fields)"
+    )
+    async def upload_grid(
+        scene_id: str,
+        request: Request,
+        resolution: float = Query(..., gt=0.0, le=10.0),
+        format: Literal["pgm", "png"] = "pgm",
+        origin_x: float = 0.0,
+        origin_y: float = 0.0,
+        origin_yaw: float = 0.0,
+        negate: bool = False,
+        occupied_thresh: float = 0.65,
+        free_thresh: float = 0.196,
+        mode: Literal["trinary", "scale", "raw"] = "trinary",
+    ) -> dict[str, Any]:
+        scene = st.scene(scene_id)
+        data = await request.body()
+        meta = {"resolution": resolution, "origin_x": origin_x, "origin_y": origin_y, "origin_yaw": origin_yaw,
+                "negate": negate, "occupied_thresh": occupied_thresh, "free_thresh": free_thresh, "mode": mode}  # fmt: skip
+        return await run(jobs.add_grid, scene, data, format, meta)
+
+    @app.get("/scenes/{scene_id}/segmentation", summary="baseplace segment --json of the scene (cached)")
+    async def segmentation(
+        scene_id: str, resolution: float | None = Query(None, gt=0.0, le=1.0)
+    ) -> dict[str, Any]:
+        return await run(jobs.segment, st.scene(scene_id), resolution)
+
+    @app.post("/place", summary="baseplace place --json on an uploaded scene")
+    async def place(req: PlaceRequest) -> dict[str, Any]:
+        scene = st.scene(req.scene_id)
+        return await run(jobs.place, st, scene, req.model_dump())
+
+    @app.post("/reach", summary="baseplace reach --json on the robot's default map")
+    async def reach(req: ReachRequest) -> dict[str, Any]:
+        return await run(jobs.reach, st, req.model_dump(), lookup=st.is_warm(req.robot, req.arm))
+
+    @app.post("/candidates", summary="baseplace candidates --json on an uploaded scene with a grid")
+    async def candidates(req: CandidatesRequest) -> dict[str, Any]:
+        scene = st.scene(req.scene_id)
+        fields = req.model_dump(exclude={"scene_id", "use_cloud"})
+        argv = [
+            "candidates",
+            *jobs.scene_files(scene, req.use_cloud, "--occupancy"),
+            *jobs.option_argv(fields),
+        ]
+        report = await run(jobs.run_command, argv, str(st.folder))
+        report["scene_id"] = scene.id
+        return report
+
+    @app.post("/navigate", summary="baseplace navigate --json across the scene's planar regions")
+    async def navigate(req: NavigateRequest) -> dict[str, Any]:
+        scene = st.scene(req.scene_id)
+        argv = [
+            "navigate",
+            *jobs.scene_files(scene, True, ""),
+            *jobs.option_argv(req.model_dump(exclude={"scene_id"})),
+        ]
+        report = await run(jobs.run_command, argv, str(st.folder))
+        report["scene_id"] = scene.id
+        return report
+
+    @app.post("/surface-map", summary="baseplace surface-map --json; later samples name its surface_map_id")
+    async def surface_map(req: SurfaceMapRequest) -> dict[str, Any]:
+        import uuid
+
+        sid = uuid.uuid4().hex[:16]
+        path = st.folder / "surface" / f"{sid}.smap"
+        path.parent.mkdir(mode=0o700, exist_ok=True)
+        argv = ["surface-map", "--out", str(path), *jobs.option_argv(req.model_dump())]
+        report = await run(jobs.run_command, argv, str(st.folder))
+        report["surface_map_id"] = sid
+        return report
+
+    @app.post("/surface-samples", summary="baseplace surface-sample --json from a surface map")
+    async def surface_samples(req: SurfaceSamplesRequest) -> dict[str, Any]:
+        if not req.surface_map_id.isalnum():
+            raise UnknownSceneError(f"unknown surface map id {req.surface_map_id!r}")
+        path = st.folder / "surface" / f"{req.surface_map_id}.smap"
+        if not path.is_file():
+            raise UnknownSceneError(
+                f"unknown surface map id {req.surface_map_id!r}: make one with POST /surface-map"
+            )
+        grid = []
+        if req.scene_id is not None:
+            grid = jobs.scene_files(st.scene(req.scene_id), False, "--occupancy")
+        fields = req.model_dump(exclude={"surface_map_id", "scene_id"})
+        return await run(
+            jobs.run_command,
+            ["surface-sample", "--map", str(path), *grid, *jobs.option_argv(fields)],
+            str(st.folder),
+        )
+
+    app.add_middleware(
+        SizeLimit, limit=settings.max_request_bytes, state=st
+    )  # outermost: before any body is read
+    return app
+
+
+class _Timeout(Exception):
+    def __init__(self, limit: float) -> None:
+        super().__init__(
+            f"the request took longer than {limit:g} s (serve --timeout); it finishes in the background "
+            "and its scene caches stay warm"
+        )
+
+
+def warm_up(state: ServiceState) -> None:
+    """Make the first request as fast as the next: robots, maps, kernels and a first placement."""
+    from baseplace.geometry.poses import pose_from_xyz_rpy
+    from baseplace.placement.pipeline import PlaceSettings, place
+    from baseplace.placement.scene_cache import SceneCache
+
+    floor = np.mgrid[-2.0:2.0:0.02, -2.0:2.0:0.02].reshape(2, -1).T
+    points = np.c_[floor, np.zeros(len(floor))]
+    cache = SceneCache(points)
+    for name in state.settings.robots:
+        robot = state.robot(name)
+        rmap = state.reach_map(robot, None)
+        target = pose_from_xyz_rpy([0.6, 0.0, 0.8, 0.0, 1.5708, 0.0])
+        try:
+            place(robot, rmap, points, target, PlaceSettings(tries=5), np.random.default_rng(0), cache=cache)
+        except BaseplaceError:
+            pass  # the kernels are loaded all the same
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("baseplace")
+    except PackageNotFoundError:
+        return "unknown"
+
+
+def _rss_mb() -> float:
+    """Resident memory of this process [MiB] (Linux /proc; 0 elsewhere)."""
+    try:
+        with open("/proc/self/statm") as f:
+            pages = int(f.read().split()[1])
+    except (OSError, ValueError, IndexError):
+        return 0.0
+    import os
+
+    return pages * os.sysconf("SC_PAGE_SIZE") / 2**20

@@ -1,0 +1,49 @@
+"""The ``baseplace serve`` command's options (kept here so that cli.py stays a list of commands)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable
+
+from baseplace.errors import InputError
+
+
+def add_serve_command(command: Callable[..., argparse.ArgumentParser]) -> None:
+    """Add ``serve`` through the CLI's ``command(name, help, func, ...)`` helper."""
+    p = command("serve", "HTTP/JSON service answering every job warm (place, candidates, reach, ...)",
+                cmd_serve, description="Serve the CLI's jobs over HTTP/JSON with robots, maps, kernels and "
+                "uploaded scenes kept warm; OpenAPI docs at /docs. Loopback only unless --host says otherwise.")  # fmt: skip
+    p.add_argument(
+        "--host", default="127.0.0.1", help="address to bind (default 127.0.0.1: this machine only)"
+    )
+    p.add_argument("--port", type=int, default=8000, help="TCP port (default 8000; 0: any free one)")
+    p.add_argument("--robot", action="append", default=None,
+                   help="robot to warm at start (built-in name; repeat; default tiago)")  # fmt: skip
+    p.add_argument("--max-request-mb", type=float, default=64.0,
+                   help="larger request bodies get 413 (default 64 MiB)")  # fmt: skip
+    p.add_argument("--timeout", type=float, default=30.0, help="per-request time limit [s] (default 30)")
+    p.add_argument(
+        "--max-scenes", type=int, default=16, help="scenes kept, least recently used dropped (default 16)"
+    )
+    p.add_argument("--no-warm-up", action="store_true", help="skip the warm-up placement at start")
+
+
+def cmd_serve(args: argparse.Namespace) -> int:
+    """Run the service until SIGINT/SIGTERM."""
+    from baseplace.serve.server import serve
+    from baseplace.serve.state import ServeSettings
+
+    if not (args.max_request_mb > 0):
+        raise InputError(f"--max-request-mb must be > 0, got {args.max_request_mb}")
+    settings = ServeSettings(host=args.host, port=args.port, max_request_bytes=int(args.max_request_mb * 2**20),
+                             timeout_s=args.timeout, max_scenes=args.max_scenes,
+                             robots=tuple(args.robot or ("tiago",)), warm_up=not args.no_warm_up)  # fmt: skip
+    if args.host not in ("127.0.0.1", "localhost", "::1"):
+        sys.stderr.write(
+            f"warning: serving on {args.host}: reachable from other machines, with no authentication\n"
+        )
+    warm = f"warming {', '.join(settings.robots)}, then " if settings.warm_up else ""
+    sys.stderr.write(f"baseplace serve: {warm}http://{args.host}:{args.port} (docs at /docs)\n")
+    serve(settings)
+    return 0

@@ -1,0 +1,240 @@
+"""What the service keeps warm between requests: robots, maps, scenes (issue 18).
+
+Robots are built once per name (their collision model and pair tables with them), maps loaded
+once per (robot, arm), and each uploaded scene keeps its cloud, its segmentation and its
+obstacle set and collision environments (:class:`~baseplace.placement.scene_cache.SceneCache`).
+Placements run on one worker thread (:attr:`ServiceState.executor`): pinocchio's data and coal's
+trees are not shared between threads. Map lookups run on two more (``lookups``), and the CLI
+commands run for the service, which build their own robots and maps, on one more (``commands``).
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+import threading
+import time
+import uuid
+from collections import OrderedDict
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from baseplace.errors import BaseplaceError, InputError
+
+CLOUD_FORMATS = ("ply", "pcd", "npy", "xyz")
+"""Upload formats of a scene's cloud (the ``format`` query parameter)."""
+
+BAG_FORMATS = ("mcap", "bag")
+"""Upload formats of a ROS recording: a rosbag2 ``.mcap`` file or a ROS 1 ``.bag``."""
+
+
+class UnknownSceneError(BaseplaceError):
+    """A request named a scene id the service does not hold (HTTP 404)."""
+
+
+@dataclass(frozen=True)
+class ServeSettings:
+    """How the service runs.
+
+    Attributes:
+        host: address to bind; 127.0.0.1 (loopback only) unless told otherwise.
+        port: TCP port (0: any free one).
+        max_request_bytes: larger request bodies are refused with 413 before they are read.
+        timeout_s: a request still computing after this many seconds is answered 504 [s].
+        max_scenes: scenes kept; the least recently used one goes when a new one comes.
+        robots: robots (built-in names) made warm at start: model, collision model, default map,
+            compiled kernels.
+        warm_up: run one small placement per robot at start, so that no request pays numba's
+            kernel loading or the first OSRM.
+    """
+
+    host: str = "127.0.0.1"
+    port: int = 8000
+    max_request_bytes: int = 64 * 1024 * 1024
+    timeout_s: float = 30.0
+    max_scenes: int = 16
+    robots: tuple[str, ...] = ("tiago",)
+    warm_up: bool = True
+
+    def __post_init__(self) -> None:
+        if not (0 <= self.port <= 65535):
+            raise InputError(f"port must be in 0..65535, got {self.port}")
+        if self.max_request_bytes < 1024:
+            raise InputError(f"max_request_bytes must be >= 1024, got {self.max_request_bytes}")
+        if not (self.timeout_s > 0):
+            raise InputError(f"timeout_s must be > 0, got {self.timeout_s}")
+        if self.max_scenes < 1:
+            raise InputError(f"max_scenes must be >= 1, got {self.max_scenes}")
+
+
+@dataclass
+class Scene:
+    """An uploaded scene: its cloud (also as a file, for commands that read one) and its cache."""
+
+    id: str
+    folder: Path
+    cache: Any  # SceneCache
+    points: int
+    source: str
+    created: float = field(default_factory=time.time)
+    grid_yaml: Path | None = None
+
+    @property
+    def cloud_file(self) -> Path:
+        """The scene's cloud as an .npy file (N, 3) float64 [m]."""
+        return self.folder / "cloud.npy"
+
+
+class ServiceState:
+    """Robots, maps and scenes of one running service."""
+
+    def __init__(self, settings: ServeSettings) -> None:
+        self.settings = settings
+        self.started = time.time()
+        self.executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="baseplace-job")
+        # map lookups only read the map: they need not wait behind a placement
+        self.lookups = ThreadPoolExecutor(max_workers=2, thread_name_prefix="baseplace-lookup")
+        # the CLI's commands build their own robots and maps: one at a time, beside the placements
+        self.commands = ThreadPoolExecutor(max_workers=1, thread_name_prefix="baseplace-command")
+        self.folder = Path(tempfile.mkdtemp(prefix="baseplace-serve-"))
+        self._robots: dict[str, Any] = {}
+        self._maps: dict[tuple[str, str | None], Any] = {}
+        self._scenes: OrderedDict[str, Scene] = OrderedDict()
+        self._lock = threading.Lock()  # scenes are added from the worker and read from the loop
+        self.requests = 0
+
+    # ---- robots and maps (worker thread only) ----
+    def robot(self, name: str) -> Any:
+        """The robot of a built-in name, built once."""
+        from baseplace.robots.spec import BUILTIN_ROBOTS
+
+        if name not in BUILTIN_ROBOTS:
+            raise InputError(f"unknown robot {name!r}; valid: {', '.join(BUILTIN_ROBOTS)}")
+        if name not in self._robots:
+            from baseplace.robots.model import Robot
+
+            self._robots[name] = Robot(name)
+        return self._robots[name]
+
+    def reach_map(self, robot: Any, arm: str | None) -> Any:
+        """The robot's cached default map for ``arm`` (default arm: None), loaded once."""
+        key = (robot.name, arm)
+        if key not in self._maps:
+            from baseplace.demo import cached_map
+            from baseplace.reachability.build import BuildSettings
+
+            if arm is not None and arm not in robot.spec.arms:
+                raise InputError(f"unknown arm {arm!r} of {robot.name}; valid: {', '.join(robot.spec.arms)}")
+            self._maps[key] = cached_map(robot, BuildSettings(), arm)[0]
+            self._maps[key].tables  # noqa: B018  the lookup tables, built now, not in a query
+        return self._maps[key]
+
+    def use_map(self, robot: Any, rmap: Any) -> None:
+        """Answer ``robot``'s requests for the map's arm (and the default arm, if it is that) with ``rmap``."""
+        from baseplace.reachability.storage import check_map_matches
+
+        check_map_matches(rmap, robot, rmap.info.arm, "the given map")
+        self._robots[robot.name] = robot
+        self._maps[(robot.name, rmap.info.arm)] = rmap
+        if rmap.info.arm == robot.spec.default_arm:
+            self._maps[(robot.name, None)] = rmap
+
+    def is_warm(self, robot: str, arm: str | None) -> bool:
+        """True when the robot and its map for ``arm`` are loaded (lookups may then run beside jobs)."""
+        return (robot, arm) in self._maps
+
+    # ---- scenes ----
+    def add_scene(self, data: bytes, fmt: str, bag: dict[str, Any] | None = None) -> Scene:
+        """A scene from an uploaded cloud or recording (worker thread): checked, saved, segmented.
+
+        ``bag``: for a recording, ``cloud_topics``, ``map_topic``, ``world_frame`` and ``clouds``
+        as :func:`baseplace.io.bag.read_bag` takes them; its grid, if any, becomes the scene's.
+        """
+        from baseplace.placement.scene_cache import SceneCache
+        from baseplace.terrain.io import load_cloud
+
+        if fmt not in CLOUD_FORMATS + BAG_FORMATS:
+            raise InputError(f"unknown format {fmt!r}; valid: {', '.join(CLOUD_FORMATS + BAG_FORMATS)}")
+        if not data:
+            raise InputError("the upload is empty: send the cloud or recording file as the request body")
+        scene_id = uuid.uuid4().hex[:16]
+        folder = self.folder / scene_id
+        folder.mkdir(mode=0o700)
+        grid = None
+        try:
+            upload = folder / f"upload.{fmt}"
+            upload.write_bytes(data)
+            if fmt in BAG_FORMATS:
+                from baseplace.io.bag import read_bag
+
+                b = bag or {}
+                if not b.get("cloud_topics"):
+                    raise InputError("with a recording, give the cloud topic: cloud_topic=/camera/points")
+                recording = read_bag(upload, b["cloud_topics"], b.get("map_topic"), b.get("world_frame", "map"),
+                                     b.get("clouds", "last"))  # fmt: skip
+                points = np.ascontiguousarray(recording.world_points(), dtype=np.float64)
+                if len(points) == 0:
+                    raise InputError("the recording's cloud topics hold no points")
+                grid = recording.grid
+            else:
+                points = np.ascontiguousarray(
+                    load_cloud(upload).points, dtype=np.float64
+                )  # the CLI's file checks
+            upload.unlink()
+            np.save(folder / "cloud.npy", points, allow_pickle=False)
+            cache = SceneCache(points)
+            cache.terrain()  # the segmentation, once per scene
+            from baseplace.placement.pipeline import scene_environment
+
+            for robot in list(self._robots.values()):  # the obstacle tree, before the first query
+                scene_environment(robot, cache)
+            scene = Scene(scene_id, folder, cache, len(points), f"upload.{fmt}")
+            if grid is not None:
+                from baseplace.serve.jobs import add_grid_values
+
+                add_grid_values(scene, grid)
+        except BaseException:
+            shutil.rmtree(folder, ignore_errors=True)
+            raise
+        with self._lock:
+            self._scenes[scene_id] = scene
+            while len(self._scenes) > self.settings.max_scenes:
+                _, old = self._scenes.popitem(last=False)
+                shutil.rmtree(old.folder, ignore_errors=True)
+        return scene
+
+    def scene(self, scene_id: str) -> Scene:
+        """The scene of an id, most recently used now; 404 if unknown."""
+        with self._lock:
+            scene = self._scenes.get(scene_id)
+            if scene is None:
+                raise UnknownSceneError(
+                    f"unknown scene id {scene_id!r}: upload the cloud with POST /scenes first "
+                    f"({len(self._scenes)} scene(s) held)"
+                )
+            self._scenes.move_to_end(scene_id)
+            return scene
+
+    def drop_scene(self, scene_id: str) -> None:
+        """Forget a scene and delete its files."""
+        with self._lock:
+            scene = self._scenes.pop(scene_id, None)
+        if scene is None:
+            raise UnknownSceneError(f"unknown scene id {scene_id!r}")
+        shutil.rmtree(scene.folder, ignore_errors=True)
+
+    def scene_ids(self) -> list[str]:
+        """Ids of the scenes held, least recently used first."""
+        with self._lock:
+            return list(self._scenes)
+
+    def close(self) -> None:
+        """Stop the worker after the job it runs, and delete the scenes' files."""
+        self.lookups.shutdown(wait=True, cancel_futures=True)
+        self.commands.shutdown(wait=True, cancel_futures=True)
+        self.executor.shutdown(wait=True, cancel_futures=True)
+        shutil.rmtree(self.folder, ignore_errors=True)

@@ -1,0 +1,286 @@
+"""``baseplace serve`` (issue 18): answers checked by pinocchio FK, errors as the CLI's lines.
+
+In process (FastAPI's TestClient) and, for disconnects and the Python client, a real uvicorn on
+a free loopback port. Oracles: pinocchio FK of the returned joints at the returned base pose
+reaches the grasp; the CLI's own error line for the same bad input.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import socket
+import threading
+import time
+
+import numpy as np
+import pytest
+
+pytest.importorskip("fastapi")
+pytest.importorskip("uvicorn")
+
+from fastapi.testclient import TestClient
+
+from baseplace.errors import InputError
+from baseplace.reachability.storage import save_map
+from baseplace.serve.client import Client
+from baseplace.serve.server import create_app
+from baseplace.serve.state import ServeSettings, ServiceState
+from conftest import run_cli
+from test_grasped_object import THROUGH_B, A, B, cloud, tray_scene
+from test_placement import pinocchio_tcp
+
+TARGET = " ".join(str(v) for v in (-0.05 + 0.151, 0.0, 0.70, 0.0, 0.0, np.pi))  # THROUGH_B as text
+
+
+def npy_bytes(points: np.ndarray) -> bytes:
+    buf = io.BytesIO()
+    np.save(buf, points, allow_pickle=False)
+    return buf.getvalue()
+
+
+def make_app(tiago, tiago_map, **settings):
+    s = ServeSettings(warm_up=False, **settings)
+    state = ServiceState(s)
+    state.use_map(tiago, tiago_map)
+    return create_app(s, state)
+
+
+@pytest.fixture(scope="module")
+def tray_points():
+    return cloud(tray_scene(A))
+
+
+@pytest.fixture(scope="module")
+def client(tiago, tiago_map):
+    with TestClient(make_app(tiago, tiago_map, max_request_bytes=8 * 1024 * 1024)) as c:
+        yield c
+
+
+@pytest.fixture(scope="module")
+def scene_id(client, tray_points):
+    r = client.post("/scenes", params={"format": "npy"}, content=npy_bytes(tray_points))
+    assert r.status_code == 200, r.text
+    assert r.json()["points"] == len(tray_points) and r.json()["regions"] >= 1
+    return r.json()["scene_id"]
+
+
+def test_place_returns_placements_that_reach_the_grasp(client, scene_id, tiago, tiago_map):
+    for seed in (0, 1):
+        r = client.post("/place", json={"scene_id": scene_id, "targets": [TARGET], "tries": 60, "seed": seed,
+                                        "placements": 2})  # fmt: skip
+        assert r.status_code == 200, r.text
+        out = r.json()
+        assert out["placements"], out["failures"]
+        assert out["object"]["allowed"] is not None  # the bottle, found at the grasp point
+        arm = tiago.arm(tiago_map.info.arm)
+        for p in out["placements"]:
+            T_world_base = np.array(p["base_pose"])
+            q = np.array([p["joints"][0][name] for name in arm.joint_names])
+            T = pinocchio_tcp(tiago, arm, q, T_world_base)  # oracle: pinocchio FK of the returned joints
+            assert np.allclose(T[:3, 3], THROUGH_B[:3, 3], atol=0.01)
+            assert np.allclose(T[:3, :3], THROUGH_B[:3, :3], atol=0.02)
+    # the CLI's keys, with the same values where the inputs are the same
+    assert {"robot", "strategy", "seed", "targets", "placements", "tries", "failures", "collisions", "object",
+            "timings_ms", "regions"} <= set(out)  # fmt: skip
+
+
+def test_bad_input_gets_the_clis_one_line_and_the_server_keeps_answering(
+    client, scene_id, tmp_path, tray_points
+):
+    bad = "0.1 0 0.7 0 0"
+    r = client.post("/place", json={"scene_id": scene_id, "targets": [bad]})
+    assert r.status_code == 400
+    np.save(tmp_path / "c.npy", tray_points)
+    cli = run_cli("place", "--cloud", str(tmp_path / "c.npy"), "--target", bad)
+    assert cli.returncode == 2
+    assert r.json()["error"] == cli.stderr.strip().removeprefix("error: ")  # the CLI's message, word for word
+    cases = [
+        (
+            {"scene_id": scene_id, "targets": [TARGET], "robot": "r2d2"},
+            400,
+            "unknown robot 'r2d2'; valid: tiago",
+        ),
+        ({"scene_id": "0123456789abcdef", "targets": [TARGET]}, 404, "unknown scene id"),
+        ({"scene_id": scene_id, "targets": [TARGET], "strategy": "XX"}, 422, "strategy"),
+        ({"scene_id": scene_id, "targets": [TARGET], "tries": 0}, 422, "tries"),
+        ({"scene_id": scene_id, "targets": [TARGET], "typo": 1}, 422, "typo"),
+        ({"scene_id": scene_id}, 422, "targets"),
+    ]
+    for body, status, words in cases:
+        r = client.post("/place", json=body)
+        assert r.status_code == status, (body, r.text)
+        line = r.json()["error"]
+        assert words in line and "\n" not in line and "Traceback" not in line
+    r = client.post("/place", content=b'{"scene_id": ', headers={"content-type": "application/json"})
+    assert r.status_code == 422 and "\n" not in r.json()["error"]
+    for data, fmt, status in [(b"", "npy", 400), (b"not a cloud", "npy", 400), (b"x", "stl", 422)]:
+        r = client.post("/scenes", params={"format": fmt}, content=data)
+        assert r.status_code == status and "\n" not in r.json()["error"], r.text
+    assert client.get("/health").json()["status"] == "ok"
+    r = client.post("/reach", json={"targets": [TARGET], "bases": ["0 0 0"]})
+    assert r.status_code == 200 and len(r.json()["values"]) == 1
+
+
+def test_nothing_found_is_200_with_found_false_and_the_clis_line(client, tiago_map, tmp_path):
+    # the hand passes through bottle B to grasp A: no placement (test_grasped_object); the same
+    # inputs through the CLI give exit 3 and the same line
+    points = cloud(tray_scene(A, B))
+    r = client.post("/scenes", params={"format": "npy"}, content=npy_bytes(points))
+    scene = r.json()["scene_id"]
+    r = client.post("/place", json={"scene_id": scene, "targets": [TARGET], "tries": 30})
+    assert r.status_code == 200
+    out = r.json()
+    assert out["found"] is False and out["placements"] == [] and out["failures"]["collision"] > 0
+    map_file, cloud_file = tmp_path / "tiago.rmap", tmp_path / "two.npy"
+    save_map(tiago_map, map_file)
+    np.save(cloud_file, points)
+    cli = run_cli(
+        "place", "--cloud", str(cloud_file), "--map", str(map_file), "--target", TARGET, "--tries", "30"
+    )
+    assert cli.returncode == 3
+    assert out["error"] == cli.stderr.strip().removeprefix("error: ")
+
+
+def test_oversized_requests_get_413_and_the_server_keeps_answering(tiago, tiago_map):
+    with TestClient(make_app(tiago, tiago_map, max_request_bytes=4096)) as c:
+        r = c.post("/scenes", params={"format": "npy"}, content=b"\0" * 10_000)
+        assert r.status_code == 413 and "over the limit of 4096 bytes" in r.json()["error"]
+
+        def chunks():  # no content-length: counted while it streams
+            for _ in range(10):
+                yield b"\0" * 1000
+
+        r = c.post("/scenes", params={"format": "npy"}, content=chunks())
+        assert r.status_code == 413, r.text
+        assert c.get("/health").status_code == 200
+
+
+def test_the_public_names_resolve():
+    import baseplace.serve
+
+    for name in baseplace.serve.__all__:
+        assert getattr(baseplace.serve, name) is not None, name
+
+
+def test_health_openapi_and_docs(client):
+    h = client.get("/health").json()
+    assert h["status"] == "ok" and h["rss_mb"] > 0
+    doc = client.get("/openapi.json").json()
+    for path in ("/place", "/candidates", "/reach", "/navigate", "/surface-map", "/surface-samples", "/scenes",
+                 "/scenes/{scene_id}/segmentation", "/health"):  # fmt: skip
+        assert path in doc["paths"], path
+    assert "targets" in doc["components"]["schemas"]["PlaceRequest"]["properties"]
+    assert client.get("/docs").status_code == 200
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture(scope="module")
+def server(tiago, tiago_map):
+    import uvicorn
+
+    port = _free_port()
+    app = make_app(tiago, tiago_map, timeout_s=20.0)
+    srv = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning", lifespan="on"))
+    thread = threading.Thread(target=srv.run, daemon=True)
+    thread.start()
+    deadline = time.time() + 30
+    while not srv.started and time.time() < deadline:
+        time.sleep(0.05)
+    assert srv.started
+    yield f"http://127.0.0.1:{port}", port
+    srv.should_exit = True  # graceful: requests in flight finish, then the lifespan ends
+    thread.join(timeout=30)
+    assert not thread.is_alive()
+
+
+def test_a_client_that_disconnects_mid_request_is_dropped(server, tray_points):
+    url, port = server
+    body = npy_bytes(tray_points)
+    # half an upload, then gone
+    with socket.create_connection(("127.0.0.1", port)) as s:
+        s.sendall(b"POST /scenes?format=npy HTTP/1.1\r\nHost: x\r\nContent-Type: application/octet-stream\r\n"
+                  + f"Content-Length: {len(body)}\r\n\r\n".encode() + body[: len(body) // 2])  # fmt: skip
+    # a whole place request, gone before the answer
+    with Client(url) as c:
+        scene = c.upload_scene(body, "npy")
+        request = json.dumps({"scene_id": scene, "targets": [TARGET], "tries": 60}).encode()
+        with socket.create_connection(("127.0.0.1", port)) as s:
+            s.sendall(b"POST /place HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
+                      + f"Content-Length: {len(request)}\r\n\r\n".encode() + request)  # fmt: skip
+        # the server keeps answering, the scene still there
+        assert c.health()["status"] == "ok"
+        out = c.place(scene, [TARGET], tries=60)
+        assert out["placements"]
+        assert (
+            c.reach([TARGET], [f"{out['placements'][0]['x']} {out['placements'][0]['y']} 0"])["values"][0]
+            >= 0
+        )
+        with pytest.raises(InputError, match="unknown scene id"):
+            c.place("ffffffffffffffff", [TARGET])
+        with pytest.raises(InputError, match="needs 6 numbers"):
+            c.place(scene, ["1 2 3"])
+
+
+def test_a_request_over_the_time_limit_gets_504_and_the_next_one_an_answer(tiago, tiago_map, tray_points):
+    with TestClient(make_app(tiago, tiago_map, timeout_s=0.001)) as c:
+        r = c.post("/scenes", params={"format": "npy"}, content=npy_bytes(tray_points))
+        assert r.status_code == 504 and "longer than" in r.json()["error"]
+        assert c.get("/health").status_code == 200
+
+
+def test_a_grid_is_read_as_map_server_reads_it_and_a_bad_one_keeps_the_last(client, scene_id, tmp_path):
+    import cv2
+
+    from baseplace.world.occupancy import load_occupancy
+
+    image = np.full((40, 60), 254, np.uint8)
+    image[:10, :20] = 0  # first image row: the top of the map (max y)
+    ok, png = cv2.imencode(".png", image)
+    assert ok
+    params = {"resolution": 0.1, "format": "png", "origin_x": -3.0, "origin_y": -2.0}
+    r = client.post(f"/scenes/{scene_id}/grid", params=params, content=png.tobytes())
+    assert r.status_code == 200, r.text
+    # oracle: the same image and YAML read from files by the loader the CLI uses
+    (tmp_path / "m.png").write_bytes(png.tobytes())
+    (tmp_path / "m.yaml").write_text("image: m.png\nresolution: 0.1\norigin: [-3.0, -2.0, 0.0]\nnegate: 0\n"
+                                     "occupied_thresh: 0.65\nfree_thresh: 0.196\n")  # fmt: skip
+    assert r.json()["data"] == load_occupancy(tmp_path / "m.yaml").to_json()["data"]
+    bad = client.post(f"/scenes/{scene_id}/grid", params=params, content=b"not an image")
+    assert bad.status_code == 400 and "cannot read map image" in bad.json()["error"]
+    assert bad.json()["error"].startswith(scene_id + "/")  # the scene's file, no path of the server
+    again = client.post(f"/scenes/{scene_id}/grid", params=params, content=png.tobytes())
+    assert again.json()["data"] == r.json()["data"]
+
+
+def test_a_ros_recording_is_a_scene_with_its_cloud_and_grid(client, tmp_path):
+    from baseplace.io.bag import read_bag
+    from test_io_bag import _write
+
+    bag = tmp_path / "rec.bag"
+    _write(bag, "ros1")  # the mug cloud on a moving base, tf, and the depot map
+    params = {"format": "bag", "cloud_topic": "/head/points", "map_topic": "/map"}
+    r = client.post("/scenes", params=params, content=bag.read_bytes())
+    assert r.status_code == 200, r.text
+    out = r.json()
+    # oracle: the recording read from the file by the CLI's reader
+    truth = read_bag(bag, ["/head/points"], "/map")
+    assert out["points"] == len(truth.world_points()) and out["grid"] is True
+    from baseplace.world.occupancy import load_occupancy
+
+    held = load_occupancy(client.app.state.service.scene(out["scene_id"]).grid_yaml)  # as the CLI reads it
+    assert np.array_equal(held.data, truth.grid.data) and held.resolution == truth.grid.resolution
+    assert np.allclose(held.origin, truth.grid.origin)
+    seg = client.get(f"/scenes/{out['scene_id']}/segmentation").json()
+    assert seg["cloud"]["points"] == len(truth.world_points())
+    again = client.post(f"/scenes/{out['scene_id']}/grid", params={"resolution": 0.05}, content=b"")
+    assert again.status_code == 400  # an empty grid upload, and the recording's grid stays
+    r = client.post("/scenes", params={"format": "bag"}, content=bag.read_bytes())
+    assert r.status_code == 400 and "cloud topic" in r.json()["error"]
+    r = client.post("/scenes", params={**params, "cloud_topic": "/nope"}, content=bag.read_bytes())
+    assert r.status_code == 400 and "/nope" in r.json()["error"] and "\n" not in r.json()["error"]
