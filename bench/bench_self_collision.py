@@ -4,7 +4,7 @@ For TIAGo, TIAGo dual (right arm, the left one at its reference) and a Franka Pa
 configurations (seed 7, disjoint from the model's calibration seed [19, 0]):
 - false-free rate: the sphere check passes, coal finds a collision (target <= 0.5 %);
 - false-colliding rate: the sphere check rejects, coal finds the robot free;
-- rates, medians of 3 on 2^20 configurations in one run: the FK + binning kernel alone (the
+- rates, medians of 5 interleaved rounds on 2^20 configurations in one run: the FK + binning kernel alone (the
   build without self-collision, the baseline), the sphere check alone, and both (the
   self-collision-aware build), with coal's rate on a few hundred configurations.
 
@@ -42,13 +42,18 @@ def panda() -> Robot:
     )
 
 
-def median_rate(fn, n: int, repeats: int = 3) -> float:
-    times = []
+def interleaved_rates(fns, n: int, repeats: int = 5) -> list[float]:
+    """Median rate [1/s] of each function over ``repeats`` rounds that run each once in turn.
+
+    Interleaving makes the ratios robust to load from other processes on a shared machine.
+    """
+    times: list[list[float]] = [[] for _ in fns]
     for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return n / statistics.median(times)
+        for k, fn in enumerate(fns):
+            t = time.perf_counter()
+            fn()
+            times[k].append(time.perf_counter() - t)
+    return [n / statistics.median(ts) for ts in times]
 
 
 def main() -> None:
@@ -96,9 +101,7 @@ def row(robot: Robot, n_configs: int) -> str:
         fk_only()
         spheres_only()
 
-    fk = median_rate(fk_only, len(B))
-    sph = median_rate(spheres_only, len(B))
-    build = median_rate(both, len(B))
+    fk, sph, build = interleaved_rates((fk_only, spheres_only, both), len(B))
     return (
         f"| {robot.name} | {len(model.sphere_radius)} | {len(model.geom_pairs)} | {100 * false_free:.3f} % "
         f"| {100 * false_colliding:.2f} % | {100 * coal.mean():.2f} % | {fk / 1e6:.2f} | {sph / 1e6:.3f} "

@@ -33,3 +33,4 @@ def test_build_with_self_collision_drops_samples() -> None:
     m = build_map(robot, settings=BuildSettings(samples=20_000, self_collision=True))
     assert 0.05 * 20_000 < m.info.dropped_self_collision < 0.5 * 20_000
     assert int(m.counts.sum()) == 20_000 - m.info.dropped_self_collision
+    assert m.info.self_collision_checker.startswith("spheres-2: ")  # provenance of the drops
