@@ -243,6 +243,7 @@ class MapAccumulator:
             build_time_s=build_time_s,
             self_collision=s.self_collision,
             dropped_self_collision=self.dropped,
+            self_collision_checker=self._checker.description if self._checker is not None else "",
         )
         manip = self.best[cells] if s.manipulability else None
         return ReachabilityMap(self.grid, cells, self.counts[cells], info, manip)

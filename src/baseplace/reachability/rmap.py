@@ -41,6 +41,7 @@ class MapInfo:
         build_time_s: wall time of the build [s].
         self_collision: whether self-colliding samples were dropped.
         dropped_self_collision: samples dropped as self-colliding.
+        self_collision_checker: which self-collision check dropped them (empty without one).
     """
 
     robot: str
@@ -54,6 +55,7 @@ class MapInfo:
     build_time_s: float = 0.0
     self_collision: bool = False
     dropped_self_collision: int = 0
+    self_collision_checker: str = ""
 
 
 @dataclass(frozen=True)

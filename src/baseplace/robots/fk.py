@@ -21,18 +21,21 @@ from baseplace.robots.model import Arm
 @nb.njit(cache=True, inline="always")
 def chain_pose(q, placements, axes, kinds, T_last, R, t):
     """Pose of the TCP for one configuration q (n,): writes rotation R (3, 3) and position t (3,)."""
-    chain_frames(q, placements, axes, kinds, T_last, R, t, _NO_FRAMES, _NO_FRAMES, False)
+    chain_frames(q, placements, axes, kinds, T_last, R, t, NO_AXES, NO_AXES, False, NO_FRAMES, False)
 
 
-_NO_FRAMES = np.empty((0, 3))
+NO_AXES = np.empty((0, 3))
+NO_FRAMES = np.empty((0, 3, 4))
 
 
 @nb.njit(cache=True, inline="always")
-def chain_frames(q, placements, axes, kinds, T_last, R, t, zs, origins, record):
-    """TCP pose as :func:`chain_pose`; with ``record`` also each joint's frame.
+def chain_frames(q, placements, axes, kinds, T_last, R, t, zs, origins, record, frames, record_frames):
+    """TCP pose as :func:`chain_pose`; with ``record`` also each joint's axis and origin.
 
     The joint axes go to ``zs`` (n, 3) and the joint origins to ``origins`` (n, 3), both in the
-    base frame, as the Jacobian needs them.
+    base frame, as the Jacobian needs them. With ``record_frames``, ``frames`` (n, 3, 4) gets each
+    joint's frame after its motion, ``[R | t]`` in the base frame: what moves the link it carries
+    (the sphere self-collision model, ``spheres.py``).
     """
     for a in range(3):
         for b in range(3):
@@ -90,6 +93,10 @@ def chain_frames(q, placements, axes, kinds, T_last, R, t, zs, origins, record):
             R[2, 0] = r20 * m00 + r21 * m10 + r22 * m20
             R[2, 1] = r20 * m01 + r21 * m11 + r22 * m21
             R[2, 2] = r20 * m02 + r21 * m12 + r22 * m22
+        if record_frames:
+            for a in range(3):
+                frames[i, a, 0], frames[i, a, 1], frames[i, a, 2] = R[a, 0], R[a, 1], R[a, 2]
+                frames[i, a, 3] = t[a]
     P = T_last
     t0 = t[0] + R[0, 0] * P[0, 3] + R[0, 1] * P[1, 3] + R[0, 2] * P[2, 3]
     t1 = t[1] + R[1, 0] * P[0, 3] + R[1, 1] * P[1, 3] + R[1, 2] * P[2, 3]

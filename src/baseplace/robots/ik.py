@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError
 from baseplace.geometry.poses import FloatArray, invert_transforms
-from baseplace.robots.fk import chain_frames
+from baseplace.robots.fk import NO_FRAMES, chain_frames
 from baseplace.robots.model import Arm
 
 
@@ -43,7 +43,7 @@ def _pose_and_jacobian(q, placements, axes, kinds, T_last, R, t, J):
     n = q.shape[0]
     origins = np.empty((n, 3))
     zs = np.empty((n, 3))
-    chain_frames(q, placements, axes, kinds, T_last, R, t, zs, origins, True)
+    chain_frames(q, placements, axes, kinds, T_last, R, t, zs, origins, True, NO_FRAMES, False)
     for i in range(n):
         zx, zy, zz = zs[i, 0], zs[i, 1], zs[i, 2]
         if kinds[i] == 1:

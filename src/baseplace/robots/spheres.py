@@ -26,12 +26,18 @@ import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
 from baseplace.robots.collision import SelfCollision
-from baseplace.robots.model import PRISMATIC, Arm, Robot
+from baseplace.robots.fk import NO_AXES, chain_frames
+from baseplace.robots.model import Arm, Robot
 
+MODEL_VERSION = "spheres-2"
+"""Names the sphere model and kernel in a map's provenance (``MapInfo.self_collision_checker``)."""
 DEFAULT_MARGIN = 0.005  # m, added to every sphere radius
 _SURFACE_SAMPLES = 3000  # random surface points per mesh, on top of vertices and edge midpoints
 _MAX_SPHERES = 8  # per geometry
 _TARGET_RADIUS = 0.06  # m: parts are split until their sphere is this small
+_REACH_SAMPLES = 1 << 17  # random configurations that find the sphere pairs that never meet
+_REACH_MARGIN = 0.05  # m: a pair is kept if its spheres came this close in those samples
+CALIBRATION_CHUNK = 1 << 14
 
 
 def _surface_points(geometry: Any, rng: np.random.Generator) -> tuple[NDArray[np.float64], float]:
@@ -119,15 +125,22 @@ class SphereModel:
         sphere_center: (S, 3) center in that joint's frame (or the base frame) [m].
         sphere_radius: (S,) radius [m].
         geom_joint, geom_center, geom_radius: the same for one bounding sphere per geometry (G,).
-        geom_pairs: (P, 2) geometry pairs checked (indices into the G geometries).
-        sphere_pairs: (M, 2) sphere pairs checked, indices into the S spheres.
+        geom_pairs: (P, 2) geometry pairs checked (indices into the G geometries), the first
+            geometry in the cluster with the larger bound, sorted by cluster pair then first geometry.
+        sphere_pairs: (M, 2) sphere pairs checked, indices into the S spheres: the exact model's
+            pairs less those that overlap where coal finds the robot free and those that never
+            came within ``_REACH_MARGIN`` in ``_REACH_SAMPLES`` random configurations.
         cluster_center, cluster_radius: (n + 1, 3), (n + 1,) a bound of all spheres each arm
             joint moves (row 0: the fixed part), in that joint's frame.
         cluster_pairs: (K, 2) joint pairs (-1 the fixed part) with geometry pairs to check.
-        cluster_pair_start: (K + 1,) where each cluster pair's geometry pairs start in
-            ``geom_pairs`` (sorted by cluster pair).
+        cluster_pair_start: (K + 1,) where each cluster pair's first geometries start in
+            ``first_geom``.
+        first_geom, first_start: (F,), (F + 1,) each first geometry and where its pairs start in
+            ``geom_pairs``.
         geom_first: (G + 1,) where each geometry's spheres start (they are contiguous).
-        allowed: (S, S) True for the sphere pairs in ``sphere_pairs``.
+        pair_u_start, ent_u, ent_v_start, ent_v: per geometry pair, the spheres u of its first
+            geometry that are in a checked sphere pair, and for each its partners v.
+        description: the model and its size, recorded in the maps it builds.
     """
 
     def __init__(
@@ -213,47 +226,91 @@ class SphereModel:
         for C in centers[: free.sum()]:
             d = np.linalg.norm(C[candidates[:, 0]] - C[candidates[:, 1]], axis=1)
             spurious |= d < rad[candidates[:, 0]] + rad[candidates[:, 1]]
-        ok = {(int(i), int(j)) for i, j in candidates[~spurious]}
-        geom_pairs, pair_start, sphere_pairs = [], [0], []
+        # Sphere pairs that stay farther apart than ``_REACH_MARGIN`` over ``_REACH_SAMPLES``
+        # random configurations cannot meet within the joint limits (up to that margin) and are
+        # left out too: most pairs between the torso and the upper arm, the shoulder and the hand.
+        near = candidates[~spurious]
+        gap = np.full(len(near), np.inf)
+        for k in range(_REACH_SAMPLES // CALIBRATION_CHUNK):
+            Qr = arm.sample(np.random.default_rng([19, 1, k]), CALIBRATION_CHUNK)
+            C = np.empty((len(Qr), len(rad), 3))
+            _sphere_centers(Qr, arm.placements, arm.axes, arm.kinds, s_joint_a, s_local_a, C)
+            _min_gap(C, near, rad, gap)
+        ok = {(int(i), int(j)) for i, j in near[gap < _REACH_MARGIN]}
+        geom_pairs: list[tuple[int, int]] = []
+        kept_pairs: list[tuple[int, int]] = []
         for a, b in pairs:
             kept = [(i, j) for i in g_spheres[index[a]] for j in g_spheres[index[b]] if (i, j) in ok]
             if kept:
                 geom_pairs.append((index[a], index[b]))
-                sphere_pairs.extend(kept)
-                pair_start.append(len(sphere_pairs))
+                kept_pairs.extend(kept)
         self.sphere_joint = np.array(s_joint, dtype=np.int64)
         self.sphere_center = np.array(s_local, dtype=float).reshape(-1, 3)
         self.sphere_radius = rad
         self.geom_joint = np.array(g_joint, dtype=np.int64)
         self.geom_center = np.array(g_local, dtype=float).reshape(-1, 3)
         self.geom_radius = np.array(g_rad, dtype=float)
-        self.sphere_pairs = np.array(sphere_pairs, dtype=np.int64).reshape(-1, 2)
-        # Geometry pairs grouped by the pair of arm joints that move them ("clusters", -1 the
-        # fixed part), so one bound check per cluster pair skips all of its geometry pairs.
-        gp = np.array(geom_pairs, dtype=np.int64).reshape(-1, 2)
-        joint_of = self.geom_joint
-        key = np.stack([joint_of[gp[:, 0]], joint_of[gp[:, 1]]], axis=1)
-        order = np.lexsort((key[:, 1], key[:, 0]))
-        self.geom_pairs, key = gp[order], key[order]
-        n = arm.n_joints + 1
+        self.sphere_pairs = np.array(kept_pairs, dtype=np.int64).reshape(-1, 2)
+        self.n_exact_pairs = len(pairs)
+        self.geom_first = np.array([r.start for r in g_spheres] + [len(rad)], dtype=np.int64)
+        self._group_pairs(np.array(geom_pairs, dtype=np.int64).reshape(-1, 2))
+        self.description = (
+            f"{MODEL_VERSION}: {len(rad)} spheres (margin {margin} m), {len(self.sphere_pairs)} "
+            f"sphere pairs in {len(self.geom_pairs)} geometry pairs"
+        )
+
+    def _group_pairs(self, gp: NDArray[np.int64]) -> None:
+        """The bounding hierarchy over the geometry pairs: cluster pair, then geometry, then pair.
+
+        A cluster is everything one arm joint moves (-1: the fixed part). Each geometry pair is
+        oriented so that its first geometry is in the cluster with the larger bound (the fixed
+        part before the hand): per configuration, one test of a first geometry against the other
+        cluster's bound skips all of its pairs, so the 12 x 41 torso/hand geometry pairs of TIAGo
+        cost a dozen tests while the hand is away from the torso.
+        """
+        rad, n = self.sphere_radius, self.arm.n_joints + 1
         self.cluster_center = np.zeros((n, 3))
         self.cluster_radius = np.zeros(n)
-        for c in range(-1, arm.n_joints):
+        for c in range(-1, self.arm.n_joints):
             sel = self.sphere_joint == c
             if sel.any():
                 C, r = self.sphere_center[sel], rad[sel]
                 bc = (C.min(axis=0) + C.max(axis=0)) / 2
                 self.cluster_center[c + 1] = bc
                 self.cluster_radius[c + 1] = float((np.linalg.norm(C - bc, axis=1) + r).max())
-        starts = [0] + [i for i in range(1, len(key)) if tuple(key[i]) != tuple(key[i - 1])] + [len(key)]
-        if not len(key):  # no pair to check (e.g. an SRDF that disables them all)
-            starts = [0]
-        self.cluster_pairs = np.array([key[i] for i in starts[:-1]], dtype=np.int64).reshape(-1, 2)
-        self.cluster_pair_start = np.array(starts if len(key) else [0], dtype=np.int64)
-        self.geom_first = np.array([r.start for r in g_spheres] + [len(rad)], dtype=np.int64)
-        self.allowed = np.zeros((len(rad), len(rad)), dtype=np.bool_)
-        self.allowed[self.sphere_pairs[:, 0], self.sphere_pairs[:, 1]] = True
-        self.n_exact_pairs = len(pairs)
+        ja, jb = self.geom_joint[gp[:, 0]] + 1, self.geom_joint[gp[:, 1]] + 1
+        swap = (self.cluster_radius[jb] > self.cluster_radius[ja]) | (
+            (self.cluster_radius[jb] == self.cluster_radius[ja]) & (jb < ja)
+        )
+        gp = np.where(swap[:, None], gp[:, ::-1], gp)
+        ja, jb = np.where(swap, jb, ja), np.where(swap, ja, jb)
+        order = np.lexsort((gp[:, 1], gp[:, 0], jb, ja))
+        self.geom_pairs, ja, jb = gp[order], ja[order], jb[order]
+        new_cluster = np.r_[True, (ja[1:] != ja[:-1]) | (jb[1:] != jb[:-1])] if len(gp) else np.zeros(0, bool)
+        new_first = new_cluster | np.r_[True, self.geom_pairs[1:, 0] != self.geom_pairs[:-1, 0]][: len(gp)]
+        first_at = np.flatnonzero(new_first)
+        self.cluster_pairs = np.stack([ja[new_cluster] - 1, jb[new_cluster] - 1], axis=1).astype(np.int64)
+        self.cluster_pair_start = np.r_[np.searchsorted(first_at, np.flatnonzero(new_cluster)), len(first_at)]
+        self.cluster_pair_start = self.cluster_pair_start.astype(np.int64)
+        self.first_geom = self.geom_pairs[first_at, 0].astype(np.int64)
+        self.first_start = np.r_[first_at, len(gp)].astype(np.int64)
+        allowed = np.zeros((len(rad), len(rad)), dtype=np.bool_)
+        allowed[self.sphere_pairs[:, 0], self.sphere_pairs[:, 1]] = True
+        allowed[self.sphere_pairs[:, 1], self.sphere_pairs[:, 0]] = True
+        # per geometry pair, its spheres u (first geometry) that have a partner, each with its v
+        pair_u_start, ent_u, ent_v_start, ent_v = [0], [], [0], []
+        for a, b in self.geom_pairs:
+            for u in range(self.geom_first[a], self.geom_first[a + 1]):
+                vs = [v for v in range(self.geom_first[b], self.geom_first[b + 1]) if allowed[u, v]]
+                if vs:
+                    ent_u.append(u)
+                    ent_v.extend(vs)
+                    ent_v_start.append(len(ent_v))
+            pair_u_start.append(len(ent_u))
+        self.pair_u_start = np.array(pair_u_start, dtype=np.int64)
+        self.ent_u = np.array(ent_u, dtype=np.int64)
+        self.ent_v_start = np.array(ent_v_start, dtype=np.int64)
+        self.ent_v = np.array(ent_v, dtype=np.int64)
 
     def colliding_arm(self, arm: Arm, q_arm: ArrayLike) -> NDArray[np.bool_]:
         """Self-collision (N,) of (N, n) arm configurations by the sphere model.
@@ -268,56 +325,23 @@ class SphereModel:
         a = self.arm
         _colliding_batch(Q, a.placements, a.axes, a.kinds, self.sphere_joint, self.sphere_center,
                          self.sphere_radius, self.geom_joint, self.geom_center, self.geom_radius,
-                         self.geom_pairs, self.geom_first, self.allowed, self.cluster_center,
-                         self.cluster_radius, self.cluster_pairs, self.cluster_pair_start, out)  # fmt: skip
+                         self.geom_pairs, self.cluster_center, self.cluster_radius,
+                         self.cluster_pairs, self.cluster_pair_start, self.first_geom,
+                         self.first_start, self.pair_u_start, self.ent_u, self.ent_v_start,
+                         self.ent_v, out)  # fmt: skip
         return out
 
 
 @nb.njit(cache=True, inline="always")
-def _joint_frames(q, placements, axes, kinds, F, R, t, NR, M):
-    """Frames (n, 3, 4) of every arm joint in the base frame, after the joint's motion.
+def _joint_frames(q, placements, axes, kinds, F, R, t):
+    """Frames F (n, 3, 4) of every arm joint in the base frame, after the joint's motion.
 
-    R, NR, M (3, 3) and t (3,) are scratch space.
+    The chain composition of ``fk.py``; R (3, 3) and t (3,) are scratch space.
     """
-    t[0], t[1], t[2] = 0.0, 0.0, 0.0
-    for a in range(3):
-        for b in range(3):
-            R[a, b] = 1.0 if a == b else 0.0
-    for i in range(q.shape[0]):
-        P = placements[i]
-        t0 = t[0] + R[0, 0] * P[0, 3] + R[0, 1] * P[1, 3] + R[0, 2] * P[2, 3]
-        t1 = t[1] + R[1, 0] * P[0, 3] + R[1, 1] * P[1, 3] + R[1, 2] * P[2, 3]
-        t2 = t[2] + R[2, 0] * P[0, 3] + R[2, 1] * P[1, 3] + R[2, 2] * P[2, 3]
-        t[0], t[1], t[2] = t0, t1, t2
-        for a in range(3):
-            for b in range(3):
-                NR[a, b] = R[a, 0] * P[0, b] + R[a, 1] * P[1, b] + R[a, 2] * P[2, b]
-        ax, ay, az = axes[i, 0], axes[i, 1], axes[i, 2]
-        if kinds[i] == PRISMATIC:
-            for a in range(3):
-                t[a] += q[i] * (NR[a, 0] * ax + NR[a, 1] * ay + NR[a, 2] * az)
-            for a in range(3):
-                for b in range(3):
-                    R[a, b] = NR[a, b]
-        else:
-            c, s = math.cos(q[i]), math.sin(q[i])
-            C = 1.0 - c
-            M[0, 0] = c + ax * ax * C
-            M[0, 1] = ax * ay * C - az * s
-            M[0, 2] = ax * az * C + ay * s
-            M[1, 0] = ay * ax * C + az * s
-            M[1, 1] = c + ay * ay * C
-            M[1, 2] = ay * az * C - ax * s
-            M[2, 0] = az * ax * C - ay * s
-            M[2, 1] = az * ay * C + ax * s
-            M[2, 2] = c + az * az * C
-            for a in range(3):
-                for b in range(3):
-                    R[a, b] = NR[a, 0] * M[0, b] + NR[a, 1] * M[1, b] + NR[a, 2] * M[2, b]
-        for a in range(3):
-            for b in range(3):
-                F[i, a, b] = R[a, b]
-            F[i, a, 3] = t[a]
+    chain_frames(q, placements, axes, kinds, _EYE4, R, t, NO_AXES, NO_AXES, False, F, True)
+
+
+_EYE4 = np.eye(4)
 
 
 @nb.njit(cache=True, inline="always")
@@ -347,11 +371,14 @@ def _place_one(j, local, F, out):
 
 @nb.njit(cache=True, parallel=True)
 def _colliding_batch(Q, placements, axes, kinds, s_joint, s_local, s_rad, g_joint, g_local, g_rad,
-                     geom_pairs, geom_first, allowed, cl_local, cl_rad, cl_pairs, cl_start, out):  # fmt: skip
+                     geom_pairs, cl_local, cl_rad, cl_pairs, cl_start, first_geom, first_start,
+                     pair_u_start, ent_u, ent_v_start, ent_v, out):  # fmt: skip
     """Self-collision of each configuration by the sphere model, in blocks of 256 per thread.
 
-    Per configuration: cluster bounds, geometry bounds, each sphere against the other geometry's
-    bound, then sphere against sphere; spheres are placed only when their geometry's bound is hit.
+    Per configuration, down the bounding hierarchy: cluster pair bounds; each first geometry
+    against the other cluster's bound; geometry pair bounds; each sphere of the first geometry
+    against the second geometry's bound; its sphere pairs. A sphere is placed when it is first
+    needed; the first overlapping sphere pair ends the configuration.
     """
     n_block = 256
     n_blocks = (Q.shape[0] + n_block - 1) // n_block
@@ -359,12 +386,12 @@ def _colliding_batch(Q, placements, axes, kinds, s_joint, s_local, s_rad, g_join
         F = np.empty((Q.shape[1], 3, 4))
         gc = np.empty((g_joint.shape[0], 3))
         sc = np.empty((s_joint.shape[0], 3))
-        placed = np.full(g_joint.shape[0], -1, dtype=np.int64)
+        placed = np.full(s_joint.shape[0], -1, dtype=np.int64)
+        g_placed = np.full(g_joint.shape[0], -1, dtype=np.int64)
         cc = np.empty((cl_rad.shape[0], 3))
-        R, NR, M, t = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)), np.empty(3)
+        R, t = np.empty((3, 3)), np.empty(3)
         for i in range(blk * n_block, min(Q.shape[0], (blk + 1) * n_block)):
-            _joint_frames(Q[i], placements, axes, kinds, F, R, t, NR, M)
-            _place(g_joint, g_local, F, gc)
+            _joint_frames(Q[i], placements, axes, kinds, F, R, t)
             for c in range(cl_rad.shape[0]):
                 _place_one(c - 1, cl_local[c], F, cc[c])
             hit = False
@@ -374,29 +401,44 @@ def _colliding_batch(Q, placements, axes, kinds, s_joint, s_local, s_rad, g_join
                 r = cl_rad[ca] + cl_rad[cb]
                 if dx * dx + dy * dy + dz * dz >= r * r:
                     continue
-                for p in range(cl_start[k], cl_start[k + 1]):
-                    a, b = geom_pairs[p, 0], geom_pairs[p, 1]
-                    dx, dy, dz = gc[a, 0] - gc[b, 0], gc[a, 1] - gc[b, 1], gc[a, 2] - gc[b, 2]
-                    r = g_rad[a] + g_rad[b]
+                for f in range(cl_start[k], cl_start[k + 1]):
+                    a = first_geom[f]
+                    if g_placed[a] != i:
+                        g_placed[a] = i
+                        _place_one(g_joint[a], g_local[a], F, gc[a])
+                    dx, dy, dz = gc[a, 0] - cc[cb, 0], gc[a, 1] - cc[cb, 1], gc[a, 2] - cc[cb, 2]
+                    r = g_rad[a] + cl_rad[cb]
                     if dx * dx + dy * dy + dz * dz >= r * r:
                         continue
-                    for g in (a, b):
-                        if placed[g] != i:
-                            placed[g] = i
-                            for u in range(geom_first[g], geom_first[g + 1]):
-                                _place_one(s_joint[u], s_local[u], F, sc[u])
-                    for u in range(geom_first[a], geom_first[a + 1]):
-                        dx, dy, dz = sc[u, 0] - gc[b, 0], sc[u, 1] - gc[b, 1], sc[u, 2] - gc[b, 2]
-                        r = s_rad[u] + g_rad[b]
+                    for p in range(first_start[f], first_start[f + 1]):
+                        b = geom_pairs[p, 1]
+                        if g_placed[b] != i:
+                            g_placed[b] = i
+                            _place_one(g_joint[b], g_local[b], F, gc[b])
+                        dx, dy, dz = gc[a, 0] - gc[b, 0], gc[a, 1] - gc[b, 1], gc[a, 2] - gc[b, 2]
+                        r = g_rad[a] + g_rad[b]
                         if dx * dx + dy * dy + dz * dz >= r * r:
                             continue
-                        for v in range(geom_first[b], geom_first[b + 1]):
-                            if not allowed[u, v]:
+                        for e in range(pair_u_start[p], pair_u_start[p + 1]):
+                            u = ent_u[e]
+                            if placed[u] != i:
+                                placed[u] = i
+                                _place_one(s_joint[u], s_local[u], F, sc[u])
+                            dx, dy, dz = sc[u, 0] - gc[b, 0], sc[u, 1] - gc[b, 1], sc[u, 2] - gc[b, 2]
+                            r = s_rad[u] + g_rad[b]
+                            if dx * dx + dy * dy + dz * dz >= r * r:
                                 continue
-                            dx, dy, dz = sc[u, 0] - sc[v, 0], sc[u, 1] - sc[v, 1], sc[u, 2] - sc[v, 2]
-                            r = s_rad[u] + s_rad[v]
-                            if dx * dx + dy * dy + dz * dz < r * r:
-                                hit = True
+                            for w in range(ent_v_start[e], ent_v_start[e + 1]):
+                                v = ent_v[w]
+                                if placed[v] != i:
+                                    placed[v] = i
+                                    _place_one(s_joint[v], s_local[v], F, sc[v])
+                                dx, dy, dz = sc[u, 0] - sc[v, 0], sc[u, 1] - sc[v, 1], sc[u, 2] - sc[v, 2]
+                                r = s_rad[u] + s_rad[v]
+                                if dx * dx + dy * dy + dz * dz < r * r:
+                                    hit = True
+                                    break
+                            if hit:
                                 break
                         if hit:
                             break
@@ -412,6 +454,20 @@ def _sphere_centers(Q, placements, axes, kinds, s_joint, s_local, out):
     """Sphere centres (N, S, 3) in the base frame for (N, n) configurations."""
     for i in nb.prange(Q.shape[0]):
         F = np.empty((Q.shape[1], 3, 4))
-        R, NR, M, t = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)), np.empty(3)
-        _joint_frames(Q[i], placements, axes, kinds, F, R, t, NR, M)
+        R, t = np.empty((3, 3)), np.empty(3)
+        _joint_frames(Q[i], placements, axes, kinds, F, R, t)
         _place(s_joint, s_local, F, out[i])
+
+
+@nb.njit(cache=True, parallel=True)
+def _min_gap(C, pairs, rad, gap):
+    """Lower ``gap`` (P,) to the smallest surface distance of each sphere pair over centres C."""
+    for p in nb.prange(pairs.shape[0]):
+        u, v = pairs[p, 0], pairs[p, 1]
+        m = gap[p]
+        for i in range(C.shape[0]):
+            dx, dy, dz = C[i, u, 0] - C[i, v, 0], C[i, u, 1] - C[i, v, 1], C[i, u, 2] - C[i, v, 2]
+            d = math.sqrt(dx * dx + dy * dy + dz * dz) - rad[u] - rad[v]
+            if d < m:
+                m = d
+        gap[p] = m
