@@ -7,7 +7,8 @@ well-tuned base lands a few centimetres and degrees off. A placement verified at
 action-related places (Stulp et al., "Learning and reasoning with action-related places for robust
 mobile manipulation", JAIR 2012), each verified placement is scored by its success probability
 under that error: the fraction of base poses drawn from a :class:`BaseErrorModel` around it from
-which every target is still reachable (IK, seeded with the nominal configuration) and the whole
+which every target is still reachable (IK, seeded with the nominal configuration; with
+``ik_solutions`` > 1, further solutions from random starts when that one collides) and the whole
 robot there is collision-free, with a Wilson score interval for the estimate.
 
 The error draws are fixed per estimator (common random numbers), so placements of one query are
