@@ -1,12 +1,14 @@
 from __future__ import annotations
 
+import itertools
+
 import coal
 import numpy as np
 import pinocchio as pin
 import pytest
 
 from baseplace.geometry.poses import pose_from_xyz_rpy
-from baseplace.placement.motion import MotionChecker, MotionSettings, stowed_configuration
+from baseplace.placement.motion import MotionChecker, MotionSettings, bisection_order, stowed_configuration
 from baseplace.placement.verify import Candidate, Verifier
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.terrain.polygons import footprint_outline
@@ -122,3 +124,46 @@ def test_motion_settings_and_start_configuration_are_checked(tiago):
         MotionSettings(pregrasp_distance=-0.1)
     with pytest.raises(InputError, match="start configuration"):
         MotionChecker(tiago, tiago.arm(), env, settings=MotionSettings(q_start=(0.0,) * 3))
+
+
+def test_bisection_order_visits_every_state_of_a_line_once():
+    for n in (1, 2, 3, 7, 16, 33):
+        order = bisection_order(n)
+        assert sorted(order) == list(range(1, n + 1)) and order[0] == n
+    assert bisection_order(8)[:3] == [8, 4, 2]
+
+
+def test_planned_and_shortened_path_is_free_by_an_independent_check(tiago):
+    """A table in front of the robot blocks the straight joint line from stowed: RRTConnect plans
+    and the greedy shortcut shortens. Oracle: coal on the true table box (RobotShapes: its own
+    pinocchio geometry, no voxels), every state 1 cm of joint motion apart on every segment."""
+    from baseplace_experiments.table_grid import RobotShapes, TrueShape
+
+    arm = tiago.arm()
+    lo, hi = np.array([0.45, -0.6, 0.66]), np.array([1.2, 0.6, 0.72])
+    g = [np.arange(a, b + 1e-9, 0.01) for a, b in zip(lo, hi, strict=True)]
+    pts = np.stack(np.meshgrid(*g, indexing="ij"), axis=-1).reshape(-1, 3)
+    env = Environment(tiago, VoxelMap.from_points(pts, RES))
+    T = np.eye(4)
+    T[:3, 3] = (lo + hi) / 2
+    table = TrueShape("table", coal.Box(*(hi - lo - 0.02)), T)  # 1 cm inside the sampled points
+    motion = MotionChecker(tiago, arm, env, settings=MotionSettings(time_limit=5.0))  # loaded CI machines
+    rng = np.random.default_rng(5)
+    goal = None
+    for q in arm.sample(rng, 2000):  # a free goal over the table whose line from stowed is blocked
+        p = _tcp(tiago, arm, q)[:3, 3]
+        if not (0.6 < p[0] < 0.9 and abs(p[1]) < 0.3 and 0.85 < p[2] < 1.0):
+            continue
+        if motion._free(q, np.eye(4)) and not motion._line_free(motion.q_start, q, np.eye(4)):
+            goal = q
+            break
+    assert goal is not None
+    path, planned = motion.joint_path(goal, np.eye(4), seed=3)
+    assert planned and path is not None
+    np.testing.assert_allclose(path[0], motion.q_start)
+    np.testing.assert_allclose(path[-1], goal)
+    shapes = RobotShapes(tiago)
+    for a, b in itertools.pairwise(path):
+        steps = max(1, int(np.ceil(np.linalg.norm(b - a) / 0.01)))
+        for s in np.linspace(0.0, 1.0, steps + 1):
+            assert shapes.touching(a + s * (b - a), np.eye(4), [table]) is None

@@ -24,7 +24,6 @@ The result is the joint waypoints of both parts (:class:`ReachingMotion`).
 from __future__ import annotations
 
 import dataclasses
-import gc
 import math
 import time
 from collections.abc import Mapping
@@ -272,8 +271,29 @@ class MotionChecker:
         return np.array(steps)
 
     def _line_free(self, a: FloatArray, b: FloatArray, T_world_base: FloatArray) -> bool:
+        """Whether the straight joint line a -> b (n,) is free at states ``joint_resolution`` apart.
+
+        The states are the same whatever the order; they are checked end first, then in bisection
+        order (midpoint, quarter points, ...), so a blocked line is usually rejected after a few.
+        """
         n = max(1, math.ceil(float(np.linalg.norm(b - a)) / self.settings.joint_resolution))
-        return all(self._free(a + (b - a) * (k / n), T_world_base) for k in range(1, n + 1))
+        return all(self._free(a + (b - a) * (k / n), T_world_base) for k in bisection_order(n))
+
+    def _shortcut(self, path: FloatArray, T_world_base: FloatArray) -> FloatArray:
+        """The path (P, n) with waypoints skipped greedily.
+
+        From each kept waypoint to the farthest later one joined to it by a free straight line
+        (deterministic: no random shortcuts, no time budget). Consecutive waypoints of ``path``
+        must already be joined by free lines.
+        """
+        out, i, last = [path[0]], 0, len(path) - 1
+        while i < last:
+            j = last
+            while j > i + 1 and not self._line_free(path[i], path[j], T_world_base):
+                j -= 1
+            out.append(path[j])
+            i = j
+        return np.array(out)
 
     def joint_path(
         self, q_goal: FloatArray, T_world_base: FloatArray, seed: int
@@ -324,16 +344,15 @@ class MotionChecker:
             solved = setup.solve(self.settings.time_limit)
             if not solved or not setup.haveExactSolutionPath():
                 return None
-            solution = setup.getSolutionPath()
-            # shortcutting until no improvement, not for a time budget: the same seed gives the
-            # same path however loaded the machine is
-            og.PathSimplifier(info).simplifyMax(solution)
-            states = solution.getStates()
+            states = setup.getSolutionPath().getStates()
             path = np.array([[s[i] for i in range(n)] for s in states])
         finally:
-            gc.collect()  # the validity callback forms a cycle with the setup
+            setup = info = None  # drop the OMPL objects (and the callback they hold) now
         path[0], path[-1] = q0, q_goal
-        return path
+        # RRTConnect's tree vertices, joined by lines OMPL checked at the same resolution;
+        # shortened here instead of by OMPL's random shortcutting, which checked ~5x more states
+        # than planning did (bench/bench_robustness.py, motion timing)
+        return self._shortcut(path, T_world_base)
 
     def check(
         self, q_grasp: ArrayLike, T_world_base: ArrayLike, T_world_tcp: ArrayLike, seed: int = 0
@@ -361,6 +380,29 @@ class MotionChecker:
             self.elapsed_s += time.perf_counter() - t0
 
 
+def bisection_order(n: int) -> list[int]:
+    """The indices 1..n of the states of a line cut in n steps: n first, then by bisection.
+
+    The midpoint first, then the quarter points, and so on: every index once, the far end first
+    (as OMPL's discrete motion validator orders them), so a collision anywhere on the line is found
+    after few checks.
+    """
+    order, seen = [n], {0, n}
+    queue = [(0, n)]
+    while queue:
+        nxt = []
+        for lo, hi in queue:
+            if hi - lo < 2:
+                continue
+            mid = (lo + hi) // 2
+            if mid not in seen:
+                seen.add(mid)
+                order.append(mid)
+            nxt += [(lo, mid), (mid, hi)]
+        queue = nxt
+    return order
+
+
 def _contacts_of(environment: Environment, arm: Arm, q: FloatArray, T_world_base: FloatArray, stage: str
                  ) -> list[tuple[str, str]]:  # fmt: skip
     pairs = dict.fromkeys(environment.contacts_arm(arm, q, T_world_base))  # one per pair, in order
@@ -378,6 +420,7 @@ __all__ = [
     "MotionSettings",
     "ReachingMotion",
     "approach_axis",
+    "bisection_order",
     "stowed_configuration",
     "transit_environment",
     "with_start",

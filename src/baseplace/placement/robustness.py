@@ -7,7 +7,8 @@ well-tuned base lands a few centimetres and degrees off. A placement verified at
 action-related places (Stulp et al., "Learning and reasoning with action-related places for robust
 mobile manipulation", JAIR 2012), each verified placement is scored by its success probability
 under that error: the fraction of base poses drawn from a :class:`BaseErrorModel` around it from
-which every target is still reachable (IK, seeded with the nominal configuration) and the whole
+which every target is still reachable (IK, seeded with the nominal configuration; with
+``ik_solutions`` > 1, further solutions from random starts when that one collides) and the whole
 robot there is collision-free, with a Wilson score interval for the estimate.
 
 The error draws are fixed per estimator (common random numbers), so placements of one query are
@@ -154,6 +155,10 @@ class RobustnessSettings:
         pool: verified placements collected before ranking by robustness (at least the number
             asked for).
         ik_restarts: random IK restarts per draw after the attempt from the nominal configuration.
+        ik_solutions: IK solutions tried per draw and target: the first from the nominal
+            configuration (as above), the others each from one random start; the draw counts when
+            one of them is collision-free (a robot at that pose re-plans its grasp; one colliding
+            IK branch does not make the pose fail). 1: only the first.
         z: normal quantile of the confidence interval (1.96: 95 %).
         seed: seed of the error draws.
     """
@@ -164,15 +169,17 @@ class RobustnessSettings:
     minimum: float = 0.0
     pool: int = 5
     ik_restarts: int = 4
+    ik_solutions: int = 1
     z: float = 1.96
     seed: int = 0
 
     def __post_init__(self) -> None:
         if self.rank not in ("reachability", "robustness"):
             raise unknown("placement ranking", self.rank, ("reachability", "robustness"))
-        if self.samples < 0 or self.pool < 1 or self.ik_restarts < 0:
+        if self.samples < 0 or self.pool < 1 or self.ik_restarts < 0 or self.ik_solutions < 1:
             raise InputError(
-                f"need samples >= 0, pool >= 1, ik_restarts >= 0; got {self.samples}, {self.pool}, {self.ik_restarts}"
+                "need samples >= 0, pool >= 1, ik_restarts >= 0, ik_solutions >= 1; got "
+                f"{self.samples}, {self.pool}, {self.ik_restarts}, {self.ik_solutions}"
             )
         if not (0.0 <= self.minimum <= 1.0):
             raise InputError(f"minimum robustness must be in [0, 1], got {self.minimum}")
@@ -209,6 +216,7 @@ class RobustnessEstimator:
             np.random.default_rng(self.settings.seed), self.settings.samples
         )
         self._ik = DampedLeastSquaresIK(arm, restarts=self.settings.ik_restarts)
+        self._ik_one = DampedLeastSquaresIK(arm, restarts=0)
         self._rng = np.random.default_rng(self.settings.seed + 1)
         self._resolution = resolution
         self._cache: dict[tuple[int, int, int], bool] = {}
@@ -241,14 +249,26 @@ class RobustnessEstimator:
                 if len(live) == 0:
                     break
                 seed = None if q_seeds is None else q_seeds[k]
-                q, found = self._ik.solve_batch(T_base_world[live] @ target, self._rng, seed)
+                T_base_tcp = T_base_world[live] @ target
+                q, found = self._ik.solve_batch(T_base_tcp, self._rng, seed)
                 for j, row in enumerate(live.tolist()):
                     ok[row] = bool(found[j]) and not self.environment.colliding_arm(
                         self.arm, q[j], poses[todo[row]]
                     )
+                    if not ok[row]:
+                        ok[row] = self._other_solution_free(T_base_tcp[j], poses[todo[row]])
             for i, value in zip(todo, ok.tolist(), strict=True):
                 self._cache[keys[i]] = value
         return np.array([self._cache[k] for k in keys], dtype=bool)
+
+    def _other_solution_free(self, T_base_tcp: FloatArray, T_world_base: FloatArray) -> bool:
+        """Whether one of ``ik_solutions - 1`` IK solutions from random starts is collision-free."""
+        arm = self.arm
+        for q0 in self._rng.uniform(arm.lower, arm.upper, (self.settings.ik_solutions - 1, arm.n_joints)):
+            q = self._ik_one.solve_from(T_base_tcp, q0[None])
+            if q is not None and not self.environment.colliding_arm(arm, q, T_world_base):
+                return True
+        return False
 
     def score(self, T_world_base: ArrayLike, q_seeds: list[FloatArray] | None = None) -> Robustness:
         """The :class:`Robustness` of a base pose (4, 4)."""

@@ -1,0 +1,167 @@
+"""Issue 20 item 3: seed 004's table grid executed with a drawn navigation error and the reaching motion.
+
+Each trial is the table-grid scene of :mod:`baseplace_experiments.table_grid` (trial ``k = 0`` of the cell,
+drawn from ``default_rng([seed, i, j, 0])`` in the same order as that experiment: the true bottle,
+its estimate, the noisy cloud). Four ways to choose the base pose, all from what the robot sees
+(the estimate, the noisy cloud, the occupancy grid):
+
+* ``baseline``: seed 004's predefined pose at the table's short edge;
+* ``radial``: seed 004's Algorithms 1 and 2 (radial candidates, pickup by motion cost);
+* ``default``: baseplace's default, the IRM-verified candidates with the reaching-motion check on
+  (as ``baseplace candidates``), fed to the same pickup loop;
+* ``robust``: the same verified candidates ranked by robustness to base error
+  (:class:`~baseplace.placement.robustness.RobustnessSettings` as chosen in
+  ``bench/bench_robustness.py``'s development run), the most robust one the grid planner reaches.
+
+Execution: the robot drives to the chosen pose and stops off it by a draw of the default error
+model (sigma 3 cm, 2 deg), ``draws`` times per method and trial (the same draws for every method
+of a trial). From there it re-plans (:meth:`~baseplace_experiments.execution.ExecutionOracle.execute`):
+some grasp of the *true* bottle (the method's grasp first, when it has one) with a collision-free
+IK solution on the true table and bottle, a reaching motion planned on the robot's own voxels of
+the noisy cloud (transit: nothing touched; approach: only the hand on the bottle), and that path
+checked state by state on the true scene. A draw succeeds when all three hold.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from baseplace.geometry.poses import BasePose
+from baseplace.placement.candidates import RadialCandidate, pickup, radial_search
+from baseplace.placement.irm_candidates import IrmSettings, irm_candidates
+from baseplace.placement.motion import MotionChecker
+from baseplace.placement.robustness import BaseErrorModel, RobustnessSettings, perturbed, score_candidates
+from baseplace.reachability.rmap import ReachabilityMap
+from baseplace.robots.model import Robot
+from baseplace.terrain.voxels import VoxelMap
+from baseplace.world.environment import Environment
+from baseplace.world.gridnav import GridNavigator
+from baseplace_experiments.execution import ExecutionOracle, ExecutionSettings
+from baseplace_experiments.table_grid import (
+    RobotShapes,
+    TableGridSettings,
+    object_cloud,
+    radial_settings,
+    table_cloud,
+    table_occupancy,
+    true_bottle,
+    true_table,
+)
+
+EXECUTION_METHODS = ("baseline", "radial", "default", "robust")
+
+
+def _grasp_order(first: int, k: int) -> list[int]:
+    return ([first] if first >= 0 else []) + [g for g in range(k) if g != first]
+
+
+def execution_trial(robot: Robot, rmap: ReachabilityMap, shapes: RobotShapes, seed: int, cell: tuple[int, int],
+                    robust: RobustnessSettings, rank_key: str = "rate", draws: int = 5,
+                    s: TableGridSettings | None = None,
+                    execution: ExecutionSettings | None = None) -> dict[str, Any]:  # fmt: skip
+    """One table-grid trial executed under navigation error (module docstring); JSON-ready.
+
+    ``robust`` scores the first ``robust.pool`` verified candidates; ``rank_key`` ("rate" or "low",
+    the Wilson lower bound) orders them.
+    """
+    s = s or TableGridSettings()
+    rng = np.random.default_rng([seed, *cell, 0])
+    p_true = s.cell_centre(*cell)
+    p_true[:2] += rng.uniform(-s.placement_noise, s.placement_noise, 2)
+    p_est = p_true + rng.normal(0.0, s.estimate_sigma, 3)
+    clean = np.concatenate([table_cloud(s), object_cloud(p_true, s)])
+    seen = clean + rng.normal(0.0, s.cloud_sigma, clean.shape)
+    occupancy = table_occupancy(s)
+    radial = radial_settings(robot, rmap, s)
+    start = BasePose(*s.start)
+    navigate = GridNavigator(occupancy, radial.r_r, allow_unknown=not radial.unknown_is_risk)
+    arm = robot.arm(rmap.info.arm)
+    # the robot's own collision model, from the noisy cloud around its estimate
+    mine = np.ones(len(seen), dtype=bool)
+    mine[_kept_rows(seen, p_est, s)] = False  # the points without_object drops: the bottle as seen
+    obstacles = VoxelMap.from_points(seen[~mine], s.voxel_size)
+    held = seen[mine]
+    verify_env = Environment(robot, obstacles)
+    planner = MotionChecker(
+        robot,
+        arm,
+        Environment(robot, VoxelMap.from_points(seen, s.voxel_size)),
+        Environment(robot, obstacles, grasped=VoxelMap.from_points(held, s.voxel_size), hand_arm=arm.name),
+    )
+    method_grasps = s.grasps(p_est, s.method_top_below)
+    true_grasps = s.grasps(p_true)
+    chosen: dict[str, tuple[BasePose | None, int, float]] = {}
+    t0 = time.perf_counter()
+    chosen["baseline"] = (s.baseline_pose(robot) if navigate(start, s.baseline_pose(robot)) is not None else None,
+                          -1, time.perf_counter() - t0)  # fmt: skip
+    t0 = time.perf_counter()
+    found = pickup(radial_search(p_est, radial, seen, occupancy).candidates, p_est, start, navigate).chosen
+    chosen["radial"] = (None if found is None else found.pose, -1, time.perf_counter() - t0)
+    t0 = time.perf_counter()
+    pool = irm_candidates(robot, rmap, p_est, method_grasps, verify_env, occupancy, IrmSettings(),
+                          np.random.default_rng([seed, *cell, 1]), planner)  # fmt: skip
+    t_pool = time.perf_counter() - t0
+    found = pickup(pool, p_est, start, navigate).chosen
+    chosen["default"] = (None if found is None else found.pose, -1 if found is None else found.grasp, t_pool)
+    t0 = time.perf_counter()
+    ranked: list[RadialCandidate] = []
+    if pool:
+        scored = score_candidates(arm, verify_env, method_grasps, pool[: robust.pool], robust)
+
+        def key(c: RadialCandidate) -> tuple[float, float, float]:
+            r = c.robustness
+            assert r is not None
+            return (-(r.low if rank_key == "low" else r.rate), -r.low, -c.reachability)
+
+        ranked = sorted(scored, key=key)
+    pick = next((c for c in ranked if navigate(start, c.pose) is not None), None)
+    chosen["robust"] = (None if pick is None else pick.pose, -1 if pick is None else pick.grasp,
+                        t_pool + time.perf_counter() - t0)  # fmt: skip
+    oracle = ExecutionOracle(shapes, true_table(s), true_bottle(p_true, s), execution)
+    offsets = BaseErrorModel().sample(np.random.default_rng([30_000 + seed, *cell]), draws)
+    out: dict[str, Any] = {"seed": seed, "cell": list(cell), "true": np.round(p_true, 4).tolist(),
+                           "pool": len(pool), "methods": {}}  # fmt: skip
+    for method in EXECUTION_METHODS:
+        pose, grasp, t_plan = chosen[method]
+        entry: dict[str, Any] = {"plan_s": round(t_plan, 3), "grasp": grasp}
+        if pose is None:
+            entry.update(pose=None, outcomes=["no_placement"] * draws, success=0)
+        else:
+            order = _grasp_order(grasp, len(true_grasps))
+            exec_rng = np.random.default_rng([40_000 + seed, *cell])
+            outcomes = [
+                oracle.execute(T, true_grasps[order], planner, exec_rng)
+                for T in perturbed(pose.matrix(), offsets)
+            ]
+            entry.update(pose=[round(pose.x, 3), round(pose.y, 3), round(pose.yaw, 3)], outcomes=outcomes,
+                         success=sum(o == "ok" for o in outcomes))  # fmt: skip
+        out["methods"][method] = entry
+    return out
+
+
+def _kept_rows(points: np.ndarray, p_o: np.ndarray, s: TableGridSettings) -> np.ndarray:
+    """Row indices of ``points`` that :func:`~baseplace_experiments.table_grid.without_object` keeps."""
+    p = np.asarray(p_o, dtype=float)
+    near = np.hypot(points[:, 0] - p[0], points[:, 1] - p[1]) <= s.object_width / 2 + s.hand_clearance
+    return np.flatnonzero(~(near & (points[:, 2] > p[2] - s.object_height / 2 + 0.005)))
+
+
+def summarise_execution(trials: list[dict[str, Any]]) -> dict[str, Any]:
+    """Per method: successful draws / all draws, and outcome counts."""
+    out: dict[str, Any] = {}
+    for m in EXECUTION_METHODS:
+        outcomes = [o for t in trials for o in t["methods"][m]["outcomes"]]
+        counts: dict[str, int] = {}
+        for o in outcomes:
+            counts[o] = counts.get(o, 0) + 1
+        ok = counts.get("ok", 0)
+        out[m] = {"success": ok, "draws": len(outcomes), "rate": round(ok / len(outcomes), 4) if outcomes else None,
+                  "outcomes": counts,
+                  "mean_plan_s": round(float(np.mean([t["methods"][m]["plan_s"] for t in trials])), 3)}  # fmt: skip
+    return out
+
+
+__all__ = ["EXECUTION_METHODS", "execution_trial", "summarise_execution"]

@@ -1,0 +1,136 @@
+"""The execution oracle (baseplace_experiments/execution.py) and the collision-aware robustness score."""
+
+from __future__ import annotations
+
+import coal
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from baseplace.errors import InputError
+from baseplace.geometry.poses import pose_from_xyz_rpy
+from baseplace.placement.robustness import RobustnessEstimator, RobustnessSettings
+from baseplace.terrain.voxels import VoxelMap
+from baseplace.world.environment import Environment
+from baseplace_experiments.execution import ExecutionOracle, ExecutionSettings
+from baseplace_experiments.table_grid import RobotShapes, TrueShape
+
+GRASP = pose_from_xyz_rpy([0.75, -0.15, 0.85, 0.0, 0.0, 0.0])  # side grasp in front of the base
+
+
+def _box(name: str, lo, hi) -> TrueShape:  # type: ignore[no-untyped-def]
+    a, b = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+    T = np.eye(4)
+    T[:3, 3] = (a + b) / 2
+    return TrueShape(name, coal.Box(*(b - a)), T)
+
+
+@pytest.fixture(scope="module")
+def shapes(tiago):
+    return RobotShapes(tiago)
+
+
+def _tcp(robot, arm, q):  # type: ignore[no-untyped-def]
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, arm.to_pinocchio(q, robot.q_reference))
+    base = data.oMf[robot.model.getFrameId(arm.base_frame)]
+    return (base.inverse() * data.oMf[robot.model.getFrameId(arm.tcp_frame)]).homogeneous
+
+
+def test_oracle_solutions_reach_the_grasp_and_clear_a_low_table(tiago, shapes):
+    table = _box("table", (0.6, -0.6, 0.0), (1.2, 0.6, 0.7))
+    oracle = ExecutionOracle(shapes, [table], None, ExecutionSettings(ik_solutions=8))
+    found = oracle.grasp_configurations(np.eye(4), GRASP, np.random.default_rng(0))
+    assert found
+    for q in found:  # pinocchio FK and a direct coal query, outside the oracle
+        np.testing.assert_allclose(_tcp(tiago, tiago.arm(), q), GRASP, atol=2e-3)
+        assert shapes.touching(q, np.eye(4), [table]) is None
+
+
+def test_oracle_finds_nothing_when_the_grasp_is_inside_a_block_or_out_of_reach(tiago, shapes):
+    block = _box("block", (0.6, -0.6, 0.0), (1.2, 0.6, 1.0))  # the grasp point is inside it
+    oracle = ExecutionOracle(shapes, [block], None, ExecutionSettings(ik_solutions=8))
+    assert oracle.grasp_configurations(np.eye(4), GRASP, np.random.default_rng(0)) == []
+    free = ExecutionOracle(shapes, [], None, ExecutionSettings(ik_solutions=8))
+    far = pose_from_xyz_rpy([-1.5, 0.0, 0.0, 0.0, 0.0, 0.0])  # 2.25 m behind the grasp
+    assert free.grasp_rate(far, GRASP, np.zeros((4, 3)), np.random.default_rng(0)) == 0.0
+    assert free.grasp_rate(np.eye(4), GRASP, np.zeros((2, 3)), np.random.default_rng(0)) == 1.0
+
+
+def test_oracle_path_check_sees_a_wall_between_two_free_configurations(tiago, shapes):
+    arm = tiago.arm()
+    free = ExecutionOracle(shapes, [], None)
+    q = free.grasp_configurations(np.eye(4), GRASP, np.random.default_rng(0), limit=1)[0]
+    # a thin wall just behind the grasp's hand, between the stowed arm and the grasp
+    p = _tcp(tiago, arm, q)[:3, 3]
+    wall = _box("wall", (p[0] - 0.25, -1.0, 0.0), (p[0] - 0.23, 1.0, 1.6))
+    walled = ExecutionOracle(shapes, [wall], None)
+    path = np.array([free.q_stowed, q])
+    assert free.path_free(path, np.eye(4), hand_may_touch=False)
+    assert not walled.path_free(path, np.eye(4), hand_may_touch=False)
+
+
+def test_execution_settings_are_checked():
+    with pytest.raises(InputError, match="ik_solutions"):
+        ExecutionSettings(ik_solutions=0)
+    with pytest.raises(InputError, match="path_step"):
+        ExecutionSettings(path_step=-1.0)
+    with pytest.raises(InputError, match="ik_solutions"):
+        RobustnessSettings(ik_solutions=0)
+
+
+def test_more_ik_solutions_per_draw_never_lose_a_draw_and_agree_with_the_oracle(tiago, shapes):
+    """A low table under the grasp: some IK branches put the elbow into it. Each draw the scorer
+    counts with 8 solutions must have a collision-free solution by the oracle (true box)."""
+    arm = tiago.arm()
+    lo, hi = np.array([0.55, -0.8, 0.0]), np.array([1.3, 0.8, 0.72])
+    g = [np.arange(a, b + 1e-9, 0.02) for a, b in zip(lo, hi, strict=True)]
+    pts = np.stack(np.meshgrid(*g, indexing="ij"), axis=-1).reshape(-1, 3)
+    env = Environment(tiago, VoxelMap.from_points(pts, 0.025))
+    T_base = pose_from_xyz_rpy([0.05, 0.0, 0.0, 0.0, 0.0, 0.0])
+    one = RobustnessEstimator(arm, env, GRASP[None], RobustnessSettings(samples=24, ik_solutions=1))
+    eight = RobustnessEstimator(arm, env, GRASP[None], RobustnessSettings(samples=24, ik_solutions=8))
+    ok1, ok8 = one.successes(T_base), eight.successes(T_base)
+    assert ok8.sum() > ok1.sum()  # 24 vs 18 draws here: the first IK branch is not the only one
+    oracle = ExecutionOracle(
+        shapes, [_box("table", lo - 0.0125, hi + 0.0125)], None, ExecutionSettings(ik_solutions=32)
+    )
+    from baseplace.placement.robustness import perturbed
+
+    poses = perturbed(T_base, eight.offsets)
+    agree = [bool(oracle.grasp_configurations(P, GRASP, np.random.default_rng(k), limit=1)) == bool(s)
+             for k, (P, s) in enumerate(zip(poses, ok8, strict=True))]  # fmt: skip
+    assert np.mean(agree) >= 0.85, (ok8, agree)
+
+
+def test_the_robots_object_points_are_those_the_table_grid_drops():
+    from baseplace_experiments.execution_experiment import _kept_rows
+    from baseplace_experiments.table_grid import TableGridSettings, object_cloud, table_cloud, without_object
+
+    s = TableGridSettings()
+    p = s.cell_centre(1, 2)
+    cloud = np.concatenate([table_cloud(s), object_cloud(p, s)])
+    estimate = p + np.array([0.01, -0.01, 0.0])
+    kept = _kept_rows(cloud, estimate, s)
+    np.testing.assert_array_equal(cloud[kept], without_object(cloud, estimate, s))
+    assert 0 < len(cloud) - len(kept) < len(object_cloud(p, s)) + 200
+
+
+@pytest.mark.slow
+def test_execution_trial_runs_every_method_on_the_same_draws(tiago, tiago_map, shapes):
+    from baseplace_experiments.execution_experiment import (
+        EXECUTION_METHODS,
+        execution_trial,
+        summarise_execution,
+    )
+
+    out = execution_trial(
+        tiago, tiago_map, shapes, 0, (1, 0), RobustnessSettings(samples=16, pool=3), draws=2
+    )
+    assert set(out["methods"]) == set(EXECUTION_METHODS)
+    for entry in out["methods"].values():
+        assert len(entry["outcomes"]) == 2
+        assert set(entry["outcomes"]) <= {"ok", "no_grasp", "no_motion", "motion_collision", "no_placement"}
+        assert entry["success"] == entry["outcomes"].count("ok")
+    summary = summarise_execution([out])
+    assert all(summary[m]["draws"] == 2 for m in EXECUTION_METHODS)
