@@ -112,6 +112,43 @@ class ReachabilityMap:
         blocks[row, orient] = self.index
         return offset, blocks
 
+    @cached_property
+    def _one_pose_args(
+        self,
+    ) -> tuple[FloatArray, NDArray[np.int64], FloatArray, NDArray[np.int32], NDArray[np.float32]]:
+        """The grid and tables packed in few arrays: a compiled call's cost grows with its arguments."""
+        origin, voxel_size, shape, nside, n_twist, pixel_phi = self.grid.params
+        offset, blocks = self.tables
+        grid_f = np.array([*origin, voxel_size], dtype=np.float64)
+        grid_i = np.array([*shape, nside, n_twist], dtype=np.int64)
+        return grid_f, grid_i, pixel_phi, offset, blocks
+
+    def value(self, T_base_tcp: ArrayLike) -> float:
+        """Reachability index of one TCP pose relative to the base: the single-pose query.
+
+        Runs on the calling thread (no thread pool), so its rate holds on a loaded machine.
+
+        Args:
+            T_base_tcp: (4, 4) TCP pose in the base frame [m].
+
+        Returns:
+            The index in [0, 1]; 0 outside the map.
+        """
+        T = T_base_tcp
+        if not (
+            type(T) is np.ndarray and T.dtype == np.float64 and T.shape == (4, 4) and T.flags.c_contiguous
+        ):
+            T = _poses(T_base_tcp, "T_base_tcp")
+            if len(T) != 1:
+                raise InputError(
+                    f"value() takes one pose (4, 4), got {len(T)}; use reachability() for a batch"
+                )
+            T = T[0]
+        v = _value_one(T, *self._one_pose_args)
+        if v < 0.0:
+            raise InputError("T_base_tcp contains NaN or infinity")
+        return v
+
     def reachability(self, T_base_tcp: ArrayLike) -> NDArray[np.float32]:
         """Reachability index of TCP poses relative to the base.
 
@@ -122,10 +159,9 @@ class ReachabilityMap:
             (N,) values in [0, 1]; 0 outside the map.
         """
         T = _poses(T_base_tcp, "T_base_tcp")
-        identity = np.eye(4)
         out = np.empty(len(T), dtype=np.float32)
         offset, blocks = self.tables
-        _lookup_batch(identity, T, False, *self.grid.params, offset, blocks, out)
+        _batch_kernel(len(T))(_IDENTITY, T, False, *self.grid.params, offset, blocks, out)
         return out
 
     def inverse(self, T_world_target: ArrayLike, T_world_base: ArrayLike) -> NDArray[np.float32]:
@@ -144,7 +180,7 @@ class ReachabilityMap:
         bases = _poses(T_world_base, "T_world_base")
         out = np.empty(len(bases), dtype=np.float32)
         offset, blocks = self.tables
-        _lookup_batch(target[0], bases, True, *self.grid.params, offset, blocks, out)
+        _batch_kernel(len(bases))(target[0], bases, True, *self.grid.params, offset, blocks, out)
         return out
 
     def inverse_on_plane(
@@ -172,7 +208,8 @@ class ReachabilityMap:
         g = np.ascontiguousarray(np.asarray(gamma, dtype=np.float64).ravel())
         out = np.empty(len(p), dtype=np.float32)
         offset, blocks = self.tables
-        _lookup_plane(target, p, g, R0, n, d_unit, *self.grid.params, offset, blocks, out)
+        plane = _lookup_plane if len(p) >= SERIAL_BELOW else _lookup_plane_serial
+        plane(target, p, g, R0, n, d_unit, *self.grid.params, offset, blocks, out)
         return out
 
 
@@ -239,8 +276,7 @@ def _poses(T: ArrayLike, name: str) -> FloatArray:
     return arr
 
 
-@nb.njit(cache=True, parallel=True)
-def _lookup_plane(
+def _lookup_plane_py(
     T_wt, xy, gamma, R0, n, d, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset, blocks, out
 ):
     n_orient = blocks.shape[1]
@@ -287,8 +323,7 @@ def _table_value(
     return 0.0 if row < 0 else blocks[row, c % n_orient]
 
 
-@nb.njit(cache=True, parallel=True)
-def _lookup_batch(T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist, pixel_phi,
+def _lookup_batch_py(T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist, pixel_phi,
                   offset, blocks, out):  # fmt: skip
     n_orient = blocks.shape[1]
     for i in nb.prange(T_wb.shape[0]):
@@ -302,6 +337,34 @@ def _lookup_batch(T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist,
             B[:3, :3], B[0, 3], B[1, 3], B[2, 3], origin, voxel_size, shape, nside, n_twist, pixel_phi,
             offset, blocks, n_orient,
         )  # fmt: skip
+
+
+@nb.njit(cache=True)
+def _value_one(T, grid_f, grid_i, pixel_phi, offset, blocks):
+    """Index of one pose (4, 4) from the packed tables; -1 if it is not finite."""
+    for a in range(3):
+        for b in range(4):
+            if not math.isfinite(T[a, b]):
+                return -1.0
+    return _table_value(T[:3, :3], T[0, 3], T[1, 3], T[2, 3], grid_f[:3], grid_f[3], grid_i[:3],
+                        grid_i[3], grid_i[4], pixel_phi, offset, blocks, blocks.shape[1])  # fmt: skip
+
+
+SERIAL_BELOW = 2048
+"""Batches smaller than this are looked up on the calling thread: waking the thread pool costs
+more than the lookups, and under CPU load a parallel call waits for every worker (a single-pose
+query ran 6-13x slower with 2 threads on a loaded 2-core machine than on 1)."""
+
+_lookup_batch = nb.njit(cache=True, parallel=True)(_lookup_batch_py)
+_lookup_batch_serial = nb.njit(cache=True)(_lookup_batch_py)
+_lookup_plane = nb.njit(cache=True, parallel=True)(_lookup_plane_py)
+_lookup_plane_serial = nb.njit(cache=True)(_lookup_plane_py)
+_IDENTITY = np.eye(4)
+
+
+def _batch_kernel(n: int):
+    """The compiled lookup for a batch of ``n`` poses: serial below :data:`SERIAL_BELOW`."""
+    return _lookup_batch if n >= SERIAL_BELOW else _lookup_batch_serial
 
 
 def reach_bounds(placements: FloatArray, axes: FloatArray, kinds: NDArray[np.int64],
