@@ -40,6 +40,8 @@ class MapInfo:
         build_time_s: wall time of the build [s].
         self_collision: whether self-colliding samples were dropped.
         dropped_self_collision: samples dropped as self-colliding.
+        certification: JSON of how the sparse cells were certified by IK (``certify.py``), or "".
+        quality: JSON of the measured recall and precision (``certify.measure_quality``), or "".
     """
 
     robot: str
@@ -53,6 +55,8 @@ class MapInfo:
     build_time_s: float = 0.0
     self_collision: bool = False
     dropped_self_collision: int = 0
+    certification: str = ""
+    quality: str = ""
 
 
 @dataclass(frozen=True)
@@ -65,6 +69,8 @@ class ReachabilityMap:
         counts: (K,) samples per reached cell.
         info: provenance.
         manipulability: (K,) best Yoshikawa manipulability per cell, or None.
+        quality: (K,) share of IK-solved certification poses per cell (NaN: not certified, the
+            cell had enough samples), or None for an uncertified map (``certify.py``).
     """
 
     grid: SE3Grid
@@ -72,6 +78,7 @@ class ReachabilityMap:
     counts: NDArray[np.uint32]
     info: MapInfo
     manipulability: NDArray[np.float32] | None = None
+    quality: NDArray[np.float32] | None = None
     _lookup: tuple[NDArray[np.int32], NDArray[np.float32]] | None = field(
         default=None, init=False, repr=False, compare=False
     )
