@@ -97,9 +97,12 @@ class ReachabilityMap:
         centres = self.grid.voxel_centre(voxels)
         return float(np.hypot(centres[:, 0], centres[:, 1]).max() + self.grid.voxel_size * math.sqrt(0.5))
 
-    @cached_property
+    @property
     def index(self) -> NDArray[np.float32]:
-        """Reachability index per stored cell, ``count / max(count)`` in (0, 1]."""
+        """Reachability index per stored cell, ``count / max(count)`` in (0, 1].
+
+        Computed per call, not kept: queries read :attr:`tables`, which hold the same values.
+        """
         if len(self.counts) == 0:
             return np.zeros(0, dtype=np.float32)
         return (self.counts / self.counts.max()).astype(np.float32)
@@ -112,11 +115,16 @@ class ReachabilityMap:
             self.grid.n_voxels * 4.0, "the lookup table of the map's grid", f"map of {self.info.robot}"
         )
         voxels, orient = np.divmod(self.cells, n_orient)
-        reached, row = np.unique(voxels, return_inverse=True)
+        first = np.ones(len(voxels), dtype=np.bool_)  # cells are sorted, so are their voxels
+        np.not_equal(voxels[1:], voxels[:-1], out=first[1:])
+        reached = voxels[first]
+        row = np.cumsum(first) - 1
+        del first
         offset = np.full(self.grid.n_voxels, -1, dtype=np.int32)
         offset[reached] = np.arange(len(reached), dtype=np.int32)
         blocks = np.zeros((len(reached), n_orient), dtype=np.float32)
-        blocks[row, orient] = self.index
+        if len(self.counts):
+            blocks[row, orient] = self.counts / np.float32(self.counts.max())
         return offset, blocks
 
     @cached_property
