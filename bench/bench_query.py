@@ -6,8 +6,11 @@ rate: calls of ``ReachabilityMap.value`` (the single-pose query) and ``reachabil
 with one (4, 4) pose and of ``inverse`` with one
 base pose, each repeated for ``--seconds``; median of 3 runs. In the same run and under the same
 load, the parallel kernel forced for one pose (the behaviour before ``SERIAL_BELOW``) is the
-baseline. Memory: bytes of the arrays a query reads (``cells``, ``counts``, ``index``, the dense
-lookup ``tables``) and the process's RSS growth from loading the map and building its tables.
+baseline. Memory: bytes of the arrays a loaded map holds (``cells``, ``counts``, the dense lookup
+``tables``), the bytes allocated and still held after loading and after building the tables
+(tracemalloc, which numpy reports to), the peak while building them, and the process's RSS
+growth (the map is loaded once before, so the RSS figures exclude the imports' and the
+kernels' memory; RSS keeps freed temporaries the allocator did not return).
 MB are 10^6 bytes.
 Usage: python bench/bench_query.py [--map tiago.rmap] [--seconds 2]
 """
@@ -19,6 +22,7 @@ import os
 import subprocess
 import sys
 import time
+import tracemalloc
 from collections.abc import Callable
 from typing import Any
 
@@ -57,10 +61,17 @@ def main() -> None:
     args = parser.parse_args()
     robot = Robot("tiago")
     proc = psutil.Process()
-    rss0 = proc.memory_info().rss
     rmap = load_map(args.map, robot) if args.map else build_map(robot, None, BuildSettings())
+    del rmap
+    rss0 = proc.memory_info().rss
+    tracemalloc.start()
+    rmap = load_map(args.map, robot) if args.map else build_map(robot, None, BuildSettings())
+    held_loaded, _ = tracemalloc.get_traced_memory()
     rss_loaded = proc.memory_info().rss
+    tracemalloc.reset_peak()
     offset, blocks = rmap.tables
+    held_tables, peak_tables = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
     rss_tables = proc.memory_info().rss
     rng = np.random.default_rng(7)
     poses = np.zeros((1000, 4, 4))
@@ -108,8 +119,10 @@ def main() -> None:
     mb = 1e-6
     memory = {
         "cells_counts_MB": round((rmap.cells.nbytes + rmap.counts.nbytes) * mb, 1),
-        "index_MB": round(rmap.index.nbytes * mb, 1),
         "lookup_tables_MB": round((offset.nbytes + blocks.nbytes) * mb, 1),
+        "held_after_load_MB": round(held_loaded * mb, 1),
+        "held_after_tables_MB": round(held_tables * mb, 1),
+        "peak_while_building_tables_MB": round(peak_tables * mb, 1),
         "rss_growth_load_MB": round((rss_loaded - rss0) * mb, 1),
         "rss_growth_tables_MB": round((rss_tables - rss_loaded) * mb, 1),
     }
