@@ -114,17 +114,19 @@ class ReachabilityMap:
         check_alloc(
             self.grid.n_voxels * 4.0, "the lookup table of the map's grid", f"map of {self.info.robot}"
         )
-        voxels, orient = np.divmod(self.cells, n_orient)
-        first = np.ones(len(voxels), dtype=np.bool_)  # cells are sorted, so are their voxels
+        voxels = self.cells // n_orient  # sorted, as the cells are
+        first = np.ones(len(voxels), dtype=np.bool_)
         np.not_equal(voxels[1:], voxels[:-1], out=first[1:])
         reached = voxels[first]
-        row = np.cumsum(first) - 1
         del first
         offset = np.full(self.grid.n_voxels, -1, dtype=np.int32)
         offset[reached] = np.arange(len(reached), dtype=np.int32)
         blocks = np.zeros((len(reached), n_orient), dtype=np.float32)
-        if len(self.counts):
-            blocks[row, orient] = self.counts / np.float32(self.counts.max())
+        top = float(self.counts.max()) if len(self.counts) else 1.0
+        step = 1 << 20  # in slices: the temporaries stay small next to the tables
+        for lo in range(0, len(voxels), step):
+            v, c = voxels[lo : lo + step], self.cells[lo : lo + step]
+            blocks[offset[v], c - v * n_orient] = self.counts[lo : lo + step] / top
         return offset, blocks
 
     @cached_property
