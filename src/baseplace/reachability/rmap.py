@@ -293,23 +293,39 @@ def _poses(T: ArrayLike, name: str) -> FloatArray:
     return arr
 
 
-def _lookup_plane_py(
-    T_wt, xy, gamma, R0, n, d, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset, blocks, out
-):
-    n_orient = blocks.shape[1]
+@nb.njit(cache=True, inline="always")
+def _plane_row(i, T_wt, xy, gamma, R0, n, d, origin, voxel_size, shape, nside, n_twist, pixel_phi,
+               offset, blocks, out):  # fmt: skip
+    c, s = math.cos(gamma[i]), math.sin(gamma[i])
+    B = np.empty((3, 4))
+    for a in range(3):  # R = R0 Rz(gamma): x' = c x0 + s y0, y' = -s x0 + c y0, z' = n
+        B[a, 0] = c * R0[a, 0] + s * R0[a, 1]
+        B[a, 1] = -s * R0[a, 0] + c * R0[a, 1]
+        B[a, 2] = R0[a, 2]
+    B[0, 3] = xy[i, 0]
+    B[1, 3] = xy[i, 1]
+    B[2, 3] = -(d + n[0] * xy[i, 0] + n[1] * xy[i, 1]) / n[2]
+    out[i] = _lookup_inverse(
+        T_wt, B, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset, blocks, blocks.shape[1]
+    )
+
+
+# The serial and the parallel kernels are separate functions: numba's on-disk cache is keyed by
+# function, not by the parallel flag, so one function compiled both ways would share one entry.
+@nb.njit(cache=True, parallel=True)
+def _lookup_plane(T_wt, xy, gamma, R0, n, d, origin, voxel_size, shape, nside, n_twist, pixel_phi,
+                  offset, blocks, out):  # fmt: skip
     for i in nb.prange(xy.shape[0]):
-        c, s = math.cos(gamma[i]), math.sin(gamma[i])
-        B = np.empty((3, 4))
-        for a in range(3):  # R = R0 Rz(gamma): x' = c x0 + s y0, y' = -s x0 + c y0, z' = n
-            B[a, 0] = c * R0[a, 0] + s * R0[a, 1]
-            B[a, 1] = -s * R0[a, 0] + c * R0[a, 1]
-            B[a, 2] = R0[a, 2]
-        B[0, 3] = xy[i, 0]
-        B[1, 3] = xy[i, 1]
-        B[2, 3] = -(d + n[0] * xy[i, 0] + n[1] * xy[i, 1]) / n[2]
-        out[i] = _lookup_inverse(
-            T_wt, B, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset, blocks, n_orient
-        )
+        _plane_row(i, T_wt, xy, gamma, R0, n, d, origin, voxel_size, shape, nside, n_twist,
+                   pixel_phi, offset, blocks, out)  # fmt: skip
+
+
+@nb.njit(cache=True)
+def _lookup_plane_serial(T_wt, xy, gamma, R0, n, d, origin, voxel_size, shape, nside, n_twist,
+                         pixel_phi, offset, blocks, out):  # fmt: skip
+    for i in range(xy.shape[0]):
+        _plane_row(i, T_wt, xy, gamma, R0, n, d, origin, voxel_size, shape, nside, n_twist,
+                   pixel_phi, offset, blocks, out)  # fmt: skip
 
 
 @nb.njit(cache=True, inline="always")
@@ -340,20 +356,36 @@ def _table_value(
     return 0.0 if row < 0 else blocks[row, c % n_orient]
 
 
-def _lookup_batch_py(T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist, pixel_phi,
-                  offset, blocks, out):  # fmt: skip
+@nb.njit(cache=True, inline="always")
+def _batch_row(i, T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist, pixel_phi,
+               offset, blocks, out):  # fmt: skip
     n_orient = blocks.shape[1]
-    for i in nb.prange(T_wb.shape[0]):
-        B = T_wb[i]
-        if invert:  # T_base_tcp = B^-1 T_wt
-            out[i] = _lookup_inverse(
-                T_wt, B, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset, blocks, n_orient
-            )
-            continue
+    B = T_wb[i]
+    if invert:  # T_base_tcp = B^-1 T_wt
+        out[i] = _lookup_inverse(
+            T_wt, B, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset, blocks, n_orient
+        )
+    else:
         out[i] = _table_value(
             B[:3, :3], B[0, 3], B[1, 3], B[2, 3], origin, voxel_size, shape, nside, n_twist, pixel_phi,
             offset, blocks, n_orient,
         )  # fmt: skip
+
+
+@nb.njit(cache=True, parallel=True)
+def _lookup_batch(T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist, pixel_phi,
+                  offset, blocks, out):  # fmt: skip
+    for i in nb.prange(T_wb.shape[0]):
+        _batch_row(i, T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist, pixel_phi,
+                   offset, blocks, out)  # fmt: skip
+
+
+@nb.njit(cache=True)
+def _lookup_batch_serial(T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist, pixel_phi,
+                         offset, blocks, out):  # fmt: skip
+    for i in range(T_wb.shape[0]):
+        _batch_row(i, T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist, pixel_phi,
+                   offset, blocks, out)  # fmt: skip
 
 
 @nb.njit(cache=True)
@@ -372,10 +404,6 @@ SERIAL_BELOW = 2048
 more than the lookups, and under CPU load a parallel call waits for every worker (a single-pose
 query ran 6-13x slower with 2 threads on a loaded 2-core machine than on 1)."""
 
-_lookup_batch = nb.njit(cache=True, parallel=True)(_lookup_batch_py)
-_lookup_batch_serial = nb.njit(cache=True)(_lookup_batch_py)
-_lookup_plane = nb.njit(cache=True, parallel=True)(_lookup_plane_py)
-_lookup_plane_serial = nb.njit(cache=True)(_lookup_plane_py)
 _IDENTITY = np.eye(4)
 
 
