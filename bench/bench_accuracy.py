@@ -55,6 +55,9 @@ def main() -> None:
     parser.add_argument("--orientation", type=float, default=0.8)
     parser.add_argument("--certify", type=int, default=0)
     parser.add_argument("--name", default="accuracy_tiago")
+    parser.add_argument(
+        "--min-count", type=int, default=1, help="drop cells with fewer samples (trade-off study)"
+    )
     args = parser.parse_args()
     robot = Robot("tiago")
     arm = robot.arm()
@@ -69,6 +72,9 @@ def main() -> None:
             ),
         )
     )
+    if args.min_count > 1:
+        keep = rmap.counts >= args.min_count
+        rmap = ReachabilityMap(rmap.grid, rmap.cells[keep], rmap.counts[keep], rmap.info)
     rng = np.random.default_rng(12345)  # the build used default_rng([seed, k]): disjoint streams
     held_out = forward_kinematics(arm, arm.sample(rng, 10_000))
     recall = float((rmap.reachability(held_out) > 0).mean())
@@ -96,6 +102,7 @@ def main() -> None:
             "build_time_s": round(rmap.info.build_time_s, 1),
             "certification": json.loads(rmap.info.certification or "{}"),
             "recorded_in_map": json.loads(rmap.info.quality or "{}"),
+            "min_count": args.min_count,
             "cells_reached": rmap.n_reached,
             "recall_held_out_fk": recall,
             "precision_cells_uniform": round(precision(rmap, ik, uniform, rng), 3),
