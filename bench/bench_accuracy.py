@@ -4,12 +4,17 @@ Recall: FK poses of 1e4 configurations never used in the build; the share the ma
 reachable. Precision: poses the map calls reachable (a random pose inside a reached cell), solved
 by IK with restarts; reported with cells drawn uniformly and weighted by their sample count, and
 by count band (boundary cells with one sample are partly unreachable by construction).
-Usage: python bench/bench_accuracy.py [--map tiago.rmap] [--samples 5e7]
+The oracle's draws (``default_rng(12345)``) are independent of the build's chunks
+(``default_rng([seed, k])``), of a certified map's IK poses (``[seed, CERTIFY_STREAM]``) and of
+the quality the map file records (``[seed, MEASURE_STREAM]``).
+Usage: python bench/bench_accuracy.py [--map tiago.rmap] [--samples 5e7] [--orientation 0.8]
+       [--certify N] [--name accuracy_tiago]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -47,14 +52,29 @@ def main() -> None:
     parser.add_argument("--map", default=None)
     parser.add_argument("--samples", type=float, default=5e7)
     parser.add_argument("--n-precision", type=int, default=1000)
+    parser.add_argument("--orientation", type=float, default=0.8)
+    parser.add_argument("--certify", type=int, default=0)
+    parser.add_argument("--name", default="accuracy_tiago")
+    parser.add_argument(
+        "--min-count", type=int, default=1, help="drop cells with fewer samples (trade-off study)"
+    )
     args = parser.parse_args()
     robot = Robot("tiago")
     arm = robot.arm()
     rmap = (
         load_map(args.map, robot)
         if args.map
-        else build_map(robot, None, BuildSettings(samples=int(args.samples)))
+        else build_map(
+            robot,
+            None,
+            BuildSettings(
+                samples=int(args.samples), orientation_resolution=args.orientation, certify=args.certify
+            ),
+        )
     )
+    if args.min_count > 1:
+        keep = rmap.counts >= args.min_count
+        rmap = ReachabilityMap(rmap.grid, rmap.cells[keep], rmap.counts[keep], rmap.info)
     rng = np.random.default_rng(12345)  # the build used default_rng([seed, k]): disjoint streams
     held_out = forward_kinematics(arm, arm.sample(rng, 10_000))
     recall = float((rmap.reachability(held_out) > 0).mean())
@@ -71,9 +91,18 @@ def main() -> None:
             "precision": round(precision(rmap, ik, cells, rng), 3),
         }
     report(
-        "accuracy_tiago",
+        args.name,
         {
             "map_samples": rmap.info.samples,
+            "grid": {
+                "voxel_size": rmap.grid.voxel_size,
+                "nside": rmap.grid.nside,
+                "n_twist": rmap.grid.n_twist,
+            },
+            "build_time_s": round(rmap.info.build_time_s, 1),
+            "certification": json.loads(rmap.info.certification or "{}"),
+            "recorded_in_map": json.loads(rmap.info.quality or "{}"),
+            "min_count": args.min_count,
             "cells_reached": rmap.n_reached,
             "recall_held_out_fk": recall,
             "precision_cells_uniform": round(precision(rmap, ik, uniform, rng), 3),

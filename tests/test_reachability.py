@@ -137,3 +137,26 @@ def test_fused_plane_lookup_equals_explicit_poses(tiago_map, rng):
     explicit = tiago_map.inverse(target, plane_base_poses(xy[:, 0], xy[:, 1], gamma, n, -0.3))
     np.testing.assert_array_equal(fused, explicit)
     assert (fused > 0).sum() > 50
+
+
+def test_single_pose_value_and_small_batches(tiago, tiago_map, rng):
+    # Oracle: pinocchio FK of samples the build drew (in the map) and poses beyond any reach (0).
+    arm = tiago.arm()
+    trained = MapAccumulator(tiago, None, BuildSettings(samples=2_000_000, seed=3)).chunk_samples(0)[:300]
+    T = pinocchio_fk(tiago, arm, trained)
+    far = np.repeat(np.eye(4)[None], 2, axis=0)
+    far[:, :3, 3] = [[2.5, 0, 1], [0, 0, 4]]
+    values = np.array([tiago_map.value(np.ascontiguousarray(t)) for t in T])
+    assert np.all(values > 0)
+    assert [tiago_map.value(t) for t in far] == [0.0, 0.0]
+    assert tiago_map.value(T[0].tolist()) == values[0]  # any array-like of one pose
+    # serial (small batch) and parallel (large batch) kernels give the same values
+    big = np.tile(T, (10, 1, 1))  # above SERIAL_BELOW: the parallel kernel
+    np.testing.assert_array_equal(tiago_map.reachability(big)[:300], values)
+    np.testing.assert_array_equal(tiago_map.reachability(T[:5]), values[:5])
+    bad = T[0].copy()
+    bad[1, 3] = np.nan
+    with pytest.raises(InputError, match="NaN"):
+        tiago_map.value(bad)
+    with pytest.raises(InputError, match="one pose"):
+        tiago_map.value(T[:2])

@@ -10,6 +10,7 @@ checkpoint stores (``checkpoint.py``).
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import time
@@ -49,6 +50,8 @@ class BuildSettings:
         orientation_resolution: largest orientation bin width [rad] (seed 000: 0.8).
         self_collision: drop self-colliding samples (conservative sphere model, ``robots/spheres.py``).
         manipulability: keep the best Yoshikawa manipulability sqrt(det(J J^T)) per cell.
+        certify: certify cells with fewer samples than this by IK and record the measured
+            precision and recall (``certify.py``); 0 (default): no certification.
     """
 
     samples: int = 50_000_000
@@ -57,12 +60,15 @@ class BuildSettings:
     orientation_resolution: float = 0.8
     self_collision: bool = False
     manipulability: bool = False
+    certify: int = 0
 
     def __post_init__(self) -> None:
         if not (1 <= self.samples <= MAX_SAMPLES):
             raise InputError(f"samples must be between 1 and {MAX_SAMPLES:.0e}, got {self.samples}")
         if self.seed < 0:
             raise InputError(f"seed must be a non-negative integer, got {self.seed}")
+        if not (0 <= self.certify <= 2**31):
+            raise InputError(f"certify must be a sample count >= 0 (0: off), got {self.certify}")
 
 
 def grid_for(arm: Arm, settings: BuildSettings) -> SE3Grid:
@@ -246,7 +252,13 @@ class MapAccumulator:
             self_collision_checker=self._checker.description if self._checker is not None else "",
         )
         manip = self.best[cells] if s.manipulability else None
-        return ReachabilityMap(self.grid, cells, self.counts[cells], info, manip)
+        rmap = ReachabilityMap(self.grid, cells, self.counts[cells], info, manip)
+        if s.certify > 0:
+            from baseplace.reachability.certify import CertifySettings, certify_map, record_quality
+
+            rmap = certify_map(rmap, self.robot, CertifySettings(below=s.certify), self.chunk_samples)
+            rmap = record_quality(rmap, self.robot)
+        return rmap
 
 
 def build_map(
@@ -331,6 +343,8 @@ def _reuse(path: str | Path, acc: MapAccumulator) -> ReachabilityMap | None:
     same = (
         rmap.grid == acc.grid
         and (info.samples, info.seed, info.self_collision) == (s.samples, s.seed, s.self_collision)
+        and bool(info.certification) == (s.certify > 0)
+        and (not info.certification or json.loads(info.certification)["below"] == s.certify)
         and (rmap.manipulability is not None) == s.manipulability
     )
     return rmap if same else None

@@ -18,7 +18,7 @@ import numba as nb
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from baseplace.arrays import unique_ints, unique_inverse
+from baseplace.arrays import unique_ints
 from baseplace.errors import InputError
 from baseplace.geometry.poses import FloatArray
 from baseplace.guards import check_alloc
@@ -42,6 +42,8 @@ class MapInfo:
         self_collision: whether self-colliding samples were dropped.
         dropped_self_collision: samples dropped as self-colliding.
         self_collision_checker: which self-collision check dropped them (empty without one).
+        certification: JSON of how the sparse cells were certified by IK (``certify.py``), or "".
+        quality: JSON of the measured recall and precision (``certify.measure_quality``), or "".
     """
 
     robot: str
@@ -56,6 +58,8 @@ class MapInfo:
     self_collision: bool = False
     dropped_self_collision: int = 0
     self_collision_checker: str = ""
+    certification: str = ""
+    quality: str = ""
 
 
 @dataclass(frozen=True)
@@ -68,6 +72,8 @@ class ReachabilityMap:
         counts: (K,) samples per reached cell.
         info: provenance.
         manipulability: (K,) best Yoshikawa manipulability per cell, or None.
+        quality: (K,) share of IK-solved certification poses per cell (NaN: not certified, the
+            cell had enough samples), or None for an uncertified map (``certify.py``).
     """
 
     grid: SE3Grid
@@ -75,6 +81,7 @@ class ReachabilityMap:
     counts: NDArray[np.uint32]
     info: MapInfo
     manipulability: NDArray[np.float32] | None = None
+    quality: NDArray[np.float32] | None = None
     _lookup: tuple[NDArray[np.int32], NDArray[np.float32]] | None = field(
         default=None, init=False, repr=False, compare=False
     )
@@ -93,9 +100,12 @@ class ReachabilityMap:
         centres = self.grid.voxel_centre(voxels)
         return float(np.hypot(centres[:, 0], centres[:, 1]).max() + self.grid.voxel_size * math.sqrt(0.5))
 
-    @cached_property
+    @property
     def index(self) -> NDArray[np.float32]:
-        """Reachability index per stored cell, ``count / max(count)`` in (0, 1]."""
+        """Reachability index per stored cell, ``count / max(count)`` in (0, 1].
+
+        Computed per call, not kept: queries read :attr:`tables`, which hold the same values.
+        """
         if len(self.counts) == 0:
             return np.zeros(0, dtype=np.float32)
         return (self.counts / self.counts.max()).astype(np.float32)
@@ -107,13 +117,57 @@ class ReachabilityMap:
         check_alloc(
             self.grid.n_voxels * 4.0, "the lookup table of the map's grid", f"map of {self.info.robot}"
         )
-        voxels, orient = np.divmod(self.cells, n_orient)
-        reached, row = unique_inverse(voxels)
+        voxels = self.cells // n_orient  # sorted, as the cells are
+        first = np.ones(len(voxels), dtype=np.bool_)
+        np.not_equal(voxels[1:], voxels[:-1], out=first[1:])
+        reached = voxels[first]
+        del first
         offset = np.full(self.grid.n_voxels, -1, dtype=np.int32)
         offset[reached] = np.arange(len(reached), dtype=np.int32)
         blocks = np.zeros((len(reached), n_orient), dtype=np.float32)
-        blocks[row, orient] = self.index
+        top = float(self.counts.max()) if len(self.counts) else 1.0
+        step = 1 << 20  # in slices: the temporaries stay small next to the tables
+        for lo in range(0, len(voxels), step):
+            v, c = voxels[lo : lo + step], self.cells[lo : lo + step]
+            blocks[offset[v], c - v * n_orient] = self.counts[lo : lo + step] / top
         return offset, blocks
+
+    @cached_property
+    def _one_pose_args(
+        self,
+    ) -> tuple[FloatArray, NDArray[np.int64], FloatArray, NDArray[np.int32], NDArray[np.float32]]:
+        """The grid and tables packed in few arrays: a compiled call's cost grows with its arguments."""
+        origin, voxel_size, shape, nside, n_twist, pixel_phi = self.grid.params
+        offset, blocks = self.tables
+        grid_f = np.array([*origin, voxel_size], dtype=np.float64)
+        grid_i = np.array([*shape, nside, n_twist], dtype=np.int64)
+        return grid_f, grid_i, pixel_phi, offset, blocks
+
+    def value(self, T_base_tcp: ArrayLike) -> float:
+        """Reachability index of one TCP pose relative to the base: the single-pose query.
+
+        Runs on the calling thread (no thread pool), so its rate holds on a loaded machine.
+
+        Args:
+            T_base_tcp: (4, 4) TCP pose in the base frame [m].
+
+        Returns:
+            The index in [0, 1]; 0 outside the map.
+        """
+        T = T_base_tcp
+        if not (
+            type(T) is np.ndarray and T.dtype == np.float64 and T.shape == (4, 4) and T.flags.c_contiguous
+        ):
+            T = _poses(T_base_tcp, "T_base_tcp")
+            if len(T) != 1:
+                raise InputError(
+                    f"value() takes one pose (4, 4), got {len(T)}; use reachability() for a batch"
+                )
+            T = T[0]
+        v = _value_one(T, *self._one_pose_args)
+        if v < 0.0:
+            raise InputError("T_base_tcp contains NaN or infinity")
+        return v
 
     def reachability(self, T_base_tcp: ArrayLike) -> NDArray[np.float32]:
         """Reachability index of TCP poses relative to the base.
@@ -125,10 +179,9 @@ class ReachabilityMap:
             (N,) values in [0, 1]; 0 outside the map.
         """
         T = _poses(T_base_tcp, "T_base_tcp")
-        identity = np.eye(4)
         out = np.empty(len(T), dtype=np.float32)
         offset, blocks = self.tables
-        _lookup_batch(identity, T, False, *self.grid.params, offset, blocks, out)
+        _batch_kernel(len(T))(_IDENTITY, T, False, *self.grid.params, offset, blocks, out)
         return out
 
     def inverse(self, T_world_target: ArrayLike, T_world_base: ArrayLike) -> NDArray[np.float32]:
@@ -147,7 +200,7 @@ class ReachabilityMap:
         bases = _poses(T_world_base, "T_world_base")
         out = np.empty(len(bases), dtype=np.float32)
         offset, blocks = self.tables
-        _lookup_batch(target[0], bases, True, *self.grid.params, offset, blocks, out)
+        _batch_kernel(len(bases))(target[0], bases, True, *self.grid.params, offset, blocks, out)
         return out
 
     def inverse_on_plane(
@@ -175,7 +228,8 @@ class ReachabilityMap:
         g = np.ascontiguousarray(np.asarray(gamma, dtype=np.float64).ravel())
         out = np.empty(len(p), dtype=np.float32)
         offset, blocks = self.tables
-        _lookup_plane(target, p, g, R0, n, d_unit, *self.grid.params, offset, blocks, out)
+        plane = _lookup_plane if len(p) >= SERIAL_BELOW else _lookup_plane_serial
+        plane(target, p, g, R0, n, d_unit, *self.grid.params, offset, blocks, out)
         return out
 
 
@@ -242,24 +296,39 @@ def _poses(T: ArrayLike, name: str) -> FloatArray:
     return arr
 
 
+@nb.njit(cache=True, inline="always")
+def _plane_row(i, T_wt, xy, gamma, R0, n, d, origin, voxel_size, shape, nside, n_twist, pixel_phi,
+               offset, blocks, out):  # fmt: skip
+    c, s = math.cos(gamma[i]), math.sin(gamma[i])
+    B = np.empty((3, 4))
+    for a in range(3):  # R = R0 Rz(gamma): x' = c x0 + s y0, y' = -s x0 + c y0, z' = n
+        B[a, 0] = c * R0[a, 0] + s * R0[a, 1]
+        B[a, 1] = -s * R0[a, 0] + c * R0[a, 1]
+        B[a, 2] = R0[a, 2]
+    B[0, 3] = xy[i, 0]
+    B[1, 3] = xy[i, 1]
+    B[2, 3] = -(d + n[0] * xy[i, 0] + n[1] * xy[i, 1]) / n[2]
+    out[i] = _lookup_inverse(
+        T_wt, B, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset, blocks, blocks.shape[1]
+    )
+
+
+# The serial and the parallel kernels are separate functions: numba's on-disk cache is keyed by
+# function, not by the parallel flag, so one function compiled both ways would share one entry.
 @nb.njit(cache=True, parallel=True)
-def _lookup_plane(
-    T_wt, xy, gamma, R0, n, d, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset, blocks, out
-):
-    n_orient = blocks.shape[1]
+def _lookup_plane(T_wt, xy, gamma, R0, n, d, origin, voxel_size, shape, nside, n_twist, pixel_phi,
+                  offset, blocks, out):  # fmt: skip
     for i in nb.prange(xy.shape[0]):
-        c, s = math.cos(gamma[i]), math.sin(gamma[i])
-        B = np.empty((3, 4))
-        for a in range(3):  # R = R0 Rz(gamma): x' = c x0 + s y0, y' = -s x0 + c y0, z' = n
-            B[a, 0] = c * R0[a, 0] + s * R0[a, 1]
-            B[a, 1] = -s * R0[a, 0] + c * R0[a, 1]
-            B[a, 2] = R0[a, 2]
-        B[0, 3] = xy[i, 0]
-        B[1, 3] = xy[i, 1]
-        B[2, 3] = -(d + n[0] * xy[i, 0] + n[1] * xy[i, 1]) / n[2]
-        out[i] = _lookup_inverse(
-            T_wt, B, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset, blocks, n_orient
-        )
+        _plane_row(i, T_wt, xy, gamma, R0, n, d, origin, voxel_size, shape, nside, n_twist,
+                   pixel_phi, offset, blocks, out)  # fmt: skip
+
+
+@nb.njit(cache=True)
+def _lookup_plane_serial(T_wt, xy, gamma, R0, n, d, origin, voxel_size, shape, nside, n_twist,
+                         pixel_phi, offset, blocks, out):  # fmt: skip
+    for i in range(xy.shape[0]):
+        _plane_row(i, T_wt, xy, gamma, R0, n, d, origin, voxel_size, shape, nside, n_twist,
+                   pixel_phi, offset, blocks, out)  # fmt: skip
 
 
 @nb.njit(cache=True, inline="always")
@@ -290,21 +359,60 @@ def _table_value(
     return 0.0 if row < 0 else blocks[row, c % n_orient]
 
 
-@nb.njit(cache=True, parallel=True)
-def _lookup_batch(T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist, pixel_phi,
-                  offset, blocks, out):  # fmt: skip
+@nb.njit(cache=True, inline="always")
+def _batch_row(i, T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist, pixel_phi,
+               offset, blocks, out):  # fmt: skip
     n_orient = blocks.shape[1]
-    for i in nb.prange(T_wb.shape[0]):
-        B = T_wb[i]
-        if invert:  # T_base_tcp = B^-1 T_wt
-            out[i] = _lookup_inverse(
-                T_wt, B, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset, blocks, n_orient
-            )
-            continue
+    B = T_wb[i]
+    if invert:  # T_base_tcp = B^-1 T_wt
+        out[i] = _lookup_inverse(
+            T_wt, B, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset, blocks, n_orient
+        )
+    else:
         out[i] = _table_value(
             B[:3, :3], B[0, 3], B[1, 3], B[2, 3], origin, voxel_size, shape, nside, n_twist, pixel_phi,
             offset, blocks, n_orient,
         )  # fmt: skip
+
+
+@nb.njit(cache=True, parallel=True)
+def _lookup_batch(T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist, pixel_phi,
+                  offset, blocks, out):  # fmt: skip
+    for i in nb.prange(T_wb.shape[0]):
+        _batch_row(i, T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist, pixel_phi,
+                   offset, blocks, out)  # fmt: skip
+
+
+@nb.njit(cache=True)
+def _lookup_batch_serial(T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist, pixel_phi,
+                         offset, blocks, out):  # fmt: skip
+    for i in range(T_wb.shape[0]):
+        _batch_row(i, T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist, pixel_phi,
+                   offset, blocks, out)  # fmt: skip
+
+
+@nb.njit(cache=True)
+def _value_one(T, grid_f, grid_i, pixel_phi, offset, blocks):
+    """Index of one pose (4, 4) from the packed tables; -1 if it is not finite."""
+    for a in range(3):
+        for b in range(4):
+            if not math.isfinite(T[a, b]):
+                return -1.0
+    return _table_value(T[:3, :3], T[0, 3], T[1, 3], T[2, 3], grid_f[:3], grid_f[3], grid_i[:3],
+                        grid_i[3], grid_i[4], pixel_phi, offset, blocks, blocks.shape[1])  # fmt: skip
+
+
+SERIAL_BELOW = 2048
+"""Batches smaller than this are looked up on the calling thread: waking the thread pool costs
+more than the lookups, and under CPU load a parallel call waits for every worker (a single-pose
+query ran 6-13x slower with 2 threads on a loaded 2-core machine than on 1)."""
+
+_IDENTITY = np.eye(4)
+
+
+def _batch_kernel(n: int):
+    """The compiled lookup for a batch of ``n`` poses: serial below :data:`SERIAL_BELOW`."""
+    return _lookup_batch if n >= SERIAL_BELOW else _lookup_batch_serial
 
 
 def reach_bounds(placements: FloatArray, axes: FloatArray, kinds: NDArray[np.int64],

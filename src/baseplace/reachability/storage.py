@@ -64,6 +64,9 @@ def save_map(rmap: ReachabilityMap, path: str | Path) -> int:
         if rmap.manipulability is not None:
             f.create_dataset("manipulability", data=rmap.manipulability, compression="gzip")
             parts.append(rmap.manipulability)
+        if rmap.quality is not None:
+            f.create_dataset("quality", data=rmap.quality, compression="gzip")
+            parts.append(rmap.quality)
         f.attrs["sha256"] = short_text(digest(*parts))
     return path.stat().st_size
 
@@ -86,8 +89,9 @@ def load_map(path: str | Path, robot: Robot | None = None, arm: str | None = Non
             cells = read_array(f, "cells", path)
             counts = read_array(f, "counts", path)
             manip = read_array(f, "manipulability", path) if "manipulability" in f else None
+            quality = read_array(f, "quality", path) if "quality" in f else None
             stored = attr_text(f.attrs, "sha256")
-        arrays: list[np.ndarray] = [cells, counts] + ([manip] if manip is not None else [])
+        arrays: list[np.ndarray] = [cells, counts] + [a for a in (manip, quality) if a is not None]
         if digest(grid_text, info_text, *arrays) != stored:
             raise InputError(f"cannot read map {path}: checksum mismatch, the file is corrupt")
         info_raw = json.loads(info_text)
@@ -98,10 +102,11 @@ def load_map(path: str | Path, robot: Robot | None = None, arm: str | None = Non
             cells.ndim != 1
             or cells.shape != counts.shape
             or (manip is not None and manip.shape != cells.shape)
+            or (quality is not None and (quality.shape != cells.shape or quality.dtype != np.float32))
             or (len(cells) and not 0 <= cells.min() <= cells.max() < grid.n_cells)
         ):
             raise ValueError("cells out of the grid")
-        rmap = ReachabilityMap(grid, cells.astype(np.int64), counts.astype(np.uint32), info, manip)
+        rmap = ReachabilityMap(grid, cells.astype(np.int64), counts.astype(np.uint32), info, manip, quality)
     except InputError:
         raise
     except CORRUPT_FILE_ERRORS as exc:
