@@ -61,6 +61,15 @@ def _cell(value: Any, fmt: str, suffix: str = "") -> str:
     return "-" if value is None else format(value, fmt) + suffix
 
 
+def _int_list(text: str) -> list[int]:
+    """Parse "1,2,3" into [1, 2, 3]."""
+    try:
+        values = [int(v) for v in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a comma-separated list of integers: {text!r}") from None
+    return values
+
+
 def _finite_float(text: str) -> float:
     try:
         value = float(text)
@@ -143,6 +152,19 @@ def _out_path(text: str | None, suffixes: Sequence[str] = PLOT_SUFFIXES, what: s
     from baseplace.guards import check_output_path
 
     return None if text is None else check_output_path(text, what, suffixes)
+
+
+def _step_progress(update: Callable[[int], None] | None) -> Callable[[int], None]:
+    """Turn an absolute-progress callback into one that is told how many steps just finished."""
+    done = 0
+
+    def step(k: int) -> None:
+        nonlocal done
+        done += k
+        if update is not None:
+            update(done)
+
+    return step
 
 
 def _set_workers(workers: int | None) -> None:

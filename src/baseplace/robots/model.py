@@ -302,3 +302,12 @@ class Robot:
             q_width=np.array(q_width, dtype=np.int64),
             approach_axis=np.array(spec.approach_vector, dtype=float),
         )
+
+    def frame_pose(self, q_full: ArrayLike, frame: str, relative_to: str | None = None) -> FloatArray:
+        """Pinocchio FK of one frame, (4, 4), in the robot root or in ``relative_to``."""
+        data = self.model.createData()
+        pin.framesForwardKinematics(self.model, data, np.asarray(q_full, dtype=float))
+        T = data.oMf[self.model.getFrameId(frame)]
+        if relative_to is not None:
+            T = data.oMf[self.model.getFrameId(relative_to)].inverse() * T
+        return T.homogeneous

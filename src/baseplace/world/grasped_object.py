@@ -299,7 +299,9 @@ def grasped_cluster(
     start = int(np.argmin(d))
     if d[start] > s.seed_radius:
         return None
-    keep, owner = _thin(local, s.spacing)
+    from baseplace.world.thinning import thin_in_order
+
+    keep, owner = thin_in_order(local, s.spacing)
     thin = local[keep]
     pairs = cKDTree(thin).query_pairs(s.link, output_type="ndarray")
     n = len(thin)
@@ -323,7 +325,7 @@ def grasped_cluster(
     lo, hi = 0, steps + 1  # cluster(z_seed - k step) is narrow for k < lo, too wide for k >= hi
     while lo < hi:
         mid = (lo + hi) // 2
-        if _diameter(thin[cluster(z_seed - mid * s.step), :2]) > s.max_size:
+        if _wider_than(thin[cluster(z_seed - mid * s.step), :2], s.max_size):
             hi = mid
         else:
             lo = mid + 1
@@ -334,7 +336,7 @@ def grasped_cluster(
     else:
         floor = z_seed - s.depth
     mine = cluster(floor)
-    if not mine.any() or _diameter(thin[mine, :2]) > s.max_size:
+    if not mine.any() or _wider_than(thin[mine, :2], s.max_size):
         return None
     chosen = mine[owner] & (local[:, 2] >= floor)
     out = np.zeros(len(p), dtype=bool)
@@ -342,32 +344,15 @@ def grasped_cluster(
     return out
 
 
-def _thin(points: FloatArray, spacing: float) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-    """Greedy thinning in the points' order: (kept indices (K,), the kept point covering each point (N,)).
-
-    A point is kept unless an earlier kept point lies within ``spacing``; each point's owner is
-    (the position in the kept indices of) the first kept point within ``spacing``, itself when
-    kept. Depends on distances and the order only, never on a grid.
-    """
-    from scipy.spatial import cKDTree
-
-    n = len(points)
-    tree = cKDTree(points)
-    nearest = tree.query(points, k=2)[0][:, 1] if n > 1 else np.full(n, np.inf)
-    owner = np.where(nearest > spacing, np.arange(n), -1)  # a point with no neighbour keeps itself
-    for i in np.flatnonzero(owner < 0).tolist():
-        if owner[i] >= 0:  # covered by an earlier kept point
-            continue
-        ball = np.asarray(tree.query_ball_point(points[i], spacing), dtype=np.intp)
-        owner[ball[owner[ball] < 0]] = i
-    kept = np.flatnonzero(owner == np.arange(n))
-    return kept, np.searchsorted(kept, owner)
-
-
-def _diameter(xy: FloatArray) -> float:
-    """The largest distance [m] between two of the points (M, 2); 0 for fewer than two."""
+def _wider_than(xy: FloatArray, size: float) -> bool:
+    """Whether two of the points (M, 2) [m] lie more than ``size`` apart (the set's diameter)."""
     if len(xy) < 2:
-        return 0.0
+        return False
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    if float(np.max(hi - lo)) > size:
+        return True
+    if float(np.hypot(*(hi - lo))) <= size:
+        return False
     from scipy.spatial import ConvexHull, QhullError
 
     try:
@@ -377,7 +362,7 @@ def _diameter(xy: FloatArray) -> float:
         t = xy @ axis
         xy = xy[[int(np.argmin(t)), int(np.argmax(t))]]
     diff = xy[:, None, :] - xy[None, :, :]
-    return float(np.sqrt((diff**2).sum(axis=-1)).max())
+    return bool(np.sqrt((diff**2).sum(axis=-1)).max() > size)
 
 
 def find_grasped_object(
