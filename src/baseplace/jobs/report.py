@@ -338,6 +338,9 @@ class SegmentReport(Report):
         cloud: path and point count.
         algorithm: robust or baseline.
         resolution: height-map cell [m].
+        height_map: origin, resolution, shape, known_cells.
+        voxels: occupied voxels.
+        non_planar_cells: known cells in no region.
     """
 
     kind: ClassVar[str] = "segment"
@@ -346,6 +349,9 @@ class SegmentReport(Report):
     cloud: dict[str, Any] = field(default_factory=dict)
     algorithm: str = "robust"
     resolution: float = 0.0
+    height_map: dict[str, Any] = field(default_factory=dict)
+    voxels: int = 0
+    non_planar_cells: int = 0
 
 
 @dataclass
