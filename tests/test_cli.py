@@ -185,7 +185,7 @@ def test_demo_places_on_the_platform_and_drives_up_the_ramp(tmp_path):
     pin.framesForwardKinematics(robot.model, data, q)
     T_base_tcp = data.oMf[robot.model.getFrameId(arm.tcp_frame)].homogeneous  # base_footprint is the root
     T_world_tcp = np.asarray(p["base_pose"]) @ T_base_tcp
-    np.testing.assert_allclose(T_world_tcp[:3, 3], parse_pose6(result["target"])[:3, 3], atol=2e-4)
+    np.testing.assert_allclose(T_world_tcp[:3, 3], parse_pose6(result["targets"][0])[:3, 3], atol=2e-4)
     # The path starts at the start on the floor, ends at the placement and goes up the ramp.
     route = result["path"]
     assert route["poses"][0][:2] == [-3.5, 0.0]
@@ -210,13 +210,13 @@ def test_scene_generate_and_segment(tmp_path):
     )
     assert proc.returncode == 0, proc.stderr
     info = json.loads(proc.stdout)
-    assert Path(info["truth"]).is_file() and info["planes"] == 2
+    assert Path(info["outputs"]["truth"]).is_file() and info["planes"] == 2
     png = tmp_path / "regions.png"
     proc = run("segment", str(cloud), "--out", str(png), "--json")
     assert proc.returncode == 0, proc.stderr
     result = json.loads(proc.stdout)
     assert len(result["regions"]) >= 3 and png.stat().st_size > 5000
-    truth = json.loads(Path(info["truth"]).read_text())
+    truth = json.loads(Path(info["outputs"]["truth"]).read_text())
     found = [r["normal"] for r in result["regions"]]
     for plane in truth["planes"]:  # every true plane has a region with its normal (within 1 deg)
         best = max(float(np.dot(plane["normal"], n)) for n in found)

@@ -61,7 +61,7 @@ def test_navigate_same_path_whatever_the_goal_heading_range(ramp_cloud):
         assert proc.returncode == 0, proc.stderr
         paths[heading] = json.loads(proc.stdout)
     same, wrapped, rounded = paths["5.328"], paths[repr(5.328 - TWO_PI)], paths["-0.955"]
-    assert same["goal"][2] == pytest.approx(5.328 - TWO_PI, abs=1e-12)
+    assert same["goal"]["yaw"] == pytest.approx(5.328 - TWO_PI, abs=1e-4)  # the schema rounds to 1e-4
     assert (
         same["poses"] == wrapped["poses"] and same["length"] == wrapped["length"]
     )  # the same pose: same path
@@ -116,7 +116,7 @@ def test_candidates_robot_pose_heading_in_any_range(tiago_map):
                    f"-1.875 0.075 {heading}", "--map", str(tiago_map), "--json")  # fmt: skip
         assert proc.returncode == 0, proc.stderr
         outs.append(json.loads(proc.stdout))
-    assert outs[0]["robot_pose"][2] == pytest.approx(7.0 - TWO_PI, abs=1e-12)
+    assert outs[0]["robot_pose"]["yaw"] == pytest.approx(7.0 - TWO_PI, abs=1e-4)
     assert outs[0]["candidates"] == outs[1]["candidates"] and outs[0]["path"] == outs[1]["path"]
     assert outs[0]["path"] is not None
 
@@ -142,6 +142,6 @@ def test_surface_sample_prints_headings_navigate_accepts(tmp_path):
     assert proc.returncode == 0, proc.stderr
     proc = run("surface-sample", "--map", str(smap), "--n", "12", "--candidates", "5", "--json", env=env)
     assert proc.returncode == 0, proc.stderr
-    thetas = np.array([p["theta"] for p in json.loads(proc.stdout)["poses"]])
+    thetas = np.array([p["yaw"] for p in json.loads(proc.stdout)["poses"]])
     assert np.all(thetas > -math.pi) and np.all(thetas <= math.pi)
     assert (thetas < 0).any()  # 12 draws: some face the other half-turn (was [0, 2 pi))

@@ -160,3 +160,20 @@ def test_single_pose_value_and_small_batches(tiago, tiago_map, rng):
         tiago_map.value(bad)
     with pytest.raises(InputError, match="one pose"):
         tiago_map.value(T[:2])
+
+
+def test_cache_keeps_maps_of_different_cells_apart():
+    """A self-collision, manipulability or certified map never reuses the plain map's cache file."""
+    from baseplace.reachability.build import BuildSettings
+    from baseplace.reachability.cache import cached_map_path
+    from baseplace.robots.model import Robot
+
+    robot = Robot("tiago")
+    plain = cached_map_path(robot, BuildSettings())
+    assert cached_map_path(robot, BuildSettings()) == plain
+    others = {
+        cached_map_path(robot, BuildSettings(self_collision=True)),
+        cached_map_path(robot, BuildSettings(manipulability=True)),
+        cached_map_path(robot, BuildSettings(certify=5)),
+    }
+    assert plain not in others and len(others) == 3

@@ -68,3 +68,32 @@ def elapsed_status(label: str, enabled: bool = True, stream: Any = None) -> Iter
     finally:
         stop.set()
         thread.join()
+
+
+class ProgressBars:
+    """A job's progress callback (``progress(step, done, total)``) shown as one tqdm bar per step on stderr.
+
+    A step's bar appears on its first update; nothing is shown when ``enabled`` is False (``--json``).
+    """
+
+    def __init__(self, enabled: bool = True, stream: Any = None) -> None:
+        self.enabled, self.stream, self.bars = enabled, stream, dict[str, Any]()
+
+    def __call__(self, step: str, done: int, total: int) -> None:
+        """``done`` of ``total`` samples of ``step`` are done."""
+        if not self.enabled:
+            return
+        if step not in self.bars:
+            from tqdm import tqdm
+
+            out = sys.stderr if self.stream is None else self.stream
+            self.bars[step] = tqdm(
+                total=total, desc=step, unit="samples", unit_scale=True, file=out, leave=False
+            )
+        self.bars[step].update(done - self.bars[step].n)
+
+    def close(self) -> None:
+        """Close every bar."""
+        for bar in self.bars.values():
+            bar.close()
+        self.bars.clear()

@@ -4,16 +4,17 @@ from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Callable
+from typing import Any
 
 from baseplace.errors import InputError
 
 
-def add_serve_command(command: Callable[..., argparse.ArgumentParser]) -> None:
-    """Add ``serve`` through the CLI's ``command(name, help, func, ...)`` helper."""
-    p = command("serve", "HTTP/JSON service answering every job warm (place, candidates, reach, ...)",
-                cmd_serve, description="Serve the CLI's jobs over HTTP/JSON with robots, maps, kernels and "
+def add_serve_command(sub: Any) -> None:
+    """Add ``serve`` to ``baseplace``'s subparsers."""
+    p = sub.add_parser("serve", help="HTTP/JSON service answering every job warm (place, candidates, reach, ...)",
+                description="Serve the CLI's jobs over HTTP/JSON with robots, maps, kernels and "
                 "uploaded scenes kept warm; OpenAPI docs at /docs. Loopback only unless --host says otherwise.")  # fmt: skip
+    p.set_defaults(func=cmd_serve)
     p.add_argument(
         "--host", default="127.0.0.1", help="address to bind (default 127.0.0.1: this machine only)"
     )

@@ -1,0 +1,35 @@
+"""The jobs layer: one function per job, typed inputs, one typed, versioned report.
+
+Front ends (the CLI, the service, the viewer) build the inputs, call a job and show its report;
+they do no work of their own. Jobs print nothing and never exit: they raise
+:class:`~baseplace.errors.InputError` for bad input and :class:`~baseplace.jobs.report.NoResultError`
+(a :class:`~baseplace.errors.NothingFoundError` carrying the partial report) when they find nothing.
+"""
+
+from __future__ import annotations
+
+import json
+from functools import cache
+from importlib import resources
+from typing import Any
+
+from baseplace.jobs.report import SCHEMA_VERSION, NoResultError, PoseRecord, Report, RobotRef, wrap_angle
+
+
+@cache
+def result_schema() -> dict[str, Any]:
+    """The JSON Schema of every report (``result.schema.json``, shipped with the package)."""
+    text = resources.files("baseplace.jobs").joinpath("result.schema.json").read_text()
+    schema: dict[str, Any] = json.loads(text)
+    return schema
+
+
+__all__ = [
+    "SCHEMA_VERSION",
+    "NoResultError",
+    "PoseRecord",
+    "Report",
+    "RobotRef",
+    "result_schema",
+    "wrap_angle",
+]

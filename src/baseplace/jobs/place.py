@@ -1,0 +1,272 @@
+"""The ``place`` job: verified base placements for TCP targets in a scanned scene (seed 000).
+
+Composes :func:`baseplace.placement.pipeline.place` (a cloud) or
+:func:`baseplace.placement.in_map.place_in_map` (an occupancy grid, optionally with clouds), and,
+with a start pose, keeps only the placements the base can drive to (seed 000 V).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from baseplace.errors import BaseplaceError, InputError
+from baseplace.jobs.inputs import (
+    PLOT_SUFFIXES,
+    CloudInput,
+    Progress,
+    bag_stamp,
+    base_xyyaw,
+    load_robot,
+    occupancy_grid,
+    out_path,
+    step_progress,
+    world_cloud,
+    write_mcap,
+)
+from baseplace.jobs.report import NoResultError, PlaceReport, RobotRef
+
+if TYPE_CHECKING:
+    from baseplace.placement.pipeline import PlaceSettings
+    from baseplace.reachability.rmap import ReachabilityMap
+    from baseplace.robots.model import Robot
+    from baseplace.world.occupancy import OccupancyGrid
+
+
+@dataclass
+class PlaceJob:
+    """The inputs of :func:`place_job`.
+
+    Attributes:
+        targets: TCP targets "x y z roll pitch yaw" [m, rad], world frame (text or 6 numbers each).
+        robot: built-in name, robot file or a loaded Robot.
+        arm: the arm (None: the robot's default arm, or the map's).
+        cloud: the scene cloud (files, a recording or loaded points).
+        occupancy: navigation map (map_server YAML or loaded grid) in the cloud's world frame.
+        map: reachability map: loaded, a file, or None for the cached default map.
+        settings: the search (strategy, M, N, motion check, robustness); None: defaults.
+        seed: random seed.
+        start: current base pose "x y yaw" [m, rad, any range]: keep placements reachable from it.
+        planner: path planner with ``start``: rrt (OMPL RRTConnect) or regions.
+        object: the grasped object spec (auto, none, box ..., cylinder ..., points FILE).
+        floor: add a floor plane at this height [m] under a cloud that shows none.
+        png: also plot the OSRM with the placements here.
+        mcap: also write the result as an MCAP recording.
+    """
+
+    targets: Sequence[str | Sequence[float]]
+    robot: Robot | str = "tiago"
+    arm: str | None = None
+    cloud: CloudInput = field(default_factory=CloudInput)
+    occupancy: OccupancyGrid | str | None = None
+    map: ReachabilityMap | str | None = None
+    settings: PlaceSettings | None = None
+    seed: int = 0
+    start: str | Sequence[float] | None = None
+    planner: str = "rrt"
+    object: str = "auto"
+    floor: float | None = None
+    png: str | None = None
+    mcap: str | None = None
+
+    def echo(self) -> dict[str, Any]:
+        """The inputs as given."""
+        s = self.settings
+        return {
+            "robot": self.robot if isinstance(self.robot, str) else self.robot.name, "arm": self.arm,
+            **self.cloud.echo(), "occupancy": self.occupancy if isinstance(self.occupancy, str | None) else "grid",
+            "targets": [t if isinstance(t, str) else [float(v) for v in t] for t in self.targets],
+            "map": self.map if isinstance(self.map, str | None) else "loaded", "seed": self.seed,
+            "strategy": None if s is None else s.strategy, "placements": None if s is None else s.placements,
+            "tries": None if s is None else s.tries, "start": self.start, "planner": self.planner,
+            "object": self.object, "floor": self.floor,
+        }  # fmt: skip
+
+
+def _target_matrix(target: str | Sequence[float]) -> np.ndarray:
+    from baseplace.geometry.poses import parse_pose6, pose_from_xyz_rpy
+
+    if isinstance(target, str):
+        return parse_pose6(target)
+    values = np.asarray(target, dtype=float)
+    if values.shape != (6,) or not np.isfinite(values).all():
+        raise InputError(f"a target needs 6 finite numbers x y z roll pitch yaw, got {list(values)}")
+    return np.asarray(pose_from_xyz_rpy(values))
+
+
+def drivable(
+    placements: list[Any], navmap: Any, start: np.ndarray, planner: str, seed: int, failures: Any
+) -> tuple[list[Any], list[Any]]:
+    """The placements the base can drive to from ``start`` on ``navmap``, with their paths.
+
+    Each placement the planner finds no path to counts once in ``failures["no_path"]``.
+    """
+    from baseplace.navigation.planners import plan_path
+
+    kept, routes = [], []
+    for p in placements:
+        T = p.T_world_base
+        try:
+            route = plan_path(navmap, start, np.array([T[0, 3], T[1, 3], p.yaw]), planner, seed=seed)
+        except BaseplaceError:
+            failures["no_path"] += 1
+            continue
+        kept.append(p)
+        routes.append(route)
+    return kept, routes
+
+
+def motion_and_robustness_json(motions: Any, robustness: Any) -> dict[str, Any]:
+    """The joint waypoints of each target's reaching motion and the robustness score, if any."""
+    out: dict[str, Any] = {}
+    if motions is not None:
+        out["motion"] = [{"path": np.round(m.path, 5).tolist(), "approach": np.round(m.approach, 5).tolist(),
+                          "planned": m.planned} for m in motions]  # fmt: skip
+    if robustness is not None:
+        out["robustness"] = robustness.as_dict()
+    return out
+
+
+def placement_json(p: Any) -> dict[str, Any]:
+    """One verified placement: the pose fields, roll_pitch_yaw, region, reachability, joints per target."""
+    from baseplace.geometry.poses import matrix_to_rpy
+    from baseplace.jobs.report import PoseRecord
+
+    T = p.T_world_base
+    return {
+        **PoseRecord(T).to_json(), "roll_pitch_yaw": [round(float(v), 5) for v in matrix_to_rpy(T[:3, :3])],
+        "region": p.region, "reachability": round(p.reachability, 5),
+        "joints": [dict(zip(p.joint_names, np.round(q, 6).tolist(), strict=True)) for q in p.joints],
+        **motion_and_robustness_json(p.motions, p.robustness),
+    }  # fmt: skip
+
+
+def place_job(job: PlaceJob, progress: Progress | None = None) -> PlaceReport:
+    """Verified base placements for ``job.targets``.
+
+    Raises:
+        InputError: bad input (no targets, no scene, a start pose off the floor, an unwritable output).
+        NoResultError: no verified placement, or none the base can drive to; ``report`` holds the
+            failure counts and the contacts.
+    """
+    from baseplace.placement.pipeline import PlaceSettings, place, with_floor
+    from baseplace.placement.verify import contact_summary, most_frequent_contact
+    from baseplace.reachability.cache import map_or_default
+    from baseplace.world.grasped_object import parse_grasped_object
+
+    t0 = time.perf_counter()
+    if not job.targets:
+        raise InputError('give at least one --target "x y z roll pitch yaw"')
+    if job.planner not in ("rrt", "regions"):
+        raise InputError(f"unknown planner {job.planner!r}; valid: regions, rrt")
+    png = out_path(job.png, "--out", PLOT_SUFFIXES)
+    mcap = out_path(job.mcap, "--mcap", (".mcap",))
+    targets = np.stack([_target_matrix(t) for t in job.targets])
+    grasped = parse_grasped_object(job.object)
+    settings = job.settings or PlaceSettings()
+    start = None if job.start is None else base_xyyaw(job.start, "--start")
+    robot = load_robot(job.robot)
+    cloud = world_cloud(job.cloud) if job.cloud.given else None
+    grid = occupancy_grid(job.occupancy, job.cloud.bag, job.cloud)
+    if cloud is None and grid is None:
+        raise InputError(
+            "give --cloud FILE, --occupancy MAP.yaml, or --bag FILE with --cloud-topic/--map-topic"
+        )
+    points = None
+    if cloud is not None:
+        points = cloud.points if job.floor is None else with_floor(cloud.points, job.floor)
+    t_load = time.perf_counter()
+    rmap = map_or_default(robot, job.map, job.arm,
+                          step_progress(progress, f"default {robot.name} map (first run only)", 50_000_000))  # fmt: skip
+    t_map = time.perf_counter()
+    terrain = navmap = None
+    if start is not None and grid is None:
+        from baseplace.navigation.navmap import navigation_map
+        from baseplace.terrain.pipeline import terrain_from_points
+
+        assert points is not None  # a cloud or a grid was given
+        terrain = terrain_from_points(points, resolution=settings.resolution)
+        navmap = navigation_map(terrain, robot.spec.footprint_bounding_radius)
+        navmap.check_pose("--start", start[:2])
+    rng = np.random.default_rng(job.seed)
+    if grid is not None:
+        from baseplace.placement.in_map import place_in_map
+
+        result = place_in_map(robot, rmap, [] if points is None else [points], grid, targets, settings, rng,
+                              grasped=grasped)  # fmt: skip
+    else:
+        assert points is not None
+        result = place(robot, rmap, points, targets, settings, rng, terrain=terrain, grasped=grasped)
+    t_nav = time.perf_counter()
+    if grid is not None and start is not None:  # on the navigation map, around what the cameras see
+        from baseplace.placement.in_map import grid_routes
+
+        goals = [(p.T_world_base[0, 3], p.T_world_base[1, 3], p.yaw) for p in result.placements]
+        paths = grid_routes(grid, [] if cloud is None else [cloud.points], start, goals,
+                            robot.spec.footprint_bounding_radius)  # fmt: skip
+        result.failures["no_path"] += sum(r is None for r in paths)
+        kept = [p for p, r in zip(result.placements, paths, strict=True) if r is not None]
+        routes: list[Any] = [r for r in paths if r is not None]
+    elif navmap is not None and start is not None:
+        kept, routes = drivable(result.placements, navmap, start, job.planner, job.seed, result.failures)
+    else:
+        kept, routes = result.placements, [None] * len(result.placements)
+    rows = []
+    for p, route in zip(kept, routes, strict=True):
+        rows.append(placement_json(p))
+        if route is not None:
+            from baseplace.jobs.report import path_json
+
+            rows[-1]["path"] = {"poses": path_json(route.poses), "length": round(route.length, 3),
+                                "planner": route.planner, "time_ms": round(route.time_ms, 1)}  # fmt: skip
+    timings = {"load": (t_load - t0) * 1e3, "map": (t_map - t_load) * 1e3, **result.timings_ms}
+    timings.pop("total", None)
+    if terrain is not None:
+        timings["segmentation"] = terrain.timings_ms["total"]
+    if start is not None:
+        timings["navigation"] = (time.perf_counter() - t_nav) * 1e3
+    report = PlaceReport(
+        robot=RobotRef.of(robot, rmap.info.arm), inputs=job.echo(), failures=dict(result.failures),
+        targets=[t if isinstance(t, str) else " ".join(f"{float(v):g}" for v in t) for t in job.targets],
+        strategy=settings.strategy, seed=job.seed, placements=rows, tries=result.tries,
+        collisions=contact_summary(result.contacts),
+        object={"requested": job.object, "found": result.grasped_note,
+                "allowed": None if result.grasped is None else result.grasped.to_json()},
+        floor=job.floor, regions=len(result.terrain.segmentation.regions),
+    )  # fmt: skip
+    if png is not None:
+        from baseplace.terrain.polygons import footprint_outline
+        from baseplace.viz.placement import plot_placement
+
+        outline = footprint_outline(robot.spec.footprint_radius, robot.spec.footprint_polygon)
+        plot_placement(result.osrm, kept, outline, png,
+                       f"{robot.name}, {settings.strategy}: {len(rows)} placement(s) in {result.tries} tries",
+                       [r.poses for r in routes if r is not None], result.rejected, result.contacts,
+                       result.grasped)  # fmt: skip
+        report.outputs["png"] = str(png)
+    if mcap is not None:
+        T_kept = [p.T_world_base for p in kept]
+        world = job.cloud.bag.world_frame if job.cloud.bag is not None else "map"
+        write_mcap(mcap, world, bag_stamp(job.cloud), result.terrain, placements=T_kept, candidates=T_kept,
+                   paths=[r.poses for r in routes if r is not None], targets=list(targets))  # fmt: skip
+        report.outputs["mcap"] = str(mcap)
+    report.timings_ms = {**timings, "total": (time.perf_counter() - t0) * 1e3}
+    if not rows and result.placements:
+        raise NoResultError(
+            f"none of the {len(result.placements)} verified placement(s) can be driven to from --start "
+            f"{job.start} ({job.planner} planner); ask for more with --placements",
+            report,
+        )
+    if not rows:
+        worst = most_frequent_contact(result.contacts)
+        raise NoResultError(
+            f"no verified placement in {result.tries} tries with {settings.strategy} "
+            f"(failures: {dict(result.failures) or 'none'}{'; ' + worst if worst else ''}); "
+            f"try --tries, another --strategy, --object or check the target",
+            report,
+        )
+    return report

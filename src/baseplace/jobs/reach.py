@@ -1,0 +1,212 @@
+"""The ``reach`` and ``build_map`` jobs: look up and build reachability maps."""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from baseplace.errors import InputError
+from baseplace.jobs.inputs import Progress, load_robot, out_path, step_progress
+from baseplace.jobs.report import BuildMapReport, ReachReport, RobotRef
+
+if TYPE_CHECKING:
+    from baseplace.reachability.build import BuildSettings
+    from baseplace.reachability.rmap import ReachabilityMap
+    from baseplace.robots.model import Robot
+
+MAP_SUFFIXES = (".rmap", ".h5", ".hdf5")
+
+
+def read_pose_file(path: str, width: int, what: str) -> np.ndarray:
+    """Rows of ``width`` finite numbers, one pose a line ("#" comments, commas or spaces)."""
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"{what} file {p} does not exist")
+    rows = []
+    for lineno, line in enumerate(p.read_text().splitlines(), 1):
+        text = line.split("#", 1)[0].strip()
+        if not text:
+            continue
+        try:
+            values = [float(v) for v in text.replace(",", " ").split()]
+        except ValueError:
+            raise InputError(f"{p}:{lineno}: {what} must be numbers, got {text!r}") from None
+        if len(values) != width:
+            raise InputError(f"{p}:{lineno}: a {what} needs {width} numbers, got {len(values)}")
+        if not all(math.isfinite(v) for v in values):
+            raise InputError(f"{p}:{lineno}: {what} contains NaN or infinity")
+        rows.append(values)
+    if not rows:
+        raise InputError(f"{what} file {p} holds no poses")
+    return np.array(rows)
+
+
+@dataclass
+class ReachJob:
+    """The inputs of :func:`reach_job`: exactly one of ``target``/``targets`` and of ``base``/``bases``.
+
+    Attributes:
+        map: reachability map (loaded or a file).
+        target: one world TCP pose "x y z roll pitch yaw" [m, rad].
+        targets: a file with one target per line, paired row by row with the bases.
+        base: one base pose "x y yaw" [m, rad].
+        bases: a file with one base pose per line.
+        robot: check the map was built for this robot.
+    """
+
+    map: ReachabilityMap | str
+    target: str | None = None
+    targets: str | None = None
+    base: str | None = None
+    bases: str | None = None
+    robot: Robot | str | None = None
+
+    def echo(self) -> dict[str, Any]:
+        """The inputs as given."""
+        return {"map": self.map if isinstance(self.map, str) else "loaded", "target": self.target,
+                "targets": self.targets, "base": self.base, "bases": self.bases,
+                "robot": self.robot if isinstance(self.robot, str | None) else self.robot.name}  # fmt: skip
+
+
+def reach_job(job: ReachJob) -> ReachReport:
+    """Inverse-reachability values of the targets from the base poses, in [0, 1].
+
+    Raises:
+        InputError: not exactly one of each pair, malformed poses, a map of another robot.
+    """
+    from baseplace.geometry.poses import (
+        BasePose,
+        invert_transforms,
+        parse_base_pose,
+        parse_pose6,
+        pose_from_xyz_rpy,
+    )
+    from baseplace.reachability.storage import check_map_matches, load_map
+
+    t0 = time.perf_counter()
+    if (job.target is None) == (job.targets is None):
+        raise InputError("give exactly one of --target or --targets FILE")
+    if (job.base is None) == (job.bases is None):
+        raise InputError("give exactly one of --base or --bases FILE")
+    rmap = job.map if not isinstance(job.map, str) else load_map(job.map)
+    robot = None
+    if job.robot is not None:
+        robot = load_robot(job.robot)
+        check_map_matches(rmap, robot, rmap.info.arm, str(job.map))
+    targets = (parse_pose6(job.target)[None] if job.target is not None
+               else pose_from_xyz_rpy(read_pose_file(str(job.targets), 6, "target pose")))  # fmt: skip
+    bases = (parse_base_pose(job.base).matrix()[None] if job.base is not None
+             else BasePose.batch_matrix(read_pose_file(str(job.bases), 3, "base pose")))  # fmt: skip
+    if len(targets) != len(bases) and len(targets) != 1:
+        raise InputError(
+            f"--targets has {len(targets)} poses but --bases has {len(bases)}; they pair row by row"
+        )
+    t_load = time.perf_counter()
+    if len(targets) == 1:
+        values = rmap.inverse(targets[0], bases)
+    else:
+        values = rmap.reachability(invert_transforms(bases) @ targets)
+    return ReachReport(
+        robot=None if robot is None else RobotRef.of(robot, rmap.info.arm), inputs=job.echo(),
+        values=[round(float(v), 6) for v in values],
+        timings_ms={"load": (t_load - t0) * 1e3, "query": (time.perf_counter() - t_load) * 1e3},
+    )  # fmt: skip
+
+
+@dataclass
+class BuildMapJob:
+    """The inputs of :func:`build_map_job`.
+
+    Attributes:
+        out: the map file (.rmap, HDF5).
+        robot: built-in name, robot file or loaded Robot (a file or name with ``scheduler``).
+        arm: the arm (None: the default arm).
+        settings: samples, seed, resolutions, self-collision, manipulability.
+        checkpoint: where to save progress (None: no checkpoint).
+        checkpoint_every: samples between checkpoints.
+        scheduler: dask scheduler "tcp://host:port" or "local" (None: this process).
+        workers: threads of this process, or local worker processes with ``scheduler="local"``.
+    """
+
+    out: str
+    robot: Robot | str = "tiago"
+    arm: str | None = None
+    settings: BuildSettings | None = None
+    checkpoint: Path | None = None
+    checkpoint_every: int = 50_000_000
+    scheduler: str | None = None
+    workers: int | None = None
+
+
+def set_workers(workers: int | None) -> None:
+    """Use ``workers`` numba threads in this process (None: all cores)."""
+    if workers is None:
+        return
+    import os
+
+    import numba
+
+    limit = int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
+    if not (1 <= workers <= limit):
+        raise InputError(
+            f"--workers must be between 1 and {limit} (this machine has {os.cpu_count() or 1} cores), got {workers}"
+        )
+    numba.set_num_threads(workers)
+
+
+def build_map_job(job: BuildMapJob, progress: Progress | None = None) -> BuildMapReport:
+    """Build a reachability map by random joint sampling and save it to ``job.out``.
+
+    A second build to the same file waits for the first; the map is saved before its checkpoint goes.
+
+    Raises:
+        InputError: bad input (an unknown arm, bad settings, an unwritable output, bad workers).
+    """
+    from baseplace.reachability.build import BuildSettings, build_map
+
+    out = out_path(job.out, "--out", MAP_SUFFIXES)
+    assert out is not None
+    if job.scheduler is None:
+        set_workers(job.workers)
+    settings = job.settings or BuildSettings()
+    robot = load_robot(job.robot)
+    robot.arm(job.arm)  # validate before spending time
+    update = step_progress(progress, f"build-map {robot.name}", settings.samples)
+    if job.scheduler is None:
+        rmap = build_map(robot, job.arm, settings, update, job.checkpoint, job.checkpoint_every, save_to=out)
+    else:
+        import logging
+
+        import distributed  # noqa: F401  (it sets its loggers' levels on import)
+
+        from baseplace.files import output_lock, remove_stray_temporaries
+        from baseplace.reachability.distributed import build_map_distributed, connect
+
+        for name in ["distributed", "asyncio", *logging.root.manager.loggerDict]:  # faults: one line of ours
+            if name.startswith(("distributed", "asyncio")):
+                logging.getLogger(name).setLevel(logging.CRITICAL)
+        if not isinstance(job.robot, str):
+            raise InputError(
+                "a distributed build needs the robot as a built-in name or robot file, not a loaded Robot"
+            )
+        with output_lock(out), connect(job.scheduler, n_workers=job.workers) as client:
+            remove_stray_temporaries(out)
+            rmap = build_map_distributed(job.robot, job.arm, settings, client, update, job.checkpoint,
+                                         job.checkpoint_every, save_to=out)  # fmt: skip
+    inputs = {"out": job.out, "robot": job.robot if isinstance(job.robot, str) else robot.name, "arm": job.arm,
+              "samples": settings.samples, "seed": settings.seed, "voxel_size": settings.voxel_size,
+              "orientation_resolution": settings.orientation_resolution, "scheduler": job.scheduler,
+              "workers": job.workers}  # fmt: skip
+    info = rmap.info
+    rate = info.samples / info.build_time_s if info.build_time_s > 0 else 0.0
+    return BuildMapReport(
+        robot=RobotRef.of(robot, info.arm), inputs=inputs, outputs={"map": str(out)},
+        timings_ms={"build": info.build_time_s * 1e3}, samples=info.samples, seed=info.seed,
+        cells_reached=rmap.n_reached, build_time_s=round(info.build_time_s, 3), samples_per_s=round(rate),
+        file_bytes=out.stat().st_size, dropped_self_collision=info.dropped_self_collision,
+    )  # fmt: skip

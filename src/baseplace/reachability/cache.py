@@ -1,0 +1,87 @@
+"""The per-user cache of default reachability maps, and "the given map, or the cached default".
+
+A map is keyed by robot, arm, URDF hash and build settings; the file name is a hash, so no name
+from a robot file ever becomes part of a path. The first use builds the map (tens of seconds,
+resumable: a killed build continues from its checkpoint) and every later use loads it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from baseplace.reachability.build import BuildSettings, build_map
+from baseplace.reachability.checkpoint import default_checkpoint_path
+from baseplace.reachability.storage import FORMAT_VERSION, load_map
+from baseplace.robots.codegen import cache_dir, private_dir
+
+if TYPE_CHECKING:
+    from baseplace.reachability.rmap import ReachabilityMap
+    from baseplace.robots.model import Robot
+
+
+def cached_map_path(robot: Robot, settings: BuildSettings, arm: str | None = None) -> Path:
+    """Where the cache keeps the map of ``robot``'s ``arm`` (default arm) built with ``settings``."""
+    arm_name = arm or robot.spec.default_arm
+    key = (
+        f"{robot.name}-{arm_name}-{robot.spec.urdf_sha256[:12]}-s{settings.samples}-seed{settings.seed}"
+        f"-v{settings.voxel_size}-o{settings.orientation_resolution}-f{FORMAT_VERSION}"
+    )
+    # settings that change the cells: part of the key only when set, so default maps keep their files
+    for name in ("self_collision", "manipulability", "certify"):
+        if getattr(settings, name):
+            key += f"-{name}{getattr(settings, name)}"
+    return cache_dir().parent / "maps" / f"map-{hashlib.sha256(key.encode()).hexdigest()[:32]}.rmap"
+
+
+def cached_map(
+    robot: Robot,
+    settings: BuildSettings,
+    arm: str | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> tuple[ReachabilityMap, Path, bool]:
+    """Load the map for these settings from the cache, building and saving it if absent.
+
+    Args:
+        robot: the robot.
+        settings: the build settings (part of the cache key).
+        arm: the arm (None: the robot's default arm).
+        progress: called with the samples done so far while a map is built.
+
+    Returns:
+        (map, path, built) where built tells whether it was built now.
+    """
+    arm_name = arm or robot.spec.default_arm
+    path = cached_map_path(robot, settings, arm_name)
+    if path.is_file():
+        return load_map(path, robot, arm_name), path, False
+    private_dir(path.parent)
+    # build_map locks the entry: a second process waits, then reuses the first one's map
+    rmap = build_map(robot, arm_name, settings, progress, default_checkpoint_path(path), save_to=path)
+    return rmap, path, True
+
+
+def map_or_default(
+    robot: Robot,
+    rmap: ReachabilityMap | str | Path | None,
+    arm: str | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> ReachabilityMap:
+    """The map given (loaded, or a file checked against ``robot`` and ``arm``), else the cached default.
+
+    Raises:
+        InputError: the file is missing, corrupt, or built for another robot or arm.
+    """
+    from baseplace.reachability.rmap import ReachabilityMap
+
+    if isinstance(rmap, ReachabilityMap):
+        if arm is not None and rmap.info.arm != arm:
+            from baseplace.errors import InputError
+
+            raise InputError(f"the map was built for arm {rmap.info.arm!r}, not {arm!r}")
+        return rmap
+    if rmap is not None:
+        return load_map(rmap, robot, arm)
+    return cached_map(robot, BuildSettings(), arm, progress)[0]
