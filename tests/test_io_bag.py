@@ -148,7 +148,7 @@ def test_place_from_a_bag_through_the_cli(bags, map_file, tmp_path, capsys, tiag
     captured = capsys.readouterr()
     assert code == 0, captured.err
     result = json.loads(captured.out)
-    assert result["placements"] and result["mcap"] == str(out)
+    assert result["placements"] and result["outputs"]["mcap"] == str(out)
     assert result["object"]["allowed"] is None  # nothing at the grasp point: the hand may touch nothing
     grid = load_occupancy(DEPOT)
     arm = tiago.arm()

@@ -252,8 +252,10 @@ def test_bad_results_and_missing_inputs_are_one_line_errors(results, tmp_path):
     # ... which the viewer then takes on its command line, as it takes a moved file
     bare = tmp_path / "bare.json"
     bare.write_text(json.dumps({k: v for k, v in place.items() if k != "inputs"}))
-    view, inputs, _ = open_view(bare, {"cloud": place["inputs"]["cloud"], "robot": None})
-    assert view.inputs.clouds[0][0] == Path(place["inputs"]["cloud"]) and len(inputs.points)
+    cloud = place["inputs"]["cloud"]
+    cloud = cloud[0] if isinstance(cloud, list) else cloud
+    view, inputs, _ = open_view(bare, {"cloud": [cloud], "robot": None})
+    assert view.inputs.clouds[0][0] == Path(cloud) and len(inputs.points)
     proc = run_cli("view", str(bare), "--cloud", str(tmp_path / "moved.ply"))
     assert proc.returncode == 2 and "moved.ply given to the viewer (--cloud) does not exist" in proc.stderr, (
         proc.stderr
@@ -269,13 +271,19 @@ def test_bad_results_and_missing_inputs_are_one_line_errors(results, tmp_path):
     bad["placements"][0]["motion"][0]["path"] = [[0.1, 0.2]]
     fails(bad, "placement 1 motion", "shape")
     cand = json.loads(results["candidates"].read_text())
-    fails({**cand, "occupancy": "nowhere.yaml"}, "`baseplace candidates`", "occupancy grid nowhere.yaml",
+    fails({**cand, "inputs": {**cand["inputs"], "occupancy": "nowhere.yaml"}}, "`baseplace candidates`", "occupancy grid nowhere.yaml",
           "--occupancy")  # fmt: skip
     samples = json.loads(results["surface_samples"].read_text())
     fails(
-        {**samples, "map": "missing.smap"}, "`baseplace surface-sample`", "surface map missing.smap", "--map"
+        {**samples, "inputs": {**samples["inputs"], "map": "missing.smap"}},
+        "`baseplace surface-sample`",
+        "surface map missing.smap",
+        "--map",
     )
-    fails({**cand, "robot": None}, "names no robot")
+    fails(
+        {**cand, "robot": None, "inputs": {k: v for k, v in cand["inputs"].items() if k != "robot"}},
+        "names no robot",
+    )
     proc = run_cli("view", str(tmp_path / "nothing.json"))
     assert proc.returncode == 2 and "does not exist" in proc.stderr and "--json" in proc.stderr
 
@@ -286,11 +294,15 @@ def test_a_robot_file_is_read_from_the_result(results, tmp_path):
     obj = json.loads(results["candidates"].read_text())
     (tmp_path / "planar3.toml").write_text(spec.read_text())
     (tmp_path / "r.json").write_text(
-        json.dumps({**obj, "robot": {"name": "planar3"}, "inputs": {"robot": "planar3.toml"}})
+        json.dumps(
+            {**obj, "robot": {"name": "planar3"}, "inputs": {**obj["inputs"], "robot": "planar3.toml"}}
+        )
     )
     view = read_result(tmp_path / "r.json")
     assert view.robot == str(tmp_path / "planar3.toml")
-    (tmp_path / "r.json").write_text(json.dumps({**obj, "inputs": {"robot": "robots/arm.toml"}}))
+    (tmp_path / "r.json").write_text(
+        json.dumps({**obj, "inputs": {**obj["inputs"], "robot": "robots/arm.toml"}})
+    )
     with pytest.raises(
         InputError, match=r"from the robot file robots/arm.toml \(--robot\), which does not exist"
     ):
@@ -315,52 +327,3 @@ def test_navigation_path_and_robot_stand_on_the_scanned_ground(results):
     )  # up the ramp
     lift = segments[:, 2] - truth.height(segments[:, :2])
     assert np.all(np.abs(lift - 0.08) < 0.04), lift.round(3)  # PATH_LIFT above the true surface everywhere
-
-
-def _as_schema_1(obj: dict, kind: str) -> dict:
-    """A command's JSON reshaped as docs/results.md of the jobs lane describes the one result schema
-    (``baseplace.result/1``): envelope, robot object, inputs echoed, poses as 4x4 plus x, y, z, yaw."""
-
-    def pose(x: float, y: float, yaw: float, z: float = 0.0) -> dict:
-        c, s = np.cos(yaw), np.sin(yaw)
-        T = [[c, -s, 0, x], [s, c, 0, y], [0, 0, 1, z], [0, 0, 0, 1]]
-        return {"base_pose": T, "x": x, "y": y, "z": z, "yaw": float(np.arctan2(s, c))}
-
-    out = {k: v for k, v in obj.items() if k not in ("robot", "inputs", "occupancy", "out", "png", "mcap")}
-    robot = obj.get("robot")
-    name = robot["name"] if isinstance(robot, dict) else robot
-    out.update(schema="baseplace.result/1", kind=kind, timings_ms={"total": 1.0}, failures={}, error=None,
-               exit_code=0, outputs={}, inputs=dict(obj.get("inputs", {})),
-               robot=None if name is None else {"name": name, "urdf": "tiago.urdf", "base_frame": "base_footprint",
-                                                "arm": "arm", "tcp_frames": {"arm": "arm_tool_link"}})  # fmt: skip
-    if obj.get("occupancy") is not None:
-        out["inputs"]["occupancy"] = obj["occupancy"]
-    if kind == "candidates":
-        out["candidates"] = [{**c, **pose(c["x"], c["y"], c["yaw"])} for c in obj["candidates"]]
-        out["robot_pose"] = pose(*obj["robot_pose"])
-    if kind == "surface_samples":
-        out["poses"] = [{**{k: v for k, v in p.items() if k != "theta"}, **pose(p["x"], p["y"], p["theta"])}
-                        for p in obj["poses"]]  # fmt: skip
-    if kind == "navigate":
-        out["start"], out["goal"] = pose(*obj["start"]), pose(*obj["goal"])
-    if kind == "surface_map":
-        out["outputs"] = {"surface_map": obj["out"]}
-    return out
-
-
-@pytest.mark.parametrize(
-    "kind", ["place", "candidates", "navigate", "segment", "surface_map", "surface_samples"]
-)
-def test_the_one_result_schema_is_read_as_the_command_json(results, kind, tmp_path):
-    """The same result in the shape of the one schema draws the same scene."""
-    obj = json.loads(results[kind].read_text())
-    (tmp_path / "r.json").write_text(json.dumps(_as_schema_1(obj, kind)))
-    old, new = read_result(results[kind]), read_result(tmp_path / "r.json")
-    assert new.kind == old.kind == kind and new.robot == old.robot and new.inputs == old.inputs
-    assert len(new.robots) == len(old.robots) and len(new.paths) == len(old.paths)
-    for a, b in zip(old.robots, new.robots, strict=True):
-        np.testing.assert_allclose(a.T_world_base, b.T_world_base, atol=1e-6)
-        assert a.joints == b.joints and (a.motion is None) == (b.motion is None)
-    for a, b in zip(old.paths, new.paths, strict=True):
-        np.testing.assert_allclose(a, b, atol=1e-9)
-    np.testing.assert_allclose(old.candidates, new.candidates, atol=1e-6)

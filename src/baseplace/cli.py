@@ -136,6 +136,10 @@ def _build_map(args: argparse.Namespace, progress: Progress) -> Any:
     settings = BuildSettings(samples=args.samples, seed=args.seed, voxel_size=args.voxel_size,
                              orientation_resolution=args.orientation_resolution,
                              self_collision=args.self_collision, manipulability=args.manipulability)  # fmt: skip
+    from baseplace.jobs.inputs import out_path
+    from baseplace.jobs.reach import MAP_SUFFIXES
+
+    out_path(args.out, "--out", MAP_SUFFIXES)  # before the checkpoint's name is derived from it
     checkpoint = None if args.no_resume else default_checkpoint_path(args.out)
     if checkpoint is not None and checkpoint.exists() and not args.json:
         sys.stderr.write(f"resuming from checkpoint {checkpoint}\n")
