@@ -327,3 +327,52 @@ def test_navigation_path_and_robot_stand_on_the_scanned_ground(results):
     )  # up the ramp
     lift = segments[:, 2] - truth.height(segments[:, :2])
     assert np.all(np.abs(lift - 0.08) < 0.04), lift.round(3)  # PATH_LIFT above the true surface everywhere
+
+
+def test_the_json_of_every_command_is_valid_against_the_result_schema(results, tmp_path):
+    """Every command's ``--json`` is one object the JSON Schema accepts, on success and on failure (exit 2, 3)."""
+    import jsonschema
+
+    from baseplace.jobs import result_schema
+
+    schema = result_schema()
+    written = {kind: json.loads(path.read_text()) for kind, path in results.items()}
+    d = next(iter(results.values())).parent
+    grid = str(SHARED_MAPS / "tb3_sandbox.yaml")
+    runs = {
+        "robots": ("robots",),
+        "occupancy": ("occupancy", grid),
+        "reach": ("reach", "--map", str(d / "tiago.rmap"), "--target", PLACE_TARGET, "--base", "0.3 0.5 0"),
+        "build_map": ("build-map", "--samples", "2e5", "--out", str(tmp_path / "small.rmap")),
+        "scene": ("scene", "generate", "--planes", "0", "--no-box", "--extent", "4", "--out", str(tmp_path / "s.ply")),
+        "robot_check": ("robot", "check", "tiago", "--png", str(tmp_path / "tiago_check.png")),
+    }  # fmt: skip
+    for name, args in runs.items():
+        proc = run_cli(*args, "--json")
+        assert proc.returncode == 0, (name, proc.stderr)
+        written[name] = json.loads(proc.stdout)
+    failures = {
+        "exit 2, place": (2, ("place", "--cloud", "nowhere.ply", "--target", PLACE_TARGET)),
+        "exit 2, candidates": (2, ("candidates", "--occupancy", grid, "--object", "1 2")),
+        "exit 2, navigate": (2, ("navigate", "--cloud", "nowhere.ply", "--start", "0 0 0", "--goal", "1 0 0")),
+        "exit 2, reach": (2, ("reach", "--map", str(d / "tiago.rmap"), "--target", "1 2 3")),
+        "exit 3, place": (3, ("place", "--cloud", str(d / "flat.ply"), "--target", "1.0 0.5 1.9 0 0 0", "--map",
+                              str(d / "tiago.rmap"), "--tries", "20", "--robustness-samples", "0")),
+    }  # fmt: skip
+    for name, (code, args) in failures.items():
+        proc = run_cli(*args, "--json")
+        assert proc.returncode == code, (name, proc.stderr)
+        obj = json.loads(proc.stdout)
+        assert obj["error"] and obj["exit_code"] == code, (name, obj)
+        assert proc.stderr.strip().splitlines()[-1] == f"error: {obj['error']}", (name, proc.stderr)
+        written[name] = obj
+    for name, obj in written.items():
+        try:
+            jsonschema.validate(obj, schema)
+        except jsonschema.ValidationError as exc:
+            raise AssertionError(f"{name}: {exc.message} at {list(exc.absolute_path)}") from None
+    # the schema is strict enough to fail: a pose without its heading is rejected
+    broken = json.loads(json.dumps(written["place"]))
+    del broken["placements"][0]["yaw"]
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate(broken, schema)

@@ -212,7 +212,7 @@ def _add_bag_args(p: argparse.ArgumentParser, clouds: bool = True, grid: bool = 
 
 
 def _add_fuse_args(p: argparse.ArgumentParser) -> None:
-    g = p.add_argument_group("fusion (seed 000: the clouds into one OctoMap by ray casting)")
+    g = p.add_argument_group("fusion: the clouds into one OctoMap by ray casting")
     g.add_argument("--fuse", action="store_true",
                    help="fuse the clouds (every --cloud, or the bag's clouds) into a 25 mm OctoMap, rays from each sensor origin")  # fmt: skip
     g.add_argument("--fuse-miss", type=float, default=0.35,
@@ -287,7 +287,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--base", help='base pose "x y yaw" [m, rad]')
     p.add_argument("--bases", help="file with one base pose per line, paired with --targets")
 
-    p = command("place", "verified base placements for TCP targets in a scanned scene (seed 000)")
+    p = command("place", "verified base placements for TCP targets in a scanned scene")
     p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
     p.add_argument("--arm", default=None, help="arm (default: the robot's default arm)")
     p.add_argument("--cloud", action="append", default=None,
@@ -301,7 +301,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_fuse_args(p)
     p.add_argument("--target", action="append", help='TCP target "x y z roll pitch yaw" [m, rad]; repeat for several')  # fmt: skip
     p.add_argument("--strategy", default="MR", choices=["MR", "TO", "MRTO", "orm", "grid", "random"],
-                   help="seed 000's MR, TO, MRTO, or a baseline (default MR)")  # fmt: skip
+                   help="MR (most reachable cell), TO (a reachable cell facing the targets), MRTO, or a baseline (default MR)")  # fmt: skip
     p.add_argument("--placements", type=int, default=1, help="M: placements to return (default 1)")
     p.add_argument("--tries", type=int, default=100, help="N: candidates to check at most (default 100)")
     p.add_argument("--map", default=None, help="reachability map (default: the cached default map, built once)")  # fmt: skip
@@ -317,28 +317,28 @@ def build_parser() -> argparse.ArgumentParser:
                    help="add a floor plane at this height [m] (z up) under and around a cloud that shows none")  # fmt: skip
     _add_motion_and_robustness_arguments(p)
 
-    p = command("candidates", "base placement candidates around an object (seed 004)")
+    p = command("candidates", "base placement candidates around an object")
     p.add_argument("--occupancy", default=None, help="occupancy grid: map_server YAML (or --bag --map-topic)")
     p.add_argument("--object", required=True, help='object position "x y z" in the map frame [m]')
     p.add_argument("--cloud", default=None, help="RGB-D cloud in the map frame (.pcd, .ply, .npy, ...)")
     p.add_argument("--transform", default=None, help="world_T_sensor file or up vector for --cloud")
     p.add_argument("--robot-pose", default=None, help='robot pose "x y yaw": rank by motion cost, plan a path')  # fmt: skip
     p.add_argument("--method", default="radial", choices=["radial", "irm"],
-                   help="radial (seed 004 Algorithm 1) or irm (reachability map); both verified (default radial)")  # fmt: skip
+                   help="radial (rays around the object) or irm (reachability map); both verified (default radial)")  # fmt: skip
     p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
     p.add_argument("--arm", default=None, help="arm (default: the robot's default arm)")
     p.add_argument("--map", default=None, help="reachability map (default: the cached default map)")
     p.add_argument("--standoff", type=float, default=None,
                    help="TCP distance behind the grasp point [m] (default: 0.15 for TIAGo, else 0)")  # fmt: skip
     p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
-    p.add_argument("--png", default=None, help="PNG of the candidates over the grid (as seed 004 Fig. 2)")
+    p.add_argument("--png", default=None, help="PNG of the candidates over the grid")
     p.add_argument("--mcap", default=None, help="also write the candidates (best first) as an MCAP recording")
     _add_bag_args(p)
     p.add_argument("--object-shape", default="auto",
                    help=OBJECT_HELP.replace("first target's grasp point", "--object position"))  # fmt: skip
     _add_motion_and_robustness_arguments(p)
 
-    p = command("navigate", "a base path across the planar regions of a scanned scene (seed 000 V)")  # fmt: skip
+    p = command("navigate", "a base path across the planar regions of a scanned scene")  # fmt: skip
     p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
     p.add_argument("--cloud", default=None, help="scene cloud: .pcd, .ply, .bt, .npy, .xyz (z up, or --transform)")  # fmt: skip
     p.add_argument("--transform", default=None, help='world_T_sensor file, or the sensor-frame up vector "ux uy uz"')  # fmt: skip
@@ -348,14 +348,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--start", required=True, help='start base pose "x y yaw" [m, rad]')
     p.add_argument("--goal", required=True, help='goal base pose "x y yaw" [m, rad]')
     p.add_argument("--planner", default="rrt", choices=["rrt", "regions"],
-                   help="OMPL RRTConnect (seed 000) or the region-graph planner (default rrt)")  # fmt: skip
+                   help="OMPL RRTConnect or the region-graph planner (default rrt)")  # fmt: skip
     p.add_argument("--time-limit", type=float, default=2.0, help="RRT planning time limit [s] (default 2)")
     p.add_argument("--resolution", type=float, default=None,
                    help="height-map cell [m] (default: from the cloud's extent and point spacing, 0.02-0.05)")  # fmt: skip
     p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
     p.add_argument("--out", default=None, help="PNG of the path over regions and obstacles (as Fig. 4)")
 
-    p = command("surface-map", "where to stand to work on a whole table or shelf (seed 002)")
+    p = command("surface-map", "where to stand to work on a whole table or shelf")
     p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
     p.add_argument("--arms", default="any",
                    help="any (either arm), both (both arms) or one arm's name (default: any)")  # fmt: skip
@@ -368,7 +368,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--samples", type=_count, default=50_000_000,
                    help="samples of the cached reachability maps, built once per arm (default 5e7)")  # fmt: skip
 
-    p = command("surface-sample", "sample good, spread-out base poses from a surface map (seed 002)")  # fmt: skip
+    p = command("surface-sample", "sample good, spread-out base poses from a surface map")  # fmt: skip
     p.add_argument("--map", required=True, help="surface map from surface-map")
     p.add_argument("--n", type=int, default=5, help="poses to sample (default 5)")
     p.add_argument("--occupancy", default=None, help="operational area: map_server YAML (free cells only)")
@@ -384,12 +384,12 @@ def build_parser() -> argparse.ArgumentParser:
     p = command("segment", "planar regions, polygons and region graph of a point cloud")
     p.add_argument("cloud", nargs="?", default=None, help="point cloud: .pcd, .ply, .bt (OctoMap), .npy, .xyz")  # fmt: skip
     p.add_argument("--algorithm", choices=["robust", "baseline"], default="robust",
-                   help="robust (seed 000) or baseline region growing (default: robust)")  # fmt: skip
+                   help="robust or baseline region growing (default: robust)")  # fmt: skip
     p.add_argument("--transform", default=None,
                    help='world_T_sensor: a file with a 4x4 matrix, or the sensor-frame up vector "ux uy uz"')  # fmt: skip
     p.add_argument("--resolution", type=float, default=None,
                    help="height-map cell [m] (default: from the cloud's extent and point spacing, 0.02-0.05)")  # fmt: skip
-    p.add_argument("--out", default=None, help="PNG of the regions (as seed 000 Fig. 2a)")
+    p.add_argument("--out", default=None, help="PNG of the regions")
     _add_bag_args(p, grid=False)
     _add_fuse_args(p)
 
@@ -397,7 +397,7 @@ def build_parser() -> argparse.ArgumentParser:
     scene_sub = scene.add_subparsers(dest="scene_command", metavar="SUBCOMMAND", parser_class=_Parser)
     scene_sub.required = True
     p = command("generate", "write a random scene's cloud and ground truth", scene_sub,
-                "A floor, inclined planes of a size class and a box with objects (seed 000 VI), "
+                "A floor, inclined planes of a size class and a box with objects, "
                 "with Gaussian height noise.")  # fmt: skip
     p.add_argument("--size-class", default="small", choices=["small", "medium", "large"],
                    help="plane sides 1-1.5, 1.5-2 or 2-2.5 m (default small)")  # fmt: skip
