@@ -17,6 +17,7 @@ from collections.abc import Callable, Sequence
 from typing import Any, NoReturn
 
 from baseplace import __version__
+from baseplace.argtypes import count, finite_float, nonneg_int
 from baseplace.errors import BaseplaceError
 from baseplace.jobs import candidates, demo, navigate, place, reach, surface, world
 from baseplace.jobs.inputs import Progress
@@ -52,37 +53,6 @@ class _Formatter(argparse.HelpFormatter):
         super().add_argument(action)
         if isinstance(action, argparse._SubParsersAction):  # argparse measures subcommands one indent short
             self._action_max_length += 2
-
-
-def _count(text: str) -> int:
-    """Parse sample counts such as 5e7 or 50000000."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not math.isfinite(value) or value < 1 or value != int(value):
-        raise argparse.ArgumentTypeError(f"must be a positive whole number, got {text!r}")
-    return int(value)
-
-
-def _finite_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
-    return value
-
-
-def _nonneg_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
-    return value
 
 
 OBJECT_HELP = (
@@ -224,7 +194,7 @@ def _add_motion_and_robustness_arguments(p: argparse.ArgumentParser) -> None:
     """Options of the reaching-motion check and the robustness score (place, candidates)."""
     p.add_argument("--no-motion-check", action="store_true",
                    help="skip the reaching-motion check (stowed -> pre-grasp path, straight approach)")  # fmt: skip
-    p.add_argument("--robustness-samples", type=_nonneg_int, default=64,
+    p.add_argument("--robustness-samples", type=nonneg_int, default=64,
                    help="base-error draws scoring each placement (0: no score; default 64)")  # fmt: skip
     p.add_argument("--rank-by-robustness", action="store_true",
                    help="return the most robust placements first (default: the method's order)")  # fmt: skip
@@ -262,9 +232,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = command("build-map", "build a reachability map by random joint sampling")
     p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
     p.add_argument("--arm", default=None, help="arm name (default: the robot's default arm)")
-    p.add_argument("--samples", type=_count, default=50_000_000, help="joint samples, e.g. 5e7 (default)")
+    p.add_argument("--samples", type=count, default=50_000_000, help="joint samples, e.g. 5e7 (default)")
     p.add_argument("--out", required=True, help="output map file (.rmap, HDF5)")
-    p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=nonneg_int, default=0, help="random seed (default 0)")
     p.add_argument("--workers", type=int, default=None,
                    help="threads, or worker processes with --scheduler local (default: all cores)")  # fmt: skip
     p.add_argument("--voxel-size", type=float, default=0.05, help="position resolution [m] (default 0.05)")
@@ -275,7 +245,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scheduler", default=None,
                    help='dask scheduler "tcp://host:port" or "local" (local worker processes); '
                         "default: this process, all cores")  # fmt: skip
-    p.add_argument("--checkpoint-every", type=_count, default=DEFAULT_CHECKPOINT_EVERY,
+    p.add_argument("--checkpoint-every", type=count, default=DEFAULT_CHECKPOINT_EVERY,
                    help="save progress to OUT.partial every N samples (default 5e7; also on Ctrl-C)")  # fmt: skip
     p.add_argument("--no-resume", action="store_true", help="ignore and write no OUT.partial checkpoint")
 
@@ -305,15 +275,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--placements", type=int, default=1, help="M: placements to return (default 1)")
     p.add_argument("--tries", type=int, default=100, help="N: candidates to check at most (default 100)")
     p.add_argument("--map", default=None, help="reachability map (default: the cached default map, built once)")  # fmt: skip
-    p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=nonneg_int, default=0, help="random seed (default 0)")
     p.add_argument("--out", default=None, help="PNG: OSRM over the scene with the placements (Fig. 2b)")
     p.add_argument("--start", default=None, help='current base pose "x y yaw": also plan a path to each placement')  # fmt: skip
     p.add_argument("--planner", default="rrt", choices=["rrt", "regions"],
                    help="path planner with --start: OMPL RRTConnect or the region graph (default rrt)")  # fmt: skip
-    p.add_argument("--resolution", type=_finite_float, default=None,
+    p.add_argument("--resolution", type=finite_float, default=None,
                    help="height-map cell [m] (default: from the cloud's extent and point spacing, 0.02-0.05)")  # fmt: skip
     p.add_argument("--object", default="auto", help=OBJECT_HELP)
-    p.add_argument("--floor", type=_finite_float, default=None,
+    p.add_argument("--floor", type=finite_float, default=None,
                    help="add a floor plane at this height [m] (z up) under and around a cloud that shows none")  # fmt: skip
     _add_motion_and_robustness_arguments(p)
 
@@ -330,7 +300,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--map", default=None, help="reachability map (default: the cached default map)")
     p.add_argument("--standoff", type=float, default=None,
                    help="TCP distance behind the grasp point [m] (default: 0.15 for TIAGo, else 0)")  # fmt: skip
-    p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=nonneg_int, default=0, help="random seed (default 0)")
     p.add_argument("--png", default=None, help="PNG of the candidates over the grid")
     p.add_argument("--mcap", default=None, help="also write the candidates (best first) as an MCAP recording")
     _add_bag_args(p)
@@ -352,7 +322,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--time-limit", type=float, default=2.0, help="RRT planning time limit [s] (default 2)")
     p.add_argument("--resolution", type=float, default=None,
                    help="height-map cell [m] (default: from the cloud's extent and point spacing, 0.02-0.05)")  # fmt: skip
-    p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=nonneg_int, default=0, help="random seed (default 0)")
     p.add_argument("--out", default=None, help="PNG of the path over regions and obstacles (as Fig. 4)")
 
     p = command("surface-map", "where to stand to work on a whole table or shelf")
@@ -365,7 +335,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--orientations", type=int, default=16, help="base headings (default 16)")
     p.add_argument("--out", required=True, help="surface map file (.smap, sparse HDF5)")
     p.add_argument("--png", default=None, help="PNG of R_S over the floor around the surface")
-    p.add_argument("--samples", type=_count, default=50_000_000,
+    p.add_argument("--samples", type=count, default=50_000_000,
                    help="samples of the cached reachability maps, built once per arm (default 5e7)")  # fmt: skip
 
     p = command("surface-sample", "sample good, spread-out base poses from a surface map")  # fmt: skip
@@ -376,7 +346,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--candidates", type=int, default=40, help="N: best of N valid candidates (default 40)")
     p.add_argument("--no-discount", action="store_true", help="do not spread consecutive poses (eq. 3)")
     p.add_argument("--robot", default=None, help="robot file for custom robots (default: the map's robot)")
-    p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=nonneg_int, default=0, help="random seed (default 0)")
 
     p = command("occupancy", "read an occupancy grid (map_server YAML + image) as nav2 does")  # fmt: skip
     p.add_argument("map", help="map YAML file")
@@ -401,11 +371,11 @@ def build_parser() -> argparse.ArgumentParser:
                 "with Gaussian height noise.")  # fmt: skip
     p.add_argument("--size-class", default="small", choices=["small", "medium", "large"],
                    help="plane sides 1-1.5, 1.5-2 or 2-2.5 m (default small)")  # fmt: skip
-    p.add_argument("--planes", type=_nonneg_int, default=2, help="number of inclined planes (default 2)")
+    p.add_argument("--planes", type=nonneg_int, default=2, help="number of inclined planes (default 2)")
     p.add_argument("--sigma", type=float, default=0.025, help="height noise std [m] (default 0.025)")
     p.add_argument("--extent", type=float, default=10.0, help="scene side [m] (default 10)")
     p.add_argument("--no-box", action="store_true", help="leave out the box with objects")
-    p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=nonneg_int, default=0, help="random seed (default 0)")
     p.add_argument("--out", required=True, help="cloud file (.ply, .pcd or .npy)")
     p.add_argument("--truth", default=None, help="ground-truth JSON (default: next to --out)")
 
@@ -419,8 +389,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = command("demo", "the main job on built-in defaults: out/demo.json and out/demo.png")
     p.add_argument("--out", default="out", help="output directory (default: out)")
-    p.add_argument("--samples", type=_count, default=50_000_000, help="samples of the cached map")
-    p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
+    p.add_argument("--samples", type=count, default=50_000_000, help="samples of the cached map")
+    p.add_argument("--seed", type=nonneg_int, default=0, help="random seed (default 0)")
     return parser
 
 

@@ -11,21 +11,13 @@ import argparse
 import json
 import math
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from baseplace.argtypes import nonneg_int
 from baseplace.errors import InputError
-
-
-def _nonneg_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
-    return value
+from baseplace.jobs.inputs import PLOT_SUFFIXES, out_path
 
 
 def _int_list(text: str) -> list[int]:
@@ -43,15 +35,6 @@ def _cell(value: Any, fmt: str, suffix: str = "") -> str:
 
 def _emit(args: argparse.Namespace, obj: dict[str, Any], text: str) -> None:
     sys.stdout.write(json.dumps(obj) + "\n" if args.json else text.rstrip("\n") + "\n")
-
-
-def _out_path(
-    text: str | None, suffixes: Sequence[str] = (".png", ".pdf", ".svg"), what: str = "--out"
-) -> Path | None:
-    """The output path, or None; checked (length, type, suffix, writable directory) before any work."""
-    from baseplace.guards import check_output_path
-
-    return None if text is None else check_output_path(text, what, suffixes)
 
 
 class _Progress:
@@ -85,8 +68,8 @@ class _Progress:
 
 def _default_map(args: argparse.Namespace, robot: Any, arm: str | None = None) -> Any:
     """The robot's cached default map, built on first use (tens of seconds) behind a progress bar."""
-    from baseplace.demo import cached_map
     from baseplace.reachability.build import BuildSettings
+    from baseplace.reachability.cache import cached_map
 
     settings = BuildSettings()
     with _Progress(args, settings.samples, f"default {robot.name} map (first run only)", "samples") as bar:
@@ -95,7 +78,7 @@ def _default_map(args: argparse.Namespace, robot: Any, arm: str | None = None) -
 
 def _results_path(path: str | None) -> Path | None:
     """A results file to write (--results), checked before any work."""
-    return _out_path(path, (".json",), "--results")
+    return out_path(path, "--results", (".json",))
 
 
 def _write_results(
@@ -224,7 +207,7 @@ def cmd_experiment_table_grid(args: argparse.Namespace) -> int:
     for name, value in (("--surface-margin", args.surface_margin), ("--top-below", args.top_below)):
         if value is not None and not (math.isfinite(value) and 0.0 <= value <= 0.1):
             raise InputError(f"{name} must be between 0 and 0.1 m, got {value}")
-    out = _out_path(args.out)
+    out = out_path(args.out, "--out", PLOT_SUFFIXES)
     results = _results_path(args.results)
     seeds = table_grid.SEEDS
     seed = args.seed if args.seed is not None else seeds.seeds(args.split)[0]
@@ -280,7 +263,7 @@ def cmd_experiment_osrm(args: argparse.Namespace) -> int:
     clock = RunClock()
     if args.scenes < 1 or args.grasps < 1:
         raise InputError(f"--scenes and --grasps must be >= 1, got {args.scenes} and {args.grasps}")
-    out, results_path = _out_path(args.out), _results_path(args.results)
+    out, results_path = out_path(args.out, "--out", PLOT_SUFFIXES), _results_path(args.results)
     seed = SEEDS.dev[0] if args.dev else args.seed
     robot = Robot(args.robot)
     rmap = load_map(args.map, robot) if args.map else _default_map(args, robot)
@@ -352,7 +335,7 @@ def add_experiment_commands(sub: Any) -> None:
                    help='noise models, comma-separated: heightmap (the seed\'s), cloud (default "heightmap,cloud")')  # fmt: skip
     p.add_argument("--split", choices=("dev", "held-out"), default="held-out",
                    help="seed set: dev (choosing parameters) or held-out (reported; default)")  # fmt: skip
-    p.add_argument("--seed", type=_nonneg_int, default=None, help="random seed (default: the split's)")
+    p.add_argument("--seed", type=nonneg_int, default=None, help="random seed (default: the split's)")
     p.add_argument("--results", default=None, help="write the results file (JSON with provenance) here")
 
     p = command("table-grid", "fixed pose vs radial vs IRM-verified on a 3 x 4 table grid (Saini et al.)",
@@ -368,7 +351,7 @@ def add_experiment_commands(sub: Any) -> None:
     )
     p.add_argument("--split", choices=("dev", "held-out"), default="held-out",
                    help="seed set: dev (choosing parameters) or held-out (reported; default)")  # fmt: skip
-    p.add_argument("--seed", type=_nonneg_int, default=None, help="random seed (default: the split's)")
+    p.add_argument("--seed", type=nonneg_int, default=None, help="random seed (default: the split's)")
     p.add_argument("--surface-margin", type=float, default=None,
                    help="radial method's surface margin [m] (default: the value chosen on the dev seeds)")  # fmt: skip
     p.add_argument("--top-below", type=float, default=None,
@@ -384,7 +367,7 @@ def add_experiment_commands(sub: Any) -> None:
     p.add_argument("--objects", type=_int_list, default=[1, 2, 3, 4],
                    help='object counts, comma-separated (default "1,2,3,4")')  # fmt: skip
     p.add_argument("--runs", type=int, default=7, help="random layouts per object count (default 7)")
-    p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=nonneg_int, default=0, help="random seed (default 0)")
     p.add_argument("--results", default=None, help="write the results file (JSON with provenance) here")
 
     p = command("navigation", "RRTConnect vs region-graph paths on multi-level scenes (Birr et al. V)",
@@ -393,7 +376,7 @@ def add_experiment_commands(sub: Any) -> None:
                 "checked against the true height field.")  # fmt: skip
     p.add_argument("--scenes", type=int, default=5, help="scenes per class (default 5)")
     p.add_argument("--pairs", type=int, default=12, help="start/goal pairs per scene (default 12)")
-    p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=nonneg_int, default=0, help="random seed (default 0)")
     p.add_argument("--results", default=None, help="write the results file (JSON with provenance) here")
 
     p = command("osrm", "placement success and timing, Birr et al. Tables I and II", cmd_experiment_osrm, exp_sub,
@@ -411,6 +394,6 @@ def add_experiment_commands(sub: Any) -> None:
                    help="write the whole results file here (rows, seeds, command line, commit, wall time)")  # fmt: skip
     p.add_argument("--scheduler", default=None,
                    help='run scenes on a dask cluster: "tcp://host:port" or "local" (default: this process)')  # fmt: skip
-    p.add_argument("--seed", type=_nonneg_int, default=2026,
+    p.add_argument("--seed", type=nonneg_int, default=2026,
                    help="scene seed (default 2026, the held-out seed the reported tables use)")  # fmt: skip
     p.add_argument("--out", default=None, help="PNG of the failure reasons (Fig. 5)")
