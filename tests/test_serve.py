@@ -284,3 +284,101 @@ def test_a_ros_recording_is_a_scene_with_its_cloud_and_grid(client, tmp_path):
     assert r.status_code == 400 and "cloud topic" in r.json()["error"]
     r = client.post("/scenes", params={**params, "cloud_topic": "/nope"}, content=bag.read_bytes())
     assert r.status_code == 400 and "/nope" in r.json()["error"] and "\n" not in r.json()["error"]
+
+
+def _valid(obj: dict) -> dict:
+    """``obj`` checked against the one result schema (the CLI's ``--json`` contract)."""
+    import jsonschema
+
+    from baseplace.jobs import result_schema
+
+    jsonschema.validate(obj, result_schema())
+    return obj
+
+
+def test_every_job_endpoint_answers_the_clis_report_on_success_and_failure(client, scene_id, tmp_path):
+    """Each endpoint's answer, found, nothing found and bad input, is a valid ``baseplace.result/1``
+    report of its kind; where the inputs are the CLI's, the values and the error lines are the CLI's."""
+    import cv2
+
+    from test_navigation import _ramp_scene
+
+    def post(path: str, body: dict, status: int, kind: str, exit_code: int) -> dict:
+        r = client.post(path, json=body)
+        assert r.status_code == status, (path, body, r.text)
+        out = _valid(r.json())
+        assert out["kind"] == kind and out["exit_code"] == exit_code, out
+        assert (out["error"] is None) == (exit_code == 0)
+        if exit_code:
+            assert "\n" not in out["error"] and "Traceback" not in out["error"]
+        return out
+
+    # place: found, nothing found (tested above for its line), bad input, unknown scene, schema misfit
+    out = post("/place", {"scene_id": scene_id, "targets": [TARGET], "tries": 60}, 200, "place", 0)
+    assert out["placements"] and out["scene_id"] == scene_id
+    post("/place", {"scene_id": scene_id, "targets": ["1 2 3"]}, 400, "place", 2)
+    missing = post("/place", {"scene_id": "0123456789abcdef", "targets": [TARGET]}, 404, "place", 2)
+    assert "unknown scene id" in missing["error"]
+    post("/place", {"scene_id": scene_id, "targets": [TARGET], "tries": 0}, 422, "place", 2)
+    # reach: the values of the map, and a base pose with two numbers
+    out = post("/reach", {"targets": [TARGET], "bases": ["0 0 0", "-0.4 0 0"]}, 200, "reach", 0)
+    assert len(out["values"]) == 2
+    bad = post("/reach", {"targets": [TARGET], "bases": ["0 0"]}, 400, "reach", 2)
+    assert "x y yaw" in bad["error"]
+    # segment and grid: the scene's segmentation, the grid as map_server reads it
+    seg = client.get(f"/scenes/{scene_id}/segmentation")
+    assert seg.status_code == 200 and _valid(seg.json())["kind"] == "segment" and seg.json()["regions"]
+    image = np.full((80, 80), 254, np.uint8)
+    ok, png = cv2.imencode(".png", image)
+    assert ok
+    r = client.post(f"/scenes/{scene_id}/grid", params={"resolution": 0.05, "format": "png", "origin_x": -2.0,
+                                                        "origin_y": -2.0}, content=png.tobytes())  # fmt: skip
+    assert r.status_code == 200 and _valid(r.json())["kind"] == "occupancy", r.text
+    bad_grid = client.post(f"/scenes/{scene_id}/grid", params={"resolution": 0.05}, content=b"not an image")
+    assert bad_grid.status_code == 400 and _valid(bad_grid.json())["kind"] == "occupancy"
+    # candidates around the bottle, on the grid and the cloud; an object with two numbers; outside the grid
+    out = client.post("/candidates", json={"scene_id": scene_id, "object": "0.101 0 0.6", "no_motion_check": True,
+                                           "robustness_samples": 0})  # fmt: skip
+    assert out.status_code == 200, out.text
+    out = _valid(out.json())
+    assert out["kind"] == "candidates" and out["exit_code"] in (0, 3) and out["rejected"] is not None
+    assert (out["exit_code"] == 0) == bool(out["candidates"]) == out.get("found", True)
+    bad = post("/candidates", {"scene_id": scene_id, "object": "1 2"}, 400, "candidates", 2)
+    outside = post("/candidates", {"scene_id": scene_id, "object": "30 0 0.6"}, 400, "candidates", 2)
+    assert "outside the occupancy grid" in outside["error"] and "/" not in outside["error"].split("grid")[-1]
+    # navigate on the ramp scene: the CLI's path for the same inputs, its lines for bad ones
+    ramp = _ramp_scene(with_object=True).sample_cloud(np.random.default_rng(0))
+    ramp_id = client.post("/scenes", params={"format": "npy"}, content=npy_bytes(ramp)).json()["scene_id"]
+    np.save(tmp_path / "ramp.npy", ramp)
+    nav = {"start": "-2 0.6 0", "goal": "1.7 0.6 0", "planner": "regions"}
+    out = post("/navigate", {"scene_id": ramp_id, **nav}, 200, "navigate", 0)
+    cli = run_cli("navigate", "--cloud", str(tmp_path / "ramp.npy"), "--start", nav["start"], "--goal", nav["goal"],
+                  "--planner", "regions", "--json")  # fmt: skip
+    assert cli.returncode == 0, cli.stderr
+    truth = json.loads(cli.stdout)
+    for key in ("poses", "length", "regions", "start", "goal", "planner", "footprint_radius"):
+        assert out[key] == truth[key], key
+    for start, status, code in (("0.7 0.6 0", 400, 2), ("-0.7 -1.9 0", 400, 2)):
+        body = {"scene_id": ramp_id, "start": start, "goal": "1.7 0.6 0"}
+        out = post("/navigate", body, status, "navigate", code)
+        cli = run_cli(
+            "navigate", "--cloud", str(tmp_path / "ramp.npy"), "--start", start, "--goal", "1.7 0.6 0"
+        )
+        assert cli.returncode == code and out["error"] == cli.stderr.strip().removeprefix("error: ")
+    none = post("/navigate", {"scene_id": ramp_id, "start": "-2 -1.9 0", "goal": "0.5 -1.9 0", "time_limit": 0.3},
+                200, "navigate", 3)  # fmt: skip
+    assert none["found"] is False and "no path" in none["error"]
+    # surface map and samples on the service's warm map; a self-crossing polygon; an unknown map id
+    body = {"polygon": "0,0;1.2,0;1.2,0.6;0,0.6", "height": 0.7, "resolution": 0.1, "orientations": 8}
+    out = post("/surface-map", body, 200, "surface_map", 0)
+    assert out["nonzero_poses"] > 0 and all(
+        tmp not in json.dumps(out) for tmp in ("/tmp/", "baseplace-serve-")
+    )
+    bad = post("/surface-map", {**body, "polygon": "0,0;1,1;1,0;0,1"}, 400, "surface_map", 2)
+    assert "not simple" in bad["error"]
+    samples = post("/surface-samples", {"surface_map_id": out["surface_map_id"], "n": 3, "candidates": 5}, 200,
+                   "surface_samples", 0)  # fmt: skip
+    assert len(samples["poses"]) == 3 and all(p["reachability"] > 0 for p in samples["poses"])
+    post("/surface-samples", {"surface_map_id": "ffffffffffffffff"}, 404, "surface_samples", 2)
+    post("/surface-samples", {"surface_map_id": out["surface_map_id"], "n": 0}, 422, "surface_samples", 2)
+    assert client.get("/health").json()["status"] == "ok"

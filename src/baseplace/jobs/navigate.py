@@ -25,6 +25,7 @@ from baseplace.jobs.inputs import (
 from baseplace.jobs.report import NavigateReport, PoseRecord, RobotRef, SegmentReport, path_json
 
 if TYPE_CHECKING:
+    from baseplace.placement.scene_cache import SceneCache
     from baseplace.robots.model import Robot
 
 
@@ -41,6 +42,8 @@ class NavigateJob:
         resolution: height-map cell [m] (None: from the cloud).
         seed: random seed.
         png, mcap: also write a plot / an MCAP recording here.
+        cache: a :class:`~baseplace.placement.scene_cache.SceneCache` of ``cloud.points``: its
+            segmentation, made once (the service).
     """
 
     start: str | Sequence[float]
@@ -53,6 +56,7 @@ class NavigateJob:
     seed: int = 0
     png: str | None = None
     mcap: str | None = None
+    cache: SceneCache | None = field(default=None, repr=False, compare=False)
 
     def echo(self) -> dict[str, Any]:
         """The inputs as given."""
@@ -82,7 +86,10 @@ def navigate_job(job: NavigateJob) -> NavigateReport:
     robot = load_robot(job.robot)
     cloud = world_cloud(job.cloud)
     t_load = time.perf_counter()
-    terrain = terrain_from_points(cloud.points, resolution=job.resolution)
+    if job.cache is not None:
+        terrain = job.cache.terrain(job.resolution)
+    else:
+        terrain = terrain_from_points(cloud.points, resolution=job.resolution)
     navmap = navigation_map(terrain, robot.spec.footprint_bounding_radius)
     path = plan_path(navmap, start, goal, job.planner, job.time_limit, job.seed)
     report = NavigateReport(
@@ -113,12 +120,15 @@ class SegmentJob:
         algorithm: robust (seed 000) or baseline region growing.
         resolution: height-map cell [m] (None: from the cloud).
         png: also plot the regions here.
+        cache: a :class:`~baseplace.placement.scene_cache.SceneCache` of ``cloud.points``: its robust
+            segmentation, made once (the service).
     """
 
     cloud: CloudInput = field(default_factory=CloudInput)
     algorithm: str = "robust"
     resolution: float | None = None
     png: str | None = None
+    cache: SceneCache | None = field(default=None, repr=False, compare=False)
 
     def echo(self) -> dict[str, Any]:
         """The inputs as given."""
@@ -139,7 +149,10 @@ def segment_job(job: SegmentJob) -> SegmentReport:
     png = out_path(job.png, "--out", PLOT_SUFFIXES)
     cloud = world_cloud(job.cloud)
     t_load = time.perf_counter()
-    terrain = terrain_from_points(cloud.points, job.algorithm, job.resolution)
+    if job.cache is not None and job.algorithm == "robust":
+        terrain = job.cache.terrain(job.resolution)
+    else:
+        terrain = terrain_from_points(cloud.points, job.algorithm, job.resolution)
     data = terrain_json(terrain)
     report = SegmentReport(
         inputs=job.echo(), regions=data["regions"], edges=data["edges"],

@@ -32,6 +32,7 @@ from baseplace.jobs.report import NoResultError, PlaceReport, RobotRef
 
 if TYPE_CHECKING:
     from baseplace.placement.pipeline import PlaceSettings
+    from baseplace.placement.scene_cache import SceneCache
     from baseplace.reachability.rmap import ReachabilityMap
     from baseplace.robots.model import Robot
     from baseplace.world.occupancy import OccupancyGrid
@@ -56,6 +57,8 @@ class PlaceJob:
         floor: add a floor plane at this height [m] under a cloud that shows none.
         png: also plot the OSRM with the placements here.
         mcap: also write the result as an MCAP recording.
+        cache: a :class:`~baseplace.placement.scene_cache.SceneCache` of ``cloud.points``: the
+            segmentation, obstacle tree and collision environments kept between queries (the service).
     """
 
     targets: Sequence[str | Sequence[float]]
@@ -72,6 +75,7 @@ class PlaceJob:
     floor: float | None = None
     png: str | None = None
     mcap: str | None = None
+    cache: SceneCache | None = field(default=None, repr=False, compare=False)
 
     def echo(self) -> dict[str, Any]:
         """The inputs as given."""
@@ -200,7 +204,8 @@ def place_job(job: PlaceJob, progress: Progress | None = None) -> PlaceReport:
                               grasped=grasped)  # fmt: skip
     else:
         assert points is not None
-        result = place(robot, rmap, points, targets, settings, rng, terrain=terrain, grasped=grasped)
+        result = place(robot, rmap, points, targets, settings, rng, terrain=terrain, grasped=grasped,
+                       cache=job.cache)  # fmt: skip
     t_nav = time.perf_counter()
     if grid is not None and start is not None:  # on the navigation map, around what the cameras see
         from baseplace.placement.in_map import grid_routes

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -53,24 +54,34 @@ class ReachJob:
     Attributes:
         map: reachability map (loaded or a file).
         target: one world TCP pose "x y z roll pitch yaw" [m, rad].
-        targets: a file with one target per line, paired row by row with the bases.
+        targets: a file with one target per line, or the targets' texts, paired row by row with the bases.
         base: one base pose "x y yaw" [m, rad].
-        bases: a file with one base pose per line.
+        bases: a file with one base pose per line, or the base poses' texts.
         robot: check the map was built for this robot.
     """
 
     map: ReachabilityMap | str
     target: str | None = None
-    targets: str | None = None
+    targets: str | Sequence[str] | None = None
     base: str | None = None
-    bases: str | None = None
+    bases: str | Sequence[str] | None = None
     robot: Robot | str | None = None
 
     def echo(self) -> dict[str, Any]:
         """The inputs as given."""
         return {"map": self.map if isinstance(self.map, str) else "loaded", "target": self.target,
-                "targets": self.targets, "base": self.base, "bases": self.bases,
+                "targets": _echo_poses(self.targets), "base": self.base, "bases": _echo_poses(self.bases),
                 "robot": self.robot if isinstance(self.robot, str | None) else self.robot.name}  # fmt: skip
+
+
+def _given_poses(matrices: list[np.ndarray], what: str, fields: str) -> np.ndarray:
+    if not matrices:
+        raise InputError(f'give at least one {what} "{fields}"')
+    return np.stack(matrices)
+
+
+def _echo_poses(poses: str | Sequence[str] | None) -> str | list[str] | None:
+    return poses if isinstance(poses, str | None) else list(poses)
 
 
 def reach_job(job: ReachJob) -> ReachReport:
@@ -98,10 +109,18 @@ def reach_job(job: ReachJob) -> ReachReport:
     if job.robot is not None:
         robot = load_robot(job.robot)
         check_map_matches(rmap, robot, rmap.info.arm, str(job.map))
-    targets = (parse_pose6(job.target)[None] if job.target is not None
-               else pose_from_xyz_rpy(read_pose_file(str(job.targets), 6, "target pose")))  # fmt: skip
-    bases = (parse_base_pose(job.base).matrix()[None] if job.base is not None
-             else BasePose.batch_matrix(read_pose_file(str(job.bases), 3, "base pose")))  # fmt: skip
+    if job.target is not None:
+        targets = parse_pose6(job.target)[None]
+    elif isinstance(job.targets, str):
+        targets = pose_from_xyz_rpy(read_pose_file(job.targets, 6, "target pose"))
+    else:
+        targets = _given_poses([parse_pose6(t) for t in job.targets or ()], "target", "x y z roll pitch yaw")
+    if job.base is not None:
+        bases = parse_base_pose(job.base).matrix()[None]
+    elif isinstance(job.bases, str):
+        bases = BasePose.batch_matrix(read_pose_file(job.bases, 3, "base pose"))
+    else:
+        bases = _given_poses([parse_base_pose(b).matrix() for b in job.bases or ()], "base pose", "x y yaw")
     if len(targets) != len(bases) and len(targets) != 1:
         raise InputError(
             f"--targets has {len(targets)} poses but --bases has {len(bases)}; they pair row by row"

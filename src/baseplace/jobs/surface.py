@@ -8,7 +8,8 @@ arms' cached reachability maps; ``surface_samples_job`` draws good, spread-out b
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -19,6 +20,7 @@ from baseplace.jobs.report import PoseRecord, RobotRef, SurfaceMapReport, Surfac
 
 if TYPE_CHECKING:
     from baseplace.jobs.inputs import BagInput
+    from baseplace.reachability.rmap import ReachabilityMap
     from baseplace.robots.model import Robot
     from baseplace.world.occupancy import OccupancyGrid
 
@@ -39,6 +41,8 @@ class SurfaceMapJob:
         orientations: base headings.
         samples: samples of the cached reachability maps, built once per arm.
         png: also plot R_S over the floor here.
+        maps: loaded reachability maps, arm -> map, used instead of the cached ones (the service's
+            warm maps); every arm of ``arms`` needs one.
     """
 
     polygon: Any
@@ -50,13 +54,15 @@ class SurfaceMapJob:
     orientations: int = 16
     samples: int = 50_000_000
     png: str | None = None
+    maps: Mapping[str, ReachabilityMap] | None = field(default=None, repr=False, compare=False)
 
     def echo(self) -> dict[str, Any]:
         """The inputs as given."""
         return {"polygon": self.polygon if isinstance(self.polygon, str) else np.asarray(self.polygon).tolist(),
                 "height": self.height, "out": self.out, "robot": self.robot if isinstance(self.robot, str)
                 else self.robot.name, "arms": self.arms, "resolution": self.resolution,
-                "orientations": self.orientations, "samples": self.samples}  # fmt: skip
+                "orientations": self.orientations, "samples": self.samples,
+                **({} if self.maps is None else {"maps": "loaded"})}  # fmt: skip
 
 
 def surface_arms(robot: Robot, arms: str) -> tuple[list[str], str]:
@@ -95,7 +101,13 @@ def surface_map_job(job: SurfaceMapJob, progress: Progress | None = None) -> Sur
     arms, combine = surface_arms(robot, job.arms)
     settings = BuildSettings(samples=job.samples)
     update = step_progress(progress, "reachability map", settings.samples)
-    rmaps = {arm: cached_map(robot, settings, arm, update)[0] for arm in arms}
+    if job.maps is not None:
+        missing = [arm for arm in arms if arm not in job.maps]
+        if missing:
+            raise InputError(f"no loaded map of arm(s) {', '.join(missing)}; loaded: {', '.join(job.maps)}")
+        rmaps = {arm: job.maps[arm] for arm in arms}
+    else:
+        rmaps = {arm: cached_map(robot, settings, arm, update)[0] for arm in arms}
     for rmap in rmaps.values():
         _ = rmap.tables  # the dense lookup of the reachability map is built once, outside the timing
     t_maps = time.perf_counter()

@@ -1,9 +1,11 @@
 """``baseplace serve``: the HTTP/JSON front end (FastAPI on uvicorn), a thin translation to the jobs.
 
-Every answer is the CLI's JSON for the same inputs. Errors: ``{"error": "<the CLI's one line>"}``
-with 400 (bad input, the CLI's exit 2), 404 (unknown scene id), 413 (request too large), 422
-(a request that does not fit the schema), 504 (over the time limit); a job that ran and found
-nothing answers 200 with its JSON and ``"found": false`` plus ``"error"`` (the CLI's exit 3).
+Every job's answer is the jobs layer's ``baseplace.result/1`` report, the CLI's ``--json`` for the
+same inputs. Errors carry ``"error": "<the CLI's one line>"``: 400 (bad input, the CLI's exit 2)
+and, on a job's endpoint, 404 (unknown scene id) and 422 (a request that does not fit the
+schema) answer the CLI's failure report of that kind (``exit_code`` 2); 413 (request too large)
+and 504 (over the time limit) answer ``{"error": ...}``. A job that ran and found nothing
+answers 200 with its report (``exit_code`` 3, ``error``) and ``"found": false``.
 """
 
 from __future__ import annotations
@@ -214,11 +216,11 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
     async def run(fn: Callable[..., Any], *args: Any, lookup: bool = False) -> Any:
         """Run a job on its thread within the time limit.
 
-        Placements and scenes on the worker, a read-only lookup on the lookup threads, a CLI
-        command on the command thread.
+        Placements and scenes on the worker, a read-only lookup on the lookup threads,
+        candidates, navigation and surface maps on the command thread.
         """
         loop = asyncio.get_running_loop()
-        pool = st.lookups if lookup else st.commands if fn is jobs.run_command else st.executor
+        pool = st.lookups if lookup else st.commands if fn in COMMAND_LANE else st.executor
         future = loop.run_in_executor(pool, functools.partial(fn, *args))
         try:
             return await asyncio.wait_for(asyncio.shield(future), settings.timeout_s)
@@ -228,15 +230,12 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
     @app.exception_handler(BaseplaceError)
     async def _baseplace_error(request: Request, exc: BaseplaceError) -> JSONResponse:
         message = str(exc).replace(str(st.folder) + "/", "")  # the scene's files, not the server's paths
-        if isinstance(exc, UnknownSceneError):
-            return JSONResponse({"error": message}, status_code=404)
-        if isinstance(exc, jobs.CommandError) and exc.exit_code == 3:
-            report = dict(exc.report or {})
-            report.update(found=False, error=message)
-            return JSONResponse(report, status_code=200)
-        if isinstance(exc, jobs.CommandError) and exc.exit_code not in (2, 3):
-            return JSONResponse({"error": message}, status_code=500)
-        return JSONResponse({"error": message}, status_code=400)
+        if isinstance(exc, jobs.JobFailed) and exc.exit_code == 3:
+            return JSONResponse({**exc.report, "found": False}, status_code=200)
+        if isinstance(exc, jobs.JobFailed):
+            return JSONResponse(exc.report, status_code=400)
+        status = 404 if isinstance(exc, UnknownSceneError) else 400
+        return JSONResponse(_error_body(request, message), status_code=status)
 
     @app.exception_handler(_Timeout)
     async def _timeout(request: Request, exc: _Timeout) -> JSONResponse:
@@ -249,7 +248,7 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
         message = (
             f"{where}: {first.get('msg', 'invalid request')}" if where else str(first.get("msg", "invalid"))
         )
-        return JSONResponse({"error": message.replace("\n", " ")}, status_code=422)
+        return JSONResponse(_error_body(request, message.replace("\n", " ")), status_code=422)
 
     @app.get("/health", summary="liveness, scenes held, resident memory")
     async def health() -> dict[str, Any]:
@@ -338,27 +337,12 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
     @app.post("/candidates", summary="baseplace candidates --json on an uploaded scene with a grid")
     async def candidates(req: CandidatesRequest) -> dict[str, Any]:
         scene = st.scene(req.scene_id)
-        fields = req.model_dump(exclude={"scene_id", "use_cloud"})
-        argv = [
-            "candidates",
-            *jobs.scene_files(scene, req.use_cloud, "--occupancy"),
-            *jobs.option_argv(fields),
-        ]
-        report = await run(jobs.run_command, argv, str(st.folder))
-        report["scene_id"] = scene.id
-        return report
+        return await run(jobs.candidates, st, scene, req.model_dump())
 
     @app.post("/navigate", summary="baseplace navigate --json across the scene's planar regions")
     async def navigate(req: NavigateRequest) -> dict[str, Any]:
         scene = st.scene(req.scene_id)
-        argv = [
-            "navigate",
-            *jobs.scene_files(scene, True, ""),
-            *jobs.option_argv(req.model_dump(exclude={"scene_id"})),
-        ]
-        report = await run(jobs.run_command, argv, str(st.folder))
-        report["scene_id"] = scene.id
-        return report
+        return await run(jobs.navigate, st, scene, req.model_dump())
 
     @app.post("/surface-map", summary="baseplace surface-map --json; later samples name its surface_map_id")
     async def surface_map(req: SurfaceMapRequest) -> dict[str, Any]:
@@ -367,8 +351,7 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
         sid = uuid.uuid4().hex[:16]
         path = st.folder / "surface" / f"{sid}.smap"
         path.parent.mkdir(mode=0o700, exist_ok=True)
-        argv = ["surface-map", "--out", str(path), *jobs.option_argv(req.model_dump())]
-        report = await run(jobs.run_command, argv, str(st.folder))
+        report = await run(jobs.surface_map, st, req.model_dump(), str(path))
         report["surface_map_id"] = sid
         return report
 
@@ -381,20 +364,31 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
             raise UnknownSceneError(
                 f"unknown surface map id {req.surface_map_id!r}: make one with POST /surface-map"
             )
-        grid = []
-        if req.scene_id is not None:
-            grid = jobs.scene_files(st.scene(req.scene_id), False, "--occupancy")
-        fields = req.model_dump(exclude={"surface_map_id", "scene_id"})
-        return await run(
-            jobs.run_command,
-            ["surface-sample", "--map", str(path), *grid, *jobs.option_argv(fields)],
-            str(st.folder),
-        )
+        scene = None if req.scene_id is None else st.scene(req.scene_id)
+        return await run(jobs.surface_samples, st, req.model_dump(), str(path), scene)
 
     app.add_middleware(
         SizeLimit, limit=settings.max_request_bytes, state=st
     )  # outermost: before any body is read
     return app
+
+
+COMMAND_LANE = (jobs.candidates, jobs.navigate, jobs.surface_map, jobs.surface_samples)
+"""Jobs run on the command thread, on robots of their own, beside the placements."""
+
+KINDS = {"/place": "place", "/candidates": "candidates", "/navigate": "navigate", "/reach": "reach",
+         "/surface-map": "surface_map", "/surface-samples": "surface_samples"}  # fmt: skip
+"""A job's endpoint -> the kind of its report."""
+
+
+def _error_body(request: Request, message: str) -> dict[str, Any]:
+    """The CLI's failure report of the endpoint's kind (exit 2), or ``{"error": ...}`` off the jobs."""
+    path = request.url.path
+    kind = KINDS.get(path) or ("segment" if path.endswith("/segmentation") else
+                               "occupancy" if path.endswith("/grid") else None)  # fmt: skip
+    if kind is None:
+        return {"error": message}
+    return jobs.failure_report(kind, message, 2)
 
 
 class _Timeout(Exception):

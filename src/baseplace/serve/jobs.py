@@ -1,207 +1,214 @@
-"""The service's jobs: request fields in, the CLI's JSON out.
+"""The service's jobs: request fields in, the jobs layer's report out.
 
-``place``, ``reach`` and ``segment`` run on what the service keeps warm (robots, maps, a scene's
-:class:`~baseplace.placement.scene_cache.SceneCache`) and return the JSON of ``baseplace place
---json``, ``reach --json`` and ``segment --json``. The other commands (candidates, surface-map,
-surface-sample, navigate) run the CLI's own command in this process on the scene's files, so
-their inputs, checks, messages and JSON are the CLI's by construction. When the jobs layer
-(``baseplace.jobs``) lands, every function here becomes a call of its job.
+Every endpoint builds the inputs of its job in :mod:`baseplace.jobs` from the request fields and
+the warm state (robots, maps, a scene's points, grid and
+:class:`~baseplace.placement.scene_cache.SceneCache`), calls the job, and returns the job's
+``baseplace.result/1`` report: the JSON of ``baseplace COMMAND --json`` for the same inputs. A job
+that fails raises :class:`JobFailed` with the CLI's one-line message, its exit code and the
+failure report the CLI would print.
 """
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import math
-from collections.abc import Sequence
-from typing import Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from baseplace.errors import BaseplaceError, InputError, NothingFoundError
-from baseplace.serve.state import Scene, ServiceState
+from baseplace.errors import BaseplaceError, InputError
+
+if TYPE_CHECKING:
+    from baseplace.jobs.report import Report
+    from baseplace.serve.state import Scene, ServiceState
 
 
-class CommandError(BaseplaceError):
-    """A CLI command run for the service exited with an error; ``exit_code`` is the CLI's."""
+class JobFailed(BaseplaceError):
+    """A job failed: the CLI's one line, its exit code (2 bad input, 3 nothing found) and report.
 
-    def __init__(self, message: str, exit_code: int, report: dict[str, Any] | None = None) -> None:
+    ``report`` is the ``baseplace.result/1`` object the CLI prints with ``--json``: the job's
+    partial report when it ran and found nothing, else the failure envelope of the command.
+    """
+
+    def __init__(self, message: str, exit_code: int, report: dict[str, Any]) -> None:
         super().__init__(message)
         self.exit_code = exit_code
         self.report = report
 
 
-def _poses6(values: Sequence[str], what: str) -> np.ndarray:
-    from baseplace.geometry.poses import parse_pose6
+def failure_report(
+    kind: str, message: str, exit_code: int, inputs: dict[str, Any] | None = None
+) -> dict[str, Any]:
+    """The CLI's failure report of a command that could not start (``kind``, the one line, exit 2 or 3)."""
+    from baseplace.jobs.report import ErrorReport
 
-    if not values:
-        raise InputError(f'give at least one {what} "x y z roll pitch yaw"')
-    return np.stack([parse_pose6(t) for t in values])
-
-
-def place(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[str, Any]:
-    """``baseplace place --json`` on an uploaded scene, with the scene's cache and warm robots and maps."""
-    from baseplace.geometry.poses import matrix_to_rpy
-    from baseplace.placement.motion import MotionSettings
-    from baseplace.placement.pipeline import PlaceSettings
-    from baseplace.placement.pipeline import place as place_in_scene
-    from baseplace.placement.robustness import BaseErrorModel, RobustnessSettings
-    from baseplace.placement.verify import contact_summary, most_frequent_contact
-    from baseplace.world.grasped_object import parse_grasped_object
-
-    targets = _poses6(req["targets"], "target")
-    grasped = parse_grasped_object(req["object"])
-    error = BaseErrorModel(req["error_model"], req["sigma_xy"], math.radians(req["sigma_yaw_deg"]),
-                           req["xy_tolerance"], req["yaw_tolerance"])  # fmt: skip
-    robustness = RobustnessSettings(req["robustness_samples"], error,
-                                    "robustness" if req["rank_by_robustness"] else "reachability",
-                                    req["min_robustness"], seed=req["seed"])  # fmt: skip
-    settings = PlaceSettings(strategy=req["strategy"], placements=req["placements"], tries=req["tries"],
-                             resolution=req["resolution"],
-                             motion=None if req["no_motion_check"] else MotionSettings(),
-                             robustness=robustness)  # fmt: skip
-    robot = state.robot(req["robot"])
-    rmap = state.reach_map(robot, req["arm"])
-    cache = scene.cache
-    result = place_in_scene(robot, rmap, cache.points, targets, settings, np.random.default_rng(req["seed"]),
-                            grasped=grasped, cache=cache)  # fmt: skip
-    arm = robot.arm(rmap.info.arm)
-    placements = []
-    for p in result.placements:
-        T = p.T_world_base
-        row: dict[str, Any] = {
-            "base_pose": np.round(T, 6).tolist(), "x": round(float(T[0, 3]), 4), "y": round(float(T[1, 3]), 4),
-            "z": round(float(T[2, 3]), 4), "yaw": round(p.yaw, 4),
-            "roll_pitch_yaw": [round(float(v), 5) for v in matrix_to_rpy(T[:3, :3])],
-            "region": p.region, "reachability": round(p.reachability, 5),
-            "joints": [dict(zip(p.joint_names, np.round(q, 6).tolist(), strict=True)) for q in p.joints],
-        }  # fmt: skip
-        if p.motions is not None:
-            row["motion"] = [{"path": np.round(m.path, 5).tolist(), "approach": np.round(m.approach, 5).tolist(),
-                              "planned": m.planned} for m in p.motions]  # fmt: skip
-        if p.robustness is not None:
-            row["robustness"] = p.robustness.as_dict()
-        placements.append(row)
-    report = {
-        "robot": {"name": robot.name, "urdf": str(robot.spec.urdf), "base_frame": robot.spec.base_frame,
-                  "tcp_frames": {a: s.tcp_frame for a, s in robot.spec.arms.items()}, "arm": arm.name},
-        "strategy": req["strategy"], "seed": req["seed"], "targets": list(req["targets"]),
-        "placements": placements,
-        "tries": result.tries,
-        "failures": dict(result.failures),
-        "collisions": contact_summary(result.contacts),
-        "object": {"requested": req["object"], "found": result.grasped_note,
-                   "allowed": None if result.grasped is None else result.grasped.to_json()},
-        "floor": None,
-        "timings_ms": {k: round(v, 2) for k, v in result.timings_ms.items()},
-        "regions": len(result.terrain.segmentation.regions),
-        "scene_id": scene.id,
-    }  # fmt: skip
-    if not placements:
-        worst = most_frequent_contact(result.contacts)
-        raise CommandError(
-            f"no verified placement in {result.tries} tries with {req['strategy']} "
-            f"(failures: {dict(result.failures) or 'none'}{'; ' + worst if worst else ''}); "
-            f"try --tries, another --strategy, --object or check the target",
-            NothingFoundError.exit_code,
-            report,
-        )
-    return report
+    return ErrorReport(kind_name=kind, inputs=inputs or {}).failed(message, exit_code).to_json()
 
 
-def reach(state: ServiceState, req: dict[str, Any]) -> dict[str, Any]:
-    """``baseplace reach --json`` on the robot's default map: targets and base poses paired row by row."""
-    from baseplace.geometry.poses import BasePose, invert_transforms, parse_base_pose
-
-    robot = state.robot(req["robot"])
-    rmap = state.reach_map(robot, req["arm"])
-    targets = _poses6(req["targets"], "target")
-    if not req["bases"]:
-        raise InputError('give at least one base pose "x y yaw"')
-    poses = [parse_base_pose(b) for b in req["bases"]]
-    bases = BasePose.batch_matrix(np.array([[p.x, p.y, p.yaw] for p in poses]))
-    if len(targets) != len(bases) and len(targets) != 1:
-        raise InputError(f"targets has {len(targets)} poses but bases has {len(bases)}; they pair row by row")
-    if len(targets) == 1:
-        values = rmap.inverse(targets[0], bases)
-    else:
-        values = rmap.reachability(invert_transforms(bases) @ targets)
-    return {"values": [round(float(v), 6) for v in values]}
-
-
-def segment(scene: Scene, resolution: float | None) -> dict[str, Any]:
-    """``baseplace segment --json`` of the scene's cloud (the robust segmentation, kept per scene)."""
-    from baseplace.terrain.pipeline import terrain_json
-
-    terrain = scene.cache.terrain(resolution)
-    result = terrain_json(terrain)
-    result["cloud"] = {"path": scene.source, "points": scene.points}
-    result["algorithm"] = "robust"
-    result["resolution"] = terrain.segmentation.hmap.resolution
-    result["scene_id"] = scene.id
-    return result
-
-
-def run_command(argv: list[str], folder: str | None = None) -> dict[str, Any]:
-    """Run ``baseplace ARGV --json`` in this process: its JSON, or :class:`CommandError` with its error line.
+def run_job(
+    kind: str, inputs: dict[str, Any], job: Callable[[], Report], folder: str | None = None
+) -> dict[str, Any]:
+    """Call a job: its report as JSON, or :class:`JobFailed` with the CLI's line and report.
 
     ``folder``: the service's own folder, cut from the answer's paths (they name the scene's
     files as ``SCENE_ID/...``, never a path of the server).
     """
-    from baseplace.cli import main
+    from baseplace.jobs.report import NoResultError
 
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        try:
-            code = main([*argv, "--json"])
-        except SystemExit as exc:  # argparse: a bad option value
-            code = int(exc.code) if isinstance(exc.code, int) else 2
-    stdout, stderr = out.getvalue(), err.getvalue()
-    if folder:
-        stdout = stdout.replace(json.dumps(folder + "/")[1:-1], "").replace(folder + "/", "")
-        stderr = stderr.replace(folder + "/", "")
-    lines = [line for line in stderr.splitlines() if line.startswith("error: ")]
-    report = None
-    text = stdout.strip()
-    if text:
-        with contextlib.suppress(ValueError):
-            report = json.loads(text.splitlines()[-1])
-    if code != 0:
-        message = lines[-1][len("error: ") :] if lines else f"{argv[0]} failed (exit {code})"
-        raise CommandError(message, code, report)
-    if report is None:
-        raise BaseplaceError(f"{argv[0]} printed no JSON")
+    try:
+        report = job().to_json()
+    except NoResultError as exc:
+        message = _cut(str(exc), folder)
+        raise JobFailed(message, exc.exit_code, _cut(exc.report.to_json(), folder)) from None
+    except BaseplaceError as exc:
+        message = _cut(str(exc), folder)
+        code = exc.exit_code if exc.exit_code in (2, 3) else 2
+        raise JobFailed(message, code, failure_report(kind, message, code, _cut(inputs, folder))) from None
+    out: dict[str, Any] = _cut(report, folder)
+    return out
+
+
+def _cut(value: Any, folder: str | None) -> Any:
+    """``value`` with ``folder/`` cut from every text in it."""
+    if not folder:
+        return value
+    if isinstance(value, str):
+        return value.replace(folder + "/", "")
+    if isinstance(value, dict):
+        return {k: _cut(v, folder) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_cut(v, folder) for v in value]
+    return value
+
+
+def _motion(req: dict[str, Any]) -> Any:
+    from baseplace.placement.motion import MotionSettings
+
+    return None if req["no_motion_check"] else MotionSettings()
+
+
+def _robustness(req: dict[str, Any]) -> Any:
+    """The CLI's ``--robustness-samples`` ... ``--yaw-tolerance`` as settings."""
+    from baseplace.placement.robustness import BaseErrorModel, RobustnessSettings
+
+    error = BaseErrorModel(req["error_model"], req["sigma_xy"], math.radians(req["sigma_yaw_deg"]),
+                           req["xy_tolerance"], req["yaw_tolerance"])  # fmt: skip
+    return RobustnessSettings(req["robustness_samples"], error,
+                              "robustness" if req["rank_by_robustness"] else "reachability",
+                              req["min_robustness"], seed=req["seed"])  # fmt: skip
+
+
+def place(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[str, Any]:
+    """``baseplace place --json`` on an uploaded scene, with the scene's cache and warm robots and maps."""
+    from baseplace.jobs.inputs import CloudInput
+    from baseplace.jobs.place import PlaceJob, place_job
+    from baseplace.placement.pipeline import PlaceSettings
+
+    def job() -> Report:
+        settings = PlaceSettings(strategy=req["strategy"], placements=req["placements"], tries=req["tries"],
+                                 resolution=req["resolution"], motion=_motion(req), robustness=_robustness(req))  # fmt: skip
+        robot = state.robot(req["robot"])
+        rmap = state.reach_map(robot, req["arm"])
+        return place_job(PlaceJob(req["targets"], robot, req["arm"], CloudInput(points=scene.cache.points),
+                                  map=rmap, settings=settings, seed=req["seed"], object=req["object"],
+                                  cache=scene.cache))  # fmt: skip
+
+    return _with_scene(run_job("place", req, job, str(state.folder)), scene)
+
+
+def candidates(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[str, Any]:
+    """``baseplace candidates --json`` on an uploaded scene: its grid, and its cloud unless ``use_cloud`` is off."""
+    from baseplace.jobs.candidates import CandidatesJob, candidates_job
+    from baseplace.jobs.inputs import CloudInput
+
+    def job() -> Report:
+        robot = state.robot(req["robot"], lane="commands")
+        rmap = state.reach_map(robot, req["arm"])
+        cloud = CloudInput(points=scene.cache.points) if req["use_cloud"] else CloudInput()
+        return candidates_job(CandidatesJob(req["object"], scene.grid, cloud, req["robot_pose"], req["method"],
+                                            robot, req["arm"], rmap, req["standoff"], req["seed"],
+                                            req["object_shape"], _motion(req), _robustness(req)))  # fmt: skip
+
+    return _with_scene(run_job("candidates", req, job, str(state.folder)), scene)
+
+
+def navigate(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[str, Any]:
+    """``baseplace navigate --json`` across the scene's planar regions (its segmentation, kept)."""
+    from baseplace.jobs.inputs import CloudInput
+    from baseplace.jobs.navigate import NavigateJob, navigate_job
+
+    def job() -> Report:
+        robot = state.robot(req["robot"], lane="commands")
+        return navigate_job(NavigateJob(req["start"], req["goal"], CloudInput(points=scene.cache.points), robot,
+                                        req["planner"], req["time_limit"], req["resolution"], req["seed"],
+                                        cache=scene.cache))  # fmt: skip
+
+    return _with_scene(run_job("navigate", req, job, str(state.folder)), scene)
+
+
+def surface_map(state: ServiceState, req: dict[str, Any], out: str) -> dict[str, Any]:
+    """``baseplace surface-map --json``, the map written to ``out`` (in the service's folder)."""
+    from baseplace.jobs.surface import SurfaceMapJob, surface_map_job
+
+    def job() -> Report:
+        from baseplace.jobs.surface import surface_arms
+
+        robot = state.robot(req["robot"], lane="commands")
+        arms, _ = surface_arms(robot, req["arms"])
+        maps = {arm: state.reach_map(robot, arm) for arm in arms}  # the warm maps, loaded once
+        return surface_map_job(SurfaceMapJob(req["polygon"], req["height"], out, robot, req["arms"],
+                                             req["resolution"], req["orientations"], maps=maps))  # fmt: skip
+
+    return run_job("surface_map", req, job, str(state.folder))
+
+
+def surface_samples(
+    state: ServiceState, req: dict[str, Any], map_file: str, scene: Scene | None
+) -> dict[str, Any]:
+    """``baseplace surface-sample --json`` from a surface map; a scene's grid as the operational area."""
+    from baseplace.jobs.surface import SurfaceSamplesJob, surface_samples_job
+
+    def job() -> Report:
+        if scene is not None and scene.grid is None:
+            raise InputError(
+                f"scene {scene.id} has no occupancy grid: attach one with POST /scenes/{scene.id}/grid"
+            )
+        grid = None if scene is None else scene.grid
+        return surface_samples_job(SurfaceSamplesJob(map_file, req["n"], grid, None, req["candidates"],
+                                                     not req["no_discount"], None, req["seed"]))  # fmt: skip
+
+    return run_job("surface_samples", req, job, str(state.folder))
+
+
+def reach(state: ServiceState, req: dict[str, Any]) -> dict[str, Any]:
+    """``baseplace reach --json`` on the robot's default map: targets and base poses paired row by row."""
+    from baseplace.jobs.reach import ReachJob, reach_job
+
+    def job() -> Report:
+        robot = state.robot(req["robot"])  # its spec only: read from any thread
+        rmap = state.reach_map(robot, req["arm"])
+        return reach_job(ReachJob(rmap, targets=req["targets"], bases=req["bases"], robot=robot))
+
+    return run_job("reach", req, job)
+
+
+def segment(scene: Scene, resolution: float | None) -> dict[str, Any]:
+    """``baseplace segment --json`` of the scene's cloud (the robust segmentation, kept per scene)."""
+    from baseplace.jobs.inputs import CloudInput
+    from baseplace.jobs.navigate import SegmentJob, segment_job
+
+    inputs = {"resolution": resolution}
+    report = run_job("segment", inputs,
+                     lambda: segment_job(SegmentJob(CloudInput(points=scene.cache.points), "robust", resolution,
+                                                    cache=scene.cache)))  # fmt: skip
+    report["cloud"]["path"] = scene.source
+    return _with_scene(report, scene)
+
+
+def _with_scene(report: dict[str, Any], scene: Scene) -> dict[str, Any]:
+    report["scene_id"] = scene.id
     return report
-
-
-def option_argv(options: dict[str, Any]) -> list[str]:
-    """CLI options from request fields: ``{"robot_pose": "0 0 0"}`` -> ``["--robot-pose", "0 0 0"]``.
-
-    None leaves an option out; True is a flag; lists repeat the option. Names are the request
-    model's fields, never free text from the request.
-    """
-    argv: list[str] = []
-    for name, value in options.items():
-        flag = "--" + name.replace("_", "-")
-        if value is None or value is False:
-            continue
-        if value is True:
-            argv.append(flag)
-        elif isinstance(value, list):
-            for v in value:
-                argv += [flag, str(v)]
-        else:
-            argv += [flag, str(value)]
-    return argv
-
-
-def scene_files(scene: Scene, cloud: bool, grid: str) -> list[str]:
-    """The scene's files as CLI options: ``--cloud`` and the grid option ``grid`` (if it has one)."""
-    argv = ["--cloud", str(scene.cloud_file)] if cloud else []
-    if grid and scene.grid_yaml is not None:
-        argv += [grid, str(scene.grid_yaml)]
-    return argv
 
 
 def add_grid(scene: Scene, image: bytes, suffix: str, meta: dict[str, Any]) -> dict[str, Any]:
@@ -222,16 +229,18 @@ def add_grid(scene: Scene, image: bytes, suffix: str, meta: dict[str, Any]) -> d
            "negate": int(bool(meta["negate"])), "occupied_thresh": float(meta["occupied_thresh"]),
            "free_thresh": float(meta["free_thresh"]), "mode": str(meta["mode"])}  # fmt: skip
     yaml_path.write_text(json.dumps(doc) + "\n")  # JSON is YAML
-    try:
+    from baseplace.jobs.world import occupancy_job
+
+    try:  # the report as ``baseplace occupancy --json`` gives it, and the grid the jobs read
+        report = run_job("occupancy", {"map": str(yaml_path)}, lambda: occupancy_job(str(yaml_path)),
+                         str(scene.folder.parent))  # fmt: skip
         grid = load_occupancy(yaml_path)
     except BaseException:
         image_path.unlink(missing_ok=True)
         yaml_path.unlink(missing_ok=True)
         raise
-    scene.grid_yaml = yaml_path
-    report: dict[str, Any] = grid.to_json()
-    report["scene_id"] = scene.id
-    return report
+    scene.grid_yaml, scene.grid = yaml_path, grid
+    return _with_scene(report, scene)
 
 
 def add_grid_values(scene: Scene, grid: Any) -> None:

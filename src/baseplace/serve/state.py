@@ -4,8 +4,9 @@ Robots are built once per name (their collision model and pair tables with them)
 once per (robot, arm), and each uploaded scene keeps its cloud, its segmentation and its
 obstacle set and collision environments (:class:`~baseplace.placement.scene_cache.SceneCache`).
 Placements run on one worker thread (:attr:`ServiceState.executor`): pinocchio's data and coal's
-trees are not shared between threads. Map lookups run on two more (``lookups``), and the CLI
-commands run for the service, which build their own robots and maps, on one more (``commands``).
+trees are not shared between threads. Map lookups run on two more (``lookups``), and candidates,
+navigation and surface maps, on robots of their own (``robot(name, lane="commands")``), on one
+more (``commands``).
 """
 
 from __future__ import annotations
@@ -82,6 +83,7 @@ class Scene:
     source: str
     created: float = field(default_factory=time.time)
     grid_yaml: Path | None = None
+    grid: Any = None  # the OccupancyGrid read from grid_yaml
 
     @property
     def cloud_file(self) -> Path:
@@ -98,30 +100,36 @@ class ServiceState:
         self.executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="baseplace-job")
         # map lookups only read the map: they need not wait behind a placement
         self.lookups = ThreadPoolExecutor(max_workers=2, thread_name_prefix="baseplace-lookup")
-        # the CLI's commands build their own robots and maps: one at a time, beside the placements
+        # candidates, navigation and surface maps: one at a time, beside the placements, on robots of their own
         self.commands = ThreadPoolExecutor(max_workers=1, thread_name_prefix="baseplace-command")
         self.folder = Path(tempfile.mkdtemp(prefix="baseplace-serve-"))
         self._robots: dict[str, Any] = {}
+        self._command_robots: dict[str, Any] = {}
         self._maps: dict[tuple[str, str | None], Any] = {}
         self._scenes: OrderedDict[str, Scene] = OrderedDict()
         self._lock = threading.Lock()  # scenes are added from the worker and read from the loop
         self.requests = 0
 
     # ---- robots and maps (worker thread only) ----
-    def robot(self, name: str) -> Any:
-        """The robot of a built-in name, built once."""
+    def robot(self, name: str, lane: str = "jobs") -> Any:
+        """The robot of a built-in name, built once per lane.
+
+        ``lane``: "jobs" (the worker thread's robots) or "commands" (the command thread's own
+        copies: pinocchio's data and coal's trees are not shared between threads).
+        """
         from baseplace.robots.spec import BUILTIN_ROBOTS
 
         if name not in BUILTIN_ROBOTS:
             raise InputError(f"unknown robot {name!r}; valid: {', '.join(BUILTIN_ROBOTS)}")
-        if name not in self._robots:
+        robots = self._robots if lane == "jobs" else self._command_robots
+        if name not in robots:
             from baseplace.robots.model import Robot
 
-            self._robots[name] = Robot(name)
-        return self._robots[name]
+            robots[name] = Robot(name)
+        return robots[name]
 
     def reach_map(self, robot: Any, arm: str | None) -> Any:
-        """The robot's cached default map for ``arm`` (default arm: None), loaded once."""
+        """The robot's cached default map for ``arm`` (default arm: None), loaded once (read only: any thread)."""
         key = (robot.name, arm)
         if key not in self._maps:
             from baseplace.demo import cached_map
