@@ -87,3 +87,35 @@ def test_a_robot_and_its_collision_model_are_freed_with_it():
     del robot, env
     gc.collect()
     assert alive() is None
+
+
+def test_points_near_are_the_brute_force_window_in_the_clouds_order():
+    # oracle: every point tested, in the cloud sorted by x (stable), as points_near gave them before the grid
+    rng = np.random.default_rng(5)
+    points = np.r_[
+        rng.uniform(-5, 5, (20_000, 3)), np.round(rng.uniform(-1, 1, (2_000, 3)), 1)
+    ]  # ties, edges
+    cache = SceneCache(points)
+    by_x = points[np.argsort(points[:, 0], kind="stable")]
+    for xy, half in [((0.0, 0.0), 0.4), ((4.9, -4.9), 0.5), ((0.3, 0.5), 0.25), ((-7.0, 0.0), 1.0),
+                     ((0.0, 9.0), 0.5), ((1.0, 1.0), 0.0), ((0.0, 0.0), 20.0)]:  # fmt: skip
+        truth = by_x[(np.abs(by_x[:, 0] - xy[0]) <= half) & (np.abs(by_x[:, 1] - xy[1]) <= half)]
+        assert np.array_equal(cache.points_near(xy, half), truth), (xy, half)
+
+
+def test_the_grasped_object_found_in_the_window_is_the_one_found_in_the_whole_cloud():
+    from baseplace.placement.pipeline import _grasped_object
+    from baseplace.robots.model import Robot
+    from baseplace.world.grasped_object import find_grasped_object
+
+    tiago = Robot("tiago")
+    points = cloud(tray_scene(A, B))
+    cache = SceneCache(points)
+    for T in (THROUGH_A, THROUGH_B):
+        windowed, _ = _grasped_object(tiago, "arm", points, T[None], "auto", cache)
+        whole, _ = _grasped_object(tiago, "arm", points, T[None], "auto", None)
+        assert windowed is not None and whole is not None
+        # the same points (the window keeps the cloud's x order, the whole cloud its own)
+        assert np.array_equal(np.unique(windowed.points, axis=0), np.unique(whole.points, axis=0))
+        assert len(windowed.points) == len(whole.points)
+    assert find_grasped_object(points, THROUGH_A[:3, 3] + [0.0, 0.0, 2.0]) is None

@@ -77,7 +77,8 @@ class CloudInput:
         paths: cloud files (.pcd, .ply, .bt, .npy, .xyz).
         transforms: per file, a world_T_sensor file or the sensor-frame up vector "ux uy uz" (None:
             the cloud is z up already, checked).
-        points: (N, 3) world points [m], already loaded (instead of files).
+        points: (N, 3) world points [m] or a :class:`~baseplace.terrain.io.Cloud`, already loaded
+            (instead of files).
         bag: read the clouds from a recording.
         fuse: fuse the clouds into one 25 mm OctoMap by ray casting from each sensor origin (seed 000).
         fuse_miss: occupancy probability of a ray passing a voxel.
@@ -143,6 +144,8 @@ def world_cloud(cloud: CloudInput) -> Cloud:
     from baseplace.terrain.io import Cloud, load_cloud, load_transform
 
     fused_out = out_path(cloud.fused_out, "--fused-out", (".bt",))
+    if isinstance(cloud.points, Cloud):  # checked once already (the service's scenes)
+        return cloud.points
     if cloud.points is not None:
         return Cloud(np.asarray(cloud.points, dtype=float), source="points")
     if cloud.bag is not None:

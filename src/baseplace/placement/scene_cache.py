@@ -30,6 +30,9 @@ T = TypeVar("T")
 OBJECT_ENVIRONMENTS = 8
 """Collision environments kept per scene for distinct grasped objects (least recently used go)."""
 
+NEAR_CELL = 0.25
+"""Cell of the grid that finds a cloud's points near a point [m]."""
+
 
 def object_key(obj: GraspedObject | None) -> str:
     """A digest of what the allowed contact depends on: the object's kind, pose, size and points."""
@@ -55,7 +58,7 @@ class SceneCache:
     ) -> None:
         self._raw = np.asarray(points, dtype=float).reshape(-1, 3)
         self._points: FloatArray | None = None
-        self._by_x: FloatArray | None = None
+        self._index: tuple[FloatArray, Any, Any, float, int, Any] | None = None
         self._terrains: dict[float | None, Terrain] = {}
         if terrain is not None:
             self._terrains[resolution] = terrain
@@ -81,13 +84,36 @@ class SceneCache:
         return self._terrains[resolution]
 
     def points_near(self, xy: ArrayLike, half_width: float) -> FloatArray:
-        """The points (M, 3) whose x and y lie within ``half_width`` [m] of ``xy`` (2,)."""
-        if self._by_x is None:  # sorted by x once: a window is a slice, then a filter on y
-            self._by_x = self.points[np.argsort(self.points[:, 0], kind="stable")]
+        """The points (M, 3) whose x and y lie within ``half_width`` [m] of ``xy`` (2,).
+
+        In the order of the cloud sorted by x (stable), whatever the window. Found through a grid
+        of :data:`NEAR_CELL` cells made once, so a query reads only the cells its window touches.
+        """
+        if self._index is None:
+            pts = self.points
+            lo = pts[:, :2].min(axis=0)
+            ny = int(np.floor((pts[:, 1].max() - lo[1]) / NEAR_CELL)) + 1
+            ij = np.floor((pts[:, :2] - lo) / NEAR_CELL).astype(np.int64)
+            rank = np.empty(len(pts), dtype=np.int64)  # each point's place in the stable sort by x
+            rank[np.argsort(pts[:, 0], kind="stable")] = np.arange(len(pts))
+            order = np.argsort(ij[:, 0] * ny + ij[:, 1], kind="stable")
+            keys = (ij[:, 0] * ny + ij[:, 1])[order]
+            self._index = (pts[order], keys, rank[order], float(NEAR_CELL), ny, lo)
+        cells, keys, rank, size, ny, lo = self._index
         x, y = (float(v) for v in np.asarray(xy, dtype=float)[:2])
-        lo, hi = np.searchsorted(self._by_x[:, 0], [x - half_width, x + half_width], side="left")
-        slab = self._by_x[lo:hi]
-        return slab[np.abs(slab[:, 1] - y) <= half_width]
+        ix0, ix1 = (int(np.floor((v - lo[0]) / size)) for v in (x - half_width, x + half_width))
+        iy0, iy1 = (int(np.floor((v - lo[1]) / size)) for v in (y - half_width, y + half_width))
+        iy0, iy1 = max(iy0, 0), min(iy1, ny - 1)
+        columns = np.arange(max(ix0, 0), max(ix1 + 1, 0))
+        if len(columns) == 0 or iy0 > iy1:
+            return np.empty((0, 3))
+        starts = np.searchsorted(keys, columns * ny + iy0, side="left")
+        ends = np.searchsorted(keys, columns * ny + iy1, side="right")
+        take = np.concatenate([np.arange(a, b) for a, b in zip(starts, ends, strict=True)])
+        window = cells[take]
+        inside = (np.abs(window[:, 0] - x) <= half_width) & (np.abs(window[:, 1] - y) <= half_width)
+        take = take[inside]
+        return cells[take[np.argsort(rank[take])]]
 
     def shared(self, key: Hashable, make: Callable[[], T]) -> T:
         """The value for ``key``, made by ``make()`` on first use and kept for the scene's life."""

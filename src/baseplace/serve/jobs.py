@@ -110,7 +110,7 @@ def place(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[str, A
                                  resolution=req["resolution"], motion=_motion(req), robustness=_robustness(req))  # fmt: skip
         robot = state.robot(req["robot"])
         rmap = state.reach_map(robot, req["arm"])
-        return place_job(PlaceJob(req["targets"], robot, req["arm"], CloudInput(points=scene.cache.points),
+        return place_job(PlaceJob(req["targets"], robot, req["arm"], CloudInput(points=scene.cloud),
                                   map=rmap, settings=settings, seed=req["seed"], object=req["object"],
                                   cache=scene.cache))  # fmt: skip
 
@@ -125,7 +125,7 @@ def candidates(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[s
     def job() -> Report:
         robot = state.robot(req["robot"], lane="commands")
         rmap = state.reach_map(robot, req["arm"])
-        cloud = CloudInput(points=scene.cache.points) if req["use_cloud"] else CloudInput()
+        cloud = CloudInput(points=scene.cloud) if req["use_cloud"] else CloudInput()
         return candidates_job(CandidatesJob(req["object"], scene.grid, cloud, req["robot_pose"], req["method"],
                                             robot, req["arm"], rmap, req["standoff"], req["seed"],
                                             req["object_shape"], _motion(req), _robustness(req)))  # fmt: skip
@@ -140,7 +140,7 @@ def navigate(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[str
 
     def job() -> Report:
         robot = state.robot(req["robot"], lane="commands")
-        return navigate_job(NavigateJob(req["start"], req["goal"], CloudInput(points=scene.cache.points), robot,
+        return navigate_job(NavigateJob(req["start"], req["goal"], CloudInput(points=scene.cloud), robot,
                                         req["planner"], req["time_limit"], req["resolution"], req["seed"],
                                         cache=scene.cache))  # fmt: skip
 
@@ -200,7 +200,7 @@ def segment(scene: Scene, resolution: float | None) -> dict[str, Any]:
 
     inputs = {"resolution": resolution}
     report = run_job("segment", inputs,
-                     lambda: segment_job(SegmentJob(CloudInput(points=scene.cache.points), "robust", resolution,
+                     lambda: segment_job(SegmentJob(CloudInput(points=scene.cloud), "robust", resolution,
                                                     cache=scene.cache)))  # fmt: skip
     report["cloud"]["path"] = scene.source
     return _with_scene(report, scene)

@@ -51,6 +51,10 @@ class ServeSettings:
             compiled kernels.
         warm_up: run one small placement per robot at start, so that no request pays numba's
             kernel loading or the first OSRM.
+        kernel_threads: numba threads of each job's compiled kernels. The service runs its
+            requests side by side on its own threads; a parallel kernel in each of them would
+            oversubscribe the cores (on 2 shared cores a warm OSRM took 16 ms with numba's 2
+            threads, 1.9 ms with 1).
     """
 
     host: str = "127.0.0.1"
@@ -60,6 +64,7 @@ class ServeSettings:
     max_scenes: int = 16
     robots: tuple[str, ...] = ("tiago",)
     warm_up: bool = True
+    kernel_threads: int = 1
 
     def __post_init__(self) -> None:
         if not (0 <= self.port <= 65535):
@@ -68,6 +73,8 @@ class ServeSettings:
             raise InputError(f"max_request_bytes must be >= 1024, got {self.max_request_bytes}")
         if not (self.timeout_s > 0):
             raise InputError(f"timeout_s must be > 0, got {self.timeout_s}")
+        if self.kernel_threads < 1:
+            raise InputError(f"kernel_threads must be >= 1, got {self.kernel_threads}")
         if self.max_scenes < 1:
             raise InputError(f"max_scenes must be >= 1, got {self.max_scenes}")
 
@@ -84,11 +91,28 @@ class Scene:
     created: float = field(default_factory=time.time)
     grid_yaml: Path | None = None
     grid: Any = None  # the OccupancyGrid read from grid_yaml
+    _cloud: Any = field(default=None, repr=False)
+
+    @property
+    def cloud(self) -> Any:
+        """The scene's points as a :class:`~baseplace.terrain.io.Cloud`, checked once."""
+        if self._cloud is None:
+            from baseplace.terrain.io import Cloud
+
+            self._cloud = Cloud(self.cache.points, source="points")
+        return self._cloud
 
     @property
     def cloud_file(self) -> Path:
         """The scene's cloud as an .npy file (N, 3) float64 [m]."""
         return self.folder / "cloud.npy"
+
+
+def _kernel_threads(n: int) -> None:
+    """Numba's threads for the kernels this thread calls (numba keeps the number per thread)."""
+    import numba
+
+    numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))  # type: ignore[attr-defined]
 
 
 class ServiceState:
@@ -97,11 +121,18 @@ class ServiceState:
     def __init__(self, settings: ServeSettings) -> None:
         self.settings = settings
         self.started = time.time()
-        self.executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="baseplace-job")
+        n = (settings.kernel_threads,)
+        self.executor = ThreadPoolExecutor(
+            max_workers=1, thread_name_prefix="baseplace-job", initializer=_kernel_threads, initargs=n
+        )
         # map lookups only read the map: they need not wait behind a placement
-        self.lookups = ThreadPoolExecutor(max_workers=2, thread_name_prefix="baseplace-lookup")
+        self.lookups = ThreadPoolExecutor(
+            max_workers=2, thread_name_prefix="baseplace-lookup", initializer=_kernel_threads, initargs=n
+        )
         # candidates, navigation and surface maps: one at a time, beside the placements, on robots of their own
-        self.commands = ThreadPoolExecutor(max_workers=1, thread_name_prefix="baseplace-command")
+        self.commands = ThreadPoolExecutor(
+            max_workers=1, thread_name_prefix="baseplace-command", initializer=_kernel_threads, initargs=n
+        )
         self.folder = Path(tempfile.mkdtemp(prefix="baseplace-serve-"))
         self._robots: dict[str, Any] = {}
         self._command_robots: dict[str, Any] = {}
