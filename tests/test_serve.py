@@ -296,7 +296,9 @@ def _valid(obj: dict) -> dict:
     return obj
 
 
-def test_every_job_endpoint_answers_the_clis_report_on_success_and_failure(client, scene_id, tmp_path):
+def test_every_job_endpoint_answers_the_clis_report_on_success_and_failure(
+    client, scene_id, tiago_map, tmp_path
+):
     """Each endpoint's answer, found, nothing found and bad input, is a valid ``baseplace.result/1``
     report of its kind; where the inputs are the CLI's, the values and the error lines are the CLI's."""
     import cv2
@@ -336,13 +338,27 @@ def test_every_job_endpoint_answers_the_clis_report_on_success_and_failure(clien
     assert r.status_code == 200 and _valid(r.json())["kind"] == "occupancy", r.text
     bad_grid = client.post(f"/scenes/{scene_id}/grid", params={"resolution": 0.05}, content=b"not an image")
     assert bad_grid.status_code == 400 and _valid(bad_grid.json())["kind"] == "occupancy"
-    # candidates around the bottle, on the grid and the cloud; an object with two numbers; outside the grid
-    out = client.post("/candidates", json={"scene_id": scene_id, "object": "0.101 0 0.6", "no_motion_check": True,
-                                           "robustness_samples": 0})  # fmt: skip
-    assert out.status_code == 200, out.text
-    out = _valid(out.json())
-    assert out["kind"] == "candidates" and out["exit_code"] in (0, 3) and out["rejected"] is not None
-    assert (out["exit_code"] == 0) == bool(out["candidates"]) == out.get("found", True)
+    # candidates around the bottle, on the grid and the cloud, twice (the second on the scene's kept
+    # environment): the CLI's candidates and rejects for the same files; an object with two numbers; outside
+    (tmp_path / "g.png").write_bytes(png.tobytes())
+    (tmp_path / "g.yaml").write_text("image: g.png\nresolution: 0.05\norigin: [-2.0, -2.0, 0.0]\nnegate: 0\n"
+                                     "occupied_thresh: 0.65\nfree_thresh: 0.196\n")  # fmt: skip
+    np.save(tmp_path / "tray.npy", client.app.state.service.scene(scene_id).cache.points)
+    save_map(tiago_map, tmp_path / "tiago.rmap")
+    cli = run_cli("candidates", "--occupancy", str(tmp_path / "g.yaml"), "--cloud", str(tmp_path / "tray.npy"),
+                  "--object", "0.101 0 0.6", "--map", str(tmp_path / "tiago.rmap"), "--no-motion-check",
+                  "--robustness-samples", "0", "--json")  # fmt: skip
+    truth = json.loads(cli.stdout)
+    assert cli.returncode in (0, 3) and truth["rejected"], cli.stderr
+    for _ in range(2):
+        out = client.post("/candidates", json={"scene_id": scene_id, "object": "0.101 0 0.6",
+                                               "no_motion_check": True, "robustness_samples": 0})  # fmt: skip
+        assert out.status_code == 200, out.text
+        out = _valid(out.json())
+        assert out["kind"] == "candidates" and out["exit_code"] == cli.returncode
+        assert (out["exit_code"] == 0) == bool(out["candidates"]) == out.get("found", True)
+        for key in ("candidates", "rejected", "object", "failures"):
+            assert out[key] == truth[key], key
     bad = post("/candidates", {"scene_id": scene_id, "object": "1 2"}, 400, "candidates", 2)
     outside = post("/candidates", {"scene_id": scene_id, "object": "30 0 0.6"}, 400, "candidates", 2)
     assert "outside the occupancy grid" in outside["error"] and "/" not in outside["error"].split("grid")[-1]

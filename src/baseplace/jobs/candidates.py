@@ -36,6 +36,7 @@ from baseplace.jobs.report import CandidatesReport, NoResultError, PoseRecord, R
 if TYPE_CHECKING:
     from baseplace.placement.motion import MotionSettings
     from baseplace.placement.robustness import RobustnessSettings
+    from baseplace.placement.scene_cache import SceneCache
     from baseplace.reachability.rmap import ReachabilityMap
     from baseplace.robots.model import Robot
     from baseplace.world.occupancy import OccupancyGrid
@@ -58,6 +59,9 @@ class CandidatesJob:
         motion: the reaching-motion check (None: off).
         robustness: the robustness score and ranking (None: defaults).
         png, mcap: also write a plot / an MCAP recording here.
+        cache: a :class:`~baseplace.placement.scene_cache.SceneCache` of ``cloud.points``: the
+            cloud's voxels and, per grasped object, the collision environments kept between
+            queries (the service).
     """
 
     object: str | Sequence[float]
@@ -75,6 +79,7 @@ class CandidatesJob:
     robustness: RobustnessSettings | None = None
     png: str | None = None
     mcap: str | None = None
+    cache: SceneCache | None = field(default=None, repr=False, compare=False)
 
     def echo(self) -> dict[str, Any]:
         """The inputs as given."""
@@ -134,6 +139,7 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
         verify_candidates,
     )
     from baseplace.placement.robustness import RobustnessSettings
+    from baseplace.placement.scene_cache import object_key
     from baseplace.reachability.cache import map_or_default
     from baseplace.terrain.voxels import VoxelMap
     from baseplace.world.environment import Environment, contact_groups
@@ -160,17 +166,28 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
     check_object(grid, p_o, settings.d_max)
     t_load = time.perf_counter()
     points = world_cloud(job.cloud).points if job.cloud.given else None
+    cache = job.cache if points is not None else None
     # only the hand may touch the object's own voxels (found at the object or given by its shape)
     grasped = shape if shape != "auto" else None
     if shape == "auto" and points is not None:
-        grasped = find_grasped_object(points, p_o)
-    voxels = (
-        VoxelMap.from_points(points) if points is not None else VoxelMap(0.025, np.zeros((0, 3), np.int64))
-    )
-    groups, object_voxels = contact_groups(
-        voxels, voxels, grasped if isinstance(grasped, GraspedObject) else None
-    )
-    environment = Environment(robot, groups, grasped=object_voxels, hand_arm=job.arm)
+        grasped = find_grasped_object(points, p_o) if cache is None else cache.grasped_object(p_o)
+    held = grasped if isinstance(grasped, GraspedObject) else None
+
+    def environments() -> tuple[Any, Any, Any]:
+        """The verification's environment, and the groups and object voxels it was built from."""
+        voxels = VoxelMap(0.025, np.zeros((0, 3), np.int64))
+        if points is not None:
+            voxels = VoxelMap.from_points(points) if cache is None else cache.shared(
+                ("voxels", 0.025), lambda: VoxelMap.from_points(points))  # fmt: skip
+        groups, object_voxels = contact_groups(voxels, voxels, held)
+        return Environment(robot, groups, grasped=object_voxels, hand_arm=job.arm), groups, object_voxels
+
+    if cache is None:
+        environment, groups, object_voxels = environments()
+    else:  # per robot, arm and grasped object, kept for the scene's next queries
+        environment, groups, object_voxels = cache.per_object(
+            ("candidates", robot, job.arm, object_key(held)), environments
+        )
     motion = None
     if job.motion is not None:  # the way to the pre-grasp must avoid the object too
         from baseplace.placement.motion import MotionChecker, transit_environment

@@ -37,11 +37,7 @@ from baseplace.terrain.polygons import footprint_outline
 from baseplace.terrain.segmentation import Segmentation
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import SUPPORT_DIST, Environment, contact_groups, obstacle_voxels
-from baseplace.world.grasped_object import AutoSettings, GraspedObject, find_grasped_object
-
-NEAR_GRASP_MARGIN = 0.05
-"""Margin [m] of the cloud window around the grasp point in which the grasped object is sought, beyond
-the largest distance :func:`~baseplace.world.grasped_object.find_grasped_object` reads a point at."""
+from baseplace.world.grasped_object import GraspedObject, find_grasped_object
 
 POSE_ONLY_CHECKS: dict[str, Any] = {"motion": None, "robustness": RobustnessSettings(samples=0)}
 """PlaceSettings overrides that check the placement's pose alone (IK + collision at the exact pose,
@@ -308,11 +304,7 @@ def _grasped_object(
     point = (
         T[:3, 3] + grasp_standoff(robot) * T[:3, 0]
     )  # the grasp point, ahead of the TCP on its approach axis
-    # find_grasped_object reads only the points within max_size + link of the grasp point (horizontal),
-    # and those within voxel_size of the cluster's box: the window holds them all, in the cloud's order
-    a = AutoSettings()
-    near = a.max_size + a.link + a.voxel_size + NEAR_GRASP_MARGIN
-    found = find_grasped_object(points if cache is None else cache.points_near(point, near), point, a)
+    found = find_grasped_object(points, point) if cache is None else cache.grasped_object(point)
     if found is None:
         return None, f"auto: no object at the grasp point {np.round(point, 3).tolist()}"
     return found, f"auto: {len(found.points)} points at the grasp point {np.round(point, 3).tolist()}"

@@ -13,6 +13,7 @@ lock per scene).
 from __future__ import annotations
 
 import hashlib
+import threading
 from collections import OrderedDict
 from collections.abc import Callable, Hashable
 from typing import Any, TypeVar
@@ -29,6 +30,10 @@ T = TypeVar("T")
 
 OBJECT_ENVIRONMENTS = 8
 """Collision environments kept per scene for distinct grasped objects (least recently used go)."""
+
+NEAR_GRASP_MARGIN = 0.05
+"""Margin [m] of the cloud window in which :meth:`SceneCache.grasped_object` seeks the object, beyond
+the largest distance :func:`~baseplace.world.grasped_object.find_grasped_object` reads a point at."""
 
 NEAR_CELL = 0.25
 """Cell of the grid that finds a cloud's points near a point [m]."""
@@ -64,6 +69,7 @@ class SceneCache:
             self._terrains[resolution] = terrain
         self._shared: dict[Hashable, Any] = {}
         self._objects: OrderedDict[Hashable, Any] = OrderedDict()
+        self._lock = threading.Lock()
         self.hits = 0
         self.misses = 0
 
@@ -79,9 +85,12 @@ class SceneCache:
 
     def terrain(self, resolution: float | None = None) -> Terrain:
         """The segmentation at this height-map cell [m] (None: chosen from the cloud), made once."""
-        if resolution not in self._terrains:
-            self._terrains[resolution] = terrain_from_points(self.points, resolution=resolution)
-        return self._terrains[resolution]
+        given = self._terrains.get(resolution)
+        if given is not None:
+            return given
+        return self.shared(
+            ("terrain", resolution), lambda: terrain_from_points(self.points, resolution=resolution)
+        )
 
     def points_near(self, xy: ArrayLike, half_width: float) -> FloatArray:
         """The points (M, 3) whose x and y lie within ``half_width`` [m] of ``xy`` (2,).
@@ -115,23 +124,50 @@ class SceneCache:
         take = take[inside]
         return cells[take[np.argsort(rank[take])]]
 
+    def grasped_object(self, grasp_point: ArrayLike) -> GraspedObject | None:
+        """:func:`~baseplace.world.grasped_object.find_grasped_object` at ``grasp_point`` (3,), default settings.
+
+        Sought in the window of the cloud it reads: the points within ``max_size + link`` of the
+        grasp point (horizontally) and within ``voxel_size`` of the cluster's box, plus
+        :data:`NEAR_GRASP_MARGIN`; the same object as in the whole cloud, its points in the order
+        of :meth:`points_near`.
+        """
+        from baseplace.world.grasped_object import AutoSettings, find_grasped_object
+
+        a = AutoSettings()
+        near = a.max_size + a.link + a.voxel_size + NEAR_GRASP_MARGIN
+        return find_grasped_object(self.points_near(grasp_point, near), grasp_point, a)
+
     def shared(self, key: Hashable, make: Callable[[], T]) -> T:
-        """The value for ``key``, made by ``make()`` on first use and kept for the scene's life."""
-        if key in self._shared:
-            self.hits += 1
-        else:
-            self.misses += 1
-            self._shared[key] = make()
-        return self._shared[key]
+        """The value for ``key``, made by ``make()`` on first use and kept for the scene's life.
+
+        Safe to call from several threads: the tables are read and written under a lock, ``make``
+        runs outside it (two threads may both make a value; the first one kept wins).
+        """
+        with self._lock:
+            if key in self._shared:
+                self.hits += 1
+                return self._shared[key]
+        value = make()
+        with self._lock:
+            if key not in self._shared:
+                self.misses += 1
+                self._shared[key] = value
+            return self._shared[key]
 
     def per_object(self, key: Hashable, make: Callable[[], T]) -> T:
         """As :meth:`shared`, for values that depend on a grasped object: the last few are kept."""
-        if key in self._objects:
-            self.hits += 1
-            self._objects.move_to_end(key)
-        else:
+        with self._lock:
+            if key in self._objects:
+                self.hits += 1
+                self._objects.move_to_end(key)
+                return self._objects[key]
+        value = make()
+        with self._lock:
+            if key in self._objects:
+                return self._objects[key]
             self.misses += 1
-            self._objects[key] = make()
+            self._objects[key] = value
             while len(self._objects) > OBJECT_ENVIRONMENTS:
                 self._objects.popitem(last=False)
-        return self._objects[key]
+        return value

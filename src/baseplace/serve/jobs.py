@@ -128,7 +128,8 @@ def candidates(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[s
         cloud = CloudInput(points=scene.cloud) if req["use_cloud"] else CloudInput()
         return candidates_job(CandidatesJob(req["object"], scene.grid, cloud, req["robot_pose"], req["method"],
                                             robot, req["arm"], rmap, req["standoff"], req["seed"],
-                                            req["object_shape"], _motion(req), _robustness(req)))  # fmt: skip
+                                            req["object_shape"], _motion(req), _robustness(req),
+                                            cache=scene.cache if req["use_cloud"] else None))  # fmt: skip
 
     return _with_scene(run_job("candidates", req, job, str(state.folder)), scene)
 
