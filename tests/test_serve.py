@@ -359,8 +359,40 @@ def test_every_job_endpoint_answers_the_clis_report_on_success_and_failure(
         assert (out["exit_code"] == 0) == bool(out["candidates"]) == out.get("found", True)
         for key in ("candidates", "rejected", "object", "failures"):
             assert out[key] == truth[key], key
+    # found: the CLI test's sandbox grid alone (use_cloud off), with the robot's pose: its candidates and path
+    from conftest import SHARED
+
+    sandbox = SHARED / "maps" / "tb3_sandbox.yaml"
+    r = client.post(f"/scenes/{scene_id}/grid", params={"resolution": 0.05, "format": "pgm", "origin_x": -10.0,
+                                                        "origin_y": -10.0},
+                    content=(SHARED / "maps" / "tb3_sandbox.pgm").read_bytes())  # fmt: skip
+    assert r.status_code == 200, r.text
+    body = {"scene_id": scene_id, "object": "-1.025 -0.775 0.6", "robot_pose": "-1.875 0.075 0", "use_cloud": False,
+            "no_motion_check": True, "robustness_samples": 0}  # fmt: skip
+    out = post("/candidates", body, 200, "candidates", 0)
+    cli = run_cli("candidates", "--occupancy", str(sandbox), "--object", body["object"], "--robot-pose",
+                  body["robot_pose"], "--map", str(tmp_path / "tiago.rmap"), "--no-motion-check",
+                  "--robustness-samples", "0", "--json")  # fmt: skip
+    assert cli.returncode == 0, cli.stderr
+    truth = json.loads(cli.stdout)
+    assert out["candidates"] and out["path"] is not None
+    for key in ("candidates", "rejected", "path", "robot_pose", "object"):
+        assert out[key] == truth[key], key
     bad = post("/candidates", {"scene_id": scene_id, "object": "1 2"}, 400, "candidates", 2)
     outside = post("/candidates", {"scene_id": scene_id, "object": "30 0 0.6"}, 400, "candidates", 2)
+    cli = run_cli(
+        "candidates",
+        "--occupancy",
+        str(sandbox),
+        "--object",
+        "30 0 0.6",
+        "--map",
+        str(tmp_path / "tiago.rmap"),
+    )
+    assert (
+        cli.returncode == 2
+        and outside["error"].split(" lies ")[0] == cli.stderr.split(" lies ")[0][len("error: ") :]
+    )
     assert "outside the occupancy grid" in outside["error"] and "/" not in outside["error"].split("grid")[-1]
     # navigate on the ramp scene: the CLI's path for the same inputs, its lines for bad ones
     ramp = _ramp_scene(with_object=True).sample_cloud(np.random.default_rng(0))
