@@ -32,7 +32,7 @@ import numpy as np
 from baseplace.geometry.poses import BasePose
 from baseplace.placement.candidates import RadialCandidate, pickup, radial_search
 from baseplace.placement.irm_candidates import IrmSettings, irm_candidates
-from baseplace.placement.motion import MotionChecker
+from baseplace.placement.motion import MotionChecker, MotionSettings
 from baseplace.placement.robustness import BaseErrorModel, RobustnessSettings, perturbed, score_candidates
 from baseplace.reachability.rmap import ReachabilityMap
 from baseplace.robots.model import Robot
@@ -62,13 +62,14 @@ def execution_trial(robot: Robot, rmap: ReachabilityMap, shapes: RobotShapes, se
                     robust: RobustnessSettings, rank_key: str = "rate", draws: int = 5,
                     s: TableGridSettings | None = None,
                     execution: ExecutionSettings | None = None,
-                    cut: str = "support") -> dict[str, Any]:  # fmt: skip
+                    cut: str = "support", motion: MotionSettings | None = None) -> dict[str, Any]:  # fmt: skip
     """One table-grid trial executed under navigation error (module docstring); JSON-ready.
 
     ``robust`` scores the first ``robust.pool`` verified candidates; ``rank_key`` ("rate" or "low",
     the Wilson lower bound) orders them. ``cut``: where the robot's model of the bottle begins,
     "support" (the measured table top, :func:`support_height`) or "estimate" (the estimate's
-    bottom; protocol v1).
+    bottom; protocol v1). ``motion``: the robot's planner settings, for the default method's
+    check and for the execution (default: ``MotionSettings()``).
     """
     if cut not in ("support", "estimate"):
         raise ValueError(f"cut must be 'support' or 'estimate', got {cut!r}")
@@ -96,6 +97,7 @@ def execution_trial(robot: Robot, rmap: ReachabilityMap, shapes: RobotShapes, se
         arm,
         Environment(robot, VoxelMap.from_points(seen, s.voxel_size)),
         Environment(robot, obstacles, grasped=VoxelMap.from_points(held, s.voxel_size), hand_arm=arm.name),
+        settings=motion,
     )
     method_grasps = s.grasps(p_est, s.method_top_below)
     true_grasps = s.grasps(p_true)
