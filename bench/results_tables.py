@@ -1,10 +1,11 @@
 """The docs' tables, printed as Markdown from the results files the commands wrote (never typed in).
 
-Usage: python bench/results_tables.py segmentation|surface|table-grid [RESULTS.json ...]
+Usage: python bench/results_tables.py segmentation|surface|table-grid|execution [RESULTS.json ...]
 
 segmentation: bench/results/experiment_segmentation.json (held-out) [+ _dev.json]
 surface:      bench/results/surface_map.json
 table-grid:   bench/results/experiment_table_grid.json (held-out) [+ dev files]
+execution:    bench/results/execution_table_grid_heldout_v2.json [+ other runs]
 """
 
 from __future__ import annotations
@@ -101,9 +102,36 @@ def table_grid(paths: list[str]) -> None:
         print(f"\n{Path(path).name}: {_source(_load(path))}")
 
 
+def execution(paths: list[str]) -> None:
+    """Per file: successful draws per method with the Wilson interval, and the outcome counts."""
+    names = {"baseline": "seed 004 fixed pose", "radial": "seed 004 radial (Alg. 1-2)",
+             "default": "baseplace default (motion check)", "robust": "baseplace, ranked by robustness"}  # fmt: skip
+    kinds = ("no_placement", "no_grasp", "no_motion", "motion_collision")
+    for path in paths:
+        data = _load(path)
+        pr = data["protocol"]
+        print(f"Protocol v{pr.get('version', 1)}, {pr['split']} seeds {pr['seeds']}, {pr['cells']} cells, "
+              f"{pr['draws']} draws each; from {_source(data)}:\n")  # fmt: skip
+        print("| method | success | 95 % interval | " + " | ".join(kinds) + " | mean planning [s] |")
+        print("|---|---|---|" + "---|" * len(kinds) + "---|")
+        for m, row in data["summary"].items():
+            low, high = row.get("ci95", [None, None])
+            ci = f"{100 * low:.0f}-{100 * high:.0f} %" if low is not None else "-"
+            counts = " | ".join(str(row["outcomes"].get(k, 0)) for k in kinds)
+            print(f"| {names.get(m, m)} | {row['success']}/{row['draws']} ({100 * row['rate']:.1f} %) | {ci} "
+                  f"| {counts} | {row['mean_plan_s']} |")  # fmt: skip
+        print()
+
+
 def main() -> None:
     kind, paths = sys.argv[1], sys.argv[2:]
-    {"segmentation": segmentation, "surface": surface, "table-grid": table_grid}[kind](paths)
+    tables = {
+        "segmentation": segmentation,
+        "surface": surface,
+        "table-grid": table_grid,
+        "execution": execution,
+    }
+    tables[kind](paths)
 
 
 if __name__ == "__main__":
