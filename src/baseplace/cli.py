@@ -33,12 +33,13 @@ KINDS = {"robots": "robots", "robot": "robot_check", "build-map": "build_map", "
 class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors and exit code 2 (and the failure report with --json)."""
 
-    json_kind: str | None = None  # set by main when the command line asks for --json
+    json_argv: list[str] | None = None  # set by main when the command line asks for --json
+    json_kind: str | None = None  # the command's kind; None for an unknown command
 
     def error(self, message: str) -> NoReturn:
         text = f"{message} (see '{self.prog} --help')"
-        if _Parser.json_kind is not None:
-            _emit_error(_Parser.json_kind, text, 2, {})
+        if _Parser.json_argv is not None:
+            _emit_error(_Parser.json_kind, text, 2, {"argv": _Parser.json_argv})
         sys.stderr.write(f"error: {text}\n")
         raise SystemExit(2)
 
@@ -62,7 +63,7 @@ OBJECT_HELP = (
 )
 
 
-def _emit_error(kind: str, message: str, code: int, inputs: dict[str, Any]) -> None:
+def _emit_error(kind: str | None, message: str, code: int, inputs: dict[str, Any]) -> None:
     """The failure report of a command that could not start (bad arguments) on stdout."""
     from baseplace.jobs.report import ErrorReport
 
@@ -417,7 +418,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point: parse, run one job, print its report; errors map to exit codes 2 and 3."""
     argv = list(sys.argv[1:] if argv is None else argv)
     words = [a for a in argv if not a.startswith("-")]
-    _Parser.json_kind = KINDS.get(words[0], "place") if "--json" in argv and words else None
+    _Parser.json_argv = argv if "--json" in argv else None
+    _Parser.json_kind = KINDS.get(words[0]) if words else None
     args = build_parser().parse_args(argv)
     from baseplace.jobs.report import NoResultError, Report
     from baseplace.jobs.text import report_text
@@ -435,7 +437,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return exc.exit_code
     except BaseplaceError as exc:
         if as_json:
-            _emit_error(KINDS.get(args.command, "place"), str(exc), exc.exit_code, _echo(args))
+            _emit_error(KINDS.get(args.command), str(exc), exc.exit_code, _echo(args))
         sys.stderr.write(f"error: {exc}\n")
         return exc.exit_code
     except KeyboardInterrupt:

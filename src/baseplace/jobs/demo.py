@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -66,7 +65,7 @@ def demo_job(job: DemoJob, progress: Progress | None = None) -> DemoReport:
     """
     from baseplace.files import atomic_write
     from baseplace.geometry.poses import parse_pose6
-    from baseplace.guards import check_output_path
+    from baseplace.guards import check_output_dir, check_output_path
     from baseplace.navigation.navmap import navigation_map
     from baseplace.navigation.planners import plan_path
     from baseplace.placement.pipeline import PlaceSettings, place
@@ -78,12 +77,7 @@ def demo_job(job: DemoJob, progress: Progress | None = None) -> DemoReport:
     from baseplace.viz.placement import plot_placement
     from baseplace.viz.viewer import save_view_data, view_data_from
 
-    out_dir = Path(job.out)
-    if out_dir.exists() and not out_dir.is_dir():
-        from baseplace.errors import InputError
-
-        raise InputError(f"--out {job.out} exists and is not a directory")
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir = check_output_dir(job.out, "--out")
     json_path = check_output_path(out_dir / "demo.json", "--out", (".json",))
     t0 = time.perf_counter()
     robot = Robot("tiago")
