@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 
 import jsonschema
 import pytest
@@ -18,8 +17,6 @@ import pytest
 from baseplace.cli import KINDS, build_parser
 from baseplace.jobs import result_schema
 from conftest import run_cli
-
-SANDBOX = str(Path(__file__).resolve().parents[2] / "shared" / "data" / "maps" / "tb3_sandbox.yaml")
 
 
 def _commands() -> dict[tuple[str, ...], argparse.ArgumentParser]:

@@ -31,7 +31,7 @@ from baseplace.jobs.inputs import (
     write_mcap,
 )
 from baseplace.jobs.place import motion_and_robustness_json
-from baseplace.jobs.report import CandidatesReport, NoResultError, PoseRecord, RobotRef, path_json, wrap_angle
+from baseplace.jobs.report import CandidatesReport, NoResultError, PoseRecord, RobotRef, path_json
 
 if TYPE_CHECKING:
     from baseplace.placement.motion import MotionSettings
@@ -107,14 +107,6 @@ def check_object(grid: Any, p_o: np.ndarray, reach: float) -> None:
             f"--object ({x:.2f}, {y:.2f}) lies inside an obstacle or unknown space: the nearest free cell is "
             f"{gap[row, col]:.2f} m away, beyond the arm's reach ({reach:.2f} m)"
         )
-
-
-def _path_rows(route: Any, goal_yaw: float) -> list[list[float]]:
-    """A grid path (K, 2) as rows x, y, yaw: the direction of travel, the goal's heading at the end."""
-    xy = np.asarray(route, dtype=float)[:, :2]
-    step = np.diff(xy, axis=0)
-    yaw = np.r_[np.arctan2(step[:, 1], step[:, 0]), goal_yaw] if len(step) else np.array([goal_yaw])
-    return path_json(np.c_[xy, yaw])
 
 
 def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> CandidatesReport:
@@ -240,7 +232,7 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
         object=[float(v) for v in p_o],
         robot_pose=None if robot_pose is None else PoseRecord.from_xyyaw(*robot_pose), candidates=rows,
         rejected=[{"x": round(xy[0], 4), "y": round(xy[1], 4), "reason": why} for xy, why in rejected],
-        path=None if route is None or chosen is None else _path_rows(route, wrap_angle(chosen.pose.yaw)),
+        path=None if route is None or chosen is None else path_json(route.poses),
         object_shape={"requested": job.object_shape,
                       "allowed": grasped.to_json() if isinstance(grasped, GraspedObject) else None},
         settings={"r_r": settings.r_r, "d_min": settings.d_min, "d_max": round(settings.d_max, 4),
@@ -249,14 +241,14 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
     if png is not None:
         from baseplace.viz.candidates import plot_candidates
 
-        plot_candidates(grid, p_o, ranked, rejected, png, robot_pose, route,
+        plot_candidates(grid, p_o, ranked, rejected, png, robot_pose, None if route is None else route.poses,
                         f"{job.method} candidates for {robot.name}: {len(ranked)} verified, {len(rejected)} rejected")  # fmt: skip
         report.outputs["png"] = str(png)
     if mcap is not None:
         T_c = [PoseRecord.from_xyyaw(c.pose.x, c.pose.y, c.pose.yaw).T_world_base for c in ranked]
         world = job.cloud.bag.world_frame if job.cloud.bag is not None else "map"
         write_mcap(mcap, world, bag_stamp(job.cloud), candidates=T_c, placements=T_c[:1],
-                   paths=[] if route is None else [np.asarray(route)])  # fmt: skip
+                   paths=[] if route is None else [route.poses])  # fmt: skip
         report.outputs["mcap"] = str(mcap)
     now = time.perf_counter()
     report.timings_ms = {"load": (t_load - t0) * 1e3, "cloud": (t_search - t_load) * 1e3,
