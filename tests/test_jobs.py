@@ -76,6 +76,12 @@ def test_scene_and_occupancy_jobs_against_their_files(tmp_path):
     assert np.abs(points[:, 2]).max() < 0.06 and np.ptp(points[:, 0]) == pytest.approx(
         4.0, abs=0.1
     )  # a flat 4 m floor
+    from baseplace.jobs.inputs import world_cloud
+
+    # a cloud file given without a transform (the CLI always passes one, maybe None) is z up, as loaded
+    np.testing.assert_array_equal(np.asarray(world_cloud(baseplace.CloudInput([str(cloud)]))), points)
+    with pytest.raises(InputError, match="one --transform per --cloud"):
+        world_cloud(baseplace.CloudInput([str(cloud)], ["0 0 1", "0 0 1"]))
     truth = json.loads(Path(obj["outputs"]["truth"]).read_text())
     assert truth and Path(obj["outputs"]["truth"]).parent == tmp_path
     grid = _valid(baseplace.occupancy_job(str(SANDBOX)))
