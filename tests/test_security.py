@@ -249,10 +249,7 @@ TARGET = "1 0 1 0 0 0"
 SANDBOX = str(Path(__file__).resolve().parents[2] / "shared" / "data" / "maps" / "tb3_sandbox.yaml")
 
 
-@pytest.mark.skipif(os.access(UNWRITABLE, os.W_OK), reason="needs a folder this user cannot write")
-@pytest.mark.parametrize(
-    "args,option",
-    [
+UNWRITABLE_CASES = [
         (["build-map", "--out", "U/m.rmap"], "--out"),
         (["surface-map", "--polygon", "0,0;1,0;1,1", "--height", "0.7", "--out", "U/s.smap"], "--out"),
         (["surface-map", "--polygon", "0,0;1,0;1,1", "--height", "0.7", "--out", "s.smap", "--png", "U/s.png"], "--png"),
@@ -268,8 +265,11 @@ SANDBOX = str(Path(__file__).resolve().parents[2] / "shared" / "data" / "maps" /
         (["scene", "generate", "--out", "s.ply", "--truth", "U/t.json"], "--truth"),
         (["demo", "--out", "U/out"], "--out"),
         (["robot", "check", "tiago", "--png", "U/r.png"], "--png"),
-    ],
-)  # fmt: skip
+]  # fmt: skip
+
+
+@pytest.mark.skipif(os.access(UNWRITABLE, os.W_OK), reason="needs a folder this user cannot write")
+@pytest.mark.parametrize("args,option", UNWRITABLE_CASES)
 def test_an_unwritable_output_of_any_command_fails_before_any_work(tmp_path, args, option):
     """Issue 16 item 5: every output is checked first; no cloud is read (c.pcd does not exist), no map built."""
     args = [a.replace("U/", UNWRITABLE + "/") for a in args]
@@ -277,6 +277,22 @@ def test_an_unwritable_output_of_any_command_fails_before_any_work(tmp_path, arg
     assert one_line(proc) == f"error: {option} directory '{UNWRITABLE}' is not writable"
     assert json.loads(proc.stdout)["exit_code"] == 2
     assert list(tmp_path.iterdir()) == []  # nothing written, not even the cache
+
+
+@pytest.mark.skipif(os.access(UNWRITABLE, os.W_OK), reason="needs a folder this user cannot write")
+def test_an_unwritable_output_is_refused_before_the_heavy_libraries_load(tmp_path):
+    """Before any work means before the robot model, numba, the plots or scipy are even imported."""
+    cases = [[a.replace("U/", UNWRITABLE + "/") for a in args] for args, _ in UNWRITABLE_CASES]
+    code = f"""
+import sys
+from baseplace.cli import main
+codes = [main(args) for args in {cases!r}]
+print(codes, sorted(m for m in ("numba", "pinocchio", "matplotlib", "scipy", "ompl") if m in sys.modules))
+"""
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path,
+                          env=_env(BASEPLACE_CACHE=str(tmp_path / "cache")), timeout=300)  # fmt: skip
+    assert proc.stdout.strip() == f"{[2] * len(cases)} []", proc.stdout + proc.stderr[-2000:]
+    assert proc.stderr.count("is not writable") == len(cases)
 
 
 @pytest.mark.parametrize(

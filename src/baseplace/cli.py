@@ -101,16 +101,16 @@ def _robustness_settings(args: argparse.Namespace) -> Any:
 
 
 def _build_map(args: argparse.Namespace, progress: Progress) -> Any:
+    from baseplace.jobs.inputs import out_path
+    from baseplace.jobs.reach import MAP_SUFFIXES
+
+    out_path(args.out, "--out", MAP_SUFFIXES)  # before the settings' imports and the checkpoint's name
     from baseplace.reachability.build import BuildSettings
     from baseplace.reachability.checkpoint import default_checkpoint_path
 
     settings = BuildSettings(samples=args.samples, seed=args.seed, voxel_size=args.voxel_size,
                              orientation_resolution=args.orientation_resolution,
                              self_collision=args.self_collision, manipulability=args.manipulability)  # fmt: skip
-    from baseplace.jobs.inputs import out_path
-    from baseplace.jobs.reach import MAP_SUFFIXES
-
-    out_path(args.out, "--out", MAP_SUFFIXES)  # before the checkpoint's name is derived from it
     checkpoint = None if args.no_resume else default_checkpoint_path(args.out)
     if checkpoint is not None and checkpoint.exists() and not args.json:
         sys.stderr.write(f"resuming from checkpoint {checkpoint}\n")
@@ -128,12 +128,22 @@ def _build_map(args: argparse.Namespace, progress: Progress) -> Any:
 
 
 def _place(a: argparse.Namespace, progress: Progress) -> Any:
+    job = place.PlaceJob(a.target or [], a.robot, a.arm, _cloud(a), a.occupancy, a.map, None, a.seed, a.start,
+                         a.planner, a.object, a.floor, a.out, a.mcap)  # fmt: skip
+    job.check_outputs()  # before the settings' imports (seconds)
     from baseplace.placement.pipeline import PlaceSettings
 
-    settings = PlaceSettings(strategy=a.strategy, placements=a.placements, tries=a.tries, resolution=a.resolution,
-                             motion=_motion_settings(a), robustness=_robustness_settings(a))  # fmt: skip
-    return place.place_job(place.PlaceJob(a.target or [], a.robot, a.arm, _cloud(a), a.occupancy, a.map, settings,
-                                          a.seed, a.start, a.planner, a.object, a.floor, a.out, a.mcap), progress)  # fmt: skip
+    job.settings = PlaceSettings(strategy=a.strategy, placements=a.placements, tries=a.tries, resolution=a.resolution,
+                                 motion=_motion_settings(a), robustness=_robustness_settings(a))  # fmt: skip
+    return place.place_job(job, progress)
+
+
+def _candidates(a: argparse.Namespace, progress: Progress) -> Any:
+    job = candidates.CandidatesJob(a.object, a.occupancy, _cloud(a), a.robot_pose, a.method, a.robot, a.arm, a.map,
+                                   a.standoff, a.seed, a.object_shape, None, None, a.png, a.mcap)  # fmt: skip
+    job.check_outputs()  # before the settings' imports (seconds)
+    job.motion, job.robustness = _motion_settings(a), _robustness_settings(a)
+    return candidates.candidates_job(job, progress)
 
 
 def _demo(a: argparse.Namespace, progress: Progress) -> Any:
@@ -149,9 +159,7 @@ JOBS: dict[str, Callable[[argparse.Namespace, Progress], Any]] = {
     "build-map": _build_map,
     "reach": lambda a, _: reach.reach_job(reach.ReachJob(a.map, a.target, a.targets, a.base, a.bases, a.robot)),
     "place": _place,
-    "candidates": lambda a, progress: candidates.candidates_job(candidates.CandidatesJob(
-        a.object, a.occupancy, _cloud(a), a.robot_pose, a.method, a.robot, a.arm, a.map, a.standoff, a.seed,
-        a.object_shape, _motion_settings(a), _robustness_settings(a), a.png, a.mcap), progress),
+    "candidates": _candidates,
     "navigate": lambda a, _: navigate.navigate_job(navigate.NavigateJob(
         a.start, a.goal, _cloud(a), a.robot, a.planner, a.time_limit, a.resolution, a.seed, a.out, a.mcap)),
     "surface-map": lambda a, progress: surface.surface_map_job(surface.SurfaceMapJob(

@@ -34,6 +34,8 @@ from baseplace.jobs.place import motion_and_robustness_json
 from baseplace.jobs.report import CandidatesReport, NoResultError, PoseRecord, RobotRef, path_json
 
 if TYPE_CHECKING:
+    from pathlib import Path
+
     from baseplace.placement.motion import MotionSettings
     from baseplace.placement.robustness import RobustnessSettings
     from baseplace.reachability.rmap import ReachabilityMap
@@ -89,6 +91,14 @@ class CandidatesJob:
             "rank": "reachability" if self.robustness is None else self.robustness.rank,
         }  # fmt: skip
 
+    def check_outputs(self) -> tuple[Path | None, Path | None]:
+        """The PNG and MCAP outputs (and the fused cloud's), checked before any work.
+
+        Front ends call it before they build the settings, whose imports take seconds.
+        """
+        out_path(self.cloud.fused_out, "--fused-out", (".bt",))
+        return out_path(self.png, "--png", PLOT_SUFFIXES), out_path(self.mcap, "--mcap", (".mcap",))
+
 
 def check_object(grid: Any, p_o: np.ndarray, reach: float) -> None:
     """Clear errors for an object outside the map or buried in an obstacle (no free cell in reach)."""
@@ -116,6 +126,9 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
         InputError: bad input (no grid, an object outside it or in an obstacle, an unwritable output).
         NoResultError: no verified candidate; ``report`` lists the rejected positions and why.
     """
+    if job.method not in ("radial", "irm"):
+        raise InputError(f"unknown method {job.method!r}; valid: irm, radial")
+    png, mcap = job.check_outputs()  # outputs first: before the imports and any work
     from baseplace.geometry.poses import BasePose
     from baseplace.placement.candidates import RadialSettings, motion_costs, pickup, radial_search
     from baseplace.placement.irm_candidates import (
@@ -133,10 +146,6 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
     from baseplace.world.gridnav import GridNavigator
 
     t0 = time.perf_counter()
-    if job.method not in ("radial", "irm"):
-        raise InputError(f"unknown method {job.method!r}; valid: irm, radial")
-    png = out_path(job.png, "--png", PLOT_SUFFIXES)
-    mcap = out_path(job.mcap, "--mcap", (".mcap",))
     robust = job.robustness or RobustnessSettings()
     p_o = parse_xyz(job.object, "--object")
     robot_pose = None if job.robot_pose is None else base_xyyaw(job.robot_pose, "--robot-pose")

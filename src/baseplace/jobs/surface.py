@@ -81,14 +81,14 @@ def surface_map_job(job: SurfaceMapJob, progress: Progress | None = None) -> Sur
     Raises:
         InputError: bad input (a malformed polygon, an unknown arm, an unwritable output).
     """
+    out = out_path(job.out, "--out", SURFACE_SUFFIXES)  # outputs first: before the imports and any work
+    png = out_path(job.png, "--png", PLOT_SUFFIXES)
     from baseplace.placement.surface_map import build_surface_map, parse_polygon
     from baseplace.placement.surface_storage import save_surface_map
     from baseplace.reachability.build import BuildSettings
     from baseplace.reachability.cache import cached_map
 
     t0 = time.perf_counter()
-    out = out_path(job.out, "--out", SURFACE_SUFFIXES)
-    png = out_path(job.png, "--png", PLOT_SUFFIXES)
     assert out is not None
     polygon = parse_polygon(job.polygon)
     robot = load_robot(job.robot)
