@@ -11,7 +11,6 @@ import os
 import shutil
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -235,12 +234,9 @@ LONG = "x" * 300
 )
 def test_odd_output_paths_fail_fast_with_one_line(tmp_path, args, fragment):
     (tmp_path / "adir.rmap").mkdir()
-    t0 = time.perf_counter()
     proc = cli(*args, cwd=tmp_path, env=_env(BASEPLACE_CACHE=str(tmp_path / "cache")))
-    elapsed = time.perf_counter() - t0
     line = one_line(proc)
     assert fragment in line
-    assert elapsed < 5.0  # 2 s of checking plus the interpreter's start on a loaded machine
     assert sorted(p.name for p in tmp_path.iterdir()) == ["adir.rmap"]
 
 
