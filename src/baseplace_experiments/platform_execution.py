@@ -46,7 +46,7 @@ from shapely.geometry import Polygon
 from baseplace.errors import BaseplaceError
 from baseplace.geometry.poses import FloatArray
 from baseplace.placement.motion import MotionChecker, MotionSettings, transit_environment
-from baseplace.placement.pipeline import POSE_ONLY_CHECKS, PlaceSettings, _obstacles, place
+from baseplace.placement.pipeline import POSE_ONLY_CHECKS, PlaceSettings, place, place_obstacles
 from baseplace.placement.robustness import BaseErrorModel, RobustnessSettings
 from baseplace.reachability.rmap import ReachabilityMap
 from baseplace.robots.model import Robot
@@ -281,7 +281,7 @@ def platform_scene_trials(robot: Robot, rmap: ReachabilityMap, shapes: RobotShap
     )
     truth = GroundTruth()
     outline = footprint_outline(robot.spec.footprint_radius, robot.spec.footprint_polygon)
-    obstacles = _obstacles(terrain, terrain.segmentation, PlaceSettings(), outline)
+    obstacles = place_obstacles(terrain, PlaceSettings(), outline)
     out: list[dict[str, Any]] = []
     for g, (grasp, obj) in enumerate(zip(grasps, objects, strict=True)):
         if len(out) >= queries:
