@@ -73,6 +73,19 @@ def test_a_cached_terrain_equals_a_fresh_segmentation(points, fresh, cache_root)
     assert_same_terrain(first, fresh)
 
 
+def test_a_terrain_of_one_region_without_edges_round_trips(cache_root):
+    rng = np.random.default_rng(3)
+    flat = generate_scene(SceneSettings(n_planes=0, with_box=False, extent=(4.0, 4.0)), rng).sample_cloud(rng)
+    fresh = terrain_from_points(flat)
+    assert len(fresh.segmentation.regions) == 1 and fresh.graph.number_of_edges() == 0
+    cached_terrain(flat)
+    again = cached_terrain(flat)
+    assert "cache_read" in again.timings_ms
+    assert again.graph.number_of_edges() == 0 and len(again.segmentation.regions) == 1
+    assert np.array_equal(again.segmentation.labels, fresh.segmentation.labels)
+    assert np.array_equal(again.voxels.keys, fresh.voxels.keys)
+
+
 def test_other_points_or_settings_miss_the_cache(points, fresh, cache_root):
     cached_terrain(points)
     moved = points.copy()

@@ -65,8 +65,13 @@ def terrain_key(
     h = hashlib.sha256()
     settings = f"{FORMAT}/{FORMAT_VERSION} {code_digest()} {algorithm} {resolution!r} {voxel_size!r} {graph_settings!r}"
     h.update(settings.encode() + b"\0" + repr(points.shape).encode() + b"\0")
-    h.update(points.data.cast("B"))
+    h.update(_raw(points))
     return h.hexdigest()
+
+
+def _raw(a: np.ndarray) -> memoryview | bytes:
+    """The bytes of a C-contiguous array, without a copy."""
+    return a.data.cast("B") if a.size else b""
 
 
 def check_up_direction_cached(points: ArrayLike, optical: bool = False) -> None:
@@ -188,7 +193,7 @@ def _digest(key: str, arrays: dict[str, np.ndarray]) -> str:
     for name in sorted(arrays):
         a = np.ascontiguousarray(arrays[name])
         h.update(f"\0{name} {a.dtype.str} {a.shape}\0".encode())
-        h.update(a.data.cast("B"))
+        h.update(_raw(a))
     return h.hexdigest()
 
 
