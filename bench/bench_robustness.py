@@ -27,7 +27,8 @@ Protocol (v2, fixed in writing here and in docs/placement.md before any v2 run):
   is evaluated, so the best any ranking of the pool could reach is reported too.
 * Query time (must-show c): ``place`` on generated scenes (``sim/scenes.py``, seed 000's
   platform scenes), a top-down grasp 0.45 m above an object as in ``bench_placement.py``, with the
-  motion check and the robustness score on (the defaults) and off, medians over the scenes; one
+  motion check and the robustness score on (the defaults) and off, medians over the scenes (all,
+  and those where both settings found a placement) and of the time the checks add; one
   query before the timed ones compiles the kernels.
 
 Usage: python bench/bench_robustness.py --part table --split dev|heldout [--cells 12]
@@ -39,6 +40,7 @@ from __future__ import annotations
 import argparse
 import itertools
 import math
+import os
 import time
 
 import numpy as np
@@ -204,16 +206,29 @@ def query_times(robot, rmap, seeds: list[int]) -> dict:  # type: ignore[no-untyp
         if k > 0:
             rows.append(row)
     both = [r for r in rows if "query" in r.get("off", {}) and "query" in r.get("on", {})]
-    med = {
-        name: float(np.median([r[name]["query"] for r in both])) if both else None for name in ("off", "on")
-    }
+    found = [r for r in both if r["off"]["found"] and r["on"]["found"]]
+
+    def medians(subset: list[dict]) -> dict:
+        if not subset:
+            return {"scenes": 0}
+        med = {name: float(np.median([r[name]["query"] for r in subset])) for name in ("off", "on")}
+        return {
+            "scenes": len(subset),
+            "median_query_ms_off": med["off"],
+            "median_query_ms_on": med["on"],
+            "median_motion_ms_on": float(np.median([r["on"]["motion"] for r in subset])),
+            "median_robustness_ms_on": float(np.median([r["on"]["robustness"] for r in subset])),
+            "median_added_ms": float(np.median([r["on"]["query"] - r["off"]["query"] for r in subset])),
+            "ratio_on_off": round(med["on"] / med["off"], 2) if med["off"] else None,
+        }
+
+    # every scene with a query (no placement in some: all candidates fail before the motion
+    # check, both settings cost the same), and the scenes where both settings found one
     return {
         "scenes": rows,
-        "median_query_ms_off": med["off"],
-        "median_query_ms_on": med["on"],
-        "median_motion_ms_on": float(np.median([r["on"]["motion"] for r in both])) if both else None,
-        "median_robustness_ms_on": float(np.median([r["on"]["robustness"] for r in both])) if both else None,
-        "ratio_on_off": round(med["on"] / med["off"], 2) if both and med["off"] else None,
+        "all": medians(both),
+        "found": medians(found),
+        "load_average_end": os.getloadavg(),
     }
 
 

@@ -1,10 +1,12 @@
 """The docs' tables, printed as Markdown from the results files the commands wrote (never typed in).
 
-Usage: python bench/results_tables.py segmentation|surface|table-grid [RESULTS.json ...]
+Usage: python bench/results_tables.py segmentation|surface|table-grid|execution|platform [RESULTS.json ...]
 
 segmentation: bench/results/experiment_segmentation.json (held-out) [+ _dev.json]
 surface:      bench/results/surface_map.json
 table-grid:   bench/results/experiment_table_grid.json (held-out) [+ dev files]
+execution:    bench/results/execution_table_grid_heldout_v2.json [+ other runs]
+platform:     bench/results/execution_platform_heldout.json [+ the dev run]
 """
 
 from __future__ import annotations
@@ -101,9 +103,75 @@ def table_grid(paths: list[str]) -> None:
         print(f"\n{Path(path).name}: {_source(_load(path))}")
 
 
+def execution(paths: list[str]) -> None:
+    """Per file: successful draws per method with the Wilson interval, and the outcome counts."""
+    names = {"baseline": "seed 004 fixed pose", "radial": "seed 004 radial (Alg. 1-2)",
+             "default": "baseplace default (motion check)", "robust": "baseplace, ranked by robustness"}  # fmt: skip
+    kinds = ("no_placement", "no_grasp", "no_motion", "motion_collision")
+    for path in paths:
+        data = _load(path)
+        pr = data["protocol"]
+        print(f"Protocol v{pr.get('version', 1)}, {pr['split']} seeds {pr['seeds']}, {pr['cells']} cells, "
+              f"{pr['draws']} draws each; from {_source(data)}:\n")  # fmt: skip
+        print("| method | success | 95 % interval | " + " | ".join(kinds) + " | mean planning [s] |")
+        print("|---|---|---|" + "---|" * len(kinds) + "---|")
+        for m, row in data["summary"].items():
+            low, high = row.get("ci95", [None, None])
+            ci = f"{100 * low:.0f}-{100 * high:.0f} %" if low is not None else "-"
+            counts = " | ".join(str(row["outcomes"].get(k, 0)) for k in kinds)
+            print(f"| {names.get(m, m)} | {row['success']}/{row['draws']} ({100 * row['rate']:.1f} %) | {ci} "
+                  f"| {counts} | {row['mean_plan_s']} |")  # fmt: skip
+        print()
+
+
+def platform(paths: list[str]) -> None:
+    """Per file: seed 000's platform scenes executed, per method (all classes, then per class)."""
+    from baseplace.placement.robustness import wilson_interval
+
+    names = {"TO": "seed 000 TO", "MR": "seed 000 MR", "MRTO": "seed 000 MRTO",
+             "default": "baseplace default (MR + motion check)", "robust": "baseplace, ranked by robustness"}  # fmt: skip
+    kinds = ("no_placement", "off_region", "no_grasp", "no_motion", "motion_collision")
+    for path in paths:
+        data = _load(path)
+        pr = data["protocol"]
+        print(f"{pr['split']} seeds {pr['seeds']}, classes {pr['classes']}, {pr['scenes_per_class']} scenes per "
+              f"class, {pr['queries_per_scene']} queries per scene ({data['queries']} queries), {pr['draws']} draws "
+              f"each; from {_source(data)}:\n")  # fmt: skip
+        print("| method | scenes | success | 95 % interval | success where placed | " + " | ".join(kinds)
+              + " | ok at the chosen pose | mean planning [s] |")  # fmt: skip
+        print("|---|---|---|---|---|" + "---|" * len(kinds) + "---|---|")
+        groups = [("all", data["trials"])] + [
+            (" ".join(map(str, c)), [t for t in data["trials"] if t["class"] == c]) for c in pr["classes"]
+        ]
+        for m in data["summary"]:
+            for label, trials in groups:
+                out = [o for t in trials for o in t["methods"][m]["outcomes"]]
+                ok, n = out.count("ok"), len(out)
+                placed = n - out.count("no_placement")
+                low, high = wilson_interval(ok, n)
+                nominal_ok = sum(t["methods"][m].get("at_nominal") == "ok" for t in trials)
+                with_pose = sum(t["methods"][m]["pose"] is not None for t in trials)
+                recorded = any("at_nominal" in t["methods"][m] for t in trials)
+                nominal = f"{nominal_ok}/{with_pose}" if recorded else "-"
+                counts = " | ".join(str(out.count(k)) for k in kinds)
+                rate = f"{ok}/{n} ({100 * ok / n:.1f} %)" if n else "-"
+                where = f"{ok}/{placed}" if placed else "-"
+                plan = sum(t["methods"][m]["plan_s"] for t in trials) / len(trials) if trials else 0.0
+                print(f"| {names.get(m, m)} | {label} | {rate} | {100 * low:.0f}-{100 * high:.0f} % | {where} | "
+                      f"{counts} | {nominal} | {plan:.2f} |")  # fmt: skip
+        print()
+
+
 def main() -> None:
     kind, paths = sys.argv[1], sys.argv[2:]
-    {"segmentation": segmentation, "surface": surface, "table-grid": table_grid}[kind](paths)
+    tables = {
+        "segmentation": segmentation,
+        "surface": surface,
+        "table-grid": table_grid,
+        "execution": execution,
+        "platform": platform,
+    }
+    tables[kind](paths)
 
 
 if __name__ == "__main__":

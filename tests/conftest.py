@@ -51,7 +51,10 @@ def run_cli(*args: str, env: dict[str, str] | None = None) -> subprocess.Complet
     os.environ.update(env or {})
     try:
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-            code = main(list(args))
+            try:
+                code = main(list(args))
+            except SystemExit as exc:  # argparse's errors, --help and --version exit
+                code = exc.code if isinstance(exc.code, int) else 1
     finally:
         os.environ.clear()
         os.environ.update(saved)

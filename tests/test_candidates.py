@@ -18,6 +18,7 @@ from shapely.geometry import Point, Polygon
 
 from baseplace.errors import InputError
 from baseplace.geometry.poses import BasePose, invert_transforms
+from baseplace.navigation.path import Path
 from baseplace.placement.candidates import (
     RadialCandidate,
     RadialSettings,
@@ -40,7 +41,7 @@ from baseplace.placement.pointing import pointed_object, pointing_ray, ray_box_d
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import Environment
-from baseplace.world.gridnav import GridNavigator, path_length
+from baseplace.world.gridnav import GridNavigator
 from baseplace.world.occupancy import OccupancyGrid, load_occupancy
 from conftest import SHARED
 
@@ -288,7 +289,11 @@ def test_pickup_reranks_after_a_navigation_failure():
     def navigate(current: BasePose, goal: BasePose):
         k = next(i for i, c in enumerate(cands) if c.pose == goal)
         tried.append(k)
-        return None if k == 0 else np.array([[current.x, current.y], [goal.x, goal.y]])
+        return (
+            None
+            if k == 0
+            else Path(np.array([[current.x, current.y, 0.0], [goal.x, goal.y, 0.0]]), "test", 0.0, ())
+        )
 
     def cost(c, pose):  # oracle: the seed's two distances
         return math.dist((pose.x, pose.y), (c.pose.x, c.pose.y)) + math.hypot(c.pose.x, c.pose.y)
@@ -325,7 +330,8 @@ def test_pickup_default_navigator_skips_an_enclosed_candidate():
     result = pickup([inside, outside], p_o, start, occupancy=grid, settings=RadialSettings(r_r=0.2))
     assert result.chosen is outside and result.tries == 2
     assert result.failures == [(inside, "no path")]
-    assert result.path is not None and np.allclose(result.path[-1], [2.0, 3.0])
+    assert result.path is not None and np.allclose(result.path.poses[-1], [2.0, 3.0, -math.pi / 2])
+    assert np.allclose(result.path.poses[0], [3.6, 2.8, 0.0])  # from the robot, as it stands
 
 
 # --- grid planner --------------------------------------------------------------------------------
@@ -361,8 +367,13 @@ def test_grid_planner_goes_around_a_wall():
     grid = _grid(_wall, n=60)
     radius = 0.15
     start, goal = (0.525, 0.525), (2.525, 0.525)  # cell centres
-    path = GridNavigator(grid, radius).plan(start, goal)
-    assert path is not None and np.allclose(path[0], start) and np.allclose(path[-1], goal)
+    route = GridNavigator(grid, radius).plan(start, goal, start_yaw=0.5, goal_yaw=-3.0)
+    assert isinstance(route, Path) and route.planner == "grid"  # the one path type (issue 16 item 6)
+    path = route.poses[:, :2]
+    assert np.allclose(path[0], start) and np.allclose(path[-1], goal)
+    assert route.poses[0, 2] == 0.5 and route.poses[-1, 2] == -3.0
+    step = np.diff(path, axis=0)  # in between, each pose heads to the next
+    np.testing.assert_allclose(route.poses[1:-1, 2], np.arctan2(step[1:, 1], step[1:, 0]))
     assert path[:, 1].max() > 1.4  # over the wall's end
     obstacles = _occupied_squares(grid)
     cells = grid.world_to_cell(path)
@@ -374,7 +385,7 @@ def test_grid_planner_goes_around_a_wall():
     d = np.min(np.linalg.norm(centres[:, None] - obstacles[None], axis=2), axis=1)
     free = (d > radius + 1e-9).reshape(grid.data.shape)  # "within radius" includes radius itself
     s, g = tuple(grid.world_to_cell(start)[0][::-1]), tuple(grid.world_to_cell(goal)[0][::-1])
-    assert path_length(path) == pytest.approx(_oracle_length(free, s, g, RES), abs=1e-9)
+    assert route.length == pytest.approx(_oracle_length(free, s, g, RES), abs=1e-9)
 
 
 def test_grid_planner_errors_and_no_path():
@@ -399,7 +410,7 @@ def test_grid_travel_matches_planned_length():
     goal = (2.525, 0.525)
     path = nav.plan((0.525, 0.525), goal)
     assert path is not None
-    assert nav.travel(BasePose(0.525, 0.525, 0.0), np.array([goal]))[0] == pytest.approx(path_length(path))
+    assert nav.travel(BasePose(0.525, 0.525, 0.0), np.array([goal]))[0] == pytest.approx(path.length)
 
 
 # --- pointing ------------------------------------------------------------------------------------

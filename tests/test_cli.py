@@ -173,6 +173,11 @@ def test_demo_places_on_the_platform_and_drives_up_the_ramp(tmp_path):
     assert proc.returncode == 0, proc.stderr
     result = json.loads(proc.stdout)
     assert json.loads((tmp_path / "out" / "demo.json").read_text()) == result
+    import jsonschema
+
+    from baseplace.jobs import result_schema
+
+    jsonschema.validate(result, result_schema())
     assert (tmp_path / "out" / "demo.png").stat().st_size > 10_000
     p = result["placement"]
     # On the platform (the generator's truth: 0.3 m high, x 0.3..2.9, y -1.3..1.3), level.

@@ -134,3 +134,30 @@ def test_execution_trial_runs_every_method_on_the_same_draws(tiago, tiago_map, s
         assert entry["success"] == entry["outcomes"].count("ok")
     summary = summarise_execution([out])
     assert all(summary[m]["draws"] == 2 for m in EXECUTION_METHODS)
+
+
+def test_the_bottle_is_cut_at_the_measured_table_top_when_the_estimate_is_high():
+    from baseplace_experiments.execution_experiment import _kept_rows, support_height
+    from baseplace_experiments.table_grid import TableGridSettings, object_cloud, table_cloud
+
+    s = TableGridSettings()
+    p = s.cell_centre(0, 0)
+    rng = np.random.default_rng(3)
+    bottle = object_cloud(p, s)
+    cloud = np.concatenate([table_cloud(s), bottle])
+    seen = cloud + rng.normal(0.0, s.cloud_sigma, cloud.shape)
+    estimate = p + np.array([0.005, -0.004, 0.012])  # 1.2 cm high, as v1's failing held-out trial
+    z = support_height(seen, estimate, s)
+    assert abs(z - s.table_height) < 0.003  # the generator's table top, not the estimate's bottom
+    is_bottle = np.arange(len(seen)) >= len(cloud) - len(bottle)
+    # what stays an obstacle around the bottle must not rise above the true table top by more than
+    # the 5 mm margin and the support height's error (3 mm); the estimate's cut leaves its foot
+    foot = is_bottle & (seen[:, 2] > s.table_height + 0.008)
+    for bottom, leaves_foot in ((z, False), (None, True)):
+        kept = np.zeros(len(seen), dtype=bool)
+        kept[_kept_rows(seen, estimate, s, bottom)] = True
+        assert bool((kept & foot).any()) == leaves_foot
+    far = ~is_bottle & (np.hypot(*(cloud[:, :2] - p[:2]).T) > s.object_width / 2 + s.hand_clearance + 0.02)
+    kept = np.zeros(len(seen), dtype=bool)
+    kept[_kept_rows(seen, estimate, s, z)] = True
+    assert kept[far].all()  # the table away from the bottle stays an obstacle

@@ -167,3 +167,28 @@ def test_planned_and_shortened_path_is_free_by_an_independent_check(tiago):
         steps = max(1, int(np.ceil(np.linalg.norm(b - a) / 0.01)))
         for s in np.linspace(0.0, 1.0, steps + 1):
             assert shapes.touching(a + s * (b - a), np.eye(4), [table]) is None
+
+
+def test_a_check_budget_stops_planning_before_the_time_limit(tiago, wall_scene):
+    """In the caged scene no path exists, so RRTConnect runs until a limit: with a 60 s time limit
+    and a budget of 200 validity checks it must stop on the budget (counted independently by
+    wrapping the environment's collision check), a few checks of one extension past it at most."""
+    _, q, wall, _ = wall_scene
+    arm = tiago.arm()
+    env = Environment(tiago, wall)
+    counted = [0]
+    colliding = env.colliding_arm
+
+    def counting(*args, **kwargs):  # type: ignore[no-untyped-def]
+        counted[0] += 1
+        return colliding(*args, **kwargs)
+
+    env.colliding_arm = counting  # type: ignore[method-assign]
+    settings = MotionSettings(pregrasp_distance=0.03, time_limit=60.0, max_checks=200)
+    motion = MotionChecker(tiago, arm, env, settings=settings)
+    path, planned = motion.joint_path(q, np.eye(4), seed=1)
+    assert path is None and planned
+    line = int(np.ceil(np.linalg.norm(q - motion.q_start) / settings.joint_resolution))
+    assert 200 <= counted[0] <= 200 + line + 2 + 100  # the straight line, the ends, one extension
+    with pytest.raises(Exception, match="max_checks"):
+        MotionSettings(max_checks=0)

@@ -108,3 +108,22 @@ def test_a_step_past_two_seconds_shows_a_status_line_on_a_terminal(tmp_path):
     assert code == 3 and "baseplace navigate: working, 00:0" in err and "error: no path" in err
     code, _, err = _stderr_on_a_terminal(*args, "--json")
     assert code == 3 and "working" not in err
+
+
+def test_one_progress_bar_type_counts_loops_in_their_own_unit():
+    """The experiments' loops use the jobs' ProgressBars (one type): ``count(k)`` adds k done."""
+    import io
+
+    from baseplace.status import ProgressBars
+
+    out = io.StringIO()
+    with ProgressBars(stream=out) as bars:
+        count = bars.counter("osrm experiment", 10, "scenes")
+        count(3)
+        count(4)
+        bar = bars.bars["osrm experiment"]
+        assert (bar.n, bar.total, bar.unit) == (7, 10, "scenes")
+    assert bars.bars == {} and "osrm experiment" in out.getvalue() and "0.00/10.0" not in out.getvalue()
+    with ProgressBars(enabled=False) as quiet:  # --json: nothing shown
+        quiet.counter("x", 5)(5)
+    assert quiet.bars == {}

@@ -160,7 +160,7 @@ def test_discounted_samples_spread_and_stay_reachable(pr2, table_map):
     for discounted in (False, True):
         sampler = SurfaceSampler(table_map, pr2, candidates=20, discounted=discounted)
         samples = np.array([[s.x, s.y] for s in (sampler.sample(rng) for _ in range(25))])
-        assert np.all(table_map.reachability(np.c_[samples, [s.theta for s in sampler.history]]) > 0)
+        assert np.all(table_map.reachability(np.c_[samples, [s.yaw for s in sampler.history]]) > 0)
         d = np.linalg.norm(samples[:, None] - samples[None], axis=-1)
         spread[discounted] = d[np.triu_indices(len(d), 1)].mean()
     assert spread[True] > 1.2 * spread[False]
@@ -199,6 +199,6 @@ def test_nothing_found_when_every_draw_fails(pr2, table_map):
 def test_attachments(pr2, table_map):
     poses = grounding(table_map, np.random.default_rng(3), robot=pr2, candidates=10)
     first, second = next(poses), next(poses)
-    assert reachability(table_map, (first.x, first.y, first.theta)) == pytest.approx(first.reachability)
-    assert math.hypot(first.x - second.x, first.y - second.y) > 0.1 or abs(first.theta - second.theta) > 0.3
+    assert reachability(table_map, (first.x, first.y, first.yaw)) == pytest.approx(first.reachability)
+    assert math.hypot(first.x - second.x, first.y - second.y) > 0.1 or abs(first.yaw - second.yaw) > 0.3
     assert reachability(table_map, (0.7, 0.3, 0.0)) == 0.0  # standing in the table

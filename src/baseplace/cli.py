@@ -33,12 +33,13 @@ KINDS = {"robots": "robots", "robot": "robot_check", "build-map": "build_map", "
 class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors and exit code 2 (and the failure report with --json)."""
 
-    json_kind: str | None = None  # set by main when the command line asks for --json
+    json_argv: list[str] | None = None  # set by main when the command line asks for --json
+    json_kind: str | None = None  # the command's kind; None for an unknown command
 
     def error(self, message: str) -> NoReturn:
         text = f"{message} (see '{self.prog} --help')"
-        if _Parser.json_kind is not None:
-            _emit_error(_Parser.json_kind, text, 2, {})
+        if _Parser.json_argv is not None:
+            _emit_error(_Parser.json_kind, text, 2, {"argv": _Parser.json_argv})
         sys.stderr.write(f"error: {text}\n")
         raise SystemExit(2)
 
@@ -62,7 +63,7 @@ OBJECT_HELP = (
 )
 
 
-def _emit_error(kind: str, message: str, code: int, inputs: dict[str, Any]) -> None:
+def _emit_error(kind: str | None, message: str, code: int, inputs: dict[str, Any]) -> None:
     """The failure report of a command that could not start (bad arguments) on stdout."""
     from baseplace.jobs.report import ErrorReport
 
@@ -100,16 +101,16 @@ def _robustness_settings(args: argparse.Namespace) -> Any:
 
 
 def _build_map(args: argparse.Namespace, progress: Progress) -> Any:
+    from baseplace.jobs.inputs import out_path
+    from baseplace.jobs.reach import MAP_SUFFIXES
+
+    out_path(args.out, "--out", MAP_SUFFIXES)  # before the settings' imports and the checkpoint's name
     from baseplace.reachability.build import BuildSettings
     from baseplace.reachability.checkpoint import default_checkpoint_path
 
     settings = BuildSettings(samples=args.samples, seed=args.seed, voxel_size=args.voxel_size,
                              orientation_resolution=args.orientation_resolution,
                              self_collision=args.self_collision, manipulability=args.manipulability)  # fmt: skip
-    from baseplace.jobs.inputs import out_path
-    from baseplace.jobs.reach import MAP_SUFFIXES
-
-    out_path(args.out, "--out", MAP_SUFFIXES)  # before the checkpoint's name is derived from it
     checkpoint = None if args.no_resume else default_checkpoint_path(args.out)
     if checkpoint is not None and checkpoint.exists() and not args.json:
         sys.stderr.write(f"resuming from checkpoint {checkpoint}\n")
@@ -127,12 +128,22 @@ def _build_map(args: argparse.Namespace, progress: Progress) -> Any:
 
 
 def _place(a: argparse.Namespace, progress: Progress) -> Any:
+    job = place.PlaceJob(a.target or [], a.robot, a.arm, _cloud(a), a.occupancy, a.map, None, a.seed, a.start,
+                         a.planner, a.object, a.floor, a.out, a.mcap)  # fmt: skip
+    job.check_outputs()  # before the settings' imports (seconds)
     from baseplace.placement.pipeline import PlaceSettings
 
-    settings = PlaceSettings(strategy=a.strategy, placements=a.placements, tries=a.tries, resolution=a.resolution,
-                             motion=_motion_settings(a), robustness=_robustness_settings(a))  # fmt: skip
-    return place.place_job(place.PlaceJob(a.target or [], a.robot, a.arm, _cloud(a), a.occupancy, a.map, settings,
-                                          a.seed, a.start, a.planner, a.object, a.floor, a.out, a.mcap), progress)  # fmt: skip
+    job.settings = PlaceSettings(strategy=a.strategy, placements=a.placements, tries=a.tries, resolution=a.resolution,
+                                 motion=_motion_settings(a), robustness=_robustness_settings(a))  # fmt: skip
+    return place.place_job(job, progress)
+
+
+def _candidates(a: argparse.Namespace, progress: Progress) -> Any:
+    job = candidates.CandidatesJob(a.object, a.occupancy, _cloud(a), a.robot_pose, a.method, a.robot, a.arm, a.map,
+                                   a.standoff, a.seed, a.object_shape, None, None, a.png, a.mcap)  # fmt: skip
+    job.check_outputs()  # before the settings' imports (seconds)
+    job.motion, job.robustness = _motion_settings(a), _robustness_settings(a)
+    return candidates.candidates_job(job, progress)
 
 
 def _demo(a: argparse.Namespace, progress: Progress) -> Any:
@@ -148,9 +159,7 @@ JOBS: dict[str, Callable[[argparse.Namespace, Progress], Any]] = {
     "build-map": _build_map,
     "reach": lambda a, _: reach.reach_job(reach.ReachJob(a.map, a.target, a.targets, a.base, a.bases, a.robot)),
     "place": _place,
-    "candidates": lambda a, progress: candidates.candidates_job(candidates.CandidatesJob(
-        a.object, a.occupancy, _cloud(a), a.robot_pose, a.method, a.robot, a.arm, a.map, a.standoff, a.seed,
-        a.object_shape, _motion_settings(a), _robustness_settings(a), a.png, a.mcap), progress),
+    "candidates": _candidates,
     "navigate": lambda a, _: navigate.navigate_job(navigate.NavigateJob(
         a.start, a.goal, _cloud(a), a.robot, a.planner, a.time_limit, a.resolution, a.seed, a.out, a.mcap)),
     "surface-map": lambda a, progress: surface.surface_map_job(surface.SurfaceMapJob(
@@ -417,7 +426,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point: parse, run one job, print its report; errors map to exit codes 2 and 3."""
     argv = list(sys.argv[1:] if argv is None else argv)
     words = [a for a in argv if not a.startswith("-")]
-    _Parser.json_kind = KINDS.get(words[0], "place") if "--json" in argv and words else None
+    _Parser.json_argv = argv if "--json" in argv else None
+    _Parser.json_kind = KINDS.get(words[0]) if words else None
     args = build_parser().parse_args(argv)
     from baseplace.jobs.report import NoResultError, Report
     from baseplace.jobs.text import report_text
@@ -435,7 +445,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return exc.exit_code
     except BaseplaceError as exc:
         if as_json:
-            _emit_error(KINDS.get(args.command, "place"), str(exc), exc.exit_code, _echo(args))
+            _emit_error(KINDS.get(args.command), str(exc), exc.exit_code, _echo(args))
         sys.stderr.write(f"error: {exc}\n")
         return exc.exit_code
     except KeyboardInterrupt:

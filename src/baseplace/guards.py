@@ -146,3 +146,29 @@ def check_output_path(
     if path.exists() and not path.is_file():
         raise InputError(f"{what} {brief(raw, 60)} exists and is not a regular file")
     return path
+
+
+def check_output_dir(text: str | os.PathLike[str], what: str = "--out") -> Path:
+    """Check an output directory before any work is done, and create it; returns it as a Path.
+
+    Checks: the path's length (as :func:`check_path_length`), it is a directory or does not exist yet,
+    and its nearest existing folder is a writable directory.
+
+    Raises:
+        InputError: one line naming the problem.
+    """
+    path = Path(check_path_length(text, what))
+    if path.exists() and not path.is_dir():
+        raise InputError(f"{what} {brief(str(path), 60)} exists and is not a directory")
+    existing = path
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise InputError(f"{what} {brief(str(path), 60)}: {brief(str(existing), 60)} is not a directory")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise InputError(f"{what} directory {brief(str(existing), 60)} is not writable")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"{what} {brief(str(path), 60)} cannot be created: {exc.strerror}") from None
+    return path

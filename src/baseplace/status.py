@@ -13,7 +13,7 @@ import contextlib
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Any
 
 QUIET_FOR = 2.0
@@ -78,6 +78,7 @@ class ProgressBars:
 
     def __init__(self, enabled: bool = True, stream: Any = None) -> None:
         self.enabled, self.stream, self.bars = enabled, stream, dict[str, Any]()
+        self.units: dict[str, str] = {}
 
     def __call__(self, step: str, done: int, total: int) -> None:
         """``done`` of ``total`` samples of ``step`` are done."""
@@ -87,10 +88,29 @@ class ProgressBars:
             from tqdm import tqdm
 
             out = sys.stderr if self.stream is None else self.stream
+            unit = self.units.get(step, "samples")
             self.bars[step] = tqdm(
-                total=total, desc=step, unit="samples", unit_scale=True, file=out, leave=False
+                total=total, desc=step, unit=unit, unit_scale=unit == "samples", file=out, leave=False
             )
         self.bars[step].update(done - self.bars[step].n)
+
+    def counter(self, step: str, total: int, unit: str = "steps") -> Callable[[int], None]:
+        """The callback ``count(k)`` of a loop that reports ``k`` more of ``total`` done in ``step``."""
+        self.units[step] = unit
+        done = 0
+
+        def count(k: int) -> None:
+            nonlocal done
+            done += k
+            self(step, done, total)
+
+        return count
+
+    def __enter__(self) -> ProgressBars:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
     def close(self) -> None:
         """Close every bar."""

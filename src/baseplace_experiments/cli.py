@@ -17,7 +17,8 @@ from typing import Any
 
 from baseplace.argtypes import nonneg_int
 from baseplace.errors import InputError
-from baseplace.jobs.inputs import PLOT_SUFFIXES, out_path
+from baseplace.jobs.inputs import PLOT_SUFFIXES, out_path, step_progress
+from baseplace.status import ProgressBars
 
 
 def _int_list(text: str) -> list[int]:
@@ -37,33 +38,9 @@ def _emit(args: argparse.Namespace, obj: dict[str, Any], text: str) -> None:
     sys.stdout.write(json.dumps(obj) + "\n" if args.json else text.rstrip("\n") + "\n")
 
 
-class _Progress:
-    """A progress bar on stderr (none with --json) that appears on the first step; ``step(k)``: k more done."""
-
-    def __init__(self, args: argparse.Namespace, total: int, desc: str, unit: str = "steps") -> None:
-        self.enabled, self.total, self.desc, self.unit = not args.json, total, desc, unit
-        self.bar: Any = None
-
-    def update(self, done: int) -> None:
-        """Set the number of steps done so far."""
-        if not self.enabled:
-            return
-        if self.bar is None:
-            from tqdm import tqdm
-
-            self.bar = tqdm(total=self.total, desc=self.desc, unit=self.unit, file=sys.stderr, leave=False)
-        self.bar.update(done - self.bar.n)
-
-    def step(self, k: int) -> None:
-        """Count ``k`` more steps done."""
-        self.update((self.bar.n if self.bar is not None else 0) + k)
-
-    def __enter__(self) -> _Progress:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        if self.bar is not None:
-            self.bar.close()
+def _bars(args: argparse.Namespace) -> ProgressBars:
+    """Progress bars on stderr, none with --json."""
+    return ProgressBars(enabled=not args.json)
 
 
 def _default_map(args: argparse.Namespace, robot: Any, arm: str | None = None) -> Any:
@@ -72,8 +49,9 @@ def _default_map(args: argparse.Namespace, robot: Any, arm: str | None = None) -
     from baseplace.reachability.cache import cached_map
 
     settings = BuildSettings()
-    with _Progress(args, settings.samples, f"default {robot.name} map (first run only)", "samples") as bar:
-        return cached_map(robot, settings, arm, bar.update)[0]
+    with _bars(args) as bars:
+        return cached_map(robot, settings, arm, step_progress(bars, f"default {robot.name} map (first run only)",
+                                                              settings.samples))[0]  # fmt: skip
 
 
 def _results_path(path: str | None) -> Path | None:
@@ -117,8 +95,9 @@ def cmd_experiment_segmentation(args: argparse.Namespace) -> int:
     seed = args.seed if args.seed is not None else SEEDS.seeds(args.split)[0]
     split = args.split if args.seed is None or args.seed in SEEDS.seeds(args.split) else None
     results = _results_path(args.results)
-    with _Progress(args, args.scenes * 6 * len(noises), "segmentation experiment", "scenes") as bar:
-        runs = {n: run_segmentation_experiment(args.scenes, seed, progress=bar.step, noise=n) for n in noises}
+    with _bars(args) as bars:
+        bar = bars.counter("segmentation experiment", args.scenes * 6 * len(noises), "scenes")
+        runs = {n: run_segmentation_experiment(args.scenes, seed, progress=bar, noise=n) for n in noises}
     result: dict[str, Any] = {"experiment": "segmentation", "paper": PAPER, "noise_models": runs}
     lines = []
     for noise, run in runs.items():
@@ -150,8 +129,9 @@ def cmd_experiment_navigation(args: argparse.Namespace) -> int:
     if args.scenes < 1 or args.pairs < 1:
         raise InputError(f"--scenes and --pairs must be >= 1, got {args.scenes} and {args.pairs}")
     results = _results_path(args.results)
-    with _Progress(args, args.scenes * len(CLASSES), "navigation experiment", "scenes") as bar:
-        result = run_navigation_experiment(args.scenes, args.pairs, args.seed, progress=bar.step)
+    with _bars(args) as bars:
+        bar = bars.counter("navigation experiment", args.scenes * len(CLASSES), "scenes")
+        result = run_navigation_experiment(args.scenes, args.pairs, args.seed, progress=bar)
     lines = [f"{'scene':<16} {'planner':<8} {'pairs':>5} {'success':>8} {'false':>5} {'length m':>8} "
              f"{'time ms':>8} {'steps':>5}"]  # fmt: skip
     for r in result["rows"]:
@@ -179,10 +159,9 @@ def cmd_experiment_inspect_table(args: argparse.Namespace) -> int:
     robot = Robot("pr2")
     rmaps = {arm: _default_map(args, robot, arm) for arm in ("left", "right")}
     smap = build_surface_map(robot, rmaps, *INSPECT_TABLE, combine="any")
-    with _Progress(args, 5 * len(counts) * args.runs, "inspect-table experiment", "runs") as bar:
-        result = run_inspect_experiment(
-            robot, rmaps, smap, tuple(counts), args.runs, args.seed, progress=bar.step
-        )
+    with _bars(args) as bars:
+        bar = bars.counter("inspect-table experiment", 5 * len(counts) * args.runs, "runs")
+        result = run_inspect_experiment(robot, rmaps, smap, tuple(counts), args.runs, args.seed, progress=bar)
     lines = [f"{'objects':>7} {'poses':<10} {'unsolved':>8} {'T min':>6} {'moves':>6} {'other':>6} "
              f"{'replans':>7} {'plan s':>7}"]  # fmt: skip
     for r in result["summary"]:
@@ -218,8 +197,9 @@ def cmd_experiment_table_grid(args: argparse.Namespace) -> int:
     if args.top_below is not None:
         settings = table_grid.TableGridSettings(method_top_below=args.top_below)
     radial = table_grid.radial_settings(robot, rmap, settings, args.surface_margin)
-    with _Progress(args, 12 * args.trials, "table-grid experiment", "trials") as bar:
-        result = table_grid.run_table_grid(robot, rmap, args.trials, seed, progress=bar.step,
+    with _bars(args) as bars:
+        bar = bars.counter("table-grid experiment", 12 * args.trials, "trials")
+        result = table_grid.run_table_grid(robot, rmap, args.trials, seed, progress=bar,
                                            settings=settings, radial=radial, feasible=not args.no_feasible)  # fmt: skip
     if out is not None:
         from baseplace.viz.table_grid import plot_table_grid
@@ -269,15 +249,16 @@ def cmd_experiment_osrm(args: argparse.Namespace) -> int:
     rmap = load_map(args.map, robot) if args.map else _default_map(args, robot)
     classes = SCENE_CLASSES if not args.flat_only else SCENE_CLASSES[:1]
     settings = ExperimentSettings(grasps_per_scene=args.grasps, seed=seed, tries=args.tries)
-    with _Progress(args, args.scenes * len(classes), "osrm experiment", "scenes") as bar:
+    with _bars(args) as bars:
+        bar = bars.counter("osrm experiment", args.scenes * len(classes), "scenes")
         if args.scheduler is None:
-            result = run_osrm_experiment(robot, rmap, args.scenes, settings, classes, bar.step)
+            result = run_osrm_experiment(robot, rmap, args.scenes, settings, classes, bar)
         else:
             from baseplace.reachability.distributed import connect
 
             with connect(args.scheduler) as client:
                 result = run_osrm_experiment(
-                    robot, rmap, args.scenes, settings, classes, bar.step, client, args.robot
+                    robot, rmap, args.scenes, settings, classes, bar, client, args.robot
                 )
     if out is not None:
         from baseplace.viz.experiments import plot_failure_rates

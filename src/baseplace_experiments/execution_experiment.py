@@ -32,7 +32,7 @@ import numpy as np
 from baseplace.geometry.poses import BasePose
 from baseplace.placement.candidates import RadialCandidate, pickup, radial_search
 from baseplace.placement.irm_candidates import IrmSettings, irm_candidates
-from baseplace.placement.motion import MotionChecker
+from baseplace.placement.motion import MotionChecker, MotionSettings
 from baseplace.placement.robustness import BaseErrorModel, RobustnessSettings, perturbed, score_candidates
 from baseplace.reachability.rmap import ReachabilityMap
 from baseplace.robots.model import Robot
@@ -61,12 +61,18 @@ def _grasp_order(first: int, k: int) -> list[int]:
 def execution_trial(robot: Robot, rmap: ReachabilityMap, shapes: RobotShapes, seed: int, cell: tuple[int, int],
                     robust: RobustnessSettings, rank_key: str = "rate", draws: int = 5,
                     s: TableGridSettings | None = None,
-                    execution: ExecutionSettings | None = None) -> dict[str, Any]:  # fmt: skip
+                    execution: ExecutionSettings | None = None,
+                    cut: str = "support", motion: MotionSettings | None = None) -> dict[str, Any]:  # fmt: skip
     """One table-grid trial executed under navigation error (module docstring); JSON-ready.
 
     ``robust`` scores the first ``robust.pool`` verified candidates; ``rank_key`` ("rate" or "low",
-    the Wilson lower bound) orders them.
+    the Wilson lower bound) orders them. ``cut``: where the robot's model of the bottle begins,
+    "support" (the measured table top, :func:`support_height`) or "estimate" (the estimate's
+    bottom; protocol v1). ``motion``: the robot's planner settings, for the default method's
+    check and for the execution (default: ``MotionSettings()``).
     """
+    if cut not in ("support", "estimate"):
+        raise ValueError(f"cut must be 'support' or 'estimate', got {cut!r}")
     s = s or TableGridSettings()
     rng = np.random.default_rng([seed, *cell, 0])
     p_true = s.cell_centre(*cell)
@@ -81,7 +87,8 @@ def execution_trial(robot: Robot, rmap: ReachabilityMap, shapes: RobotShapes, se
     arm = robot.arm(rmap.info.arm)
     # the robot's own collision model, from the noisy cloud around its estimate
     mine = np.ones(len(seen), dtype=bool)
-    mine[_kept_rows(seen, p_est, s)] = False  # the points without_object drops: the bottle as seen
+    bottom = support_height(seen, p_est, s) if cut == "support" else None
+    mine[_kept_rows(seen, p_est, s, bottom)] = False  # the bottle as seen: only the hand may touch it
     obstacles = VoxelMap.from_points(seen[~mine], s.voxel_size)
     held = seen[mine]
     verify_env = Environment(robot, obstacles)
@@ -90,6 +97,7 @@ def execution_trial(robot: Robot, rmap: ReachabilityMap, shapes: RobotShapes, se
         arm,
         Environment(robot, VoxelMap.from_points(seen, s.voxel_size)),
         Environment(robot, obstacles, grasped=VoxelMap.from_points(held, s.voxel_size), hand_arm=arm.name),
+        settings=motion,
     )
     method_grasps = s.grasps(p_est, s.method_top_below)
     true_grasps = s.grasps(p_true)
@@ -142,11 +150,39 @@ def execution_trial(robot: Robot, rmap: ReachabilityMap, shapes: RobotShapes, se
     return out
 
 
-def _kept_rows(points: np.ndarray, p_o: np.ndarray, s: TableGridSettings) -> np.ndarray:
-    """Row indices of ``points`` that :func:`~baseplace_experiments.table_grid.without_object` keeps."""
+def _kept_rows(
+    points: np.ndarray, p_o: np.ndarray, s: TableGridSettings, bottom: float | None = None
+) -> np.ndarray:
+    """Row indices of ``points`` that :func:`~baseplace_experiments.table_grid.without_object` keeps.
+
+    ``bottom``: the height [m] the object stands on; default: the estimate's bottom, ``p_o``'s z
+    less half the object's height (as ``without_object``).
+    """
     p = np.asarray(p_o, dtype=float)
+    z0 = p[2] - s.object_height / 2 if bottom is None else bottom
     near = np.hypot(points[:, 0] - p[0], points[:, 1] - p[1]) <= s.object_width / 2 + s.hand_clearance
-    return np.flatnonzero(~(near & (points[:, 2] > p[2] - s.object_height / 2 + 0.005)))
+    return np.flatnonzero(~(near & (points[:, 2] > z0 + 0.005)))
+
+
+def support_height(points: np.ndarray, p_o: np.ndarray, s: TableGridSettings, ring: float = 0.1) -> float:
+    """Height [m] of the surface the object at ``p_o`` (3,) stands on, measured in the cloud (P, 3).
+
+    Among the points below ``p_o`` in the ring ``ring`` wide just outside the region
+    :func:`_kept_rows` clears: the densest 5 mm height bin (the table top; the slab's rim and the
+    legs spread over many heights), then the median of the points within 1 cm of it. The
+    estimate's bottom when the ring holds no point. A robot segments the object above its support
+    plane; cutting at the estimate's bottom instead leaves the object's lowest centimetres as
+    obstacle voxels whenever the estimate is high (protocol v2 of ``bench/bench_execution.py``).
+    """
+    p = np.asarray(p_o, dtype=float)
+    r0 = s.object_width / 2 + s.hand_clearance
+    d = np.hypot(points[:, 0] - p[0], points[:, 1] - p[1])
+    z = points[(d > r0) & (d <= r0 + ring) & (points[:, 2] < p[2]), 2]
+    if len(z) == 0:
+        return float(p[2] - s.object_height / 2)
+    counts = np.bincount(np.floor((z - z.min()) / 0.005).astype(np.int64))
+    mode = z.min() + (int(np.argmax(counts)) + 0.5) * 0.005
+    return float(np.median(z[np.abs(z - mode) <= 0.01]))
 
 
 def summarise_execution(trials: list[dict[str, Any]]) -> dict[str, Any]:
@@ -164,4 +200,4 @@ def summarise_execution(trials: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
-__all__ = ["EXECUTION_METHODS", "execution_trial", "summarise_execution"]
+__all__ = ["EXECUTION_METHODS", "execution_trial", "summarise_execution", "support_height"]

@@ -31,9 +31,11 @@ from baseplace.jobs.inputs import (
     write_mcap,
 )
 from baseplace.jobs.place import motion_and_robustness_json
-from baseplace.jobs.report import CandidatesReport, NoResultError, PoseRecord, RobotRef, path_json, wrap_angle
+from baseplace.jobs.report import CandidatesReport, NoResultError, PoseRecord, RobotRef, path_json
 
 if TYPE_CHECKING:
+    from pathlib import Path
+
     from baseplace.placement.motion import MotionSettings
     from baseplace.placement.robustness import RobustnessSettings
     from baseplace.placement.scene_cache import SceneCache
@@ -94,6 +96,14 @@ class CandidatesJob:
             "rank": "reachability" if self.robustness is None else self.robustness.rank,
         }  # fmt: skip
 
+    def check_outputs(self) -> tuple[Path | None, Path | None]:
+        """The PNG and MCAP outputs (and the fused cloud's), checked before any work.
+
+        Front ends call it before they build the settings, whose imports take seconds.
+        """
+        out_path(self.cloud.fused_out, "--fused-out", (".bt",))
+        return out_path(self.png, "--png", PLOT_SUFFIXES), out_path(self.mcap, "--mcap", (".mcap",))
+
 
 def check_object(grid: Any, p_o: np.ndarray, reach: float) -> None:
     """Clear errors for an object outside the map or buried in an obstacle (no free cell in reach)."""
@@ -114,14 +124,6 @@ def check_object(grid: Any, p_o: np.ndarray, reach: float) -> None:
         )
 
 
-def _path_rows(route: Any, goal_yaw: float) -> list[list[float]]:
-    """A grid path (K, 2) as rows x, y, yaw: the direction of travel, the goal's heading at the end."""
-    xy = np.asarray(route, dtype=float)[:, :2]
-    step = np.diff(xy, axis=0)
-    yaw = np.r_[np.arctan2(step[:, 1], step[:, 0]), goal_yaw] if len(step) else np.array([goal_yaw])
-    return path_json(np.c_[xy, yaw])
-
-
 def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> CandidatesReport:
     """Verified placement candidates for grasping at ``job.object``, best first.
 
@@ -129,6 +131,9 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
         InputError: bad input (no grid, an object outside it or in an obstacle, an unwritable output).
         NoResultError: no verified candidate; ``report`` lists the rejected positions and why.
     """
+    if job.method not in ("radial", "irm"):
+        raise InputError(f"unknown method {job.method!r}; valid: irm, radial")
+    png, mcap = job.check_outputs()  # outputs first: before the imports and any work
     from baseplace.geometry.poses import BasePose
     from baseplace.placement.candidates import RadialSettings, motion_costs, pickup, radial_search
     from baseplace.placement.irm_candidates import (
@@ -147,10 +152,6 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
     from baseplace.world.gridnav import GridNavigator
 
     t0 = time.perf_counter()
-    if job.method not in ("radial", "irm"):
-        raise InputError(f"unknown method {job.method!r}; valid: irm, radial")
-    png = out_path(job.png, "--png", PLOT_SUFFIXES)
-    mcap = out_path(job.mcap, "--mcap", (".mcap",))
     robust = job.robustness or RobustnessSettings()
     p_o = parse_xyz(job.object, "--object")
     robot_pose = None if job.robot_pose is None else base_xyyaw(job.robot_pose, "--robot-pose")
@@ -257,7 +258,7 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
         object=[float(v) for v in p_o],
         robot_pose=None if robot_pose is None else PoseRecord.from_xyyaw(*robot_pose), candidates=rows,
         rejected=[{"x": round(xy[0], 4), "y": round(xy[1], 4), "reason": why} for xy, why in rejected],
-        path=None if route is None or chosen is None else _path_rows(route, wrap_angle(chosen.pose.yaw)),
+        path=None if route is None or chosen is None else path_json(route.poses),
         object_shape={"requested": job.object_shape,
                       "allowed": grasped.to_json() if isinstance(grasped, GraspedObject) else None},
         settings={"r_r": settings.r_r, "d_min": settings.d_min, "d_max": round(settings.d_max, 4),
@@ -266,14 +267,14 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
     if png is not None:
         from baseplace.viz.candidates import plot_candidates
 
-        plot_candidates(grid, p_o, ranked, rejected, png, robot_pose, route,
+        plot_candidates(grid, p_o, ranked, rejected, png, robot_pose, None if route is None else route.poses,
                         f"{job.method} candidates for {robot.name}: {len(ranked)} verified, {len(rejected)} rejected")  # fmt: skip
         report.outputs["png"] = str(png)
     if mcap is not None:
         T_c = [PoseRecord.from_xyyaw(c.pose.x, c.pose.y, c.pose.yaw).T_world_base for c in ranked]
         world = job.cloud.bag.world_frame if job.cloud.bag is not None else "map"
         write_mcap(mcap, world, bag_stamp(job.cloud), candidates=T_c, placements=T_c[:1],
-                   paths=[] if route is None else [np.asarray(route)])  # fmt: skip
+                   paths=[] if route is None else [route.poses])  # fmt: skip
         report.outputs["mcap"] = str(mcap)
     now = time.perf_counter()
     report.timings_ms = {"load": (t_load - t0) * 1e3, "cloud": (t_search - t_load) * 1e3,

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -64,9 +63,12 @@ def demo_job(job: DemoJob, progress: Progress | None = None) -> DemoReport:
         NoResultError: no verified placement, or no path to it (a regression: the scene is built
             so that both exist).
     """
+    from baseplace.guards import check_output_dir, check_output_path
+
+    out_dir = check_output_dir(job.out, "--out")  # outputs first: before the imports and any work
+    json_path = check_output_path(out_dir / "demo.json", "--out", (".json",))
     from baseplace.files import atomic_write
     from baseplace.geometry.poses import parse_pose6
-    from baseplace.guards import check_output_path
     from baseplace.navigation.navmap import navigation_map
     from baseplace.navigation.planners import plan_path
     from baseplace.placement.pipeline import PlaceSettings, place
@@ -78,13 +80,6 @@ def demo_job(job: DemoJob, progress: Progress | None = None) -> DemoReport:
     from baseplace.viz.placement import plot_placement
     from baseplace.viz.viewer import save_view_data, view_data_from
 
-    out_dir = Path(job.out)
-    if out_dir.exists() and not out_dir.is_dir():
-        from baseplace.errors import InputError
-
-        raise InputError(f"--out {job.out} exists and is not a directory")
-    out_dir.mkdir(parents=True, exist_ok=True)
-    json_path = check_output_path(out_dir / "demo.json", "--out", (".json",))
     t0 = time.perf_counter()
     robot = Robot("tiago")
     settings = BuildSettings(samples=job.samples, seed=job.seed)

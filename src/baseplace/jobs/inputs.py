@@ -160,14 +160,14 @@ def world_cloud(cloud: CloudInput) -> Cloud:
     if not cloud.paths:
         raise InputError("give --cloud FILE or --bag FILE --cloud-topic TOPIC")
     paths, transforms = list(cloud.paths), list(cloud.transforms)
-    if len(paths) > 1 and len(transforms) not in (0, len(paths)) and transforms != [None]:
+    if len(transforms) not in (0, len(paths)) and transforms != [None]:
         raise InputError(
             f"give one --transform per --cloud ({len(paths)} clouds, {len(transforms)} transforms)"
         )
     clouds, origins = [], []
     for k, path in enumerate(paths):
         loaded = load_cloud(path)
-        spec = transforms[k] if len(transforms) == len(paths) else transforms[0] if len(paths) == 1 else None
+        spec = transforms[k] if len(transforms) == len(paths) else None  # none given: the cloud is z up
         origins.append(np.zeros(3))
         if spec is not None:
             T = load_transform(spec)

@@ -73,15 +73,15 @@ def navigate_job(job: NavigateJob) -> NavigateReport:
         InputError: bad input (a pose off the floor, an unknown planner, an unwritable output).
         NothingFoundError: no path within the time limit.
     """
+    if job.planner not in ("rrt", "regions"):
+        raise InputError(f"unknown planner {job.planner!r}; valid: regions, rrt")
+    png = out_path(job.png, "--out", PLOT_SUFFIXES)  # outputs first: before the imports and any work
+    mcap = out_path(job.mcap, "--mcap", (".mcap",))
     from baseplace.navigation.navmap import navigation_map
     from baseplace.navigation.planners import plan_path
     from baseplace.terrain.pipeline import terrain_from_points
 
     t0 = time.perf_counter()
-    if job.planner not in ("rrt", "regions"):
-        raise InputError(f"unknown planner {job.planner!r}; valid: regions, rrt")
-    png = out_path(job.png, "--out", PLOT_SUFFIXES)
-    mcap = out_path(job.mcap, "--mcap", (".mcap",))
     start, goal = base_xyyaw(job.start, "--start"), base_xyyaw(job.goal, "--goal")
     robot = load_robot(job.robot)
     cloud = world_cloud(job.cloud)
@@ -141,12 +141,12 @@ def segment_job(job: SegmentJob) -> SegmentReport:
     Raises:
         InputError: bad input (an unreadable cloud, an unknown algorithm, an unwritable output).
     """
+    if job.algorithm not in ("robust", "baseline"):
+        raise InputError(f"unknown algorithm {job.algorithm!r}; valid: baseline, robust")
+    png = out_path(job.png, "--out", PLOT_SUFFIXES)  # outputs first: before the imports and any work
     from baseplace.terrain.pipeline import terrain_from_points, terrain_json
 
     t0 = time.perf_counter()
-    if job.algorithm not in ("robust", "baseline"):
-        raise InputError(f"unknown algorithm {job.algorithm!r}; valid: baseline, robust")
-    png = out_path(job.png, "--out", PLOT_SUFFIXES)
     cloud = world_cloud(job.cloud)
     t_load = time.perf_counter()
     if job.cache is not None and job.algorithm == "robust":

@@ -31,6 +31,8 @@ from baseplace.jobs.inputs import (
 from baseplace.jobs.report import NoResultError, PlaceReport, RobotRef
 
 if TYPE_CHECKING:
+    from pathlib import Path
+
     from baseplace.placement.pipeline import PlaceSettings
     from baseplace.placement.scene_cache import SceneCache
     from baseplace.reachability.rmap import ReachabilityMap
@@ -93,6 +95,14 @@ class PlaceJob:
             "tries": None if s is None else s.tries, "start": self.start, "planner": self.planner,
             "object": self.object, "floor": self.floor,
         }  # fmt: skip
+
+    def check_outputs(self) -> tuple[Path | None, Path | None]:
+        """The PNG and MCAP outputs (and the fused cloud's), checked before any work.
+
+        Front ends call it before they build the settings, whose imports take seconds.
+        """
+        out_path(self.cloud.fused_out, "--fused-out", (".bt",))
+        return out_path(self.png, "--out", PLOT_SUFFIXES), out_path(self.mcap, "--mcap", (".mcap",))
 
 
 def _target_matrix(target: str | Sequence[float]) -> np.ndarray:
@@ -161,6 +171,9 @@ def place_job(job: PlaceJob, progress: Progress | None = None) -> PlaceReport:
         NoResultError: no verified placement, or none the base can drive to; ``report`` holds the
             failure counts and the contacts.
     """
+    if job.planner not in ("rrt", "regions"):
+        raise InputError(f"unknown planner {job.planner!r}; valid: regions, rrt")
+    png, mcap = job.check_outputs()  # outputs first: before the imports and any work
     from baseplace.placement.pipeline import PlaceSettings, place, with_floor
     from baseplace.placement.verify import contact_summary, most_frequent_contact
     from baseplace.reachability.cache import map_or_default
@@ -169,10 +182,6 @@ def place_job(job: PlaceJob, progress: Progress | None = None) -> PlaceReport:
     t0 = time.perf_counter()
     if not job.targets:
         raise InputError('give at least one --target "x y z roll pitch yaw"')
-    if job.planner not in ("rrt", "regions"):
-        raise InputError(f"unknown planner {job.planner!r}; valid: regions, rrt")
-    png = out_path(job.png, "--out", PLOT_SUFFIXES)
-    mcap = out_path(job.mcap, "--mcap", (".mcap",))
     targets = np.stack([_target_matrix(t) for t in job.targets])
     grasped = parse_grasped_object(job.object)
     settings = job.settings or PlaceSettings()

@@ -186,9 +186,9 @@ def build_map_job(job: BuildMapJob, progress: Progress | None = None) -> BuildMa
     Raises:
         InputError: bad input (an unknown arm, bad settings, an unwritable output, bad workers).
     """
+    out = out_path(job.out, "--out", MAP_SUFFIXES)  # outputs first: before the imports and any work
     from baseplace.reachability.build import BuildSettings, build_map
 
-    out = out_path(job.out, "--out", MAP_SUFFIXES)
     assert out is not None
     if job.scheduler is None:
         set_workers(job.workers)

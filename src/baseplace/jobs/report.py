@@ -181,9 +181,9 @@ class Report:
 
 @dataclass
 class ErrorReport(Report):
-    """A failure before a job could start (bad arguments); ``kind`` names the command's kind."""
+    """A failure before a job could start (bad arguments); ``kind`` names the command's kind (None: no such command)."""
 
-    kind_name: str = "place"
+    kind_name: str | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The envelope with ``kind`` set to the command's kind."""

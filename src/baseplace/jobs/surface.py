@@ -87,14 +87,14 @@ def surface_map_job(job: SurfaceMapJob, progress: Progress | None = None) -> Sur
     Raises:
         InputError: bad input (a malformed polygon, an unknown arm, an unwritable output).
     """
+    out = out_path(job.out, "--out", SURFACE_SUFFIXES)  # outputs first: before the imports and any work
+    png = out_path(job.png, "--png", PLOT_SUFFIXES)
     from baseplace.placement.surface_map import build_surface_map, parse_polygon
     from baseplace.placement.surface_storage import save_surface_map
     from baseplace.reachability.build import BuildSettings
     from baseplace.reachability.cache import cached_map
 
     t0 = time.perf_counter()
-    out = out_path(job.out, "--out", SURFACE_SUFFIXES)
-    png = out_path(job.png, "--png", PLOT_SUFFIXES)
     assert out is not None
     polygon = parse_polygon(job.polygon)
     robot = load_robot(job.robot)
@@ -179,7 +179,7 @@ def surface_samples_job(job: SurfaceSamplesJob) -> SurfaceSamplesReport:
     sampler = SurfaceSampler(smap, robot, grid, job.candidates, discounted=job.discount)
     rng = np.random.default_rng(job.seed)
     samples = [sampler.sample(rng) for _ in range(job.n)]
-    poses = [{**PoseRecord.from_xyyaw(s.x, s.y, s.theta).to_json(), "reachability": round(s.reachability, 4),
+    poses = [{**PoseRecord.from_xyyaw(s.x, s.y, s.yaw).to_json(), "reachability": round(s.reachability, 4),
               "score": round(s.score, 4)} for s in samples]  # fmt: skip
     occupancy = job.occupancy if isinstance(job.occupancy, str) else (job.bag.path if job.bag else None)
     arm = smap.arms[0] if len(smap.arms) == 1 else None

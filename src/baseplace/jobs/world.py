@@ -48,13 +48,13 @@ class RobotCheckJob:
 
 def robot_check_job(job: RobotCheckJob) -> RobotCheckReport:
     """Load a robot file, describe it, render its collision geometry and warn where it looks wrong."""
+    png = out_path(job.png, "--png", PLOT_SUFFIXES)  # checked before the robot loads
     from baseplace.robots.check import check_robot, collision_meshes
     from baseplace.robots.collision import load_collision_model
     from baseplace.robots.model import Robot
     from baseplace.viz.robot import plot_robot
 
     t0 = time.perf_counter()
-    png = out_path(job.png, "--png", PLOT_SUFFIXES)  # checked before the robot loads
     robot = Robot(job.robot)
     if png is None:  # the robot's name as a plain file name in this folder
         png = Path(re.sub(r"[^A-Za-z0-9_.-]", "_", robot.name).lstrip(".") + "_check.png")
@@ -102,13 +102,13 @@ class SceneJob:
 
 def scene_job(job: SceneJob) -> SceneReport:
     """Write a random scene's cloud and its ground truth."""
+    out_path(job.out, "--out", (".ply", ".pcd", ".npy"))  # outputs first: before the imports and any work
+    truth = job.truth or str(Path(job.out).with_suffix(".json"))
+    out_path(truth, "--truth", (".json",))
     from baseplace.sim.scenes import SceneSettings, generate_scene, save_scene
     from baseplace.terrain.io import Cloud, save_cloud
 
     t0 = time.perf_counter()
-    out_path(job.out, "--out", (".ply", ".pcd", ".npy"))
-    truth = job.truth or str(Path(job.out).with_suffix(".json"))
-    out_path(truth, "--truth", (".json",))
     settings = SceneSettings(size_class=job.size_class, n_planes=job.planes, sigma=job.sigma,
                              extent=(job.extent, job.extent), with_box=job.box)  # fmt: skip
     rng = np.random.default_rng(job.seed)

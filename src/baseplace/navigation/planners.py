@@ -18,9 +18,7 @@ from __future__ import annotations
 import dataclasses
 import gc
 import itertools
-import math
 import time
-from dataclasses import dataclass
 
 import networkx as nx
 import numpy as np
@@ -30,38 +28,9 @@ from scipy import ndimage
 from baseplace.errors import NothingFoundError, unknown
 from baseplace.geometry.poses import FloatArray, wrap_angle
 from baseplace.navigation.navmap import NavigationMap
+from baseplace.navigation.path import Path
 
 PLANNERS = ("rrt", "regions")
-
-
-@dataclass(frozen=True)
-class Path:
-    """A base path.
-
-    Attributes:
-        poses: (N, 3) x, y, yaw [m, m, rad], from the start to the goal.
-        planner: "rrt" or "regions".
-        time_ms: planning time [ms].
-        regions: the region ids the path passes, in order.
-    """
-
-    poses: FloatArray
-    planner: str
-    time_ms: float
-    regions: tuple[int, ...]
-
-    @property
-    def length(self) -> float:
-        """Length [m] of the path's xy polyline."""
-        return float(np.linalg.norm(np.diff(self.poses[:, :2], axis=0), axis=1).sum())
-
-    def dense(self, step: float = 0.01) -> FloatArray:
-        """(M, 2) xy points along the path, at most ``step`` [m] apart."""
-        out = [self.poses[:1, :2]]
-        for a, b in itertools.pairwise(self.poses[:, :2]):
-            n = max(1, math.ceil(float(np.linalg.norm(b - a)) / step))
-            out.append(a + (b - a) * (np.arange(1, n + 1)[:, None] / n))
-        return np.concatenate(out)
 
 
 def plan_path(

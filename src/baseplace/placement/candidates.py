@@ -45,6 +45,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError
 from baseplace.geometry.poses import BasePose, FloatArray
+from baseplace.navigation.path import Path
 from baseplace.placement.motion import ReachingMotion
 from baseplace.placement.robustness import Robustness
 from baseplace.reachability.rmap import ReachabilityMap
@@ -53,8 +54,8 @@ from baseplace.world.gridnav import OBSTACLE, GridNavigator, blocked_by_inflatio
 from baseplace.world.occupancy import UNKNOWN, OccupancyGrid
 
 Risk = Literal["body", "arm", "occupancy"]
-Navigate = Callable[[BasePose, BasePose], FloatArray | None]
-"""Seed 004's ``Navigate``: (current pose, goal pose) -> path (N, 2) [m], or None on failure."""
+Navigate = Callable[[BasePose, BasePose], Path | None]
+"""Seed 004's ``Navigate``: (current pose, goal pose) -> the path, or None on failure."""
 Travel = Callable[[BasePose, FloatArray], FloatArray]
 """(robot pose, goal points (N, 2) [m]) -> travel distances (N,) [m], inf where unreachable."""
 
@@ -457,13 +458,13 @@ class PickupResult:
 
     Attributes:
         chosen: the candidate the robot reached, or None when every navigation failed.
-        path: (N, 2) path to it [m], or None.
+        path: the path to it, or None.
         tries: navigation attempts made.
         failures: (candidate, why) for each failed attempt, in order.
     """
 
     chosen: RadialCandidate | None
-    path: FloatArray | None
+    path: Path | None
     tries: int
     failures: list[tuple[RadialCandidate, str]] = field(default_factory=list)
 
@@ -526,7 +527,7 @@ def pickup(
         except InputError as exc:
             path, why = None, str(exc)
         if path is not None:
-            return PickupResult(goal, np.asarray(path, dtype=float), len(failures) + 1, failures)
+            return PickupResult(goal, path, len(failures) + 1, failures)
         failures.append((goal, why))
         if locate is not None:
             current = locate()

@@ -10,7 +10,6 @@ the clouds; obstacles come from both.
 from __future__ import annotations
 
 import dataclasses
-import time
 from collections.abc import Sequence
 
 import numpy as np
@@ -56,7 +55,7 @@ def grid_routes(
     The grid planner of seed 004 (:class:`~baseplace.world.gridnav.GridNavigator`, 8-connected,
     obstacles inflated by ``radius`` [m]) on the grid with the cameras' obstacles marked (points
     between 5 cm and 2 m above the floor). Poses along a path head in the direction of travel; the
-    last takes the goal's yaw.
+    first takes the start's yaw, the last the goal's.
 
     Raises:
         InputError: a start the robot cannot stand on (outside the map, unknown, too near an obstacle).
@@ -72,22 +71,10 @@ def grid_routes(
     navigator.plan(s[:2], s[:2])  # a start the robot cannot stand on: the planner's one-line error
     out: list[Path | None] = []
     for goal in goals:
-        g = np.asarray(goal, dtype=float)
-        t0 = time.perf_counter()
         try:
-            xy = navigator(BasePose(*s), BasePose(*g))
+            out.append(navigator(BasePose(*s), BasePose(*np.asarray(goal, dtype=float))))
         except InputError:
-            xy = None
-        if xy is None:
             out.append(None)
-            continue
-        step = np.diff(xy, axis=0)
-        yaw = (
-            np.r_[s[2], np.arctan2(step[1:, 1], step[1:, 0]), g[2]]
-            if len(xy) > 2
-            else np.r_[s[2], g[2]][: len(xy)]
-        )
-        out.append(Path(np.c_[xy, yaw], "grid", (time.perf_counter() - t0) * 1e3, ()))
     return out
 
 

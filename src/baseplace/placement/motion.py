@@ -102,6 +102,9 @@ class MotionSettings:
         joint_resolution: the joint path is checked at states at most this far apart
             (Euclidean in joint space [rad]).
         time_limit: OMPL planning time for one joint path [s]; no path in it rejects the placement.
+        max_checks: also stop planning after this many state validity checks (None: no such
+            limit). A budget that does not depend on the machine's load, for experiments on a
+            shared machine (wall time counts every other process's share).
         approach_restarts: other pre-grasp IK solutions tried when the approach cannot start
             from the verified grasp configuration.
         q_start: start arm configuration (n,), e.g. the robot's current one; default: stowed.
@@ -114,6 +117,7 @@ class MotionSettings:
     time_limit: float = 1.0
     approach_restarts: int = 4
     q_start: tuple[float, ...] | None = None
+    max_checks: int | None = None
 
     def __post_init__(self) -> None:
         for name in (
@@ -128,6 +132,8 @@ class MotionSettings:
                 raise InputError(f"motion setting {name} must be a finite number > 0, got {value}")
         if self.approach_restarts < 0:
             raise InputError(f"approach_restarts must be >= 0, got {self.approach_restarts}")
+        if self.max_checks is not None and self.max_checks < 1:
+            raise InputError(f"max_checks must be >= 1 or None, got {self.max_checks}")
 
 
 @dataclass(frozen=True)
@@ -330,7 +336,10 @@ class MotionChecker:
             space.setBounds(bounds)
             setup = og.SimpleSetup(space)
 
+            checks = [0]
+
             def valid(state: object) -> bool:
+                checks[0] += 1
                 return self._free(np.array([state[i] for i in range(n)]), T_world_base)  # type: ignore[index]
 
             setup.setStateValidityChecker(valid)
@@ -341,7 +350,16 @@ class MotionChecker:
                 a[i], b[i] = float(q0[i]), float(q_goal[i])
             setup.setStartAndGoalStates(a, b, 1e-6)
             setup.setPlanner(og.RRTConnect(info))
-            solved = setup.solve(self.settings.time_limit)
+            limit = self.settings.max_checks
+            if limit is None:
+                solved = setup.solve(self.settings.time_limit)
+            else:
+                solved = setup.solve(
+                    ob.plannerOrTerminationCondition(
+                        ob.timedPlannerTerminationCondition(self.settings.time_limit),
+                        ob.PlannerTerminationCondition(lambda: checks[0] >= limit),
+                    )
+                )
             if not solved or not setup.haveExactSolutionPath():
                 return None
             states = setup.getSolutionPath().getStates()

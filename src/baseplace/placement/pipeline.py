@@ -326,6 +326,14 @@ def standable_regions(seg: Segmentation, outline: FloatArray, n_orientations: in
     return out
 
 
+def place_obstacles(terrain: Terrain, settings: PlaceSettings, outline: FloatArray) -> VoxelMap:
+    """The obstacle voxels :func:`place` checks the robot against (support removed), for footprint (F, 2).
+
+    For a caller that builds the same collision model outside a query (an experiment's own planner).
+    """
+    return _obstacles(terrain, terrain.segmentation, settings, outline)
+
+
 def _obstacles(terrain: Terrain, seg: Segmentation, s: PlaceSettings, outline: FloatArray) -> VoxelMap:
     if s.strategy != "orm":
         return obstacle_voxels(terrain.voxels, seg, s.support_dist, standable_regions(seg, outline))

@@ -1,12 +1,12 @@
 """Sampling good, spread-out base poses from a surface map (seed 002, section III-B).
 
-Random continuous candidates (x, y, theta) are drawn in the map's bounding box and discarded, in
+Random continuous candidates (x, y, yaw) are drawn in the map's bounding box and discarded, in
 order of cost, when R_S = 0, when they lie outside the operational area (an occupancy grid: the
 cell is free and the footprint keeps clear of occupied cells), or when the robot, at its
 reference configuration, collides with the surface's furniture (a full collision check). Of N
 valid candidates (default 40) the one with the highest discounted R_S wins. The discount of eq.
 3, ``w = prod_i min(1, d(c, p_i))``, uses the normalized Euclidean distance d between the
-candidate c and every earlier sample p_i over (x, y, z, theta), with scales S = (0.5 m, 0.5 m,
+candidate c and every earlier sample p_i over (x, y, z, yaw), with scales S = (0.5 m, 0.5 m,
 0.5 m, pi/4): poses closer than that to an earlier one lose value, which spreads consecutive
 samples around the surface (seed 002 Fig. 3).
 """
@@ -43,27 +43,27 @@ class SampledPose:
     """One sampled base pose.
 
     Attributes:
-        x, y, theta: the pose [m, m, rad], theta in (-pi, pi].
+        x, y, yaw: the pose [m, m, rad], yaw in (-pi, pi].
         reachability: R_S of the pose.
         score: R_S times the discount when it was chosen.
     """
 
     x: float
     y: float
-    theta: float
+    yaw: float
     reachability: float
     score: float
 
     @property
     def pose(self) -> BasePose:
-        """The pose as the library's base-pose type (``yaw`` = ``theta``)."""
-        return BasePose(self.x, self.y, self.theta)
+        """The pose as the library's base-pose type."""
+        return BasePose(self.x, self.y, self.yaw)
 
 
 def discount(
     candidates: FloatArray, previous: FloatArray, scales: tuple[float, ...] = DISCOUNT_SCALES
 ) -> FloatArray:
-    """Eq. 3: per candidate (N, 3) (x, y, theta), the product over earlier poses (M, 3) of min(1, d).
+    """Eq. 3: per candidate (N, 3) (x, y, yaw), the product over earlier poses (M, 3) of min(1, d).
 
     Poses stand on the floor (z = 0), so the z term of the distance vanishes.
     """
@@ -168,7 +168,7 @@ class SurfaceSampler:
             )
         cand = np.array(valid)
         rs = self.smap.reachability(cand).astype(float)
-        w = discount(cand, np.array([[p.x, p.y, p.theta] for p in self.history])) if self.discounted else 1.0
+        w = discount(cand, np.array([[p.x, p.y, p.yaw] for p in self.history])) if self.discounted else 1.0
         best = int(np.argmax(rs * w))
         score = float((rs * w if self.discounted else rs)[best])
         heading = float(wrap_angle(cand[best, 2]))  # (-pi, pi], as every base pose (navigate takes it)

@@ -15,7 +15,7 @@ Example::
     smap = load_surface_map("table.smap")
     poses = grounding(smap, np.random.default_rng(0), robot=Robot("pr2"))
     first, second = next(poses), next(poses)       # spread apart
-    assert reachability(smap, (first.x, first.y, first.theta)) > 0
+    assert reachability(smap, (first.x, first.y, first.yaw)) > 0
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ if TYPE_CHECKING:
 
 
 def reachability(surface: SurfaceMap, pose: ArrayLike) -> float:
-    """Condition attachment: R_S of base pose (x, y, theta) for the surface, in [0, 1]."""
+    """Condition attachment: R_S of base pose (x, y, yaw) for the surface, in [0, 1]."""
     return float(surface.reachability(pose)[0])
 
 

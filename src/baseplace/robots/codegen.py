@@ -233,12 +233,12 @@ def _kernel_file(directory: Path, key: str, source: str) -> Path:
 def arm_kernels(arm: Arm) -> ModuleType:
     """The compiled module with ``tcp_pose``, ``fk_batch`` and ``bin_chunk`` for ``arm``."""
     source = _TEMPLATE.format(body=chain_source(arm))
+    # a change in the binning code must not reuse stale kernels; imported here, not read from
+    # sys.modules, because ``import baseplace`` no longer loads them (and not at the top: the
+    # reachability package imports this module)
     deps = "".join(
-        Path(m.__file__).read_text()  # a change in the binning code must not reuse stale kernels
-        for m in (
-            sys.modules["baseplace.reachability.grid"],
-            sys.modules["baseplace.geometry.healpix"],
-        )
+        Path(m.__file__).read_text()
+        for m in map(importlib.import_module, ("baseplace.reachability.grid", "baseplace.geometry.healpix"))
         if m.__file__
     )
     key = hashlib.sha256((source + deps).encode()).hexdigest()[:20]

@@ -38,7 +38,7 @@ def plot_candidates(
         rejected: (x, y) positions and their reasons.
         out: PNG path (written atomically).
         robot_pose: (3,) x, y, yaw of the robot, or None.
-        route: (N, 2) path to the best candidate, or None.
+        route: (N, 2) or (N, 3) path to the best candidate (x, y[, yaw]), or None.
         title: figure title.
     """
     shade = np.where(grid.data < 0, 0.6, 1.0 - grid.data.astype(float) / 100.0)

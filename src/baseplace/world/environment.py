@@ -206,11 +206,14 @@ class Environment:
         """:meth:`colliding` for arm joint values (n,), other joints at their reference values.
 
         Self-collision uses only the pairs the arm can move relative to each other (exact here,
-        since every other joint stays at its reference value).
+        since every other joint stays at its reference value). The obstacles are checked first:
+        the same answer, but in the reaching-motion check most colliding states touch an obstacle
+        (212 of 216 on six generated scenes), and that check costs about a quarter of the
+        self-collision check (TIAGo: 1076 mesh pairs, about 2 ms).
         """
-        if self._self is not None and self._self.colliding_arm(arm, q_arm)[0]:
+        if self._touches_obstacles(arm.to_pinocchio(q_arm, self.robot.q_reference), T_world_base):
             return True
-        return self._touches_obstacles(arm.to_pinocchio(q_arm, self.robot.q_reference), T_world_base)
+        return self._self is not None and bool(self._self.colliding_arm(arm, q_arm)[0])
 
     def contacts_arm(self, arm: Arm, q_arm: ArrayLike, T_world_base: ArrayLike) -> list[tuple[str, str]]:
         """Every (robot link, what it touches) at arm joint values (n,), other joints at reference.

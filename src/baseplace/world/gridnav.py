@@ -15,6 +15,7 @@ runs move_base); :mod:`baseplace.placement.candidates` uses it as the default ``
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -22,7 +23,8 @@ from numpy.typing import ArrayLike, NDArray
 from skimage.graph import MCP_Geometric
 
 from baseplace.errors import InputError
-from baseplace.geometry.poses import BasePose, FloatArray
+from baseplace.geometry.poses import BasePose, FloatArray, wrap_angle
+from baseplace.navigation.path import Path
 from baseplace.world.occupancy import UNKNOWN, OccupancyGrid
 
 OBSTACLE = 50
@@ -110,36 +112,56 @@ class GridNavigator:
         col, row = self.grid.world_to_cell(p)[0]
         return p, (int(row), int(col))
 
-    def plan(self, start_xy: ArrayLike, goal_xy: ArrayLike) -> FloatArray | None:
+    def plan(
+        self,
+        start_xy: ArrayLike,
+        goal_xy: ArrayLike,
+        start_yaw: float | None = None,
+        goal_yaw: float | None = None,
+    ) -> Path | None:
         """The shortest 8-connected path from start to goal, or None when the goal cannot be reached.
 
         None rather than an error, because the pickup loop tries the next candidate; the scanned
-        scene's planner, :func:`baseplace.navigation.planners.plan_path`, raises instead.
+        scene's planner, :func:`baseplace.navigation.planners.plan_path`, raises instead. Both
+        return the same :class:`~baseplace.navigation.path.Path`.
 
         Args:
             start_xy: (2,) start position in the map frame [m].
             goal_xy: (2,) goal position [m].
+            start_yaw: the heading of the first pose [rad] (None: the direction of travel).
+            goal_yaw: the heading of the last pose [rad] (None: the direction of travel).
 
         Returns:
-            (N, 2) waypoints [m], N >= 2: the exact start, the centres of the cells in between, the
-            exact goal.
+            The path (planner "grid"): N >= 2 poses, the exact start, the centres of the cells in
+            between, the exact goal; each heads in the direction of travel, the first and the last
+            take ``start_yaw`` and ``goal_yaw`` when given.
 
         Raises:
             InputError: the start or the goal lies outside the map, in an obstacle, on an unknown
                 cell (unless allowed), or within ``radius`` of an obstacle.
         """
+        t0 = time.perf_counter()
         start, s = self._cell(start_xy, "start")
         goal, g = self._cell(goal_xy, "goal")
         if s == g:
-            return np.array([start, goal])
-        mcp = self._search()
-        cost, _ = mcp.find_costs([s], [g], find_all_ends=True)
-        if not np.isfinite(cost[g]):
-            return None
-        rows_cols = np.asarray(mcp.traceback(g), dtype=np.int64)
-        path = self.grid.cell_to_world(rows_cols[:, ::-1])
-        path[0], path[-1] = start, goal
-        return path
+            xy = np.array([start, goal])
+        else:
+            mcp = self._search()
+            cost, _ = mcp.find_costs([s], [g], find_all_ends=True)
+            if not np.isfinite(cost[g]):
+                return None
+            rows_cols = np.asarray(mcp.traceback(g), dtype=np.int64)
+            xy = self.grid.cell_to_world(rows_cols[:, ::-1])
+            xy[0], xy[-1] = start, goal
+        step = np.diff(xy, axis=0)
+        travel = np.arctan2(step[:, 1], step[:, 0])
+        yaw = np.r_[travel, travel[-1]]
+        if start_yaw is not None:
+            yaw[0] = start_yaw
+        if goal_yaw is not None:
+            yaw[-1] = goal_yaw
+        poses = np.c_[xy, wrap_angle(yaw)]
+        return Path(poses, "grid", (time.perf_counter() - t0) * 1e3, ())
 
     def distances(self, start_xy: ArrayLike) -> FloatArray:
         """(H, W) path length [m] from the start cell's centre to every cell centre; inf where unreachable.
@@ -165,17 +187,9 @@ class GridNavigator:
         out[ok] = dist[cells[:, 1], cells[:, 0]]
         return out
 
-    def __call__(self, start: BasePose, goal: BasePose) -> FloatArray | None:
-        """Seed 004's ``Navigate``: the path (N, 2) [m] from ``start`` to ``goal``, or None."""
-        return self.plan((start.x, start.y), (goal.x, goal.y))
+    def __call__(self, start: BasePose, goal: BasePose) -> Path | None:
+        """Seed 004's ``Navigate``: the path from ``start`` to ``goal`` (their headings at its ends), or None."""
+        return self.plan((start.x, start.y), (goal.x, goal.y), start.yaw, goal.yaw)
 
 
-def path_length(path: ArrayLike) -> float:
-    """Length [m] of a polyline (N, 2) or (N, 3): the sum of its segment lengths."""
-    p = np.asarray(path, dtype=float)
-    if p.ndim != 2 or len(p) == 0:
-        raise InputError(f"a path must be an (N, 2) or (N, 3) array of waypoints, got shape {p.shape}")
-    return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
-
-
-__all__ = ["OBSTACLE", "GridNavigator", "blocked_by_inflation", "path_length"]
+__all__ = ["OBSTACLE", "GridNavigator", "blocked_by_inflation"]
