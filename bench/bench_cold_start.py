@@ -1,10 +1,11 @@
 """Cold start (issue 18): ``import baseplace`` and ``baseplace place`` from a new process, caches warm.
 
 The generated 10 x 10 m scene of bench_serve (seed 1: floor + two inclined planes, three support
-regions) and one top-down target; the default map and numba's kernels already cached (one
-unmeasured run first). Each figure is the median of ``--runs`` new processes: wall time and CPU
-time (user + system, the machine is shared). ``--baseline-src DIR`` runs the same commands with
-another source tree first on the path (e.g. the commit before), for the ratio in the same run.
+regions) and one top-down target; the default map, numba's kernels and the cloud's segmentation
+(terrain.cache) already cached (one unmeasured run first). Each figure is the median of
+``--runs`` new processes: wall time and CPU time (user + system, the machine is shared). ``--baseline-src DIR`` runs the same commands with
+another source tree first on the path (e.g. the commit before), for the ratio in the same run,
+and the placements both print are compared (a cache must not change the answer).
 
 Usage: nice -n 10 python bench/bench_cold_start.py [--runs 5] [--baseline-src ../main/src]
 """
@@ -12,6 +13,7 @@ Usage: nice -n 10 python bench/bench_cold_start.py [--runs 5] [--baseline-src ..
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import resource
 import subprocess
@@ -28,15 +30,15 @@ from baseplace.terrain.io import Cloud, save_cloud
 from common import report
 
 
-def timed(cmd: list[str], env: dict[str, str]) -> tuple[float, float, int]:
-    """Wall and CPU time [s] of one new process, and its exit code."""
+def timed(cmd: list[str], env: dict[str, str]) -> tuple[float, float, int, str]:
+    """Wall and CPU time [s] of one new process, its exit code and its output."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t = time.perf_counter()
     done = subprocess.run(cmd, env=env, capture_output=True, text=True)
     wall = time.perf_counter() - t
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    return wall, cpu, done.returncode
+    return wall, cpu, done.returncode, done.stdout
 
 
 def main() -> None:
@@ -73,17 +75,22 @@ def main() -> None:
     }
     result: dict[str, Any] = {"scene": "generated 10 x 10 m, 3 support regions, seed 1", "target": target,
                               "runs": args.runs, "load_average_at_start": os.getloadavg()[0]}  # fmt: skip
+    placements: dict[tuple[str, str], str] = {}
     for tree, src in trees.items():
         env = dict(os.environ, PYTHONPATH=src)
         for name, cmd in commands.items():
             timed(cmd, env)  # caches warm: the map, numba's kernels, the bytecode
             runs = [timed(cmd, env) for _ in range(args.runs)]
-            assert all(code in (0, 3) for *_, code in runs), (tree, name, runs)
+            assert all(code in (0, 3) for _, _, code, _ in runs), (tree, name, runs)
             result[f"{tree}: {name}"] = {
-                "wall_s_median": round(float(np.median([w for w, _, _ in runs])), 3),
-                "cpu_s_median": round(float(np.median([c for _, c, _ in runs])), 3),
-                "wall_s": [round(w, 3) for w, _, _ in runs],
+                "wall_s_median": round(float(np.median([w for w, *_ in runs])), 3),
+                "cpu_s_median": round(float(np.median([c for _, c, *_ in runs])), 3),
+                "wall_s": [round(w, 3) for w, *_ in runs],
             }
+            if name.startswith("place"):
+                answers = {json.dumps(json.loads(out)["placements"]) for *_, out in runs}
+                assert len(answers) == 1, (tree, name, "placements differ between runs")
+                placements[(tree, name)] = answers.pop()
             print(tree, name, result[f"{tree}: {name}"], flush=True)
     if args.baseline_src:
         for name in commands:
@@ -92,6 +99,10 @@ def main() -> None:
                 "wall": round(b["wall_s_median"] / a["wall_s_median"], 2),
                 "cpu": round(b["cpu_s_median"] / a["cpu_s_median"], 2),
             }
+            if name.startswith("place"):
+                result[f"same placements as baseline: {name}"] = (
+                    placements[("this", name)] == placements[("baseline", name)]
+                )
     result["load_average_at_end"] = os.getloadavg()[0]
     result["goals"] = (
         "import baseplace <= 0.3 s; baseplace place from a new process <= 1.5 s wall, caches warm"

@@ -140,7 +140,7 @@ def world_cloud(cloud: CloudInput) -> Cloud:
     Raises:
         InputError: no cloud given, one transform per cloud missing, or an unreadable file.
     """
-    from baseplace.terrain.diagnose import check_up_direction
+    from baseplace.terrain.cache import check_up_direction_cached
     from baseplace.terrain.io import Cloud, load_cloud, load_transform
 
     fused_out = out_path(cloud.fused_out, "--fused-out", (".bt",))
@@ -174,7 +174,7 @@ def world_cloud(cloud: CloudInput) -> Cloud:
             loaded = loaded.transformed(T)
             origins[-1] = T[:3, 3]
         else:
-            check_up_direction(
+            check_up_direction_cached(
                 loaded.points, optical=loaded.width is not None and loaded.height not in (None, 1)
             )
         clouds.append(loaded)

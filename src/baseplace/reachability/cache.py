@@ -2,7 +2,9 @@
 
 A map is keyed by robot, arm, URDF hash and build settings; the file name is a hash, so no name
 from a robot file ever becomes part of a path. The first use builds the map (tens of seconds,
-resumable: a killed build continues from its checkpoint) and every later use loads it.
+resumable: a killed build continues from its checkpoint) and every later use loads it. The first
+load stores it again without compression (TIAGo's: 40 MB instead of 3.6 MB), which every later
+command opens in 0.07 s instead of 0.22 s (a new process per command pays it each time).
 """
 
 from __future__ import annotations
@@ -12,9 +14,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from baseplace.errors import InputError
 from baseplace.reachability.build import BuildSettings, build_map
 from baseplace.reachability.checkpoint import default_checkpoint_path
-from baseplace.reachability.storage import FORMAT_VERSION, load_map
+from baseplace.reachability.storage import FORMAT_VERSION, is_compressed, load_map, save_map
 from baseplace.robots.codegen import cache_dir, private_dir
 
 if TYPE_CHECKING:
@@ -56,7 +59,13 @@ def cached_map(
     arm_name = arm or robot.spec.default_arm
     path = cached_map_path(robot, settings, arm_name)
     if path.is_file():
-        return load_map(path, robot, arm_name), path, False
+        rmap = load_map(path, robot, arm_name)
+        if is_compressed(path):  # built (or cached by an older baseplace) with gzip: store it plain once
+            try:
+                save_map(rmap, path, compress=False)
+            except (OSError, InputError):
+                pass  # a read-only cache opens slower, nothing else
+        return rmap, path, False
     private_dir(path.parent)
     # build_map locks the entry: a second process waits, then reuses the first one's map
     rmap = build_map(robot, arm_name, settings, progress, default_checkpoint_path(path), save_to=path)

@@ -38,9 +38,14 @@ FORMAT = "baseplace-reachability-map"
 FORMAT_VERSION = 2  # 1 kept grid and info in variable-length string attributes
 
 
-def save_map(rmap: ReachabilityMap, path: str | Path) -> int:
-    """Write ``rmap`` to ``path`` atomically; returns the file size in bytes."""
+def save_map(rmap: ReachabilityMap, path: str | Path, compress: bool = True) -> int:
+    """Write ``rmap`` to ``path`` atomically; returns the file size in bytes.
+
+    ``compress=False`` stores the arrays without gzip: about 11x the size, opened about 3x faster
+    (the per-user cache keeps its maps so, :mod:`baseplace.reachability.cache`).
+    """
     path = Path(path)
+    packed = {"compression": "gzip", "compression_opts": 4, "shuffle": True} if compress else {}
     with atomic_write(path, "map") as tmp, h5py.File(tmp, "w") as f:
         write_header(f, FORMAT, FORMAT_VERSION)
         grid = rmap.grid
@@ -59,16 +64,28 @@ def save_map(rmap: ReachabilityMap, path: str | Path) -> int:
             rmap.cells,
             rmap.counts,
         ]
-        f.create_dataset("cells", data=rmap.cells, compression="gzip", compression_opts=4, shuffle=True)
-        f.create_dataset("counts", data=rmap.counts, compression="gzip", compression_opts=4, shuffle=True)
+        f.create_dataset("cells", data=rmap.cells, **packed)
+        f.create_dataset("counts", data=rmap.counts, **packed)
         if rmap.manipulability is not None:
-            f.create_dataset("manipulability", data=rmap.manipulability, compression="gzip")
+            f.create_dataset(
+                "manipulability", data=rmap.manipulability, **({"compression": "gzip"} if compress else {})
+            )
             parts.append(rmap.manipulability)
         if rmap.quality is not None:
-            f.create_dataset("quality", data=rmap.quality, compression="gzip")
+            f.create_dataset("quality", data=rmap.quality, **({"compression": "gzip"} if compress else {}))
             parts.append(rmap.quality)
         f.attrs["sha256"] = short_text(digest(*parts))
     return path.stat().st_size
+
+
+def is_compressed(path: str | Path) -> bool:
+    """Whether the map file's cells are stored compressed (False for an unreadable file)."""
+    try:
+        with h5py.File(path, "r") as f:
+            cells = f["cells"]
+            return isinstance(cells, h5py.Dataset) and cells.compression is not None
+    except CORRUPT_FILE_ERRORS:
+        return False
 
 
 def load_map(path: str | Path, robot: Robot | None = None, arm: str | None = None) -> ReachabilityMap:

@@ -15,7 +15,6 @@ from dataclasses import dataclass
 import networkx as nx
 import numpy as np
 from numpy.typing import NDArray
-from scipy import ndimage
 from shapely.geometry import MultiPolygon, Polygon
 
 from baseplace.terrain.heightmap import HeightMap
@@ -48,6 +47,8 @@ def build_region_graph(seg: Segmentation, settings: GraphSettings | None = None)
     separate edges. Edge attributes: ``p_s``, ``p_e`` (world x, y [m]), ``step`` (largest height
     difference of the two planes along the stretch [m]) and ``traversable``.
     """
+    from scipy import ndimage  # here: a cached terrain never imports it (0.5 s)
+
     s = settings or GraphSettings()
     hmap = seg.hmap
     graph = nx.MultiGraph()

@@ -6,7 +6,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import ndimage
 
 from baseplace.terrain.heightmap import FloatArray, HeightMap
 
@@ -42,6 +41,8 @@ def local_planes(
     m = known.astype(float)
     hc = np.where(known, heights, 0.0)
     centre = hc
+
+    from scipy import ndimage  # here: a cached terrain never imports it (0.5 s)
 
     def corr(img: FloatArray, kernel: FloatArray) -> FloatArray:
         return ndimage.correlate(img, kernel, mode="constant", cval=0.0)

@@ -26,7 +26,6 @@ from typing import Protocol
 import numba as nb
 import numpy as np
 from numpy.typing import NDArray
-from scipy import ndimage
 
 from baseplace.errors import InputError
 from baseplace.terrain.heightmap import FloatArray, HeightMap
@@ -471,6 +470,8 @@ class RobustSegmenter:
 
     def _largest_components(self, hmap: HeightMap, labels: Labels, n: int) -> Labels:
         """Keep each region's largest 4-connected component; give the rest to the closest neighbour."""
+        from scipy import ndimage  # here: a cached terrain never imports it (0.5 s)
+
         orphan = np.zeros(labels.shape, dtype=bool)
         for k in range(n):
             comp, count = ndimage.label(labels == k)

@@ -34,7 +34,6 @@ import cv2
 import numpy as np
 import yaml
 from numpy.typing import ArrayLike, NDArray
-from scipy.ndimage import distance_transform_edt
 
 from baseplace.errors import InputError, brief, unknown
 from baseplace.guards import check_alloc, check_path_length
@@ -143,6 +142,8 @@ class OccupancyGrid:
             if not occupied.any():
                 dist = np.full(self.data.shape, np.inf)
             else:
+                from scipy.ndimage import distance_transform_edt  # here: most commands never need it (0.5 s)
+
                 dist = np.asarray(distance_transform_edt(~occupied), dtype=float)
             self._edt_cache[threshold] = dist
         return self._edt_cache[threshold]
