@@ -15,6 +15,7 @@ configurations (seed 7, disjoint from the model's calibration seeds [19, 0] and 
   accuracy configurations.
 
 Usage: python bench/bench_self_collision.py [--configs 100000] [--robots tiago,tiago_dual,panda]
+    [--name self_collision]
 """
 
 from __future__ import annotations
@@ -71,6 +72,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--configs", type=int, default=100_000)
     parser.add_argument("--robots", default="tiago,tiago_dual,panda", help="comma-separated")
+    parser.add_argument("--name", default="self_collision", help="results file bench/results/NAME.json")
     args = parser.parse_args()
     print(
         "| robot | false-free (old) | false-colliding (old) | coal colliding | spheres M/CPU-s old "
@@ -97,7 +99,7 @@ def main() -> None:
             f"| {r['sphere_model_setup_s']:.1f} | {load:.1f}-{r['load_after']:.1f} |",
             flush=True,
         )
-    report("self_collision", {"configs": args.configs, "robots": rows}, used_seeds=[7, 8])
+    report(args.name, {"configs": args.configs, "robots": rows}, used_seeds=[7, 8])
 
 
 def row(robot: Robot, n_configs: int) -> dict:
