@@ -29,7 +29,7 @@ from baseplace.robots.collision import SelfCollision
 from baseplace.robots.fk import NO_AXES, chain_frames
 from baseplace.robots.model import Arm, Robot
 
-MODEL_VERSION = "spheres-2"
+MODEL_VERSION = "spheres-3"
 """Names the sphere model and kernel in a map's provenance (``MapInfo.self_collision_checker``)."""
 DEFAULT_MARGIN = 0.005  # m, added to every sphere radius
 _SURFACE_SAMPLES = 3000  # random surface points per mesh, on top of vertices and edge midpoints
@@ -38,6 +38,10 @@ _TARGET_RADIUS = 0.06  # m: parts are split until their sphere is this small
 _REACH_SAMPLES = 1 << 17  # random configurations that find the sphere pairs that never meet
 _REACH_MARGIN = 0.05  # m: a pair is kept if its spheres came this close in those samples
 CALIBRATION_CHUNK = 1 << 14
+_TABLE_MAX_JOINTS = 3  # cluster pairs whose relative pose depends on this many joints get a table
+_TABLE_SLACK = 0.002  # m: a table's aim for how far a sphere moves inside one of its cells
+_TABLE_MAX_CELLS = 1 << 21  # per table (256 KiB of bits)
+_TABLE_MAX_DELTA = 0.004  # m: no table where the cell cap leaves more slack than this
 
 
 def _surface_points(geometry: Any, rng: np.random.Generator) -> tuple[NDArray[np.float64], float]:
@@ -149,6 +153,7 @@ class SphereModel:
         arm_name: str | None = None,
         margin: float = DEFAULT_MARGIN,
         calibration: int = 400,
+        pair_tables: bool = True,
     ) -> None:
         self.robot = robot
         self.arm = arm = robot.arm(arm_name)
@@ -254,9 +259,15 @@ class SphereModel:
         self.n_exact_pairs = len(pairs)
         self.geom_first = np.array([r.start for r in g_spheres] + [len(rad)], dtype=np.int64)
         self._group_pairs(np.array(geom_pairs, dtype=np.int64).reshape(-1, 2))
+        self._build_tables(pair_tables)
+        tables = (
+            f", {len(self.table_joints)} joint-pair tables ({self.table_bits.nbytes // 1024} KiB)"
+            if len(self.table_joints)
+            else ", no joint-pair tables"
+        )
         self.description = (
             f"{MODEL_VERSION}: {len(rad)} spheres (margin {margin} m), {len(self.sphere_pairs)} "
-            f"sphere pairs in {len(self.geom_pairs)} geometry pairs"
+            f"sphere pairs in {len(self.geom_pairs)} geometry pairs{tables}"
         )
 
     def _group_pairs(self, gp: NDArray[np.int64]) -> None:
@@ -312,6 +323,105 @@ class SphereModel:
         self.ent_v_start = np.array(ent_v_start, dtype=np.int64)
         self.ent_v = np.array(ent_v, dtype=np.int64)
 
+    def _build_tables(self, enabled: bool) -> None:
+        """Lookup tables for the cluster pairs whose relative pose depends on few joints.
+
+        The spheres of cluster ``lo`` are rigid in joint ``lo``'s frame and those of ``hi > lo``
+        in joint ``hi``'s, so their relative pose depends only on joints ``lo + 1 .. hi``. Where
+        that is at most ``_TABLE_MAX_JOINTS`` joints, a bit table over those joints' limits
+        (bins of half-width ``h_j``) records whether any sphere pair of the cluster pair may
+        overlap in the cell: it is evaluated at the cell's centre with every radius sum grown by
+        ``delta = sum_j h_j L_j``, where ``L_j`` bounds how far a sphere of cluster ``hi`` moves
+        per unit of joint ``j`` (1 for a prismatic joint; for a revolute one its distance from
+        the joint's axis: exact for joint ``hi``, through the joint origins for the others).
+        A table is therefore conservative with respect to the spheres (it never calls a
+        configuration free whose spheres overlap); it may call colliding a configuration whose
+        spheres come within ``delta`` of each other. Bins are sized for ``delta`` <=
+        ``_TABLE_SLACK``, fewer where a table would exceed ``_TABLE_MAX_CELLS`` cells; a table
+        whose ``delta`` then exceeds ``_TABLE_MAX_DELTA`` is not made. Configurations outside a
+        table's range (joint values beyond the limits) fall back to the bounding hierarchy.
+
+        Attributes set: ``cluster_table`` (K,) table of each cluster pair or -1; per table,
+        ``table_joints`` (T, 3) (-1: unused), ``table_lower`` (T, 3), ``table_scale`` (T, 3)
+        bins per unit, ``table_bins`` (T, 3), ``table_start`` (T + 1,) bit offsets into
+        ``table_bits`` (uint8), ``table_delta`` (T,) [m].
+        """
+        arm = self.arm
+        K = len(self.cluster_pairs)
+        self.cluster_table = np.full(K, -1, dtype=np.int64)
+        joints: list[NDArray[np.int64]] = []
+        bins: list[NDArray[np.int64]] = []
+        lower: list[NDArray[np.float64]] = []
+        scale: list[NDArray[np.float64]] = []
+        start, delta = [0], []
+        chunks: list[NDArray[np.uint8]] = []
+        offsets = np.linalg.norm(arm.placements[:, :3, 3], axis=1)
+        travel = np.where(arm.kinds == 1, np.maximum(np.abs(arm.lower), np.abs(arm.upper)), 0.0)
+        for k in range(K if enabled else 0):
+            lo, hi = int(self.cluster_pairs[k].min()), int(self.cluster_pairs[k].max())
+            J = list(range(lo + 1, hi + 1))
+            if not 1 <= len(J) <= _TABLE_MAX_JOINTS or np.any(arm.continuous[J]):
+                continue
+            U, V = self._cluster_sphere_pairs(k)
+            down = np.unique(np.concatenate([U, V]))
+            C = self.sphere_center[down[self.sphere_joint[down] == hi]]
+            reach = float(np.linalg.norm(C, axis=1).max())
+            ax = arm.axes[hi]
+            L = [
+                1.0
+                if arm.kinds[j] == 1
+                else float(np.linalg.norm(C - np.outer(C @ ax, ax), axis=1).max())
+                if j == hi
+                else reach + offsets[j + 1 : hi + 1].sum() + travel[j + 1 : hi + 1].sum()
+                for j in J
+            ]
+            width = arm.upper[J] - arm.lower[J]
+            wl = np.maximum(width * np.array(L), 1e-12)
+            n = np.ceil(wl * len(J) / (2 * _TABLE_SLACK))
+            if n.prod() > _TABLE_MAX_CELLS:  # equal shares of delta per joint at the cap
+                n = np.ceil(wl * (_TABLE_MAX_CELLS / wl.prod()) ** (1 / len(J)) * 0.999)
+            n = np.clip(n, 1, None).astype(np.int64)
+            d = float((width / (2 * n) * np.array(L)).sum()) + 1e-9
+            if d > _TABLE_MAX_DELTA:
+                continue
+            J3 = np.full(3, -1, dtype=np.int64)
+            J3[: len(J)] = J
+            n3 = np.ones(3, dtype=np.int64)
+            n3[: len(J)] = n
+            lo3, w3 = np.zeros(3), np.zeros(3)
+            lo3[: len(J)], w3[: len(J)] = arm.lower[J], width / n
+            bits = np.zeros((int(n3.prod()) + 7) // 8, dtype=np.uint8)
+            thr2 = (self.sphere_radius[U] + self.sphere_radius[V] + d) ** 2
+            _fill_table((arm.lower + arm.upper) / 2, J3, n3, lo3, w3, arm.placements, arm.axes,
+                        arm.kinds, self.sphere_joint, self.sphere_center, U, V, thr2, bits)  # fmt: skip
+            self.cluster_table[k] = len(joints)
+            joints.append(J3)
+            lower.append(lo3)
+            scale.append(np.where(w3 > 0, 1 / np.where(w3 > 0, w3, 1), 0.0))
+            bins.append(n3)
+            chunks.append(bits)
+            start.append(start[-1] + 8 * len(bits))
+            delta.append(d)
+        self.table_joints = np.array(joints, dtype=np.int64).reshape(-1, 3)
+        self.table_lower = np.array(lower, dtype=float).reshape(-1, 3)
+        self.table_scale = np.array(scale, dtype=float).reshape(-1, 3)
+        self.table_bins = np.array(bins, dtype=np.int64).reshape(-1, 3)
+        self.table_start = np.array(start, dtype=np.int64)
+        self.table_bits = np.concatenate(chunks) if chunks else np.zeros(0, dtype=np.uint8)
+        self.table_delta = np.array(delta, dtype=float)
+
+    def _cluster_sphere_pairs(self, k: int) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        """The sphere pairs (u, v) the hierarchy checks under cluster pair ``k``."""
+        U: list[int] = []
+        V: list[int] = []
+        for f in range(self.cluster_pair_start[k], self.cluster_pair_start[k + 1]):
+            for p in range(self.first_start[f], self.first_start[f + 1]):
+                for e in range(self.pair_u_start[p], self.pair_u_start[p + 1]):
+                    vs = self.ent_v[self.ent_v_start[e] : self.ent_v_start[e + 1]]
+                    U.extend([int(self.ent_u[e])] * len(vs))
+                    V.extend(int(v) for v in vs)
+        return np.array(U, dtype=np.int64), np.array(V, dtype=np.int64)
+
     def colliding_arm(self, arm: Arm, q_arm: ArrayLike) -> NDArray[np.bool_]:
         """Self-collision (N,) of (N, n) arm configurations by the sphere model.
 
@@ -328,7 +438,9 @@ class SphereModel:
                          self.geom_pairs, self.cluster_center, self.cluster_radius,
                          self.cluster_pairs, self.cluster_pair_start, self.first_geom,
                          self.first_start, self.pair_u_start, self.ent_u, self.ent_v_start,
-                         self.ent_v, out)  # fmt: skip
+                         self.ent_v, self.cluster_table, self.table_joints, self.table_lower,
+                         self.table_scale, self.table_bins, self.table_start, self.table_bits,
+                         out)  # fmt: skip
         return out
 
 
@@ -372,10 +484,13 @@ def _place_one(j, local, F, out):
 @nb.njit(cache=True, parallel=True)
 def _colliding_batch(Q, placements, axes, kinds, s_joint, s_local, s_rad, g_joint, g_local, g_rad,
                      geom_pairs, cl_local, cl_rad, cl_pairs, cl_start, first_geom, first_start,
-                     pair_u_start, ent_u, ent_v_start, ent_v, out):  # fmt: skip
+                     pair_u_start, ent_u, ent_v_start, ent_v, cl_table, t_joints, t_lower, t_scale,
+                     t_bins, t_start, t_bits, out):  # fmt: skip
     """Self-collision of each configuration by the sphere model, in blocks of 256 per thread.
 
-    Per configuration, down the bounding hierarchy: cluster pair bounds; each first geometry
+    Per configuration, first the joint-pair tables (before any kinematics: a hit ends the
+    configuration), then for the other cluster pairs (and tabled ones whose joints are out of
+    the table's range) down the bounding hierarchy: cluster pair bounds; each first geometry
     against the other cluster's bound; geometry pair bounds; each sphere of the first geometry
     against the second geometry's bound; its sphere pairs. A sphere is placed when it is first
     needed; the first overlapping sphere pair ends the configuration.
@@ -390,12 +505,36 @@ def _colliding_batch(Q, placements, axes, kinds, s_joint, s_local, s_rad, g_join
         g_placed = np.full(g_joint.shape[0], -1, dtype=np.int64)
         cc = np.empty((cl_rad.shape[0], 3))
         R, t = np.empty((3, 3)), np.empty(3)
+        in_table = np.zeros(t_joints.shape[0], dtype=np.bool_)
         for i in range(blk * n_block, min(Q.shape[0], (blk + 1) * n_block)):
+            hit = False
+            for tb in range(t_joints.shape[0]):
+                idx = 0
+                in_table[tb] = True
+                for d in range(3):
+                    j, n = t_joints[tb, d], t_bins[tb, d]
+                    c = 0
+                    if j >= 0:
+                        x = (Q[i, j] - t_lower[tb, d]) * t_scale[tb, d]
+                        if not 0.0 <= x <= n:
+                            in_table[tb] = False
+                            break
+                        c = min(int(x), n - 1)
+                    idx = idx * n + c
+                if in_table[tb]:
+                    idx += t_start[tb]
+                    if (t_bits[idx >> 3] >> (idx & 7)) & 1:
+                        hit = True
+                        break
+            if hit:
+                out[i] = True
+                continue
             _joint_frames(Q[i], placements, axes, kinds, F, R, t)
             for c in range(cl_rad.shape[0]):
                 _place_one(c - 1, cl_local[c], F, cc[c])
-            hit = False
             for k in range(cl_pairs.shape[0]):
+                if cl_table[k] >= 0 and in_table[cl_table[k]]:
+                    continue
                 ca, cb = cl_pairs[k, 0] + 1, cl_pairs[k, 1] + 1
                 dx, dy, dz = cc[ca, 0] - cc[cb, 0], cc[ca, 1] - cc[cb, 1], cc[ca, 2] - cc[cb, 2]
                 r = cl_rad[ca] + cl_rad[cb]
@@ -447,6 +586,43 @@ def _colliding_batch(Q, placements, axes, kinds, s_joint, s_local, s_rad, g_join
                 if hit:
                     break
             out[i] = hit
+
+
+@nb.njit(cache=True, parallel=True)
+def _fill_table(q0, J, n, lo, w, placements, axes, kinds, s_joint, s_local, U, V, thr2, bits):
+    """Set bit ``(a n1 + b) n2 + c`` of ``bits`` where a sphere pair (U, V) comes within ``thr2``.
+
+    ``thr2`` holds squared distances. Cell (a, b, c) is evaluated at its centre: joint ``J[0]``
+    at ``lo[0] + (a + 1/2) w[0]`` and likewise ``J[1]``, ``J[2]`` where they are >= 0 (``n`` is 1
+    for an unused one); every other joint at ``q0`` (the pair's relative pose does not depend on
+    them). Cells run in parallel into a boolean grid, packed into ``bits`` afterwards.
+    """
+    total = n[0] * n[1] * n[2]
+    hits = np.zeros(total, dtype=np.bool_)
+    for cell in nb.prange(total):
+        q = q0.copy()
+        c2 = cell % n[2]
+        c1 = (cell // n[2]) % n[1]
+        c0 = cell // (n[2] * n[1])
+        q[J[0]] = lo[0] + (c0 + 0.5) * w[0]
+        if J[1] >= 0:
+            q[J[1]] = lo[1] + (c1 + 0.5) * w[1]
+        if J[2] >= 0:
+            q[J[2]] = lo[2] + (c2 + 0.5) * w[2]
+        F = np.empty((q.shape[0], 3, 4))
+        R, t = np.empty((3, 3)), np.empty(3)
+        cu, cv = np.empty(3), np.empty(3)
+        _joint_frames(q, placements, axes, kinds, F, R, t)
+        for p in range(U.shape[0]):
+            _place_one(s_joint[U[p]], s_local[U[p]], F, cu)
+            _place_one(s_joint[V[p]], s_local[V[p]], F, cv)
+            dx, dy, dz = cu[0] - cv[0], cu[1] - cv[1], cu[2] - cv[2]
+            if dx * dx + dy * dy + dz * dz < thr2[p]:
+                hits[cell] = True
+                break
+    for idx in range(total):
+        if hits[idx]:
+            bits[idx >> 3] |= np.uint8(1 << (idx & 7))
 
 
 @nb.njit(cache=True, parallel=True)
