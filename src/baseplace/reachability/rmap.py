@@ -18,7 +18,6 @@ import numba as nb
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from baseplace.arrays import unique_ints
 from baseplace.errors import InputError
 from baseplace.geometry.poses import FloatArray
 from baseplace.guards import check_alloc
@@ -96,7 +95,10 @@ class ReachabilityMap:
         """Largest horizontal distance [m] from the base origin to a reached voxel's far corner."""
         if len(self.cells) == 0:
             return 0.0
-        voxels = unique_ints(self.cells // self.grid.n_orientations)
+        voxels = self.cells // self.grid.n_orientations
+        first = np.ones(len(voxels), dtype=np.bool_)  # a voxel's run of cells, once (no sort:
+        np.not_equal(voxels[1:], voxels[:-1], out=first[1:])  # repeats cannot change the max)
+        voxels = voxels[first]
         centres = self.grid.voxel_centre(voxels)
         return float(np.hypot(centres[:, 0], centres[:, 1]).max() + self.grid.voxel_size * math.sqrt(0.5))
 
