@@ -177,3 +177,15 @@ def test_cache_keeps_maps_of_different_cells_apart():
         cached_map_path(robot, BuildSettings(certify=5)),
     }
     assert plain not in others and len(others) == 3
+
+
+def test_reached_voxels_and_horizontal_reach_against_every_cell(tiago_map):
+    """The distinct voxels of the cells (np.unique as the oracle) and the farthest one's reach."""
+    m = tiago_map
+    voxels = np.unique(m.cells // m.grid.n_orientations)
+    assert np.array_equal(m.reached_voxels, voxels)
+    offset, _ = m.tables
+    assert np.array_equal(np.flatnonzero(offset >= 0), voxels)
+    centres = m.grid.voxel_centre(voxels)
+    far = np.hypot(centres[:, 0], centres[:, 1]).max() + m.grid.voxel_size * np.sqrt(0.5)
+    assert m.horizontal_reach == pytest.approx(far, abs=1e-12)

@@ -53,6 +53,7 @@ def assert_same_terrain(a: Terrain, b: Terrain) -> None:
         assert a.graph.nodes[ra.id]["region"] == ra and b.graph.nodes[rb.id]["region"] == rb
         pa, pb = a.graph.nodes[ra.id]["polygon"], b.graph.nodes[rb.id]["polygon"]
         assert pa.geom_type == pb.geom_type and shapely.equals_exact(pa, pb, tolerance=0.0)
+        assert a.polygons[ra.id] is pa and b.polygons[rb.id] is pb  # the outlines a placement reads
     ea = list(a.graph.edges(keys=True, data=True))
     eb = list(b.graph.edges(keys=True, data=True))
     assert len(ea) == len(eb) >= 1
@@ -71,6 +72,25 @@ def test_a_cached_terrain_equals_a_fresh_segmentation(points, fresh, cache_root)
     assert "cache_read" in second.timings_ms
     assert_same_terrain(second, fresh)
     assert_same_terrain(first, fresh)
+
+
+def test_a_cached_terrain_imports_networkx_only_for_its_graph(points, cache_root):
+    """A placement reads the polygons only: a new process reading the entry never imports networkx."""
+    import subprocess
+    import sys
+
+    cached_terrain(points)
+    np.save(cache_root / "points.npy", points)
+    code = (
+        "import sys, numpy as np\n"
+        "from baseplace.terrain.cache import cached_terrain\n"
+        f"t = cached_terrain(np.load({str(cache_root / 'points.npy')!r}))\n"
+        "assert 'cache_read' in t.timings_ms and len(t.polygons) >= 2\n"
+        "assert 'networkx' not in sys.modules, 'read'\n"
+        "assert t.graph.number_of_edges() >= 1 and 'networkx' in sys.modules\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
 
 
 def test_a_terrain_of_one_region_without_edges_round_trips(cache_root):

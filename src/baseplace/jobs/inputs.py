@@ -243,7 +243,7 @@ def write_mcap(path: Path, world_frame: str, stamp_ns: int, terrain: Any = None,
     regions = []
     if terrain is not None:
         for r in terrain.segmentation.regions:
-            poly = terrain.graph.nodes[r.id]["polygon"]
+            poly = terrain.polygons[r.id]
             rings = []
             for p in list(poly.geoms) if poly.geom_type == "MultiPolygon" else [poly]:
                 for ring in [p.exterior, *p.interiors]:

@@ -204,7 +204,7 @@ def place(
         else:
             motion = MotionChecker(robot, arm, transit, env, s.motion)
     verifier = Verifier(arm, DampedLeastSquaresIK(arm), env, T_targets,
-                        {r.id: terrain.graph.nodes[r.id]["polygon"] for r in seg.regions}, outline,
+                        {r.id: terrain.polygons[r.id] for r in seg.regions}, outline,
                         motion=motion)  # fmt: skip
     rs = s.robustness
     estimator = RobustnessEstimator(arm, env, T_targets, rs) if rs.samples > 0 else None

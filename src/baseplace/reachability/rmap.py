@@ -18,7 +18,6 @@ import numba as nb
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from baseplace.arrays import unique_ints
 from baseplace.errors import InputError
 from baseplace.geometry.poses import FloatArray
 from baseplace.guards import check_alloc
@@ -92,12 +91,19 @@ class ReachabilityMap:
         return len(self.cells)
 
     @cached_property
+    def reached_voxels(self) -> NDArray[np.int64]:
+        """The voxels (sorted, distinct) that hold at least one reached cell."""
+        voxels = self.cells // self.grid.n_orientations  # sorted, as the cells are
+        first = np.ones(len(voxels), dtype=np.bool_)
+        np.not_equal(voxels[1:], voxels[:-1], out=first[1:])
+        return voxels[first]
+
+    @cached_property
     def horizontal_reach(self) -> float:
         """Largest horizontal distance [m] from the base origin to a reached voxel's far corner."""
         if len(self.cells) == 0:
             return 0.0
-        voxels = unique_ints(self.cells // self.grid.n_orientations)
-        centres = self.grid.voxel_centre(voxels)
+        centres = self.grid.voxel_centre(self.reached_voxels)
         return float(np.hypot(centres[:, 0], centres[:, 1]).max() + self.grid.voxel_size * math.sqrt(0.5))
 
     @property
@@ -117,18 +123,15 @@ class ReachabilityMap:
         check_alloc(
             self.grid.n_voxels * 4.0, "the lookup table of the map's grid", f"map of {self.info.robot}"
         )
-        voxels = self.cells // n_orient  # sorted, as the cells are
-        first = np.ones(len(voxels), dtype=np.bool_)
-        np.not_equal(voxels[1:], voxels[:-1], out=first[1:])
-        reached = voxels[first]
-        del first
+        reached = self.reached_voxels
         offset = np.full(self.grid.n_voxels, -1, dtype=np.int32)
         offset[reached] = np.arange(len(reached), dtype=np.int32)
         blocks = np.zeros((len(reached), n_orient), dtype=np.float32)
         top = float(self.counts.max()) if len(self.counts) else 1.0
         step = 1 << 20  # in slices: the temporaries stay small next to the tables
-        for lo in range(0, len(voxels), step):
-            v, c = voxels[lo : lo + step], self.cells[lo : lo + step]
+        for lo in range(0, len(self.cells), step):
+            c = self.cells[lo : lo + step]
+            v = c // n_orient
             blocks[offset[v], c - v * n_orient] = self.counts[lo : lo + step] / top
         return offset, blocks
 

@@ -123,7 +123,15 @@ def load_map(path: str | Path, robot: Robot | None = None, arm: str | None = Non
             or (len(cells) and not 0 <= cells.min() <= cells.max() < grid.n_cells)
         ):
             raise ValueError("cells out of the grid")
-        rmap = ReachabilityMap(grid, cells.astype(np.int64), counts.astype(np.uint32), info, manip, quality)
+        # copy=False: stored as these types (the usual case), the arrays just read are used as they are
+        rmap = ReachabilityMap(
+            grid,
+            cells.astype(np.int64, copy=False),
+            counts.astype(np.uint32, copy=False),
+            info,
+            manip,
+            quality,
+        )
     except InputError:
         raise
     except CORRUPT_FILE_ERRORS as exc:

@@ -39,16 +39,18 @@ MAX_ENTRIES = 16
 @cache
 def code_digest() -> str:
     """SHA-256 of the segmenting code: ``terrain/*.py``, ``arrays.py`` and the libraries' versions."""
+    from importlib.metadata import version
+
     import cv2
-    import networkx
     import numba
     import scipy
     import shapely
 
     here = Path(__file__).resolve().parent
     h = hashlib.sha256()
-    for lib in (np, scipy, numba, cv2, shapely, networkx):
+    for lib in (np, scipy, numba, cv2, shapely):
         h.update(f"{lib.__name__} {lib.__version__}\0".encode())
+    h.update(f"networkx {version('networkx')}\0".encode())  # not imported: a cached terrain needs no graph
     for path in [*sorted(here.glob("*.py")), here.parent / "arrays.py"]:
         h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
     return h.hexdigest()
@@ -156,10 +158,10 @@ def _arrays(terrain: Terrain) -> dict[str, np.ndarray]:
     """The terrain as named arrays (polygons as WKB, concatenated)."""
     import shapely
 
-    seg, graph = terrain.segmentation, terrain.graph
+    seg = terrain.segmentation
     regions = seg.regions
-    wkb = [shapely.to_wkb(graph.nodes[r.id]["polygon"]) for r in regions]
-    edges = list(graph.edges(keys=True, data=True))
+    wkb = [shapely.to_wkb(terrain.polygons[r.id]) for r in regions]
+    edges = list(terrain.graph.edges(keys=True, data=True))
     return {
         "voxel_keys": terrain.voxels.keys,
         "voxel_resolution": np.array([terrain.voxels.resolution]),
@@ -252,7 +254,6 @@ def _read(path: Path, key: str) -> Terrain | None:
 
 def _terrain(a: dict[str, Any]) -> Terrain | None:
     """The terrain of :func:`_arrays`' arrays; None if they do not fit together."""
-    import networkx as nx
     import shapely
 
     from baseplace.terrain.heightmap import HeightMap
@@ -304,14 +305,25 @@ def _terrain(a: dict[str, Any]) -> Terrain | None:
     ]
     timings = json.loads(bytes(a["timings"]).decode())
     seg = Segmentation(hmap, a["labels"], regions, timings["segmentation"])
-    graph = nx.MultiGraph()
     starts = [0, *a["polygon_ends"][:-1].tolist()]
     wkb = bytes(a["polygon_wkb"])
-    for r, s, e in zip(regions, starts, a["polygon_ends"].tolist(), strict=True):
-        graph.add_node(r.id, region=r, polygon=shapely.from_wkb(wkb[s:e]))
-    for (i, j, k), p_s, p_e, step, trav in zip(a["edge_ends"].tolist(), a["edge_p_s"], a["edge_p_e"],
-                                              a["edge_step"].tolist(), a["edge_traversable"].tolist(), strict=True):  # fmt: skip
-        if not (0 <= i < n and 0 <= j < n):
-            return None
-        graph.add_edge(i, j, key=k, p_s=p_s, p_e=p_e, step=float(step), traversable=bool(trav))
-    return Terrain(VoxelMap(float(a["voxel_resolution"][0]), a["voxel_keys"]), seg, graph, timings["terrain"])
+    polygons = {r.id: shapely.from_wkb(wkb[s:e]) for r, s, e in zip(regions, starts, a["polygon_ends"].tolist(), strict=True)}  # fmt: skip
+    ends = a["edge_ends"]
+    if ends.ndim != 2 or ends.shape[1] != 3 or not np.all((ends[:, :2] >= 0) & (ends[:, :2] < n)):
+        return None
+    edges = list(zip(ends.tolist(), a["edge_p_s"], a["edge_p_e"], a["edge_step"].tolist(),
+                     a["edge_traversable"].tolist(), strict=True))  # fmt: skip
+
+    def make_graph() -> Any:
+        """The region graph, as :func:`~baseplace.terrain.graph.build_region_graph` made it."""
+        import networkx as nx
+
+        graph = nx.MultiGraph()
+        for r in regions:
+            graph.add_node(r.id, region=r, polygon=polygons[r.id])
+        for (i, j, k), p_s, p_e, step, trav in edges:
+            graph.add_edge(i, j, key=k, p_s=p_s, p_e=p_e, step=float(step), traversable=bool(trav))
+        return graph
+
+    voxels = VoxelMap(float(a["voxel_resolution"][0]), a["voxel_keys"])
+    return Terrain(voxels, seg, polygons, timings["terrain"], make_graph)

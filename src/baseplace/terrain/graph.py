@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import networkx as nx
 import numpy as np
 from numpy.typing import NDArray
 from shapely.geometry import MultiPolygon, Polygon
@@ -20,6 +20,9 @@ from shapely.geometry import MultiPolygon, Polygon
 from baseplace.terrain.heightmap import HeightMap
 from baseplace.terrain.polygons import mask_polygon
 from baseplace.terrain.segmentation import PlanarRegion, Segmentation
+
+if TYPE_CHECKING:
+    import networkx as nx
 
 
 @dataclass(frozen=True)
@@ -47,6 +50,7 @@ def build_region_graph(seg: Segmentation, settings: GraphSettings | None = None)
     separate edges. Edge attributes: ``p_s``, ``p_e`` (world x, y [m]), ``step`` (largest height
     difference of the two planes along the stretch [m]) and ``traversable``.
     """
+    import networkx as nx
     from scipy import ndimage  # here: a cached terrain never imports it (0.5 s)
 
     s = settings or GraphSettings()
