@@ -7,7 +7,9 @@ OcTrees, checked against every collision mesh of the robot, together with self-c
 
 At a grasp only the hand may touch the grasped object (:mod:`baseplace.world.grasped_object`):
 its voxels are checked against every other link, and the surface under it stays an obstacle
-(:func:`contact_groups`); collisions are reported per robot link and per thing touched.
+(:func:`contact_groups`); collisions are reported per robot link and per thing touched. Given the
+cloud, the planar part of that surface is a thin slab instead of voxels
+(:mod:`baseplace.world.support_plane`), without the voxels' 25 mm quantization.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from baseplace.robots.model import Arm, Robot
 from baseplace.terrain.segmentation import Segmentation
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.grasped_object import GraspedObject, rows_in
+from baseplace.world.support_plane import SupportSlab, fit_support_slab, with_support_slab
 
 SUPPORT_DIST = 0.1
 """Voxels this close [m] to their region's plane are support: 4 sigma of seed 000's 25 mm noise."""
@@ -54,14 +57,18 @@ def obstacle_voxels(
 
 
 def contact_groups(
-    voxels: VoxelMap, obstacles: VoxelMap, grasped: GraspedObject | None
-) -> tuple[dict[str, VoxelMap], VoxelMap | None]:
+    voxels: VoxelMap, obstacles: VoxelMap, grasped: GraspedObject | None, points: ArrayLike | None = None
+) -> tuple[dict[str, VoxelMap | SupportSlab], VoxelMap | None]:
     """Split the scene for :class:`Environment`: ({"support": ..., "obstacle": ...}, object voxels).
 
     The object's voxels come from all ``voxels`` (it may stand on a planar region); its support is
     every voxel of ``voxels`` just under and around it (:meth:`GraspedObject.support_mask`), even
     one a planar region removed from ``obstacles``; the other obstacles are ``obstacles`` less
     both. Without an object: ({"obstacle": obstacles}, None).
+
+    ``points``: the cloud (N, 3) the voxels were made from. Given, the planar surface the object
+    stands on is fitted (:func:`~baseplace.world.support_plane.fit_support_slab`) and, when the
+    fit is good, the voxels only its points occupy become one thin slab, group "support_plane".
     """
     if grasped is None:
         return {"obstacle": obstacles}, None
@@ -69,9 +76,15 @@ def contact_groups(
     support = grasped.support_mask(voxels) & ~mine
     taken = VoxelMap(voxels.resolution, voxels.keys[mine | support])
     rest = obstacles.without(rows_in(obstacles.keys, taken.keys))
-    return {"support": VoxelMap(voxels.resolution, voxels.keys[support]), "obstacle": rest}, VoxelMap(
-        voxels.resolution, voxels.keys[mine]
-    )
+    groups: dict[str, VoxelMap] = {
+        "support": VoxelMap(voxels.resolution, voxels.keys[support]),
+        "obstacle": rest,
+    }
+    object_voxels = VoxelMap(voxels.resolution, voxels.keys[mine])
+    if points is None:
+        return dict(groups), object_voxels
+    slab = fit_support_slab(points, grasped.footprint_distance, grasped.bottom, voxels.resolution)
+    return with_support_slab(groups, points, slab), object_voxels
 
 
 _SELF_COLLISION = "_baseplace_self_collision"
@@ -111,7 +124,7 @@ class Environment:
     Args:
         robot: the robot.
         obstacles: obstacle voxels in the world frame (see :func:`obstacle_voxels`), or a mapping
-            name -> voxels.
+            name -> voxels or a support slab (:class:`~baseplace.world.support_plane.SupportSlab`).
         self_collision: also check self-collision (default True).
         grasped: voxels of the grasped object (world frame), or None.
         hand_arm: the arm whose hand holds the object (default: the robot's first arm).
@@ -120,7 +133,7 @@ class Environment:
     def __init__(
         self,
         robot: Robot,
-        obstacles: VoxelMap | Mapping[str, VoxelMap],
+        obstacles: VoxelMap | Mapping[str, VoxelMap | SupportSlab] | Mapping[str, VoxelMap],
         self_collision: bool = True,
         grasped: VoxelMap | None = None,
         hand_arm: str | None = None,
@@ -138,15 +151,18 @@ class Environment:
         self.hand_ids = set(hand_geometry_ids(robot, self.geom, hand_arm)) if grasped is not None else set()
         self.env_ids: list[int] = []
         for name, voxels in [*groups.items(), (GRASPED, grasped)]:
-            if voxels is None or len(voxels) == 0:
+            if isinstance(voxels, SupportSlab):
+                tree = voxels.geometry
+            elif voxels is None or len(voxels) == 0:
                 continue
-            tree = coal.makeOctree(np.ascontiguousarray(voxels.centres), voxels.resolution)
+            else:
+                tree = coal.makeOctree(np.ascontiguousarray(voxels.centres), voxels.resolution)
             gid = self.geom.addGeometryObject(pin.GeometryObject(name, 0, pin.SE3.Identity(), tree))
             self.env_ids.append(gid)
             for k in range(n_robot):
                 if name != GRASPED or k not in self.hand_ids:
                     self.geom.addCollisionPair(pin.CollisionPair(k, gid))
-        self.obstacle_names = [n for n, v in groups.items() if len(v)]
+        self.obstacle_names = [n for n, v in groups.items() if isinstance(v, SupportSlab) or len(v)]
         self.data = self.model.createData()
         self.geom_data = pin.GeometryData(self.geom)
         if self._self is not None:  # build the arm-pruned pair tables now, not in the first query
@@ -162,8 +178,11 @@ class Environment:
         return self.env_ids[0] if self.env_ids else None
 
     @property
-    def obstacle_trees(self) -> list[coal.OcTree]:
-        """The obstacle voxels (every group, not the grasped object) as coal OcTrees in the world frame."""
+    def obstacle_trees(self) -> list[coal.CollisionGeometry]:
+        """The obstacles (every group, not the grasped object) as coal geometries in the world frame.
+
+        OcTrees of voxels, and a support group's slab (:mod:`baseplace.world.support_plane`).
+        """
         return [
             self.geom.geometryObjects[g].geometry
             for g in self.env_ids
@@ -171,7 +190,7 @@ class Environment:
         ]
 
     @property
-    def obstacle_tree(self) -> coal.OcTree | None:
+    def obstacle_tree(self) -> coal.CollisionGeometry | None:
         """The first obstacle OcTree in the world frame, or None when there are none."""
         trees = self.obstacle_trees
         return trees[0] if trees else None
@@ -270,7 +289,9 @@ class HandFilter:
             for k in hand_geometry_ids(robot, geom, arm_name)
         ]
 
-    def clear(self, T_world_tcp: ArrayLike, obstacles: coal.OcTree | list[coal.OcTree]) -> bool:
+    def clear(
+        self, T_world_tcp: ArrayLike, obstacles: coal.CollisionGeometry | list[coal.CollisionGeometry]
+    ) -> bool:
         """True if no hand geometry at ``T_world_tcp`` (4, 4) touches ``obstacles`` (world frame)."""
         T_tcp = np.asarray(T_world_tcp, dtype=float)
         request, identity = coal.CollisionRequest(), coal.Transform3s()
