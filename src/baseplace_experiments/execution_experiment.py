@@ -39,7 +39,7 @@ from baseplace.robots.model import Robot
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import Environment
 from baseplace.world.gridnav import GridNavigator
-from baseplace.world.support_plane import SupportSlab, cylinder_distance, fit_support_slab, with_support_slab
+from baseplace.world.support_plane import cylinder_distance, fit_support_slab, with_support_slab
 from baseplace_experiments.execution import ExecutionOracle, ExecutionSettings
 from baseplace_experiments.table_grid import (
     RobotShapes,
@@ -74,7 +74,7 @@ def execution_trial(robot: Robot, rmap: ReachabilityMap, shapes: RobotShapes, se
     check and for the execution (default: ``MotionSettings()``). ``support``: the robot's model of
     the table top around the bottle, "voxels" (protocols v1, v2) or "slab" (v3: the points of the
     plane the bottle stands on, fitted within :data:`~baseplace.world.support_plane.RADIUS` of the
-    estimate's footprint, replaced by a thin slab where the fit is good, in every collision model
+    estimate's footprint, their voxels cut down to a thin slab where the fit is good, in every collision model
     of the robot: verification, motion check, robustness score, execution planner).
     """
     if cut not in ("support", "estimate"):
@@ -104,7 +104,7 @@ def execution_trial(robot: Robot, rmap: ReachabilityMap, shapes: RobotShapes, se
         z0 = bottom if bottom is not None else float(p_est[2] - s.object_height / 2)
         slab = fit_support_slab(seen, cylinder_distance(p_est, s.object_width / 2), z0, s.voxel_size)
 
-    def model(voxels: VoxelMap) -> dict[str, VoxelMap | SupportSlab]:
+    def model(voxels: VoxelMap) -> dict[str, VoxelMap]:
         return with_support_slab({"obstacle": voxels}, seen, slab)
 
     verify_env = Environment(robot, model(obstacles))

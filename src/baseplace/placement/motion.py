@@ -38,7 +38,6 @@ from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Arm, Robot
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import GRASPED, Environment
-from baseplace.world.support_plane import SupportSlab
 
 # Stowed ("home"/"tucked") arm configurations of the built-in robots, in the arm's joint order
 # (torso first): PAL's TIAGo home motion and the PR2's pr2_tuck_arms values.
@@ -72,7 +71,7 @@ def approach_axis(arm: Arm) -> FloatArray:
 
 
 def transit_environment(
-    robot: Robot, groups: Mapping[str, VoxelMap | SupportSlab], grasped: VoxelMap | None
+    robot: Robot, groups: Mapping[str, VoxelMap], grasped: VoxelMap | None
 ) -> Environment | None:
     """The collision model of the transit to the pre-grasp, where nothing may be touched.
 

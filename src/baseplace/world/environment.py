@@ -8,8 +8,8 @@ OcTrees, checked against every collision mesh of the robot, together with self-c
 At a grasp only the hand may touch the grasped object (:mod:`baseplace.world.grasped_object`):
 its voxels are checked against every other link, and the surface under it stays an obstacle
 (:func:`contact_groups`); collisions are reported per robot link and per thing touched. Given the
-cloud, the planar part of that surface is a thin slab instead of voxels
-(:mod:`baseplace.world.support_plane`), without the voxels' 25 mm quantization.
+cloud, the voxels of the planar part of that surface are cut down to a thin slab around the
+fitted plane (:mod:`baseplace.world.support_plane`): no longer up to 25 mm above the surface.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from baseplace.robots.model import Arm, Robot
 from baseplace.terrain.segmentation import Segmentation
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.grasped_object import GraspedObject, rows_in
-from baseplace.world.support_plane import SupportSlab, fit_support_slab, with_support_slab
+from baseplace.world.support_plane import fit_support_slab, with_support_slab
 
 SUPPORT_DIST = 0.1
 """Voxels this close [m] to their region's plane are support: 4 sigma of seed 000's 25 mm noise."""
@@ -58,7 +58,7 @@ def obstacle_voxels(
 
 def contact_groups(
     voxels: VoxelMap, obstacles: VoxelMap, grasped: GraspedObject | None, points: ArrayLike | None = None
-) -> tuple[dict[str, VoxelMap | SupportSlab], VoxelMap | None]:
+) -> tuple[dict[str, VoxelMap], VoxelMap | None]:
     """Split the scene for :class:`Environment`: ({"support": ..., "obstacle": ...}, object voxels).
 
     The object's voxels come from all ``voxels`` (it may stand on a planar region); its support is
@@ -68,7 +68,8 @@ def contact_groups(
 
     ``points``: the cloud (N, 3) the voxels were made from. Given, the planar surface the object
     stands on is fitted (:func:`~baseplace.world.support_plane.fit_support_slab`) and, when the
-    fit is good, the voxels only its points occupy become one thin slab, group "support_plane".
+    fit is good, the voxels only its points occupy are cut down to a thin slab around the plane
+    (5 mm cells, group "support_plane"; :func:`~baseplace.world.support_plane.with_support_slab`).
     """
     if grasped is None:
         return {"obstacle": obstacles}, None
@@ -82,7 +83,7 @@ def contact_groups(
     }
     object_voxels = VoxelMap(voxels.resolution, voxels.keys[mine])
     if points is None:
-        return dict(groups), object_voxels
+        return groups, object_voxels
     slab = fit_support_slab(points, grasped.footprint_distance, grasped.bottom, voxels.resolution)
     return with_support_slab(groups, points, slab), object_voxels
 
@@ -124,7 +125,7 @@ class Environment:
     Args:
         robot: the robot.
         obstacles: obstacle voxels in the world frame (see :func:`obstacle_voxels`), or a mapping
-            name -> voxels or a support slab (:class:`~baseplace.world.support_plane.SupportSlab`).
+            name -> voxels.
         self_collision: also check self-collision (default True).
         grasped: voxels of the grasped object (world frame), or None.
         hand_arm: the arm whose hand holds the object (default: the robot's first arm).
@@ -133,7 +134,7 @@ class Environment:
     def __init__(
         self,
         robot: Robot,
-        obstacles: VoxelMap | Mapping[str, VoxelMap | SupportSlab] | Mapping[str, VoxelMap],
+        obstacles: VoxelMap | Mapping[str, VoxelMap],
         self_collision: bool = True,
         grasped: VoxelMap | None = None,
         hand_arm: str | None = None,
@@ -151,18 +152,15 @@ class Environment:
         self.hand_ids = set(hand_geometry_ids(robot, self.geom, hand_arm)) if grasped is not None else set()
         self.env_ids: list[int] = []
         for name, voxels in [*groups.items(), (GRASPED, grasped)]:
-            if isinstance(voxels, SupportSlab):
-                tree = voxels.geometry
-            elif voxels is None or len(voxels) == 0:
+            if voxels is None or len(voxels) == 0:
                 continue
-            else:
-                tree = coal.makeOctree(np.ascontiguousarray(voxels.centres), voxels.resolution)
+            tree = coal.makeOctree(np.ascontiguousarray(voxels.centres), voxels.resolution)
             gid = self.geom.addGeometryObject(pin.GeometryObject(name, 0, pin.SE3.Identity(), tree))
             self.env_ids.append(gid)
             for k in range(n_robot):
                 if name != GRASPED or k not in self.hand_ids:
                     self.geom.addCollisionPair(pin.CollisionPair(k, gid))
-        self.obstacle_names = [n for n, v in groups.items() if isinstance(v, SupportSlab) or len(v)]
+        self.obstacle_names = [n for n, v in groups.items() if len(v)]
         self.data = self.model.createData()
         self.geom_data = pin.GeometryData(self.geom)
         if self._self is not None:  # build the arm-pruned pair tables now, not in the first query
@@ -178,11 +176,8 @@ class Environment:
         return self.env_ids[0] if self.env_ids else None
 
     @property
-    def obstacle_trees(self) -> list[coal.CollisionGeometry]:
-        """The obstacles (every group, not the grasped object) as coal geometries in the world frame.
-
-        OcTrees of voxels, and a support group's slab (:mod:`baseplace.world.support_plane`).
-        """
+    def obstacle_trees(self) -> list[coal.OcTree]:
+        """The obstacle voxels (every group, not the grasped object) as coal OcTrees in the world frame."""
         return [
             self.geom.geometryObjects[g].geometry
             for g in self.env_ids
@@ -190,7 +185,7 @@ class Environment:
         ]
 
     @property
-    def obstacle_tree(self) -> coal.CollisionGeometry | None:
+    def obstacle_tree(self) -> coal.OcTree | None:
         """The first obstacle OcTree in the world frame, or None when there are none."""
         trees = self.obstacle_trees
         return trees[0] if trees else None
@@ -289,9 +284,7 @@ class HandFilter:
             for k in hand_geometry_ids(robot, geom, arm_name)
         ]
 
-    def clear(
-        self, T_world_tcp: ArrayLike, obstacles: coal.CollisionGeometry | list[coal.CollisionGeometry]
-    ) -> bool:
+    def clear(self, T_world_tcp: ArrayLike, obstacles: coal.OcTree | list[coal.OcTree]) -> bool:
         """True if no hand geometry at ``T_world_tcp`` (4, 4) touches ``obstacles`` (world frame)."""
         T_tcp = np.asarray(T_world_tcp, dtype=float)
         request, identity = coal.CollisionRequest(), coal.Transform3s()
