@@ -39,7 +39,7 @@ from baseplace.robots.model import Robot
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import Environment
 from baseplace.world.gridnav import GridNavigator
-from baseplace.world.support_plane import cylinder_distance, fit_support_slab, with_support_slab
+from baseplace.world.support_plane import SupportSlab, cylinder_distance, fit_support_slab, with_support_slab
 from baseplace_experiments.execution import ExecutionOracle, ExecutionSettings
 from baseplace_experiments.table_grid import (
     RobotShapes,
@@ -94,29 +94,7 @@ def execution_trial(robot: Robot, rmap: ReachabilityMap, shapes: RobotShapes, se
     navigate = GridNavigator(occupancy, radial.r_r, allow_unknown=not radial.unknown_is_risk)
     arm = robot.arm(rmap.info.arm)
     # the robot's own collision model, from the noisy cloud around its estimate
-    mine = np.ones(len(seen), dtype=bool)
-    bottom = support_height(seen, p_est, s) if cut == "support" else None
-    mine[_kept_rows(seen, p_est, s, bottom)] = False  # the bottle as seen: only the hand may touch it
-    obstacles = VoxelMap.from_points(seen[~mine], s.voxel_size)
-    held = seen[mine]
-    slab = None
-    if support == "slab":
-        z0 = bottom if bottom is not None else float(p_est[2] - s.object_height / 2)
-        slab = fit_support_slab(seen, cylinder_distance(p_est, s.object_width / 2), z0, s.voxel_size)
-
-    def model(voxels: VoxelMap) -> dict[str, VoxelMap]:
-        return with_support_slab({"obstacle": voxels}, seen, slab)
-
-    verify_env = Environment(robot, model(obstacles))
-    planner = MotionChecker(
-        robot,
-        arm,
-        Environment(robot, model(VoxelMap.from_points(seen, s.voxel_size))),
-        Environment(
-            robot, model(obstacles), grasped=VoxelMap.from_points(held, s.voxel_size), hand_arm=arm.name
-        ),
-        settings=motion,
-    )
+    verify_env, planner, slab = robot_models(robot, rmap.info.arm, seen, p_est, s, cut, support, motion)
     method_grasps = s.grasps(p_est, s.method_top_below)
     true_grasps = s.grasps(p_true)
     chosen: dict[str, tuple[BasePose | None, int, float]] = {}
@@ -170,6 +148,43 @@ def execution_trial(robot: Robot, rmap: ReachabilityMap, shapes: RobotShapes, se
     return out
 
 
+def robot_models(robot: Robot, arm_name: str, seen: np.ndarray, p_est: np.ndarray, s: TableGridSettings,
+                 cut: str = "support", support: str = "voxels",
+                 motion: MotionSettings | None = None) -> tuple[Environment, MotionChecker, SupportSlab | None]:  # fmt: skip
+    """The robot's collision models of a trial's noisy cloud (P, 3): (verification, planner, slab).
+
+    The bottle (around the estimate ``p_est``) is cut out above ``cut`` ("support": the measured
+    support height; "estimate": the estimate's bottom) and only the hand may touch it in the
+    approach; ``support`` "slab" cuts the table's voxels around it down to the fitted plane
+    (:mod:`baseplace.world.support_plane`), "voxels" leaves them.
+    """
+    arm = robot.arm(arm_name)
+    mine = np.ones(len(seen), dtype=bool)
+    bottom = support_height(seen, p_est, s) if cut == "support" else None
+    mine[_kept_rows(seen, p_est, s, bottom)] = False  # the bottle as seen: only the hand may touch it
+    obstacles = VoxelMap.from_points(seen[~mine], s.voxel_size)
+    held = seen[mine]
+    slab = None
+    if support == "slab":
+        z0 = bottom if bottom is not None else float(p_est[2] - s.object_height / 2)
+        slab = fit_support_slab(seen, cylinder_distance(p_est, s.object_width / 2), z0, s.voxel_size)
+
+    def model(voxels: VoxelMap) -> dict[str, VoxelMap]:
+        return with_support_slab({"obstacle": voxels}, seen, slab)
+
+    verify_env = Environment(robot, model(obstacles))
+    planner = MotionChecker(
+        robot,
+        arm,
+        Environment(robot, model(VoxelMap.from_points(seen, s.voxel_size))),
+        Environment(
+            robot, model(obstacles), grasped=VoxelMap.from_points(held, s.voxel_size), hand_arm=arm.name
+        ),
+        settings=motion,
+    )
+    return verify_env, planner, slab
+
+
 def _kept_rows(
     points: np.ndarray, p_o: np.ndarray, s: TableGridSettings, bottom: float | None = None
 ) -> np.ndarray:
@@ -220,4 +235,4 @@ def summarise_execution(trials: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
-__all__ = ["EXECUTION_METHODS", "execution_trial", "summarise_execution", "support_height"]
+__all__ = ["EXECUTION_METHODS", "execution_trial", "robot_models", "summarise_execution", "support_height"]
