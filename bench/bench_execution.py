@@ -119,9 +119,13 @@ def main() -> None:
     parser.add_argument("--protocol", type=int, choices=tuple(PROTOCOLS), required=True)
     parser.add_argument("--split", choices=("dev", "heldout"), required=True)
     parser.add_argument("--cells", type=int, default=12, help="cells per seed (first N of the 3 x 4 grid)")
+    parser.add_argument("--support", choices=("voxels", "slab"), default=None,
+                        help="the table model instead of the protocol's (a control run; results file _control_<model>)")  # fmt: skip
     args = parser.parse_args()
     load_start = os.getloadavg()
     cut, split, motion = PROTOCOLS[args.protocol]
+    support = args.support or SUPPORT_MODEL[args.protocol]
+    control = "" if args.support is None else f"_control_{args.support}"
     seeds = split.dev if args.split == "dev" else split.held_out
     robot = Robot("tiago")
     rmap = build_map(robot, None, BuildSettings(samples=10_000_000, seed=1))
@@ -140,7 +144,7 @@ def main() -> None:
             DRAWS,
             cut=cut,
             motion=motion,
-            support=SUPPORT_MODEL[args.protocol],
+            support=support,
         )
         trials.append(t)
         print(seed, cell, {m: (e["success"], e["outcomes"]) for m, e in t["methods"].items()}, flush=True)
@@ -149,7 +153,7 @@ def main() -> None:
         low, high = wilson_interval(summary[m]["success"], summary[m]["draws"])
         summary[m]["ci95"] = [round(low, 4), round(high, 4)]
     result = {
-        "protocol": {"version": args.protocol, "bottle_from": cut, "support_model": SUPPORT_MODEL[args.protocol], "planner": {"time_limit": motion.time_limit, "max_checks": motion.max_checks}, "split": args.split, "seeds": list(seeds), "cells": len(cells), "draws": DRAWS,
+        "protocol": {"version": args.protocol, "bottle_from": cut, "support_model": support, "planner": {"time_limit": motion.time_limit, "max_checks": motion.max_checks}, "split": args.split, "seeds": list(seeds), "cells": len(cells), "draws": DRAWS,
                      "robust": {"pool": ROBUST.pool, "samples": ROBUST.samples,
                                 "ik_solutions": ROBUST.ik_solutions, "key": ROBUST_KEY},
                      "error_model": "gaussian sigma 0.03 m, 2 deg; tolerances 0.25 m, 0.25 rad",
@@ -157,7 +161,7 @@ def main() -> None:
         "summary": summary,
         "trials": trials,
     }  # fmt: skip
-    report(f"execution_table_grid_{args.split}_v{args.protocol}", result, seeds=split,
+    report(f"execution_table_grid_{args.split}_v{args.protocol}{control}", result, seeds=split,
            split="dev" if args.split == "dev" else "held-out", used_seeds=list(seeds))  # fmt: skip
 
 
