@@ -39,6 +39,7 @@ from baseplace.robots.model import Robot
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import Environment
 from baseplace.world.gridnav import GridNavigator
+from baseplace.world.support_plane import SupportSlab, cylinder_distance, fit_support_slab, with_support_slab
 from baseplace_experiments.execution import ExecutionOracle, ExecutionSettings
 from baseplace_experiments.table_grid import (
     RobotShapes,
@@ -62,17 +63,24 @@ def execution_trial(robot: Robot, rmap: ReachabilityMap, shapes: RobotShapes, se
                     robust: RobustnessSettings, rank_key: str = "rate", draws: int = 5,
                     s: TableGridSettings | None = None,
                     execution: ExecutionSettings | None = None,
-                    cut: str = "support", motion: MotionSettings | None = None) -> dict[str, Any]:  # fmt: skip
+                    cut: str = "support", motion: MotionSettings | None = None,
+                    support: str = "voxels") -> dict[str, Any]:  # fmt: skip
     """One table-grid trial executed under navigation error (module docstring); JSON-ready.
 
     ``robust`` scores the first ``robust.pool`` verified candidates; ``rank_key`` ("rate" or "low",
     the Wilson lower bound) orders them. ``cut``: where the robot's model of the bottle begins,
     "support" (the measured table top, :func:`support_height`) or "estimate" (the estimate's
     bottom; protocol v1). ``motion``: the robot's planner settings, for the default method's
-    check and for the execution (default: ``MotionSettings()``).
+    check and for the execution (default: ``MotionSettings()``). ``support``: the robot's model of
+    the table top around the bottle, "voxels" (protocols v1, v2) or "slab" (v3: the points of the
+    plane the bottle stands on, fitted within :data:`~baseplace.world.support_plane.RADIUS` of the
+    estimate's footprint, their voxels cut down to a thin slab where the fit is good, in every collision model
+    of the robot: verification, motion check, robustness score, execution planner).
     """
     if cut not in ("support", "estimate"):
         raise ValueError(f"cut must be 'support' or 'estimate', got {cut!r}")
+    if support not in ("voxels", "slab"):
+        raise ValueError(f"support must be 'voxels' or 'slab', got {support!r}")
     s = s or TableGridSettings()
     rng = np.random.default_rng([seed, *cell, 0])
     p_true = s.cell_centre(*cell)
@@ -86,19 +94,7 @@ def execution_trial(robot: Robot, rmap: ReachabilityMap, shapes: RobotShapes, se
     navigate = GridNavigator(occupancy, radial.r_r, allow_unknown=not radial.unknown_is_risk)
     arm = robot.arm(rmap.info.arm)
     # the robot's own collision model, from the noisy cloud around its estimate
-    mine = np.ones(len(seen), dtype=bool)
-    bottom = support_height(seen, p_est, s) if cut == "support" else None
-    mine[_kept_rows(seen, p_est, s, bottom)] = False  # the bottle as seen: only the hand may touch it
-    obstacles = VoxelMap.from_points(seen[~mine], s.voxel_size)
-    held = seen[mine]
-    verify_env = Environment(robot, obstacles)
-    planner = MotionChecker(
-        robot,
-        arm,
-        Environment(robot, VoxelMap.from_points(seen, s.voxel_size)),
-        Environment(robot, obstacles, grasped=VoxelMap.from_points(held, s.voxel_size), hand_arm=arm.name),
-        settings=motion,
-    )
+    verify_env, planner, slab = robot_models(robot, rmap.info.arm, seen, p_est, s, cut, support, motion)
     method_grasps = s.grasps(p_est, s.method_top_below)
     true_grasps = s.grasps(p_true)
     chosen: dict[str, tuple[BasePose | None, int, float]] = {}
@@ -132,6 +128,8 @@ def execution_trial(robot: Robot, rmap: ReachabilityMap, shapes: RobotShapes, se
     offsets = BaseErrorModel().sample(np.random.default_rng([30_000 + seed, *cell]), draws)
     out: dict[str, Any] = {"seed": seed, "cell": list(cell), "true": np.round(p_true, 4).tolist(),
                            "pool": len(pool), "methods": {}}  # fmt: skip
+    if support == "slab":
+        out["slab"] = None if slab is None else slab.to_json()
     for method in EXECUTION_METHODS:
         pose, grasp, t_plan = chosen[method]
         entry: dict[str, Any] = {"plan_s": round(t_plan, 3), "grasp": grasp}
@@ -148,6 +146,43 @@ def execution_trial(robot: Robot, rmap: ReachabilityMap, shapes: RobotShapes, se
                          success=sum(o == "ok" for o in outcomes))  # fmt: skip
         out["methods"][method] = entry
     return out
+
+
+def robot_models(robot: Robot, arm_name: str, seen: np.ndarray, p_est: np.ndarray, s: TableGridSettings,
+                 cut: str = "support", support: str = "voxels",
+                 motion: MotionSettings | None = None) -> tuple[Environment, MotionChecker, SupportSlab | None]:  # fmt: skip
+    """The robot's collision models of a trial's noisy cloud (P, 3): (verification, planner, slab).
+
+    The bottle (around the estimate ``p_est``) is cut out above ``cut`` ("support": the measured
+    support height; "estimate": the estimate's bottom) and only the hand may touch it in the
+    approach; ``support`` "slab" cuts the table's voxels around it down to the fitted plane
+    (:mod:`baseplace.world.support_plane`), "voxels" leaves them.
+    """
+    arm = robot.arm(arm_name)
+    mine = np.ones(len(seen), dtype=bool)
+    bottom = support_height(seen, p_est, s) if cut == "support" else None
+    mine[_kept_rows(seen, p_est, s, bottom)] = False  # the bottle as seen: only the hand may touch it
+    obstacles = VoxelMap.from_points(seen[~mine], s.voxel_size)
+    held = seen[mine]
+    slab = None
+    if support == "slab":
+        z0 = bottom if bottom is not None else float(p_est[2] - s.object_height / 2)
+        slab = fit_support_slab(seen, cylinder_distance(p_est, s.object_width / 2), z0, s.voxel_size)
+
+    def model(voxels: VoxelMap) -> dict[str, VoxelMap]:
+        return with_support_slab({"obstacle": voxels}, seen, slab)
+
+    verify_env = Environment(robot, model(obstacles))
+    planner = MotionChecker(
+        robot,
+        arm,
+        Environment(robot, model(VoxelMap.from_points(seen, s.voxel_size))),
+        Environment(
+            robot, model(obstacles), grasped=VoxelMap.from_points(held, s.voxel_size), hand_arm=arm.name
+        ),
+        settings=motion,
+    )
+    return verify_env, planner, slab
 
 
 def _kept_rows(
@@ -200,4 +235,4 @@ def summarise_execution(trials: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
-__all__ = ["EXECUTION_METHODS", "execution_trial", "summarise_execution", "support_height"]
+__all__ = ["EXECUTION_METHODS", "execution_trial", "robot_models", "summarise_execution", "support_height"]

@@ -180,7 +180,7 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
         if points is not None:
             voxels = VoxelMap.from_points(points) if cache is None else cache.shared(
                 ("voxels", 0.025), lambda: VoxelMap.from_points(points))  # fmt: skip
-        groups, object_voxels = contact_groups(voxels, voxels, held)
+        groups, object_voxels = contact_groups(voxels, voxels, held, points)
         return Environment(robot, groups, grasped=object_voxels, hand_arm=job.arm), groups, object_voxels
 
     if cache is None:

@@ -181,7 +181,8 @@ def place(
     if obj is not None:  # the allowed contact: per grasped object, kept for the scene's next queries
 
         def environments_for_object() -> tuple[Environment, Environment | None]:
-            groups, object_voxels = contact_groups(terrain.voxels, obstacles, obj)
+            # the surface under it: a slab fitted to the cloud where it is planar, else voxels
+            groups, object_voxels = contact_groups(terrain.voxels, obstacles, obj, cache.points)
             hand = Environment(robot, groups, grasped=object_voxels, hand_arm=rmap.info.arm)
             # on the way to the pre-grasp the hand may not touch it either
             return hand, transit_environment(robot, groups, object_voxels)

@@ -7,7 +7,9 @@ OcTrees, checked against every collision mesh of the robot, together with self-c
 
 At a grasp only the hand may touch the grasped object (:mod:`baseplace.world.grasped_object`):
 its voxels are checked against every other link, and the surface under it stays an obstacle
-(:func:`contact_groups`); collisions are reported per robot link and per thing touched.
+(:func:`contact_groups`); collisions are reported per robot link and per thing touched. Given the
+cloud, the voxels of the planar part of that surface are cut down to a thin slab around the
+fitted plane (:mod:`baseplace.world.support_plane`): no longer up to 25 mm above the surface.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from baseplace.robots.model import Arm, Robot
 from baseplace.terrain.segmentation import Segmentation
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.grasped_object import GraspedObject, rows_in
+from baseplace.world.support_plane import fit_support_slab, with_support_slab
 
 SUPPORT_DIST = 0.1
 """Voxels this close [m] to their region's plane are support: 4 sigma of seed 000's 25 mm noise."""
@@ -54,7 +57,7 @@ def obstacle_voxels(
 
 
 def contact_groups(
-    voxels: VoxelMap, obstacles: VoxelMap, grasped: GraspedObject | None
+    voxels: VoxelMap, obstacles: VoxelMap, grasped: GraspedObject | None, points: ArrayLike | None = None
 ) -> tuple[dict[str, VoxelMap], VoxelMap | None]:
     """Split the scene for :class:`Environment`: ({"support": ..., "obstacle": ...}, object voxels).
 
@@ -62,6 +65,11 @@ def contact_groups(
     every voxel of ``voxels`` just under and around it (:meth:`GraspedObject.support_mask`), even
     one a planar region removed from ``obstacles``; the other obstacles are ``obstacles`` less
     both. Without an object: ({"obstacle": obstacles}, None).
+
+    ``points``: the cloud (N, 3) the voxels were made from. Given, the planar surface the object
+    stands on is fitted (:func:`~baseplace.world.support_plane.fit_support_slab`) and, when the
+    fit is good, the voxels only its points occupy are cut down to a thin slab around the plane
+    (5 mm cells, group "support_plane"; :func:`~baseplace.world.support_plane.with_support_slab`).
     """
     if grasped is None:
         return {"obstacle": obstacles}, None
@@ -69,9 +77,15 @@ def contact_groups(
     support = grasped.support_mask(voxels) & ~mine
     taken = VoxelMap(voxels.resolution, voxels.keys[mine | support])
     rest = obstacles.without(rows_in(obstacles.keys, taken.keys))
-    return {"support": VoxelMap(voxels.resolution, voxels.keys[support]), "obstacle": rest}, VoxelMap(
-        voxels.resolution, voxels.keys[mine]
-    )
+    groups: dict[str, VoxelMap] = {
+        "support": VoxelMap(voxels.resolution, voxels.keys[support]),
+        "obstacle": rest,
+    }
+    object_voxels = VoxelMap(voxels.resolution, voxels.keys[mine])
+    if points is None:
+        return groups, object_voxels
+    slab = fit_support_slab(points, grasped.footprint_distance, grasped.bottom, voxels.resolution)
+    return with_support_slab(groups, points, slab), object_voxels
 
 
 _SELF_COLLISION = "_baseplace_self_collision"

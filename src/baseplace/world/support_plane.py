@@ -1,0 +1,257 @@
+"""The surface under the grasped object cut down to a thin slab around its plane (issue 20, protocol v3).
+
+An occupied 25 mm voxel is a whole cube: the voxel layer of a table top reaches up to 25 mm above
+the true top, depending on where the top falls in the grid, and a single noisy point just above a
+voxel boundary adds a cube reaching 25 mm higher. A side grasp's hand, walking back along its
+approach a centimetre or two above the table, meets those cubes while the true table is free
+(``bench/bench_execution.py``, protocol v2: most failed draws were ``no_motion`` for this reason).
+
+Here the points of the planar support surface around the grasped object are fitted by a plane
+(:func:`fit_support_slab`); the slab around it reaches from the plane less ``max(margin, voxel)``
+up to the plane plus ``margin``, the largest vertical residual of the plane's points (those within
+:data:`PLANE_SIGMAS` robust standard deviations of it; at least :data:`MIN_MARGIN`), over the
+convex hull of their footprint. A voxel all of whose cloud points lie in the slab is cut down to
+the heights it shares with the slab and filled with finer cells (:func:`clipped_cells`): each of
+its points lies in both the voxel and the slab, so the model stays conservative for every point,
+and it is never higher than the voxel nor than the slab. Every other voxel stays as it is. When
+the fit is poor (too few points, a 99th percentile of the residuals above :data:`MAX_RESIDUAL`, a
+plane tilted more than :data:`MAX_TILT`) nothing changes.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import ConvexHull, QhullError
+
+from baseplace.geometry.poses import FloatArray
+from baseplace.terrain.voxels import VoxelMap
+from baseplace.world.grasped_object import rows_in
+
+RADIUS = 0.5
+"""Points within this horizontal distance [m] of the object's footprint are fitted: the hand's
+0.15 m approach plus its length (TIAGo's safety box is 0.2 m long) and some of the transit."""
+DEPTH = 0.1
+"""How far [m] below the object's bottom the support surface is sought (as ``SUPPORT_DEPTH``)."""
+BIN = 0.005
+"""Height bin [m] of the densest layer that seeds the fit."""
+BAND = 0.015
+"""Points within this height [m] of the densest layer are fitted."""
+MIN_POINTS = 50
+"""Fewer fitted points than this: no slab."""
+MAX_RESIDUAL = 0.01
+"""A fit whose 99th percentile of |residual| exceeds this [m] is not a plane: no slab."""
+MIN_MARGIN = 0.003
+"""The slab's top lies at least this far [m] above the fitted plane."""
+PLANE_SIGMAS = 4.0
+"""Points within this many robust standard deviations of the fitted plane are its points."""
+FINE_PER_VOXEL = 5
+"""A voxel cut down to the slab is filled with cells this many times finer (25 mm voxels: 5 mm)."""
+MAX_TILT = math.radians(10.0)
+"""A fitted plane tilted more than this from horizontal is not a support: no slab."""
+
+
+@dataclass(frozen=True)
+class SupportSlab:
+    """A convex slab around a fitted support plane z = a x + b y + c (world frame).
+
+    Attributes:
+        coeffs: (a, b, c) of the plane.
+        margin: the slab's top lies ``margin`` [m] above the plane.
+        depth: its bottom lies ``depth`` [m] below the plane.
+        hull: (H, 2) the footprint's convex hull, counter-clockwise [m].
+        residual_p99: 99th percentile of the plane's points' |vertical residual| [m].
+        points: how many points were fitted.
+    """
+
+    coeffs: FloatArray
+    margin: float
+    depth: float
+    hull: FloatArray
+    residual_p99: float
+    points: int
+
+    def height(self, xy: ArrayLike) -> FloatArray:
+        """The plane's height (N,) [m] at xy points (N, 2)."""
+        p = np.asarray(xy, dtype=float).reshape(-1, 2)
+        a, b, c = self.coeffs
+        return np.asarray(a * p[:, 0] + b * p[:, 1] + c, dtype=float)
+
+    def contains(self, points: ArrayLike) -> NDArray[np.bool_]:
+        """(N,) True for the points (N, 3) inside the slab."""
+        p = np.asarray(points, dtype=float).reshape(-1, 3)
+        r = p[:, 2] - self.height(p[:, :2])
+        inside = (r <= self.margin) & (r >= -self.depth)
+        h = self.hull
+        for k in range(len(h)):  # left of every counter-clockwise edge (with a 1e-9 m tolerance)
+            e = h[(k + 1) % len(h)] - h[k]
+            inside &= e[0] * (p[:, 1] - h[k, 1]) - e[1] * (p[:, 0] - h[k, 0]) >= -1e-9 * np.hypot(*e)
+        return inside
+
+    def to_json(self) -> dict[str, float | int]:
+        """What replaced the support's voxels, for results files."""
+        return {"margin": round(self.margin, 4), "depth": round(self.depth, 4),
+                "residual_p99": round(self.residual_p99, 4), "points": self.points,
+                "hull_vertices": len(self.hull)}  # fmt: skip
+
+
+def fit_support_slab(
+    points: ArrayLike,
+    distance: Callable[[FloatArray], FloatArray],
+    bottom: float,
+    voxel: float,
+    radius: float = RADIUS,
+) -> SupportSlab | None:
+    """The slab of the planar surface an object stands on, or None when it is not a good plane.
+
+    Args:
+        points: (N, 3) the cloud [m].
+        distance: horizontal distance (M,) [m] of xy points (M, 2) from the object's footprint
+            (0 inside it); points inside the footprint are not fitted (they are the object).
+        bottom: height [m] of the object's bottom; the surface is sought from :data:`DEPTH` below
+            it to half a voxel above it.
+        voxel: the voxel edge [m] the slab replaces; its bottom lies at least this far below the plane.
+        radius: points within this distance [m] of the footprint are fitted.
+    """
+    p = np.asarray(points, dtype=float).reshape(-1, 3)
+    p = p[np.all(np.isfinite(p), axis=1)]
+    p = p[(p[:, 2] >= bottom - DEPTH) & (p[:, 2] <= bottom + voxel / 2)]
+    if len(p) < MIN_POINTS:
+        return None
+    d = distance(p[:, :2])
+    p = p[(d > 0) & (d <= radius)]
+    if len(p) < MIN_POINTS:
+        return None
+    z = p[:, 2]
+    counts = np.bincount(np.floor((z - z.min()) / BIN).astype(np.int64))
+    mode = z.min() + (int(np.argmax(counts)) + 0.5) * BIN
+    p = p[np.abs(z - mode) <= BAND]
+    if len(p) < MIN_POINTS:
+        return None
+    A = np.c_[p[:, :2], np.ones(len(p))]
+    coeffs, *_ = np.linalg.lstsq(A, p[:, 2], rcond=None)
+    # one trimmed refit: points farther than 3 robust sigmas (the object's foot, a rim) do not
+    # pull the plane
+    residual = p[:, 2] - A @ coeffs
+    inlier = np.abs(residual) <= max(3 * _robust_sigma(residual), MIN_MARGIN)
+    if inlier.sum() < MIN_POINTS:
+        return None
+    coeffs, *_ = np.linalg.lstsq(A[inlier], p[inlier, 2], rcond=None)
+    # the plane's points: within PLANE_SIGMAS robust sigmas of it (sensor noise); the slab holds
+    # every one of them, the others (an object on the plane, a rare outlier) stay voxels
+    residual = p[:, 2] - A @ coeffs
+    plane = np.abs(residual) <= max(PLANE_SIGMAS * _robust_sigma(residual[inlier]), MIN_MARGIN)
+    if plane.sum() < MIN_POINTS:
+        return None
+    p, residual = p[plane], residual[plane]
+    p99 = float(np.percentile(np.abs(residual), 99))
+    tilt = math.atan(math.hypot(coeffs[0], coeffs[1]))
+    if p99 > MAX_RESIDUAL or tilt > MAX_TILT:
+        return None
+    margin = max(float(np.abs(residual).max()), MIN_MARGIN)
+    depth = max(margin, voxel)
+    try:
+        hull = p[ConvexHull(p[:, :2]).vertices, :2]  # counter-clockwise in 2-D
+    except (QhullError, ValueError):
+        return None
+    a, b, c = (float(v) for v in coeffs)
+    return SupportSlab(np.array([a, b, c]), margin, depth, hull, p99, len(p))
+
+
+def _robust_sigma(residual: FloatArray) -> float:
+    """The standard deviation of Gaussian residuals (N,) from their median absolute deviation."""
+    return 1.4826 * float(np.median(np.abs(residual - np.median(residual))))
+
+
+def slab_voxels(voxels: VoxelMap, points: ArrayLike, slab: SupportSlab) -> NDArray[np.bool_]:
+    """(M,) True for the voxels the slab replaces: those holding a point, every one inside the slab."""
+    if len(voxels) == 0:
+        return np.zeros(0, dtype=bool)
+    p = np.asarray(points, dtype=float).reshape(-1, 3)
+    p = p[np.all(np.isfinite(p), axis=1)]
+    lo, hi = slab.hull.min(axis=0) - voxels.resolution, slab.hull.max(axis=0) + voxels.resolution
+    p = p[np.all((p[:, :2] >= lo) & (p[:, :2] <= hi), axis=1)]
+    if len(p) == 0:
+        return np.zeros(len(voxels), dtype=bool)
+    keys = np.floor(p / voxels.resolution).astype(np.int64)
+    uniq, inverse = np.unique(keys, axis=0, return_inverse=True)
+    outside = np.zeros(len(uniq), dtype=bool)
+    np.logical_or.at(outside, inverse.reshape(-1), ~slab.contains(p))
+    replaced = uniq[~outside]
+    if len(replaced) == 0:
+        return np.zeros(len(voxels), dtype=bool)
+    return rows_in(voxels.keys, replaced)
+
+
+def clipped_cells(voxels: VoxelMap, slab: SupportSlab) -> tuple[NDArray[np.bool_], VoxelMap]:
+    """The voxels cut down to the slab: (M,) True for the voxels replaced, and the finer cells replacing them.
+
+    Each voxel the slab replaces (:func:`slab_voxels` is the caller's choice of ``voxels``) that
+    reaches above the slab's top or below its bottom over its square is cut to the heights both
+    share, [max(voxel bottom, slab bottom), min(voxel top, slab top)] (the slab's extremes over the
+    square's corners), and filled with cells :data:`FINE_PER_VOXEL` times finer: every one of its
+    points lies in both the voxel and the slab, so in a cell. A voxel inside the slab stays as it is.
+    """
+    res = voxels.resolution
+    n = FINE_PER_VOXEL
+    fine = res / n
+    if len(voxels) == 0:
+        return np.zeros(0, dtype=bool), VoxelMap(fine, np.zeros((0, 3), dtype=np.int64))
+    k = voxels.keys
+    corners = np.concatenate([(k[:, :2] + np.array(o)) * res for o in ((0, 0), (1, 0), (0, 1), (1, 1))])
+    plane = slab.height(corners).reshape(4, -1)
+    top = plane.max(axis=0) + slab.margin
+    bottom = plane.min(axis=0) - slab.depth
+    z0, z1 = k[:, 2] * res, (k[:, 2] + 1) * res
+    lo, hi = np.maximum(z0, bottom), np.minimum(z1, top)
+    cut = (hi > lo) & ((lo > z0 + 1e-9) | (hi < z1 - 1e-9))
+    cells = []
+    sub = np.array([(i, j) for i in range(n) for j in range(n)], dtype=np.int64)
+    for key, a, b in zip(k[cut], lo[cut], hi[cut], strict=True):
+        layers = np.arange(int(np.floor(a / fine)), max(int(np.ceil(b / fine)), int(np.floor(a / fine)) + 1))
+        xy = key[:2] * n + sub
+        cells.append(np.c_[np.repeat(xy, len(layers), axis=0), np.tile(layers, len(xy))])
+    keys = np.unique(np.concatenate(cells), axis=0) if cells else np.zeros((0, 3), dtype=np.int64)
+    return cut, VoxelMap(fine, keys.astype(np.int64))
+
+
+def with_support_slab(
+    groups: dict[str, VoxelMap], points: ArrayLike, slab: SupportSlab | None
+) -> dict[str, VoxelMap]:
+    """The obstacle groups with the voxels the slab replaces cut down to it (:func:`clipped_cells`).
+
+    The cut voxels leave their groups; their finer cells form the group :data:`SUPPORT_PLANE`.
+    """
+    if slab is None:
+        return dict(groups)
+    out: dict[str, VoxelMap] = {}
+    fine: list[NDArray[np.int64]] = []
+    for name, v in groups.items():
+        replaced = np.flatnonzero(slab_voxels(v, points, slab))
+        cut, cells = clipped_cells(VoxelMap(v.resolution, v.keys[replaced]), slab)
+        mask = np.zeros(len(v), dtype=bool)
+        mask[replaced[cut]] = True
+        out[name] = v.without(mask)
+        fine.append(cells.keys)
+        resolution = cells.resolution
+    if fine and sum(len(f) for f in fine):
+        out[SUPPORT_PLANE] = VoxelMap(resolution, np.unique(np.concatenate(fine), axis=0))
+    return out
+
+
+SUPPORT_PLANE = "support_plane"
+"""Name of the obstacle group of the voxels cut down to the slab, in contact reports."""
+
+
+def cylinder_distance(centre_xy: ArrayLike, radius: float) -> Callable[[FloatArray], FloatArray]:
+    """Horizontal distance from an upright cylinder's footprint (for :func:`fit_support_slab`)."""
+    c = np.asarray(centre_xy, dtype=float)[:2]
+
+    def distance(xy: FloatArray) -> FloatArray:
+        return np.asarray(np.maximum(np.hypot(xy[:, 0] - c[0], xy[:, 1] - c[1]) - radius, 0.0), dtype=float)
+
+    return distance

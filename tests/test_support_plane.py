@@ -1,0 +1,156 @@
+"""The grasped object's support cut down to a thin slab (world/support_plane.py), against ground truth.
+
+Oracle: coal on the true table (a box of known top height) and the cloud's own points (which cell
+holds each), never the code's own containment test or fit.
+"""
+
+from __future__ import annotations
+
+import coal
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from baseplace.geometry.poses import pose_from_xyz_rpy
+from baseplace.robots.ik import DampedLeastSquaresIK
+from baseplace.terrain.voxels import VoxelMap
+from baseplace.world.environment import Environment, contact_groups
+from baseplace.world.grasped_object import GraspedObject
+from baseplace.world.support_plane import RADIUS, SUPPORT_PLANE
+
+RES = 0.025
+TARGET = [0.75, -0.15, 0.85, 0.0, 0.0, 0.0]  # side grasp in front of the base (as tests/test_motion.py)
+TABLE_XY = ((0.45, 1.25), (-0.6, 0.45))  # the true table top's extent [m]
+OBJECT_XY = (0.9, 0.12)
+
+
+def _table_box(top: float) -> tuple[coal.Box, coal.Transform3s]:
+    (x0, x1), (y0, y1) = TABLE_XY
+    box = coal.Box(x1 - x0, y1 - y0, 0.04)
+    return box, coal.Transform3s(np.eye(3), np.array([(x0 + x1) / 2, (y0 + y1) / 2, top - 0.02]))
+
+
+def _robot_distance(robot, env: Environment, q_full, T_world_base, shape, T_shape) -> float:
+    """Oracle: the smallest coal distance from any robot geometry to a shape (negative: penetration)."""
+    data, gdata = robot.model.createData(), pin.GeometryData(env.geom)
+    pin.updateGeometryPlacements(robot.model, data, env.geom, gdata, q_full)
+    T_world_root = pin.SE3(np.asarray(T_world_base, dtype=float)) * env._T_root_base.inverse()
+    request = coal.DistanceRequest()
+    out = np.inf
+    for k, obj in enumerate(env.geom.geometryObjects[: env.geom.ngeoms - len(env.env_ids)]):
+        M = T_world_root * gdata.oMg[k]
+        out = min(out, coal.distance(obj.geometry, coal.Transform3s(M.rotation, M.translation), shape, T_shape,
+                                     request, coal.DistanceResult()))  # fmt: skip
+    return float(out)
+
+
+def _scene(
+    top: float, rng: np.random.Generator, sigma: float = 0.003
+) -> tuple[np.ndarray, np.ndarray, GraspedObject]:
+    """A table top at ``top`` (1 cm grid, Gaussian noise per axis) and a cylinder standing on it."""
+    (x0, x1), (y0, y1) = TABLE_XY
+    X, Y = np.meshgrid(np.arange(x0, x1, 0.01), np.arange(y0, y1, 0.01))
+    table = np.c_[X.ravel(), Y.ravel(), np.full(X.size, top)]
+    obj = GraspedObject.cylinder([*OBJECT_XY, top + 0.075], 0.03, 0.15)
+    a, z = np.meshgrid(
+        np.linspace(0, 2 * np.pi, 40, endpoint=False), np.arange(top + 0.005, top + 0.15, 0.01)
+    )
+    bottle = np.c_[
+        OBJECT_XY[0] + 0.03 * np.cos(a).ravel(), OBJECT_XY[1] + 0.03 * np.sin(a).ravel(), z.ravel()
+    ]
+    table = table + rng.normal(0.0, sigma, table.shape)
+    return table, np.concatenate([table, bottle + rng.normal(0.0, sigma, bottle.shape)]), obj
+
+
+def _models(cloud: np.ndarray, obj: GraspedObject, slab: bool):
+    voxels = VoxelMap.from_points(cloud, RES)
+    return contact_groups(voxels, voxels, obj, cloud if slab else None)
+
+
+@pytest.fixture(scope="module")
+def hand_over_table(tiago):
+    """A side-grasp configuration and the height of the robot's lowest point over the table area."""
+    arm = tiago.arm()
+    q = DampedLeastSquaresIK(arm).solve(pose_from_xyz_rpy(TARGET), np.random.default_rng(0))
+    assert q is not None
+    q_full = arm.to_pinocchio(q, tiago.q_reference)
+    env = Environment(tiago, VoxelMap(RES, np.zeros((0, 3), dtype=np.int64)))
+    assert not env.colliding(q_full, np.eye(4))  # free on its own (self-collision included)
+    top = 0.4  # raise a probe table until the robot is 1 cm above it (coal distance, secant steps)
+    for _ in range(20):
+        d = _robot_distance(tiago, env, q_full, np.eye(4), *_table_box(top))
+        if abs(d - 0.01) < 1e-6:
+            break
+        top += d - 0.01
+    assert abs(d - 0.01) < 1e-6
+    assert 0.6 < top < 0.85  # under the hand, well above the base
+    return q_full, top + 0.01
+
+
+def test_hand_1cm_above_true_top_is_free_2mm_into_it_collides(tiago, hand_over_table):
+    q_full, low = hand_over_table
+    # lift the robot so that the true top lies 4 mm into a voxel layer: a voxel's cube then
+    # reaches 21 mm above the top, and the hand 1 cm above the top is inside the old layer
+    top = np.floor((low - 0.01) / RES) * RES + RES + 0.004
+    lift = top + 0.01 - low
+    # 1 mm sensor noise: the slab holds every point of the plane (up to 4 sigma above it)
+    _, cloud, obj = _scene(top, np.random.default_rng(3), sigma=0.001)
+    box, T_box = _table_box(top)
+    old = Environment(tiago, _models(cloud, obj, slab=False)[0])
+    groups, object_voxels = _models(cloud, obj, slab=True)
+    assert len(groups[SUPPORT_PLANE]) > 0
+    new = Environment(tiago, groups, grasped=object_voxels)
+    for dz, gap in ((lift, 0.01), (lift - 0.012, -0.002)):
+        T = np.eye(4)
+        T[2, 3] = dz
+        truth = _robot_distance(tiago, old, q_full, T, box, T_box)  # oracle on the true table
+        if gap > 0:
+            assert truth == pytest.approx(gap, abs=2e-4)
+            assert old.colliding(q_full, T)  # the voxel layer: a false collision
+            assert not new.colliding(q_full, T)  # cut down to the slab: free, as on the true table
+        else:  # 12 mm lower than a 10 mm gap; coal's penetration depth of a mesh is not exact
+            assert truth < 0
+            assert new.colliding(q_full, T)  # 2 mm into the true table: still a collision
+
+
+@pytest.mark.parametrize("top", [0.7, 0.7125, 0.74])
+def test_every_support_point_lies_inside_the_new_obstacles(top):
+    sigma = 0.003
+    table, cloud, obj = _scene(top, np.random.default_rng(int(top * 1e4)), sigma=sigma)
+    groups, object_voxels = _models(cloud, obj, slab=True)
+    cells = groups.pop(SUPPORT_PLANE)
+    fine = cells.resolution
+    coarse = {tuple(k) for v in [*groups.values(), object_voxels] for k in v.keys}
+    cut = {tuple(k) for k in cells.keys}
+    for p in table:  # each point's voxel stayed, or its fine cell is in the cut-down support
+        assert (
+            tuple(np.floor(p / RES).astype(np.int64)) in coarse
+            or tuple(np.floor(p / fine).astype(np.int64)) in cut
+        )
+    # never more than the voxels were: every fine cell lies in a voxel of the cloud
+    original = {tuple(k) for k in VoxelMap.from_points(cloud, RES).keys}
+    assert all(tuple(k) in original for k in np.floor_divide(cells.keys, round(RES / fine)))
+
+    # and around the object (not at it) the table's voxels are gone: nothing left above top +
+    # 4.5 sigma + a fine cell, where the voxel layer reached 10 mm or more above the top
+    def near(c):
+        d = np.hypot(*(c[:, :2] - OBJECT_XY).T)
+        return (d > 0.1) & (d < RADIUS - RES)
+
+    table_voxels = VoxelMap.from_points(table, RES)
+    assert (table_voxels.keys[near(table_voxels.centres), 2].max() + 1) * RES >= top + 0.01
+    left = [VoxelMap(RES, np.array(sorted(coarse), dtype=np.int64)), cells]
+    tops = [((v.keys[near(v.centres), 2] + 1) * v.resolution) for v in left]
+    low_enough = [t[(t > top - 0.05) & (t < top + 0.1)] for t in tops]
+    assert max(t.max() for t in low_enough if len(t)) <= top + 4.5 * sigma + fine
+
+
+def test_a_surface_that_is_not_planar_stays_voxels():
+    rng = np.random.default_rng(5)
+    _, cloud, obj = _scene(0.7, rng, sigma=0.012)  # 12 mm noise: 99th percentile above 1 cm
+    groups, _ = _models(cloud, obj, slab=True)
+    plain, _ = _models(cloud, obj, slab=False)
+    assert SUPPORT_PLANE not in groups
+    assert set(groups) == set(plain)
+    for name, v in plain.items():
+        assert np.array_equal(groups[name].keys, v.keys)
