@@ -220,10 +220,12 @@ def support_height(points: np.ndarray, p_o: np.ndarray, s: TableGridSettings, ri
     return float(np.median(z[np.abs(z - mode) <= 0.01]))
 
 
-def summarise_execution(trials: list[dict[str, Any]]) -> dict[str, Any]:
-    """Per method: successful draws / all draws, and outcome counts."""
+def summarise_execution(
+    trials: list[dict[str, Any]], methods: tuple[str, ...] = EXECUTION_METHODS
+) -> dict[str, Any]:
+    """Per method: successful draws / all draws, outcome counts, mean planning time."""
     out: dict[str, Any] = {}
-    for m in EXECUTION_METHODS:
+    for m in methods:
         outcomes = [o for t in trials for o in t["methods"][m]["outcomes"]]
         counts: dict[str, int] = {}
         for o in outcomes:

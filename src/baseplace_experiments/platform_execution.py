@@ -54,6 +54,7 @@ from baseplace.sim.scenes import Plane, Scene
 from baseplace.terrain.polygons import footprint_outline
 from baseplace.world.environment import Environment, HandFilter, contact_groups
 from baseplace_experiments.execution import ExecutionOracle, ExecutionSettings
+from baseplace_experiments.execution_experiment import summarise_execution
 from baseplace_experiments.osrm_experiment import (
     SCENE_CLASSES,
     ExperimentSettings,
@@ -340,20 +341,12 @@ def platform_scene_trials(robot: Robot, rmap: ReachabilityMap, shapes: RobotShap
 
 
 def summarise_platform(trials: list[dict[str, Any]]) -> dict[str, Any]:
-    """Per method: successful draws / all draws, outcome counts, mean planning time."""
-    out: dict[str, Any] = {}
-    for m in PLATFORM_METHODS:
-        outcomes = [o for t in trials for o in t["methods"][m]["outcomes"]]
-        counts: dict[str, int] = {}
-        for o in outcomes:
-            counts[o] = counts.get(o, 0) + 1
-        ok = counts.get("ok", 0)
-        out[m] = {"success": ok, "draws": len(outcomes), "rate": round(ok / len(outcomes), 4) if outcomes else None,
-                  "outcomes": counts,
-                  "at_nominal": {o: sum(t["methods"][m].get("at_nominal") == o for t in trials)
-                                 for o in ("ok", "off_region", "no_grasp", "no_motion", "motion_collision")},
-                  "queries_with_placement": sum(t["methods"][m]["pose"] is not None for t in trials),
-                  "mean_plan_s": round(float(np.mean([t["methods"][m]["plan_s"] for t in trials])), 3) if trials else None}  # fmt: skip
+    """Per method: the table grid's summary, plus outcomes from the chosen pose itself and queries placed."""
+    out = summarise_execution(trials, PLATFORM_METHODS)
+    for m, e in out.items():
+        e["at_nominal"] = {o: sum(t["methods"][m].get("at_nominal") == o for t in trials)
+                           for o in ("ok", "off_region", "no_grasp", "no_motion", "motion_collision")}  # fmt: skip
+        e["queries_with_placement"] = sum(t["methods"][m]["pose"] is not None for t in trials)
     return out
 
 
