@@ -60,13 +60,23 @@ def run_job(
         report = job().to_json()
     except NoResultError as exc:
         message = _cut(str(exc), folder)
-        raise JobFailed(message, exc.exit_code, _cut(exc.report.to_json(), folder)) from None
+        raise JobFailed(
+            message, exc.exit_code, _robot_file_name(_cut(exc.report.to_json(), folder))
+        ) from None
     except BaseplaceError as exc:
         message = _cut(str(exc), folder)
         code = exc.exit_code if exc.exit_code in (2, 3) else 2
         raise JobFailed(message, code, failure_report(kind, message, code, _cut(inputs, folder))) from None
     out: dict[str, Any] = _cut(report, folder)
-    return out
+    return _robot_file_name(out)
+
+
+def _robot_file_name(report: dict[str, Any]) -> dict[str, Any]:
+    """The report with its robot's URDF named by file name only: a server's paths stay on the server."""
+    robot = report.get("robot")
+    if isinstance(robot, dict) and isinstance(robot.get("urdf"), str):
+        report["robot"] = {**robot, "urdf": robot["urdf"].replace("\\", "/").rsplit("/", 1)[-1]}
+    return report
 
 
 def _cut(value: Any, folder: str | None) -> Any:
