@@ -117,6 +117,7 @@ def test_bad_input_gets_the_clis_one_line_and_the_server_keeps_answering(
         assert words in line and "\n" not in line and "Traceback" not in line
     r = client.post("/place", content=b'{"scene_id": ', headers={"content-type": "application/json"})
     assert r.status_code == 422 and "\n" not in r.json()["error"]
+    assert r.json()["error"].startswith("the request body is not valid JSON at character "), r.json()["error"]
     for data, fmt, status in [(b"", "npy", 400), (b"not a cloud", "npy", 400), (b"x", "stl", 422)]:
         r = client.post("/scenes", params={"format": fmt}, content=data)
         assert r.status_code == status and "\n" not in r.json()["error"], r.text

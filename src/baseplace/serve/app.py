@@ -262,10 +262,17 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
     @app.exception_handler(RequestValidationError)
     async def _invalid(request: Request, exc: RequestValidationError) -> JSONResponse:
         first = exc.errors()[0] if exc.errors() else {}
-        where = ".".join(str(p) for p in first.get("loc", ()) if p != "body")
-        message = (
-            f"{where}: {first.get('msg', 'invalid request')}" if where else str(first.get("msg", "invalid"))
-        )
+        if first.get("type") == "json_invalid":  # loc is (body, character offset)
+            at = [p for p in first.get("loc", ()) if p != "body"]
+            where = f" at character {at[0]}" if at else ""
+            message = f"the request body is not valid JSON{where} ({first.get('msg', 'decode error')})"
+        else:
+            where = ".".join(str(p) for p in first.get("loc", ()) if p != "body")
+            message = (
+                f"{where}: {first.get('msg', 'invalid request')}"
+                if where
+                else str(first.get("msg", "invalid"))
+            )
         return JSONResponse(_error_body(request, message.replace("\n", " ")), status_code=422)
 
     @app.get("/health", summary="liveness, scenes held, resident memory")
