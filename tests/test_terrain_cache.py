@@ -12,6 +12,7 @@ import shapely
 
 from baseplace.errors import InputError
 from baseplace.jobs.inputs import CloudInput
+from baseplace.jobs.navigate import NavigateJob, navigate_job
 from baseplace.jobs.place import PlaceJob, place_job
 from baseplace.placement.pipeline import PlaceSettings
 from baseplace.sim.scenes import SceneSettings, generate_scene
@@ -207,3 +208,27 @@ def test_place_with_the_cache_equals_place_without(points, tiago, tiago_map, cac
     assert "segmentation_cache_read" not in stored.timings_ms and "segmentation_cache_read" in read.timings_ms
     assert without.placements and without.placements == stored.placements == read.placements
     assert without.failures == stored.failures == read.failures and without.regions == read.regions
+
+
+def test_navigate_with_the_cache_equals_navigate_without(tiago, cache_root, tmp_path):
+    from test_navigation import _ramp_scene
+
+    cloud = tmp_path / "ramp.npy"
+    np.save(cloud, _ramp_scene(with_object=True).sample_cloud(np.random.default_rng(0)))
+
+    def run(use_cache: bool, planner: str):
+        job = NavigateJob("-2 0.6 0", "1.7 0.6 0", CloudInput(paths=[str(cloud)], transforms=[None]), robot=tiago,
+                          planner=planner, seed=1, segmentation_cache=use_cache)  # fmt: skip
+        return navigate_job(job).to_json()
+
+    for planner in ("regions", "rrt"):
+        without = run(False, planner)
+        with_cache = run(True, planner)
+        assert without["poses"] and without["poses"] == with_cache["poses"], planner
+        assert (
+            without["regions"] == with_cache["regions"] == [0, 1]
+            and without["length"] == with_cache["length"]
+        )
+    assert (
+        len(list(cache_root.glob("terrain/terrain-*.h5"))) == 1
+    )  # stored by the first run, read by the second

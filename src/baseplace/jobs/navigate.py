@@ -44,6 +44,8 @@ class NavigateJob:
         png, mcap: also write a plot / an MCAP recording here.
         cache: a :class:`~baseplace.placement.scene_cache.SceneCache` of ``cloud.points``: its
             segmentation, made once (the service).
+        segmentation_cache: without ``cache``, read the cloud's segmentation from the per-user
+            cache (:mod:`baseplace.terrain.cache`) and store it there once computed, as ``place``.
     """
 
     start: str | Sequence[float]
@@ -57,6 +59,7 @@ class NavigateJob:
     png: str | None = None
     mcap: str | None = None
     cache: SceneCache | None = field(default=None, repr=False, compare=False)
+    segmentation_cache: bool = field(default=True, compare=False)
 
     def echo(self) -> dict[str, Any]:
         """The inputs as given."""
@@ -88,6 +91,10 @@ def navigate_job(job: NavigateJob) -> NavigateReport:
     t_load = time.perf_counter()
     if job.cache is not None:
         terrain = job.cache.terrain(job.resolution)
+    elif job.segmentation_cache:
+        from baseplace.terrain.cache import cached_terrain
+
+        terrain = cached_terrain(cloud.points, resolution=job.resolution)
     else:
         terrain = terrain_from_points(cloud.points, resolution=job.resolution)
     navmap = navigation_map(terrain, robot.spec.footprint_bounding_radius)
