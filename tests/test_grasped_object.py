@@ -399,8 +399,8 @@ def test_contacts_name_exactly_the_links_that_touch(tiago):
     assert seen  # some configurations reach into the slab
 
 
-def test_thinning_kernel_matches_the_pairs_loop():
-    """The numba kernel (large clouds) against the loop over neighbour pairs (small clouds) as the oracle."""
+def test_thinning_kernel_matches_the_kd_tree_loop():
+    """The numba kernel (large clouds) against the plain KD-tree loop (small clouds) as the oracle."""
     from scipy.spatial import cKDTree
 
     from baseplace.world import thinning
@@ -409,7 +409,7 @@ def test_thinning_kernel_matches_the_pairs_loop():
     dense = rng.uniform(0.0, 0.1, (25_000, 3))  # ~2.3 mm apart: most points covered by another
     sparse = rng.uniform(-5.0, 5.0, (3_000, 3))  # all apart: every point kept
     for points in (dense, sparse, dense - 7.3):
-        tree, kernel = thinning._owners_pairs(points, 0.004), thinning._owners_kernel(points, 0.004)
+        tree, kernel = thinning._owners_tree(points, 0.004), thinning._owners_kernel(points, 0.004)
         assert np.array_equal(tree, kernel)
         kept = np.flatnonzero(tree == np.arange(len(points)))
         # kept points are more than the spacing apart; every point lies within it of its owner

@@ -279,7 +279,9 @@ def grasped_cluster(
         The mask, or None when no point lies within ``seed_radius`` of the grasp point, the grasp
         point lies on the support itself, or the cluster is wider than ``max_size``.
     """
-    from baseplace.world.neighbours import component_labels, pairs_within, wider_than
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
 
     s = settings or AutoSettings()
     g = _vector(grasp_point, 3, "grasp point")
@@ -301,25 +303,29 @@ def grasped_cluster(
 
     keep, owner = thin_in_order(local, s.spacing)
     thin = local[keep]
-    pairs = pairs_within(thin, s.link)
+    pairs = cKDTree(thin).query_pairs(s.link, output_type="ndarray")
     n = len(thin)
+    graph = coo_matrix((np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])), shape=(n, n)).tocsr()
     seed = int(owner[start])
     z_seed = float(thin[seed, 2])
 
     def cluster(floor: float) -> NDArray[np.bool_]:
         """The thinned points linked to the seed through points at or above ``floor``."""
-        above = thin[:, 2] >= floor
-        if not above[seed]:
-            return np.zeros(n, dtype=bool)
-        labels = component_labels(n, pairs[above[pairs[:, 0]] & above[pairs[:, 1]]])
-        return above & (labels == labels[seed])
+        above = np.flatnonzero(thin[:, 2] >= floor)
+        out = np.zeros(n, dtype=bool)
+        where = np.searchsorted(above, seed)
+        if where == len(above) or above[where] != seed:
+            return out
+        _, labels = connected_components(graph[above][:, above], directed=False)
+        out[above[labels == labels[where]]] = True
+        return out
 
     # the cluster only grows as the floor goes down: bisect for the first floor where it is too wide
     steps = int(s.depth / s.step)
     lo, hi = 0, steps + 1  # cluster(z_seed - k step) is narrow for k < lo, too wide for k >= hi
     while lo < hi:
         mid = (lo + hi) // 2
-        if wider_than(thin[cluster(z_seed - mid * s.step), :2], s.max_size):
+        if _wider_than(thin[cluster(z_seed - mid * s.step), :2], s.max_size):
             hi = mid
         else:
             lo = mid + 1
@@ -330,12 +336,33 @@ def grasped_cluster(
     else:
         floor = z_seed - s.depth
     mine = cluster(floor)
-    if not mine.any() or wider_than(thin[mine, :2], s.max_size):
+    if not mine.any() or _wider_than(thin[mine, :2], s.max_size):
         return None
     chosen = mine[owner] & (local[:, 2] >= floor)
     out = np.zeros(len(p), dtype=bool)
     out[index[chosen]] = True
     return out
+
+
+def _wider_than(xy: FloatArray, size: float) -> bool:
+    """Whether two of the points (M, 2) [m] lie more than ``size`` apart (the set's diameter)."""
+    if len(xy) < 2:
+        return False
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    if float(np.max(hi - lo)) > size:
+        return True
+    if float(np.hypot(*(hi - lo))) <= size:
+        return False
+    from scipy.spatial import ConvexHull, QhullError
+
+    try:
+        xy = xy[ConvexHull(xy).vertices]
+    except QhullError:  # collinear or too few: the extreme points along the main direction
+        axis = np.linalg.svd(xy - xy.mean(axis=0), full_matrices=False)[2][0]
+        t = xy @ axis
+        xy = xy[[int(np.argmin(t)), int(np.argmax(t))]]
+    diff = xy[:, None, :] - xy[None, :, :]
+    return bool(np.sqrt((diff**2).sum(axis=-1)).max() > size)
 
 
 def find_grasped_object(

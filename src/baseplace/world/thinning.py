@@ -4,8 +4,8 @@ A point is kept unless an earlier kept point lies within ``spacing``; every poin
 first kept point within ``spacing`` (itself when kept). Only distances and the order decide, so
 the result does not depend on the frame of the points: the numba kernel's cells only find the
 candidates within ``spacing`` quickly, every decision is an exact distance test. Clouds under
-:data:`KERNEL_FROM` points go through a loop over the pairs within ``spacing`` instead (no kernel
-to load in a fresh process); both give the same result.
+:data:`KERNEL_FROM` points go through a KD-tree loop instead (no kernel to load in a fresh
+process); both give the same result.
 """
 
 from __future__ import annotations
@@ -29,33 +29,31 @@ def thin_in_order(points: FloatArray, spacing: float) -> tuple[NDArray[np.intp],
         spacing: [m] > 0.
     """
     p = np.ascontiguousarray(points, dtype=np.float64)
-    owner = _owners_kernel(p, spacing) if len(p) >= KERNEL_FROM else _owners_pairs(p, spacing)
+    owner = _owners_kernel(p, spacing) if len(p) >= KERNEL_FROM else _owners_tree(p, spacing)
     kept = np.flatnonzero(owner == np.arange(len(p)))
     return kept, np.searchsorted(kept, owner).astype(np.intp)
 
 
-def _owners_pairs(p: FloatArray, spacing: float) -> NDArray[np.int64]:
-    """The owner (N,) of every point as a point index, with a loop over the kept points' neighbours."""
-    from baseplace.world.neighbours import pairs_within
+def _owners_tree(p: FloatArray, spacing: float) -> NDArray[np.int64]:
+    """The owner (N,) of every point as a point index, with a KD-tree and a loop over the kept points."""
+    from scipy.spatial import cKDTree
 
     n = len(p)
-    pairs = pairs_within(p, spacing)
-    both = np.concatenate([pairs, pairs[:, ::-1]])
-    both = both[np.argsort(both[:, 0], kind="stable")]
-    start = np.searchsorted(both[:, 0], np.arange(n + 1))
-    neighbours = both[:, 1]
-    owner = np.where(start[1:] == start[:-1], np.arange(n), -1)  # a point with no neighbour keeps itself
+    if n == 0:
+        return np.zeros(0, dtype=np.int64)
+    tree = cKDTree(p)
+    nearest = tree.query(p, k=2)[0][:, 1] if n > 1 else np.full(n, np.inf)
+    owner = np.where(nearest > spacing, np.arange(n), -1)  # a point with no neighbour keeps itself
     for i in np.flatnonzero(owner < 0).tolist():
         if owner[i] >= 0:  # covered by an earlier kept point
             continue
-        owner[i] = i
-        ball = neighbours[start[i] : start[i + 1]]
+        ball = np.asarray(tree.query_ball_point(p[i], spacing), dtype=np.intp)
         owner[ball[owner[ball] < 0]] = i
     return owner.astype(np.int64)
 
 
 def _owners_kernel(p: FloatArray, spacing: float) -> NDArray[np.int64]:
-    """As :func:`_owners_pairs`, in the numba kernel: candidates from cells of edge ``spacing``."""
+    """As :func:`_owners_tree`, in the numba kernel: candidates from cells of edge ``spacing``."""
     cells = np.floor(p / spacing).astype(np.int64)
     cells -= cells.min(axis=0) - 1  # one empty cell of margin on every side
     dims = cells.max(axis=0) + 2
