@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import sys
 from collections.abc import Callable, Sequence
@@ -20,7 +19,7 @@ from baseplace import __version__
 from baseplace.argtypes import count, finite_float, nonneg_int
 from baseplace.errors import BaseplaceError
 from baseplace.jobs import candidates, demo, navigate, place, reach, surface, world
-from baseplace.jobs.inputs import Progress
+from baseplace.jobs.inputs import Progress, motion_and_robustness
 
 DEFAULT_CHECKPOINT_EVERY = 50_000_000  # baseplace.reachability.build's, without importing numba for --help
 KINDS = {"robots": "robots", "robot": "robot_check", "build-map": "build_map", "reach": "reach", "place": "place",
@@ -84,22 +83,6 @@ def _cloud(args: argparse.Namespace) -> Any:
                       fuse_miss=getattr(args, "fuse_miss", 0.35), fused_out=getattr(args, "fused_out", None))  # fmt: skip
 
 
-def _motion_settings(args: argparse.Namespace) -> Any:
-    from baseplace.placement.motion import MotionSettings
-
-    return None if args.no_motion_check else MotionSettings()
-
-
-def _robustness_settings(args: argparse.Namespace) -> Any:
-    from baseplace.placement.robustness import BaseErrorModel, RobustnessSettings
-
-    error = BaseErrorModel(args.error_model, args.sigma_xy, math.radians(args.sigma_yaw_deg),
-                           args.xy_tolerance, args.yaw_tolerance)  # fmt: skip
-    return RobustnessSettings(args.robustness_samples, error,
-                              "robustness" if args.rank_by_robustness else "reachability",
-                              args.min_robustness, seed=args.seed)  # fmt: skip
-
-
 def _build_map(args: argparse.Namespace, progress: Progress) -> Any:
     from baseplace.jobs.inputs import out_path
     from baseplace.jobs.reach import MAP_SUFFIXES
@@ -133,8 +116,9 @@ def _place(a: argparse.Namespace, progress: Progress) -> Any:
     job.check_outputs()  # before the settings' imports (seconds)
     from baseplace.placement.pipeline import PlaceSettings
 
+    motion, robustness = motion_and_robustness(vars(a))
     job.settings = PlaceSettings(strategy=a.strategy, placements=a.placements, tries=a.tries, resolution=a.resolution,
-                                 motion=_motion_settings(a), robustness=_robustness_settings(a))  # fmt: skip
+                                 motion=motion, robustness=robustness)  # fmt: skip
     return place.place_job(job, progress)
 
 
@@ -142,7 +126,7 @@ def _candidates(a: argparse.Namespace, progress: Progress) -> Any:
     job = candidates.CandidatesJob(a.object, a.occupancy, _cloud(a), a.robot_pose, a.method, a.robot, a.arm, a.map,
                                    a.standoff, a.seed, a.object_shape, None, None, a.png, a.mcap)  # fmt: skip
     job.check_outputs()  # before the settings' imports (seconds)
-    job.motion, job.robustness = _motion_settings(a), _robustness_settings(a)
+    job.motion, job.robustness = motion_and_robustness(vars(a))
     return candidates.candidates_job(job, progress)
 
 

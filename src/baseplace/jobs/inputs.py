@@ -6,7 +6,7 @@ a service keeps warm between calls).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -38,6 +38,31 @@ def load_robot(robot: Robot | str) -> Robot:
     from baseplace.robots.model import Robot
 
     return robot if isinstance(robot, Robot) else Robot(robot)
+
+
+def motion_and_robustness(options: Mapping[str, Any]) -> tuple[Any, Any]:
+    """The reaching-motion and robustness settings from the front ends' options, by their CLI names.
+
+    ``options``: ``no_motion_check``, ``robustness_samples``, ``error_model``, ``sigma_xy`` [m],
+    ``sigma_yaw_deg``, ``xy_tolerance`` [m], ``yaw_tolerance`` [rad], ``rank_by_robustness``,
+    ``min_robustness`` and ``seed`` (the CLI's parsed arguments, or a service request).
+
+    Returns:
+        (MotionSettings, or None when the check is off; RobustnessSettings).
+    """
+    import math
+
+    from baseplace.placement.motion import MotionSettings
+    from baseplace.placement.robustness import BaseErrorModel, RobustnessSettings
+
+    o = options
+    motion = None if o["no_motion_check"] else MotionSettings()
+    error = BaseErrorModel(o["error_model"], o["sigma_xy"], math.radians(o["sigma_yaw_deg"]),
+                           o["xy_tolerance"], o["yaw_tolerance"])  # fmt: skip
+    robustness = RobustnessSettings(o["robustness_samples"], error,
+                                    "robustness" if o["rank_by_robustness"] else "reachability",
+                                    o["min_robustness"], seed=o["seed"])  # fmt: skip
+    return motion, robustness
 
 
 def out_path(path: str | Path | None, what: str, suffixes: Sequence[str] | None) -> Path | None:

@@ -11,7 +11,6 @@ failure report the CLI would print.
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
@@ -92,32 +91,16 @@ def _cut(value: Any, folder: str | None) -> Any:
     return value
 
 
-def _motion(req: dict[str, Any]) -> Any:
-    from baseplace.placement.motion import MotionSettings
-
-    return None if req["no_motion_check"] else MotionSettings()
-
-
-def _robustness(req: dict[str, Any]) -> Any:
-    """The CLI's ``--robustness-samples`` ... ``--yaw-tolerance`` as settings."""
-    from baseplace.placement.robustness import BaseErrorModel, RobustnessSettings
-
-    error = BaseErrorModel(req["error_model"], req["sigma_xy"], math.radians(req["sigma_yaw_deg"]),
-                           req["xy_tolerance"], req["yaw_tolerance"])  # fmt: skip
-    return RobustnessSettings(req["robustness_samples"], error,
-                              "robustness" if req["rank_by_robustness"] else "reachability",
-                              req["min_robustness"], seed=req["seed"])  # fmt: skip
-
-
 def place(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[str, Any]:
     """``baseplace place --json`` on an uploaded scene, with the scene's cache and warm robots and maps."""
-    from baseplace.jobs.inputs import CloudInput
+    from baseplace.jobs.inputs import CloudInput, motion_and_robustness
     from baseplace.jobs.place import PlaceJob, place_job
     from baseplace.placement.pipeline import PlaceSettings
 
     def job() -> Report:
+        motion, robustness = motion_and_robustness(req)
         settings = PlaceSettings(strategy=req["strategy"], placements=req["placements"], tries=req["tries"],
-                                 resolution=req["resolution"], motion=_motion(req), robustness=_robustness(req))  # fmt: skip
+                                 resolution=req["resolution"], motion=motion, robustness=robustness)  # fmt: skip
         robot = state.robot(req["robot"])
         rmap = state.reach_map(robot, req["arm"])
         return place_job(PlaceJob(req["targets"], robot, req["arm"], CloudInput(points=scene.cloud),
@@ -130,7 +113,7 @@ def place(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[str, A
 def candidates(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[str, Any]:
     """``baseplace candidates --json`` on an uploaded scene: its grid, and its cloud unless ``use_cloud`` is off."""
     from baseplace.jobs.candidates import CandidatesJob, candidates_job
-    from baseplace.jobs.inputs import CloudInput
+    from baseplace.jobs.inputs import CloudInput, motion_and_robustness
 
     def job() -> Report:
         robot = state.robot(req["robot"], lane="commands")
@@ -138,7 +121,7 @@ def candidates(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[s
         cloud = CloudInput(points=scene.cloud) if req["use_cloud"] else CloudInput()
         return candidates_job(CandidatesJob(req["object"], scene.grid, cloud, req["robot_pose"], req["method"],
                                             robot, req["arm"], rmap, req["standoff"], req["seed"],
-                                            req["object_shape"], _motion(req), _robustness(req),
+                                            req["object_shape"], *motion_and_robustness(req),
                                             cache=scene.cache if req["use_cloud"] else None))  # fmt: skip
 
     return _with_scene(run_job("candidates", req, job, str(state.folder)), scene)
