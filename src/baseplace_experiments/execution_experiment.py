@@ -39,7 +39,13 @@ from baseplace.robots.model import Robot
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import Environment
 from baseplace.world.gridnav import GridNavigator
-from baseplace.world.support_plane import SupportSlab, cylinder_distance, fit_support_slab, with_support_slab
+from baseplace.world.support_plane import (
+    SupportSlab,
+    cylinder_distance,
+    densest_height,
+    fit_support_slab,
+    with_support_slab,
+)
 from baseplace_experiments.execution import ExecutionOracle, ExecutionSettings
 from baseplace_experiments.table_grid import (
     RobotShapes,
@@ -215,9 +221,7 @@ def support_height(points: np.ndarray, p_o: np.ndarray, s: TableGridSettings, ri
     z = points[(d > r0) & (d <= r0 + ring) & (points[:, 2] < p[2]), 2]
     if len(z) == 0:
         return float(p[2] - s.object_height / 2)
-    counts = np.bincount(np.floor((z - z.min()) / 0.005).astype(np.int64))
-    mode = z.min() + (int(np.argmax(counts)) + 0.5) * 0.005
-    return float(np.median(z[np.abs(z - mode) <= 0.01]))
+    return float(np.median(z[np.abs(z - densest_height(z, 0.005)) <= 0.01]))
 
 
 def summarise_execution(

@@ -127,9 +127,7 @@ def fit_support_slab(
     if len(p) < MIN_POINTS:
         return None
     z = p[:, 2]
-    counts = np.bincount(np.floor((z - z.min()) / BIN).astype(np.int64))
-    mode = z.min() + (int(np.argmax(counts)) + 0.5) * BIN
-    p = p[np.abs(z - mode) <= BAND]
+    p = p[np.abs(z - densest_height(z)) <= BAND]
     if len(p) < MIN_POINTS:
         return None
     A = np.c_[p[:, :2], np.ones(len(p))]
@@ -160,6 +158,12 @@ def fit_support_slab(
         return None
     a, b, c = (float(v) for v in coeffs)
     return SupportSlab(np.array([a, b, c]), margin, depth, hull, p99, len(p))
+
+
+def densest_height(z: FloatArray, bin_size: float = BIN) -> float:
+    """The centre [m] of the most populated height bin of the heights (N,) [m], N >= 1: a surface's level."""
+    counts = np.bincount(np.floor((z - z.min()) / bin_size).astype(np.int64))
+    return float(z.min() + (int(np.argmax(counts)) + 0.5) * bin_size)
 
 
 def _robust_sigma(residual: FloatArray) -> float:
