@@ -46,6 +46,7 @@ def save_map(rmap: ReachabilityMap, path: str | Path, compress: bool = True) -> 
     """
     path = Path(path)
     packed = {"compression": "gzip", "compression_opts": 4, "shuffle": True} if compress else {}
+    gzip = {"compression": "gzip"} if compress else {}  # the optional arrays: gzip's default level
     with atomic_write(path, "map") as tmp, h5py.File(tmp, "w") as f:
         write_header(f, FORMAT, FORMAT_VERSION)
         grid = rmap.grid
@@ -67,12 +68,10 @@ def save_map(rmap: ReachabilityMap, path: str | Path, compress: bool = True) -> 
         f.create_dataset("cells", data=rmap.cells, **packed)
         f.create_dataset("counts", data=rmap.counts, **packed)
         if rmap.manipulability is not None:
-            f.create_dataset(
-                "manipulability", data=rmap.manipulability, **({"compression": "gzip"} if compress else {})
-            )
+            f.create_dataset("manipulability", data=rmap.manipulability, **gzip)
             parts.append(rmap.manipulability)
         if rmap.quality is not None:
-            f.create_dataset("quality", data=rmap.quality, **({"compression": "gzip"} if compress else {}))
+            f.create_dataset("quality", data=rmap.quality, **gzip)
             parts.append(rmap.quality)
         f.attrs["sha256"] = short_text(digest(*parts))
     return path.stat().st_size
