@@ -165,8 +165,11 @@ def _ry(a: FloatArray) -> FloatArray:
 
 
 @nb.njit(cache=True, inline="always")
-def orientation_bin(R: FloatArray, nside: int, n_twist: int, pixel_phi: FloatArray) -> int:
-    """Orientation bin of a rotation (3, 3): HEALPix pixel of its z axis, then twist bin."""
+def zyz_angles(R: FloatArray) -> tuple[float, float, float]:
+    """``(z, phi, psi)`` of a rotation (3, 3) with ``R = Rz(phi) Ry(theta) Rz(psi)``.
+
+    ``z = cos(theta)`` and the azimuth ``phi`` in [0, 2 pi) of its z axis, and the ZYZ twist ``psi``.
+    """
     z = min(1.0, max(-1.0, R[2, 2]))
     phi = math.atan2(R[1, 2], R[0, 2])
     if phi < 0.0:
@@ -176,10 +179,26 @@ def orientation_bin(R: FloatArray, nside: int, n_twist: int, pixel_phi: FloatArr
         psi = math.atan2(R[1, 0] - R[0, 1], R[0, 0] + R[1, 1]) - phi
     else:
         psi = phi - math.atan2(-(R[1, 0] + R[0, 1]), R[1, 1] - R[0, 0])
-    pix = ang2pix_ring(nside, z, phi)
-    dphi = phi - pixel_phi[pix]
+    return z, phi, psi
+
+
+@nb.njit(cache=True, inline="always")
+def twist(z: float, phi: float, psi: float, pixel_phi: float) -> float:
+    """The twist ``chi`` in [0, 2 pi) of a rotation in the pixel centred at azimuth ``pixel_phi``.
+
+    The ZYZ twist transported from the pixel centre (see the module docstring).
+    """
+    dphi = phi - pixel_phi
     dphi -= TWO_PI * math.floor((dphi + math.pi) / TWO_PI)
-    chi = (psi + z * dphi) % TWO_PI
+    return (psi + z * dphi) % TWO_PI
+
+
+@nb.njit(cache=True, inline="always")
+def orientation_bin(R: FloatArray, nside: int, n_twist: int, pixel_phi: FloatArray) -> int:
+    """Orientation bin of a rotation (3, 3): HEALPix pixel of its z axis, then twist bin."""
+    z, phi, psi = zyz_angles(R)
+    pix = ang2pix_ring(nside, z, phi)
+    chi = twist(z, phi, psi, pixel_phi[pix])
     k = int(chi * (n_twist / TWO_PI))
     if k >= n_twist:
         k = n_twist - 1
