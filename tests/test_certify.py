@@ -14,7 +14,8 @@ from baseplace.reachability.storage import load_map, save_map
 from baseplace.robots.ik import DampedLeastSquaresIK
 from test_kinematics import pinocchio_fk
 
-COARSE = {"samples": 300_000, "seed": 5, "voxel_size": 0.15, "orientation_resolution": 1.6}
+# the support test off: these tests read certified cells whole
+COARSE = {"samples": 300_000, "seed": 5, "voxel_size": 0.15, "orientation_resolution": 1.6, "support_threshold": 0.0}
 
 
 @pytest.fixture(scope="module")

@@ -19,7 +19,7 @@ from baseplace import __version__
 from baseplace.argtypes import count, finite_float, nonneg_int
 from baseplace.errors import BaseplaceError
 from baseplace.jobs import candidates, demo, navigate, place, reach, surface, world
-from baseplace.jobs.inputs import Progress, motion_and_robustness
+from baseplace.jobs.inputs import DEFAULT_MAP_SAMPLES, Progress, motion_and_robustness
 
 DEFAULT_CHECKPOINT_EVERY = 50_000_000  # baseplace.reachability.build's, without importing numba for --help
 KINDS = {"robots": "robots", "robot": "robot_check", "build-map": "build_map", "reach": "reach", "place": "place",
@@ -93,7 +93,8 @@ def _build_map(args: argparse.Namespace, progress: Progress) -> Any:
 
     settings = BuildSettings(samples=args.samples, seed=args.seed, voxel_size=args.voxel_size,
                              orientation_resolution=args.orientation_resolution,
-                             self_collision=args.self_collision, manipulability=args.manipulability)  # fmt: skip
+                             self_collision=args.self_collision, manipulability=args.manipulability,
+                             support_threshold=args.support_threshold)  # fmt: skip
     checkpoint = None if args.no_resume else default_checkpoint_path(args.out)
     if checkpoint is not None and checkpoint.exists() and not args.json:
         sys.stderr.write(f"resuming from checkpoint {checkpoint}\n")
@@ -225,7 +226,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = command("build-map", "build a reachability map by random joint sampling")
     p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
     p.add_argument("--arm", default=None, help="arm name (default: the robot's default arm)")
-    p.add_argument("--samples", type=count, default=50_000_000, help="joint samples, e.g. 5e7 (default)")
+    p.add_argument("--samples", type=count, default=DEFAULT_MAP_SAMPLES, help="joint samples (default 2e8)")
     p.add_argument("--out", required=True, help="output map file (.rmap, HDF5)")
     p.add_argument("--seed", type=nonneg_int, default=0, help="random seed (default 0)")
     p.add_argument("--workers", type=int, default=None,
@@ -235,6 +236,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="largest orientation bin [rad] (default 0.8)")  # fmt: skip
     p.add_argument("--self-collision", action="store_true", help="drop self-colliding samples (slow)")
     p.add_argument("--manipulability", action="store_true", help="store the best manipulability per cell")
+    p.add_argument("--support-threshold", type=finite_float, default=0.8,
+                   help="support a pose needs to be called reachable, in [0, 1]; 0: whole cells "
+                        "(default 0.8, see docs/maps.md)")  # fmt: skip
     p.add_argument("--scheduler", default=None,
                    help='dask scheduler "tcp://host:port" or "local" (local worker processes); '
                         "default: this process, all cores")  # fmt: skip
@@ -328,8 +332,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--orientations", type=int, default=16, help="base headings (default 16)")
     p.add_argument("--out", required=True, help="surface map file (.smap, sparse HDF5)")
     p.add_argument("--png", default=None, help="PNG of R_S over the floor around the surface")
-    p.add_argument("--samples", type=count, default=50_000_000,
-                   help="samples of the cached reachability maps, built once per arm (default 5e7)")  # fmt: skip
+    p.add_argument("--samples", type=count, default=DEFAULT_MAP_SAMPLES,
+                   help="samples of the cached reachability maps, built once per arm (default 2e8)")  # fmt: skip
 
     p = command("surface-sample", "sample good, spread-out base poses from a surface map")  # fmt: skip
     p.add_argument("--map", required=True, help="surface map from surface-map")
@@ -382,7 +386,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = command("demo", "the main job on built-in defaults: out/demo.json and out/demo.png")
     p.add_argument("--out", default="out", help="output directory (default: out)")
-    p.add_argument("--samples", type=count, default=50_000_000, help="samples of the cached map")
+    p.add_argument(
+        "--samples", type=count, default=DEFAULT_MAP_SAMPLES, help="samples of the cached map (default 2e8)"
+    )
     p.add_argument("--seed", type=nonneg_int, default=0, help="random seed (default 0)")
     return parser
 

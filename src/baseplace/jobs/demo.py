@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from baseplace.jobs.inputs import Progress, step_progress
+from baseplace.jobs.inputs import DEFAULT_MAP_SAMPLES, Progress, step_progress
 from baseplace.jobs.report import DemoReport, NoResultError, PoseRecord, RobotRef, path_json
 
 if TYPE_CHECKING:
@@ -51,7 +51,7 @@ class DemoJob:
     """
 
     out: str = "out"
-    samples: int = 50_000_000
+    samples: int = DEFAULT_MAP_SAMPLES
     seed: int = 0
 
 

@@ -73,6 +73,9 @@ def out_path(path: str | Path | None, what: str, suffixes: Sequence[str] | None)
 
 
 PLOT_SUFFIXES = (".png", ".pdf", ".svg")
+DEFAULT_MAP_SAMPLES = 200_000_000
+"""``BuildSettings().samples`` (``reachability/build.py``), here so that ``--help`` and the jobs' inputs
+do not import numba (a test keeps the two equal)."""
 
 
 @dataclass(frozen=True)

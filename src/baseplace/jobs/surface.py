@@ -15,7 +15,15 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from baseplace.errors import InputError
-from baseplace.jobs.inputs import PLOT_SUFFIXES, Progress, load_robot, occupancy_grid, out_path, step_progress
+from baseplace.jobs.inputs import (
+    DEFAULT_MAP_SAMPLES,
+    PLOT_SUFFIXES,
+    Progress,
+    load_robot,
+    occupancy_grid,
+    out_path,
+    step_progress,
+)
 from baseplace.jobs.report import PoseRecord, RobotRef, SurfaceMapReport, SurfaceSamplesReport
 
 if TYPE_CHECKING:
@@ -52,7 +60,7 @@ class SurfaceMapJob:
     arms: str = "any"
     resolution: float = 0.05
     orientations: int = 16
-    samples: int = 50_000_000
+    samples: int = DEFAULT_MAP_SAMPLES
     png: str | None = None
     maps: Mapping[str, ReachabilityMap] | None = field(default=None, repr=False, compare=False)
 

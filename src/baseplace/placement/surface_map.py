@@ -130,7 +130,10 @@ def point_map(
         ``resolution`` along both axes (x first).
     """
     offset, blocks = rmap.tables
-    ok: NDArray[np.bool_] = np.asarray((blocks[:, allowed_bins(rmap, cone, approach_axis)] > 0).any(axis=1))
+    # a cell counts if its centre passes the map's support test (any reached cell without one)
+    ok: NDArray[np.bool_] = np.asarray(
+        (blocks[:, allowed_bins(rmap, cone, approach_axis)] >= rmap.cell_floor).any(axis=1)
+    )
     voxel_ok = np.zeros(len(offset), dtype=bool)
     voxel_ok[offset >= 0] = ok[offset[offset >= 0]]
     k = math.ceil(rmap.horizontal_reach / resolution)

@@ -33,7 +33,7 @@ def cached_map_path(robot: Robot, settings: BuildSettings, arm: str | None = Non
         f"-v{settings.voxel_size}-o{settings.orientation_resolution}-f{FORMAT_VERSION}"
     )
     # settings that change the cells: part of the key only when set, so default maps keep their files
-    for name in ("self_collision", "manipulability", "certify"):
+    for name in ("self_collision", "manipulability", "certify", "support_threshold"):
         if getattr(settings, name):
             key += f"-{name}{getattr(settings, name)}"
     return cache_dir().parent / "maps" / f"map-{hashlib.sha256(key.encode()).hexdigest()[:32]}.rmap"
