@@ -13,7 +13,7 @@ Protocol (fixed before the support test's first held-out run):
   (``default_rng([seed, k])``), of a certified map's IK poses (``[seed, CERTIFY_STREAM]``) and of
   the quality the map file records (``[seed, MEASURE_STREAM]``).
 Usage: python bench/bench_accuracy.py [--map tiago.rmap] [--samples 2e8] [--orientation 0.8]
-       [--certify N] [--support-threshold 0.75] [--split held-out] [--name accuracy_tiago]
+       [--certify N] [--support-threshold 0.8] [--split held-out] [--seed S] [--name accuracy_tiago]
 """
 
 from __future__ import annotations
@@ -45,6 +45,7 @@ def main() -> None:
     parser.add_argument("--certify", type=int, default=0)
     parser.add_argument("--support-threshold", type=float, default=BuildSettings().support_threshold)
     parser.add_argument("--split", choices=sorted(SPLITS), default="held-out")
+    parser.add_argument("--seed", type=int, default=0, help="the build's seed (without --map)")
     parser.add_argument("--name", default="accuracy_tiago")
     args = parser.parse_args()
     robot = Robot("tiago")
@@ -57,6 +58,7 @@ def main() -> None:
             orientation_resolution=args.orientation,
             certify=args.certify,
             support_threshold=args.support_threshold,
+            seed=args.seed,
         )
         start = time.perf_counter()
         rmap = build_map(robot, None, settings)

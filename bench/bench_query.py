@@ -4,9 +4,12 @@ Load: one busy-loop process per core (same niceness as this process: another pro
 for the CPU at equal priority), started before and stopped after the timed loops. Single-pose
 rate: calls of ``ReachabilityMap.value`` (the single-pose query) and ``reachability``
 with one (4, 4) pose and of ``inverse`` with one
-base pose, each repeated for ``--seconds``; median of 3 runs. In the same run and under the same
-load, the parallel kernel forced for one pose (the behaviour before ``SERIAL_BELOW``) is the
-baseline. Memory: bytes of the arrays a loaded map holds (``cells``, ``counts``, the dense lookup
+base pose, each repeated for ``--seconds``; median of 3 runs. The random pose mostly falls outside
+the reached cells; ``value`` is also timed on a pose in a reached cell (the FK pose of a random
+configuration, where the support test reads the cells around it) and on a pose in a cell of the
+fewest samples (on the boundary, where the test reads more of the 64 neighbours before it is
+sure), each also with the map's support test off (same map, same poses). In the same run and under the same load, the parallel kernel forced for
+one pose (the behaviour before ``SERIAL_BELOW``) is the baseline. Memory: bytes of the arrays a loaded map holds (``cells``, ``counts``, the dense lookup
 ``tables``), the bytes allocated and still held after loading and after building the tables
 (tracemalloc, which numpy reports to), the peak while building them, and the process's RSS
 growth (the map is loaded once before, so the RSS figures exclude the imports' and the
@@ -18,6 +21,7 @@ Usage: python bench/bench_query.py [--map tiago.rmap] [--seconds 2]
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import subprocess
 import sys
@@ -32,7 +36,9 @@ from scipy.spatial.transform import Rotation
 
 from baseplace.reachability import rmap as rmap_module
 from baseplace.reachability.build import BuildSettings, build_map
+from baseplace.reachability.certify import poses_in_cells
 from baseplace.reachability.storage import load_map
+from baseplace.robots.fk import forward_kinematics
 from baseplace.robots.model import Robot
 from common import report
 
@@ -79,6 +85,14 @@ def main() -> None:
     poses[:, :3, 3] = rng.uniform(-0.6, 0.6, (1000, 3))
     poses[:, 3, 3] = 1.0
     one, target = np.ascontiguousarray(poses[0]), poses[1]
+    arm = robot.arm()
+    fk = np.ascontiguousarray(forward_kinematics(arm, arm.sample(rng, 1))[0])
+    sparse = rmap.cells[rmap.counts == rmap.counts.min()]
+    edge = np.ascontiguousarray(poses_in_cells(rmap.grid, sparse[:1], rng)[0])
+    whole = dataclasses.replace(
+        rmap, info=dataclasses.replace(rmap.info, support_count=0, support_threshold=0.0)
+    )
+    _ = whole.tables, whole.value(fk)
     base = np.eye(4)[None]
     rmap.value(one)
     rmap.reachability(one)  # compile / load both kernels before timing
@@ -99,6 +113,10 @@ def main() -> None:
     def measure() -> dict[str, Any]:
         return {
             "value_one_pose": median_rate(lambda: rmap.value(one), args.seconds),
+            "value_fk_pose": median_rate(lambda: rmap.value(fk), args.seconds),
+            "value_fk_pose_support_off": median_rate(lambda: whole.value(fk), args.seconds),
+            "value_one_sample_cell_pose": median_rate(lambda: rmap.value(edge), args.seconds),
+            "value_one_sample_cell_pose_support_off": median_rate(lambda: whole.value(edge), args.seconds),
             "reachability_one_pose": median_rate(lambda: rmap.reachability(one), args.seconds),
             "inverse_one_base": median_rate(lambda: rmap.inverse(target, base), args.seconds),
             "parallel_kernel_one_pose_baseline": median_rate(forced_parallel, args.seconds),
@@ -129,7 +147,12 @@ def main() -> None:
     report(
         "query_tiago",
         {
-            "map": {"cells_reached": rmap.n_reached, "samples": rmap.info.samples},
+            "map": {
+                "cells_reached": rmap.n_reached,
+                "samples": rmap.info.samples,
+                "support_count": rmap.info.support_count,
+                "support_threshold": rmap.info.support_threshold,
+            },
             "cores": os.cpu_count(),
             "busy_processes": len(busy),
             "idle": idle,
