@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import time
 from collections.abc import Sequence
@@ -228,4 +229,6 @@ def build_map_job(job: BuildMapJob, progress: Progress | None = None) -> BuildMa
         timings_ms={"build": info.build_time_s * 1e3}, samples=info.samples, seed=info.seed,
         cells_reached=rmap.n_reached, build_time_s=round(info.build_time_s, 3), samples_per_s=round(rate),
         file_bytes=out.stat().st_size, dropped_self_collision=info.dropped_self_collision,
+        support={"count": info.support_count, "threshold": info.support_threshold} if info.supported else None,
+        quality=json.loads(info.quality) if info.quality else None,
     )  # fmt: skip

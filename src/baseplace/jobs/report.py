@@ -390,6 +390,8 @@ class BuildMapReport(Report):
     samples_per_s: float = 0.0
     file_bytes: int = 0
     dropped_self_collision: int = 0
+    support: dict[str, Any] | None = None
+    quality: dict[str, Any] | None = None
 
 
 @dataclass

@@ -72,9 +72,16 @@ def _demo(o: dict[str, Any]) -> list[str]:
 
 
 def _build_map(o: dict[str, Any]) -> list[str]:
-    return [f"wrote {o['outputs']['map']}: {o['cells_reached']} cells reached by {o['samples']:.3g} samples "
-            f"in {o['build_time_s']:.1f} s ({o['samples_per_s'] / 1e6:.2f} M samples/s), "
-            f"{o['file_bytes'] / 1e6:.1f} MB"]  # fmt: skip
+    lines = [f"wrote {o['outputs']['map']}: {o['cells_reached']} cells reached by {o['samples']:.3g} samples "
+             f"in {o['build_time_s']:.1f} s ({o['samples_per_s'] / 1e6:.2f} M samples/s), "
+             f"{o['file_bytes'] / 1e6:.1f} MB"]  # fmt: skip
+    if o.get("support"):
+        lines.append(f"support test: count {o['support']['count']}, threshold {o['support']['threshold']}")
+    if o.get("quality"):
+        q = o["quality"]
+        lines.append(f"measured: recall {q['recall']:.2%} on {q['n_recall']} FK poses, precision "
+                     f"{q['precision']:.1%} against IK on {q['n_precision']} poses (docs/maps.md)")  # fmt: skip
+    return lines
 
 
 def _robots(o: dict[str, Any]) -> list[str]:
