@@ -15,7 +15,13 @@ from baseplace.robots.ik import DampedLeastSquaresIK
 from test_kinematics import pinocchio_fk
 
 # the support test off: these tests read certified cells whole
-COARSE = {"samples": 300_000, "seed": 5, "voxel_size": 0.15, "orientation_resolution": 1.6, "support_threshold": 0.0}
+COARSE = {
+    "samples": 300_000,
+    "seed": 5,
+    "voxel_size": 0.15,
+    "orientation_resolution": 1.6,
+    "support_threshold": 0.0,
+}
 
 
 @pytest.fixture(scope="module")
