@@ -105,7 +105,7 @@ def near_cells(tiago, rmap, n, rng):
 
 def test_support_is_the_interpolation_of_the_counts(tiago, maps, rng):
     supported, whole = maps
-    assert supported.info.support_count == support_count(supported.counts) >= 2
+    assert supported.info.support_count == support_count(supported.counts, 8) >= 2
     assert supported.info.support_threshold == BuildSettings().support_threshold
     tau = supported.info.support_threshold
     T = near_cells(tiago, supported, 3000, rng)
@@ -158,9 +158,16 @@ def test_sparse_maps_and_threshold_zero_read_whole_cells(tiago, tiago_map, rng):
     assert not off.info.supported
     T = near_cells(tiago, off, 500, rng)
     np.testing.assert_array_equal(off.reachability(T) > 0, np.isin(off.grid.cell_index(T), off.cells))
-    assert support_count(np.array([3, 4], dtype=np.uint32)) == 0
-    assert support_count(np.array([4, 4], dtype=np.uint32)) == 1
-    assert support_count(np.full(5, 30, dtype=np.uint32)) == 2
+    assert support_count(np.array([3, 4], dtype=np.uint32), 7) == 0
+    assert support_count(np.array([4, 4], dtype=np.uint32), 7) == 1
+    assert support_count(np.full(5, 30, dtype=np.uint32), 7) == 2
+    assert support_count(np.full(5, 30, dtype=np.uint32), 5) == 0  # a 5-joint arm: a thin set in SE(3)
+
+
+def test_arms_of_fewer_than_six_joints_read_whole_cells(planar3):
+    # A planar 3-joint arm reaches a 3D set of poses: the support test would erode it to nothing.
+    rmap = build_map(planar3, None, BuildSettings(samples=2_000_000, seed=5))
+    assert rmap.counts.mean() > 4 and not rmap.info.supported and rmap.info.quality == ""
 
 
 def test_support_settings_roundtrip_and_hostile_values(tiago, maps, tmp_path):

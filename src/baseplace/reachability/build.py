@@ -274,7 +274,7 @@ class MapAccumulator:
             from baseplace.reachability.certify import CertifySettings, certify_map
 
             rmap = certify_map(rmap, self.robot, CertifySettings(below=s.certify), self.chunk_samples)
-        count = support_count(rmap.counts) if s.support_threshold > 0 else 0
+        count = support_count(rmap.counts, arm.n_joints) if s.support_threshold > 0 else 0
         if count:
             info = dataclasses.replace(rmap.info, support_count=count, support_threshold=s.support_threshold)
             rmap = dataclasses.replace(rmap, info=info)
@@ -285,15 +285,19 @@ class MapAccumulator:
         return rmap
 
 
-def support_count(counts: NDArray[np.uint32]) -> int:
-    """The support count for a map's counts.
+def support_count(counts: NDArray[np.uint32], n_joints: int) -> int:
+    """The support count for a map's counts and its arm's number of joints.
 
-    Their mean over :data:`SAMPLES_PER_SUPPORT_COUNT`, rounded, at least 1; 0 (no support test)
-    when the mean is below :data:`MIN_MEAN_COUNT`. Chosen on development seeds (TIAGo at 5e7-2e8
+    Their mean over :data:`SAMPLES_PER_SUPPORT_COUNT`, rounded, at least 1. 0 (no support test)
+    when the mean is below :data:`MIN_MEAN_COUNT`, or when the arm has fewer than 6 joints: it
+    reaches a set of lower dimension than the 6D grid, every reached cell is a boundary cell, and
+    the test would call almost nothing reachable. Chosen on development seeds (TIAGo at 5e7-2e8
     samples, the Panda at 0.5 and 0.8 rad; docs/maps.md).
     """
     mean = float(counts.mean()) if len(counts) else 0.0
-    return 0 if mean < MIN_MEAN_COUNT else max(1, round(mean / SAMPLES_PER_SUPPORT_COUNT))
+    if n_joints < 6 or mean < MIN_MEAN_COUNT:
+        return 0
+    return max(1, round(mean / SAMPLES_PER_SUPPORT_COUNT))
 
 
 def build_map(
@@ -382,7 +386,7 @@ def _reuse(path: str | Path, acc: MapAccumulator) -> ReachabilityMap | None:
         and (not info.certification or json.loads(info.certification)["below"] == s.certify)
         and (rmap.manipulability is not None) == s.manipulability
         and (rmap.info.support_threshold if rmap.info.supported else 0.0)
-        == (s.support_threshold if support_count(rmap.counts) else 0.0)
+        == (s.support_threshold if support_count(rmap.counts, acc.arm.n_joints) else 0.0)
     )
     return rmap if same else None
 
