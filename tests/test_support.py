@@ -185,6 +185,10 @@ def test_support_settings_roundtrip_and_hostile_values(tiago, maps, tmp_path):
             dataclasses.replace(supported.info, **bad)
     with pytest.raises(InputError, match="support threshold"):
         BuildSettings(support_threshold=-0.1)
+    object.__setattr__(back.info, "support_threshold", 5.0)  # as a hostile file would hold it
+    save_map(back, tmp_path / "hostile.rmap")
+    with pytest.raises(InputError, match=r"cannot read map .*hostile\.rmap: support_threshold must be"):
+        load_map(tmp_path / "hostile.rmap", tiago)
     assert MapInfo("r", "", "a", (), "b", "t", 1, 0).support_count == 0  # old files: no support test
 
 

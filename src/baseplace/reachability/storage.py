@@ -112,7 +112,10 @@ def load_map(path: str | Path, robot: Robot | None = None, arm: str | None = Non
             raise InputError(f"cannot read map {path}: checksum mismatch, the file is corrupt")
         info_raw = json.loads(info_text)
         info_raw["joint_names"] = tuple(info_raw["joint_names"])
-        info = MapInfo(**info_raw)
+        try:
+            info = MapInfo(**info_raw)
+        except InputError as exc:  # a value out of range (the support test's): name the file
+            raise InputError(f"cannot read map {path}: {exc}") from None
         grid = g
         if (
             cells.ndim != 1
