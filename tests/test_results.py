@@ -33,6 +33,20 @@ def test_results_file_holds_command_commit_seeds_and_time(tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["r.json"]  # no temporary file left behind
 
 
+def test_results_file_records_file_names_not_this_machines_folders(tmp_path):
+    argv = [
+        "bench/bench_x.py",
+        "--map",
+        "/tmp/x/tiago.rmap",
+        "--out=/home/u/o.json",
+        "--n",
+        "3",
+        "rel/a.rmap",
+    ]
+    written = write_results(tmp_path / "r.json", {}, RunClock(), argv=argv)
+    assert written["provenance"]["command"] == "bench_x.py --map tiago.rmap --out=o.json --n 3 rel/a.rmap"
+
+
 def test_results_file_never_half_written(tmp_path):
     path = tmp_path / "r.json"
     with pytest.raises(TypeError):
@@ -84,7 +98,7 @@ def test_experiment_command_writes_its_results_file(tmp_path):
     assert stored == json.loads(proc.stdout)  # the file is what the command printed, whole
     prov = stored["provenance"]
     assert prov["command"].endswith(
-        f"experiment segmentation --scenes 1 --noise heightmap --seed 5 --results {path} --json"
+        f"experiment segmentation --scenes 1 --noise heightmap --seed 5 --results {path.name} --json"
     )
     assert prov["split"] is None and prov["seeds_used"] == [5]  # a custom seed is neither dev nor held-out
     assert prov["seeds"] == {"dev": [0], "held_out": [1]} and "height map" in prov["protocol"][0]

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import platform
 import subprocess
 import sys
@@ -95,6 +96,17 @@ class RunClock:
         return time.perf_counter() - self.started
 
 
+def _without_folders(arg: str) -> str:
+    """A command-line argument with an absolute path cut to its file name (``--x=/a/b`` too).
+
+    Results files are committed: the folders of the machine that ran them are not theirs to record.
+    """
+    key, eq, value = arg.partition("=") if arg.startswith("-") else ("", "", arg)
+    if os.path.isabs(value):
+        value = Path(value).name
+    return f"{key}{eq}{value}" if eq else (Path(arg).name if os.path.isabs(arg) else arg)
+
+
 def provenance(
     clock: RunClock,
     *,
@@ -115,8 +127,7 @@ def provenance(
         argv: the command line (default ``sys.argv``).
     """
     args = list(sys.argv if argv is None else argv)
-    if args:
-        args[0] = Path(args[0]).name
+    args = [Path(args[0]).name, *(_without_folders(a) for a in args[1:])] if args else []
     out: dict[str, Any] = {
         "command": " ".join(args),
         **clock.source,
