@@ -44,7 +44,7 @@ from numpy.typing import ArrayLike
 from shapely.geometry import Polygon
 
 from baseplace.errors import BaseplaceError
-from baseplace.geometry.poses import FloatArray
+from baseplace.geometry.poses import FloatArray, planar_offsets
 from baseplace.placement.motion import MotionChecker, MotionSettings, transit_environment
 from baseplace.placement.pipeline import POSE_ONLY_CHECKS, PlaceSettings, place, place_obstacles
 from baseplace.placement.robustness import BaseErrorModel, RobustnessSettings
@@ -80,14 +80,7 @@ def drawn_on_plane(T_world_base: ArrayLike, offsets: ArrayLike) -> FloatArray:
     xy, so drawing in the base frame instead of the world frame changes no distribution on a
     level floor.
     """
-    T = np.asarray(T_world_base, dtype=float)
-    d = np.asarray(offsets, dtype=float).reshape(-1, 3)
-    c, s = np.cos(d[:, 2]), np.sin(d[:, 2])
-    M = np.zeros((len(d), 4, 4))
-    M[:, 0, 0], M[:, 0, 1], M[:, 1, 0], M[:, 1, 1] = c, -s, s, c
-    M[:, 2, 2] = M[:, 3, 3] = 1.0
-    M[:, 0, 3], M[:, 1, 3] = d[:, 0], d[:, 1]
-    return T @ M
+    return np.asarray(T_world_base, dtype=float) @ planar_offsets(offsets)
 
 
 def seated(T_world_base: ArrayLike, plane: Plane) -> FloatArray:

@@ -84,6 +84,17 @@ def invert_transforms(T: ArrayLike) -> FloatArray:
     return out
 
 
+def planar_offsets(offsets: ArrayLike) -> FloatArray:
+    """(S, 4, 4) transforms ``Trans(dx, dy, 0) @ Rz(dyaw)`` of (S, 3) offsets (dx, dy, dyaw)."""
+    d = np.asarray(offsets, dtype=float).reshape(-1, 3)
+    c, s = np.cos(d[:, 2]), np.sin(d[:, 2])
+    M = np.zeros((len(d), 4, 4))
+    M[:, 0, 0], M[:, 0, 1], M[:, 1, 0], M[:, 1, 1] = c, -s, s, c
+    M[:, 2, 2] = M[:, 3, 3] = 1.0
+    M[:, 0, 3], M[:, 1, 3] = d[:, 0], d[:, 1]
+    return M
+
+
 def _unit_vector(v: ArrayLike, what: str) -> FloatArray:
     a = np.asarray(v, dtype=float)
     norm = float(np.linalg.norm(a)) if a.shape == (3,) else 0.0

@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError, unknown
-from baseplace.geometry.poses import FloatArray, invert_transforms
+from baseplace.geometry.poses import FloatArray, invert_transforms, planar_offsets
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Arm
 from baseplace.world.environment import Environment
@@ -94,11 +94,7 @@ def perturbed(T_world_base: ArrayLike, offsets: ArrayLike) -> FloatArray:
     """(S, 4, 4) base poses: ``T_world_base`` (4, 4) moved by (S, 3) world offsets (dx, dy, dyaw)."""
     T = np.asarray(T_world_base, dtype=float)
     d = np.asarray(offsets, dtype=float).reshape(-1, 3)
-    c, s = np.cos(d[:, 2]), np.sin(d[:, 2])
-    Rz = np.zeros((len(d), 4, 4))
-    Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1] = c, -s, s, c
-    Rz[:, 2, 2] = Rz[:, 3, 3] = 1.0
-    out = T @ Rz  # heading error about the base's own z axis
+    out = T @ planar_offsets(d * (0.0, 0.0, 1.0))  # heading error about the base's own z axis
     out[:, 0, 3] += d[:, 0]
     out[:, 1, 3] += d[:, 1]
     return out
