@@ -136,6 +136,11 @@ def test_build_map_bad_input(tmp_path):
     assert_one_line_error(run("build-map", "--robot", "pr2", "--arm", "middle", "--samples", "10", "--out", out), 2,
                           "unknown arm", "left, right")  # fmt: skip
     assert_one_line_error(run("build-map", "--samples", "10", "--workers", "0", "--out", out), 2, "--workers")
+    assert_one_line_error(run("build-map", "--support-threshold", "2", "--out", out), 2,
+                          "support threshold must be in [0, 1]", "0: off")  # fmt: skip
+    assert_one_line_error(
+        run("build-map", "--support-threshold", "abc", "--out", out), 2, "--support-threshold"
+    )
     (tmp_path / "broken.urdf").write_text((DATA / "broken.urdf").read_text())
     robot = tmp_path / "r.toml"
     robot.write_text('name = "b"\nurdf = "broken.urdf"\nbase_frame = "a"\nfootprint = { radius = 0.2 }\n'
