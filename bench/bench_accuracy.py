@@ -19,7 +19,6 @@ Usage: python bench/bench_accuracy.py [--map tiago.rmap] [--samples 2e8] [--orie
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import time
 
@@ -63,9 +62,7 @@ def main() -> None:
         start = time.perf_counter()
         rmap = build_map(robot, None, settings)
         print(f"built in {time.perf_counter() - start:.1f} s (with the quality measurement)")
-    whole = dataclasses.replace(
-        rmap, info=dataclasses.replace(rmap.info, support_count=0, support_threshold=0.0)
-    )
+    whole = rmap.with_support(0, 0.0)
     rng = np.random.default_rng(SPLITS[args.split])
     held_out = forward_kinematics(arm, arm.sample(rng, 10_000))
     recall = float((rmap.reachability(held_out) > 0).mean())

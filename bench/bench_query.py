@@ -21,7 +21,6 @@ Usage: python bench/bench_query.py [--map tiago.rmap] [--seconds 2]
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import os
 import subprocess
 import sys
@@ -89,9 +88,7 @@ def main() -> None:
     fk = np.ascontiguousarray(forward_kinematics(arm, arm.sample(rng, 1))[0])
     sparse = rmap.cells[rmap.counts == rmap.counts.min()]
     edge = np.ascontiguousarray(poses_in_cells(rmap.grid, sparse[:1], rng)[0])
-    whole = dataclasses.replace(
-        rmap, info=dataclasses.replace(rmap.info, support_count=0, support_threshold=0.0)
-    )
+    whole = rmap.with_support(0, 0.0)
     _ = whole.tables, whole.value(fk)
     base = np.eye(4)[None]
     rmap.value(one)

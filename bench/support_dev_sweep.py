@@ -11,7 +11,6 @@ Usage: python bench/support_dev_sweep.py --map tiago.rmap [--seed 778] [--poses 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 
 import numpy as np
 
@@ -32,7 +31,7 @@ def main() -> None:
     parser.add_argument("--poses", type=int, default=8000)
     args = parser.parse_args()
     if args.seed == HELD_OUT:
-        raise SystemExit("error: 12345 is the held-out seed of bench_accuracy.py; use a development seed")
+        parser.error("--seed 12345 is the held-out seed of bench_accuracy.py; use a development seed")
     robot = Robot("tiago")
     arm = robot.arm()
     rmap = load_map(args.map, robot)
@@ -43,8 +42,7 @@ def main() -> None:
     rows = []
     for count in (1, 2, 3, 4, 5, 6):
         for threshold in (0.5, 0.6, 0.7, 0.75, 0.8, 0.85, 0.9):
-            info = dataclasses.replace(rmap.info, support_count=count, support_threshold=threshold)
-            m = dataclasses.replace(rmap, info=info)
+            m = rmap.with_support(count, threshold)
             kept = m.reachability(T) > 0
             rows.append(
                 {

@@ -28,9 +28,7 @@ COARSE = {"samples": 4_000_000, "seed": 11, "voxel_size": 0.1, "orientation_reso
 def maps(tiago) -> tuple[ReachabilityMap, ReachabilityMap]:
     """(the map with the default support test, the same cells read whole)."""
     supported = build_map(tiago, None, BuildSettings(**COARSE))
-    whole = dataclasses.replace(
-        supported, info=dataclasses.replace(supported.info, support_count=0, support_threshold=0.0)
-    )
+    whole = supported.with_support(0, 0.0)
     return supported, whole
 
 

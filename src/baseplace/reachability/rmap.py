@@ -23,7 +23,7 @@ whole cells use (:attr:`ReachabilityMap.cell_floor`).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Literal, Protocol
 
@@ -177,6 +177,10 @@ class ReachabilityMap:
         if not info.supported or len(self.counts) == 0:
             return 1.0, 0.0
         return info.support_count / float(self.counts.max()), float(info.support_threshold)
+
+    def with_support(self, count: int, threshold: float) -> ReachabilityMap:
+        """The same cells read with another support test (count or threshold 0: cells read whole)."""
+        return replace(self, info=replace(self.info, support_count=count, support_threshold=threshold))
 
     @property
     def cell_floor(self) -> float:
