@@ -441,6 +441,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         sys.stderr.write("error: interrupted\n")
         return 130
+    except MemoryError:  # an internal failure: every size a user gives is checked before it is allocated
+        sys.stderr.write(
+            "error: out of memory (an internal failure; BASEPLACE_MAX_MEMORY_MB lowers the limits)\n"
+        )
+        return 1
     finally:
         bars.close()
     if not isinstance(report, Report):  # view and the experiments print their own output

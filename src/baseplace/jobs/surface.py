@@ -93,11 +93,12 @@ def surface_map_job(job: SurfaceMapJob, progress: Progress | None = None) -> Sur
     """Build and save the inverse surface reachability map of ``job.polygon`` at ``job.height``.
 
     Raises:
-        InputError: bad input (a malformed polygon, an unknown arm, an unwritable output).
+        InputError: bad input (a malformed polygon, an unknown arm, an unwritable output, a grid
+            over the memory cap).
     """
     out = out_path(job.out, "--out", SURFACE_SUFFIXES)  # outputs first: before the imports and any work
     png = out_path(job.png, "--png", PLOT_SUFFIXES)
-    from baseplace.placement.surface_map import build_surface_map, parse_polygon
+    from baseplace.placement.surface_map import build_surface_map, check_surface_grid, parse_polygon
     from baseplace.placement.surface_storage import save_surface_map
     from baseplace.reachability.build import BuildSettings
     from baseplace.reachability.cache import cached_map
@@ -105,6 +106,7 @@ def surface_map_job(job: SurfaceMapJob, progress: Progress | None = None) -> Sur
     t0 = time.perf_counter()
     assert out is not None
     polygon = parse_polygon(job.polygon)
+    check_surface_grid(polygon, job.resolution, job.orientations)  # the polygon's box alone, before the maps
     robot = load_robot(job.robot)
     arms, combine = surface_arms(robot, job.arms)
     settings = BuildSettings(samples=job.samples)

@@ -34,6 +34,7 @@ from scipy.signal import fftconvolve
 
 from baseplace.errors import InputError, brief, unknown
 from baseplace.geometry.poses import FloatArray
+from baseplace.guards import check_alloc, memory_cap_bytes
 from baseplace.placement.osrm import footprint_kernel
 from baseplace.reachability.rmap import ReachabilityMap
 from baseplace.robots.model import Robot
@@ -224,10 +225,68 @@ class SurfaceMap:
         }  # fmt: skip
 
 
+BYTES_PER_POSE = 32.0
+"""Peak bytes per (heading, x, y) cell of a build: the float32 results of the FFTs, stacked,
+clipped and combined over arms, and the index and values of the sparse save."""
+BYTES_PER_FLOOR_CELL = 128.0
+"""Peak bytes per (x, y) cell, whatever the headings: the surface's grid points and their indices
+(measured: 112 with one heading), or the footprint test's raster at 1/8 cell (64)."""
+
+
+def check_surface_grid(polygon: FloatArray, resolution: float, orientations: int, margin: float = 0.0) -> int:
+    """Check a surface map's settings and its grid's size before anything is allocated; returns its cells.
+
+    The grid covers the polygon's bounding box on multiples of ``resolution``, widened by
+    ``margin`` [m] on every side (the arms' horizontal reach), times ``orientations`` headings.
+    Its peak memory, :data:`BYTES_PER_POSE` per cell and :data:`BYTES_PER_FLOOR_CELL` per (x, y)
+    cell, must fit ``$BASEPLACE_MAX_MEMORY_MB`` (:func:`~baseplace.guards.memory_cap_bytes`).
+
+    Args:
+        polygon: (N, 2) vertices [m], as :func:`parse_polygon` returns them.
+        resolution: grid spacing [m], 0.01 to 0.5.
+        orientations: base headings, 1 to 360.
+        margin: how far the grid reaches beyond the polygon [m] (0: the polygon's box only).
+
+    Raises:
+        InputError: a resolution or orientation count out of range, or a grid over the limit,
+            with its cell count and the limit.
+    """
+    if not (0.01 <= resolution <= 0.5):
+        raise InputError(f"resolution must be between 0.01 and 0.5 m, got {resolution}")
+    if not (1 <= orientations <= 360):
+        raise InputError(f"orientations must be between 1 and 360, got {orientations}")
+    k = math.ceil(margin / resolution)
+    lo = np.floor(polygon.min(axis=0) / resolution)
+    hi = np.ceil(polygon.max(axis=0) / resolution)
+    nx, ny = (float(v) + 1 + 2 * k for v in hi - lo)
+    per_cell = BYTES_PER_POSE + BYTES_PER_FLOOR_CELL / orientations
+    limit = int(memory_cap_bytes() / per_cell)
+    cells = orientations * nx * ny
+    if cells > limit:
+        raise InputError(
+            f"the surface map's grid of {orientations} headings x {nx:.0f} x {ny:.0f} = {cells:.3g} cells is over "
+            f"the limit of {limit:.3g} cells ({per_cell:.0f} bytes each within BASEPLACE_MAX_MEMORY_MB="
+            f"{memory_cap_bytes() / 2**20:.0f}); use a coarser --resolution, fewer --orientations or a smaller polygon"
+        )
+    return int(cells)
+
+
+GRID_BYTES_PER_CELL = 112.0
+"""Peak bytes per cell of the polygon's bounding box in :func:`surface_grid` (measured: about 100)."""
+
+
 def surface_grid(polygon: FloatArray, resolution: float) -> FloatArray:
-    """Grid points (n, 2) inside the polygon, on multiples of ``resolution`` [m]."""
+    """Grid points (n, 2) inside the polygon, on multiples of ``resolution`` [m].
+
+    Raises:
+        InputError: the polygon's bounding box holds more cells than the memory cap allows.
+    """
     lo = np.floor(polygon.min(axis=0) / resolution).astype(int)
     hi = np.ceil(polygon.max(axis=0) / resolution).astype(int)
+    n_cells = float(np.prod((hi - lo + 1).astype(float)))
+    check_alloc(
+        n_cells * GRID_BYTES_PER_CELL, f"the {n_cells:.3g} grid points at {resolution} m", "the polygon"
+    )
     X, Y = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1), indexing="ij")
     pts = np.c_[X.ravel(), Y.ravel()] * resolution
     return pts[shapely.contains_xy(shapely.Polygon(polygon), pts[:, 0], pts[:, 1])]
@@ -259,7 +318,8 @@ def build_surface_map(
 
     Raises:
         InputError: a bad polygon, height, resolution, orientation count or combination, a map of
-            another robot, or a polygon with no grid point inside at this resolution.
+            another robot, a grid over the memory cap (:func:`check_surface_grid`), or a polygon
+            with no grid point inside at this resolution.
     """
     pts = parse_polygon(polygon)
     if combine not in COMBINE:
@@ -268,13 +328,10 @@ def build_surface_map(
         raise InputError("no reachability map given")
     if not (math.isfinite(height) and 0.0 <= height <= 3.0):
         raise InputError(f"surface height must be between 0 and 3 m, got {height}")
-    if not (0.01 <= resolution <= 0.5):
-        raise InputError(f"resolution must be between 0.01 and 0.5 m, got {resolution}")
-    if not (1 <= orientations <= 360):
-        raise InputError(f"orientations must be between 1 and 360, got {orientations}")
     for name, rmap in rmaps.items():
         if rmap.info.robot != robot.name or rmap.info.arm != name:
             raise InputError(f"the map for arm {name!r} was built for {rmap.info.robot}/{rmap.info.arm}")
+    check_surface_grid(pts, resolution, orientations, max(rmap.horizontal_reach for rmap in rmaps.values()))
     grid_pts = surface_grid(pts, resolution)
     if len(grid_pts) == 0:
         raise InputError(f"the polygon holds no grid point at resolution {resolution} m; use a finer one")

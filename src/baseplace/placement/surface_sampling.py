@@ -23,9 +23,10 @@ from numpy.typing import NDArray
 
 from baseplace.errors import InputError, NothingFoundError
 from baseplace.geometry.poses import BasePose, FloatArray, wrap_angle
+from baseplace.guards import check_alloc
 from baseplace.placement.surface_map import SurfaceMap, surface_grid
 from baseplace.robots.model import Robot
-from baseplace.terrain.voxels import VoxelMap
+from baseplace.terrain.voxels import BYTES_PER_POINT, VoxelMap
 
 if TYPE_CHECKING:
     from baseplace.world.environment import Environment
@@ -78,12 +79,23 @@ def discount(
 
 
 def furniture_voxels(smap: SurfaceMap, resolution: float = 0.025) -> VoxelMap:
-    """The surface's furniture as a solid block of voxels from the floor to the surface height."""
-    xy = surface_grid(smap.polygon, resolution) + resolution / 2
+    """The surface's furniture as a solid block of voxels from the floor to the surface height.
+
+    Raises:
+        InputError: the block (the polygon's cells times the layers up to the height) holds more
+            voxels than the memory cap allows; checked before any is allocated.
+    """
     outline = shapely.Polygon(smap.polygon).exterior
+    n_edge = math.ceil(outline.length / (resolution / 2))
+    z = np.arange(resolution / 2, max(smap.height, resolution), resolution)
+    span = np.ceil(np.ptp(smap.polygon, axis=0) / resolution) + 2
+    n_points = (float(np.prod(span)) + n_edge) * len(z)
+    check_alloc(
+        n_points * (24 + BYTES_PER_POINT), f"the furniture's {n_points:.3g} voxels", "the surface map"
+    )
+    xy = surface_grid(smap.polygon, resolution) + resolution / 2
     edge = np.array([outline.interpolate(s).coords[0] for s in np.arange(0, outline.length, resolution / 2)])
     xy = np.r_[xy, edge]
-    z = np.arange(resolution / 2, max(smap.height, resolution), resolution)
     pts = np.c_[np.repeat(xy, len(z), axis=0), np.tile(z, len(xy))]
     return VoxelMap.from_points(pts, resolution)
 

@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError
+from baseplace.guards import memory_cap_bytes
 
 FloatArray = NDArray[np.float64]
 
@@ -72,7 +73,8 @@ def fuse_clouds(
         save: also write the OctoMap as a ``.bt`` file here.
 
     Raises:
-        InputError: no cloud, or a cloud or origin that is not finite.
+        InputError: no cloud, a cloud or origin that is not finite, or more voxels than the
+            memory cap allows (:func:`check_voxels`).
     """
     import pyoctomap
 
@@ -81,14 +83,18 @@ def fuse_clouds(
     s = settings or FusionSettings()
     if not clouds:
         raise InputError("fusion needs at least one cloud")
-    tree = pyoctomap.OcTree(s.resolution)
-    tree.setProbHit(s.prob_hit)
-    tree.setProbMiss(s.prob_miss)
+    posed = []
     for k, c in enumerate(clouds):
         pts = np.ascontiguousarray(np.asarray(c.points, dtype=np.float64).reshape(-1, 3))
         origin = np.asarray(c.origin, dtype=np.float64).reshape(3)
         if not (np.isfinite(pts).all() and np.isfinite(origin).all()):
             raise InputError(f"cloud {k} or its sensor origin is not finite")
+        posed.append((pts, origin))
+    check_voxels(posed, s)
+    tree = pyoctomap.OcTree(s.resolution)
+    tree.setProbHit(s.prob_hit)
+    tree.setProbMiss(s.prob_miss)
+    for pts, origin in posed:
         if len(pts):
             tree.insertPointCloud(pts, origin, max_range=s.max_range, discretize=True)
     tree.updateInnerOccupancy()
@@ -104,6 +110,55 @@ def fuse_clouds(
             with atomic_write(Path(save), "OctoMap") as out:
                 out.write_bytes(path.read_bytes())
     return points
+
+
+BYTES_PER_VOXEL = 64.0
+"""Peak bytes per voxel the rays may touch: the octree's node and its share of its parent's
+children, and the key sets of a scan's insertion (measured: 27 to 42 per cell of the box)."""
+
+
+def check_voxels(clouds: Sequence[tuple[FloatArray, FloatArray]], settings: FusionSettings) -> int:
+    """Bound the voxels that fusing ``(points (N, 3), origin (3,))`` pairs can touch, before the octree grows.
+
+    A ray touches at most its L1 length / resolution + 1 voxels, and one cloud at most the cells of
+    the box around its points and origin (cut at ``max_range``); all clouds at most the cells of
+    their joint box. The bound times :data:`BYTES_PER_VOXEL` must fit ``$BASEPLACE_MAX_MEMORY_MB``.
+
+    Returns:
+        The bound [voxels].
+
+    Raises:
+        InputError: one line with the voxel count and the limit.
+    """
+    res = settings.resolution
+    per_cloud = 0.0
+    lo_all, hi_all = np.full(3, np.inf), np.full(3, -np.inf)
+    for pts, origin in clouds:
+        if not len(pts):
+            continue
+        ray = pts - origin
+        if settings.max_range > 0:
+            length = np.linalg.norm(ray, axis=1, keepdims=True)
+            ray = ray * np.minimum(1.0, settings.max_range / np.maximum(length, 1e-12))
+        visits = float(np.abs(ray).sum()) / res + len(pts)
+        lo, hi = np.minimum(ray.min(axis=0), 0.0) + origin, np.maximum(ray.max(axis=0), 0.0) + origin
+        box = float(np.prod(np.floor(hi / res) - np.floor(lo / res) + 1))
+        per_cloud += min(visits, box)
+        lo_all, hi_all = np.minimum(lo_all, lo), np.maximum(hi_all, hi)
+    bound = (
+        min(per_cloud, float(np.prod(np.floor(hi_all / res) - np.floor(lo_all / res) + 1)))
+        if per_cloud
+        else 0.0
+    )
+    cap = memory_cap_bytes()
+    limit = int(cap / BYTES_PER_VOXEL)
+    if bound > limit:
+        raise InputError(
+            f"fusing these clouds may touch {bound:.3g} voxels of {res} m, over the limit of {limit:.3g} "
+            f"({BYTES_PER_VOXEL:.0f} bytes each within BASEPLACE_MAX_MEMORY_MB={cap / 2**20:.0f}); use larger "
+            "voxels, a max range or fewer, nearer points"
+        )
+    return int(bound)
 
 
 def posed(points: ArrayLike, T_world_sensor: ArrayLike) -> PosedCloud:

@@ -13,10 +13,35 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError
+from baseplace.guards import memory_cap_bytes
 from baseplace.terrain.voxels import VoxelMap
 
 FloatArray = NDArray[np.float64]
 MAX_CELLS = 25_000_000
+BYTES_PER_CELL = 384.0
+"""Peak bytes per height-map cell of a segmentation: the height map, its smoothing, the local
+plane fits and the labels (measured: about 320 for both segmenters)."""
+
+
+def check_cells(n_cols: float, n_rows: float, resolution: float, reserved_bytes: float = 0.0) -> None:
+    """Refuse a height map of ``n_cols x n_rows`` cells before it is allocated.
+
+    The limit is :data:`MAX_CELLS` and what ``$BASEPLACE_MAX_MEMORY_MB``, less ``reserved_bytes``
+    (the cloud's voxelization), holds at :data:`BYTES_PER_CELL`.
+
+    Raises:
+        InputError: one line with the cell count and the limit.
+    """
+    cells = float(n_cols) * float(n_rows)
+    cap = memory_cap_bytes()
+    limit = int(max(0.0, min(MAX_CELLS, (cap - reserved_bytes) / BYTES_PER_CELL)))
+    if cells > limit:
+        raise InputError(
+            f"the cloud spans {n_cols * resolution:.0f} x {n_rows * resolution:.0f} m: a height map of "
+            f"{n_cols:.0f} x {n_rows:.0f} = {cells:.3g} cells at {resolution} m is over the limit of {limit:.3g} cells "
+            f"({BYTES_PER_CELL:.0f} bytes each within BASEPLACE_MAX_MEMORY_MB={cap / 2**20:.0f}); use a coarser "
+            "--resolution or crop the cloud"
+        )
 
 
 @dataclass(frozen=True)
@@ -43,6 +68,9 @@ class HeightMap:
             voxels: occupied voxels.
             resolution: cell edge [m], at least the voxel edge (seed 000: 0.05 over 0.025).
             sigma_cells: standard deviation of the Gaussian smoothing in cells (0: none).
+
+        Raises:
+            InputError: a resolution out of range, or a grid over the limit (:func:`check_cells`).
         """
         if not (voxels.resolution - 1e-12 <= resolution <= 1.0):
             raise InputError(
@@ -52,12 +80,7 @@ class HeightMap:
         ij = np.floor(centres[:, :2] / resolution).astype(np.int64)
         lo = ij.min(axis=0)
         shape = ij.max(axis=0) - lo + 1
-        if shape[0] * shape[1] > MAX_CELLS:
-            raise InputError(
-                f"the cloud spans {shape[0] * resolution:.0f} x {shape[1] * resolution:.0f} m: "
-                f"{shape[0] * shape[1]:.2e} cells at {resolution} m is too many; use a coarser --resolution "
-                "or crop the cloud"
-            )
+        check_cells(shape[0], shape[1], resolution)
         flat = (ij[:, 1] - lo[1]) * shape[0] + (ij[:, 0] - lo[0])  # row = y, column = x
         top = np.full(int(shape[0] * shape[1]), -np.inf)
         np.maximum.at(top, flat, centres[:, 2])

@@ -10,12 +10,12 @@ from functools import cached_property
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError, unknown
 from baseplace.terrain.diagnose import auto_resolution, explain_no_support
 from baseplace.terrain.graph import GraphSettings, build_region_graph
-from baseplace.terrain.heightmap import HeightMap
+from baseplace.terrain.heightmap import HeightMap, check_cells
 from baseplace.terrain.segmentation import (
     BaselineSegmenter,
     NoSupportError,
@@ -23,7 +23,7 @@ from baseplace.terrain.segmentation import (
     Segmentation,
     Segmenter,
 )
-from baseplace.terrain.voxels import VoxelMap
+from baseplace.terrain.voxels import VoxelMap, voxelization_bytes
 
 if TYPE_CHECKING:
     import networkx as nx
@@ -96,7 +96,8 @@ def terrain_from_points(
         graph_settings: region-graph settings.
 
     Raises:
-        InputError: a bad setting, or no level region, with its cause (too small for the cell:
+        InputError: a bad setting, a cloud whose height map would not fit the memory cap (its cell
+            count and the limit), or no level region, with its cause (too small for the cell:
             the resolution to try; no level plane: the dominant plane's normal as up vector).
     """
     segmenter = make_segmenter(algorithm)
@@ -106,6 +107,7 @@ def terrain_from_points(
     t0 = time.perf_counter()
     if not (0.01 <= resolution <= 1.0):
         raise InputError(f"--resolution must be between 0.01 and 1 m, got {resolution}")
+    _check_grid(points, resolution)
     voxels = VoxelMap.from_points(points, min(voxel_size, resolution))
     t1 = time.perf_counter()
     hmap = HeightMap.from_voxels(voxels, resolution)
@@ -127,6 +129,20 @@ def terrain_from_points(
     if t0 - t_auto > 1e-4:
         timings["auto_resolution"] = (t0 - t_auto) * 1e3  # not in the total, as before it was chosen
     return Terrain.with_graph(voxels, seg, graph, timings)
+
+
+def _check_grid(points: ArrayLike, resolution: float) -> None:
+    """Refuse a cloud whose voxelization and height map would not fit the memory cap, before either."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    reserved = voxelization_bytes(len(pts))
+    xy = pts[:, :2]
+    finite: NDArray[np.bool_] = np.asarray(np.isfinite(xy).all(axis=1))
+    if not finite.any():
+        return  # VoxelMap.from_points says so
+    lo = np.floor(np.min(xy, axis=0, where=finite[:, None], initial=np.inf) / resolution)
+    hi = np.floor(np.max(xy, axis=0, where=finite[:, None], initial=-np.inf) / resolution)
+    n_cols, n_rows = (hi - lo + 1).tolist()
+    check_cells(n_cols, n_rows, resolution, reserved)
 
 
 def terrain_json(terrain: Terrain) -> dict[str, Any]:

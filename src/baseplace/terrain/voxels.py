@@ -13,8 +13,26 @@ from numpy.typing import ArrayLike, NDArray
 
 from baseplace.arrays import unique_ints
 from baseplace.errors import InputError
+from baseplace.guards import check_alloc
 
 MIN_RESOLUTION, MAX_RESOLUTION = 0.005, 1.0
+BYTES_PER_POINT = 160.0
+"""Peak bytes per point of :meth:`VoxelMap.from_points`: the copy, the integer keys, their flat
+index and its sort (measured: 137 when every point has its own voxel)."""
+
+
+def voxelization_bytes(n_points: int) -> float:
+    """Peak bytes of voxelizing ``n_points`` points, checked against the memory cap.
+
+    The map is sparse (one key per occupied voxel, at most one per point), so its size follows
+    the points, not the cloud's extent.
+
+    Raises:
+        InputError: the voxelization would exceed ``$BASEPLACE_MAX_MEMORY_MB``.
+    """
+    n_bytes = n_points * BYTES_PER_POINT
+    check_alloc(n_bytes, f"voxelizing {n_points} points", "the cloud")
+    return n_bytes
 
 
 @dataclass(frozen=True)
@@ -31,12 +49,18 @@ class VoxelMap:
 
     @classmethod
     def from_points(cls, points: ArrayLike, resolution: float = 0.025) -> VoxelMap:
-        """Voxelize points (N, 3) [m] in the world frame."""
+        """Voxelize points (N, 3) [m] in the world frame.
+
+        Raises:
+            InputError: a resolution out of range, no finite point, or more points than the
+                memory cap allows (:func:`voxelization_bytes`).
+        """
         if not (MIN_RESOLUTION <= resolution <= MAX_RESOLUTION):
             raise InputError(
                 f"voxel resolution must be in [{MIN_RESOLUTION}, {MAX_RESOLUTION}] m, got {resolution}"
             )
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        voxelization_bytes(len(pts))
         pts = pts[np.all(np.isfinite(pts), axis=1)]
         if len(pts) == 0:
             raise InputError("the cloud has no finite points")

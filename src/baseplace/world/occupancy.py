@@ -36,7 +36,7 @@ import yaml
 from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError, brief, unknown
-from baseplace.guards import check_alloc, check_path_length
+from baseplace.guards import check_alloc, check_path_length, memory_cap_bytes
 
 MODES = ("trinary", "scale", "raw")
 IMAGE_FORMATS = (".bmp", ".pgm", ".png")
@@ -66,6 +66,7 @@ class OccupancyGrid:
     _edt_cache: dict[int, NDArray[np.float64]] = field(default_factory=dict, repr=False, init=False)
 
     def __post_init__(self) -> None:
+        check_grid_cells(np.shape(self.data), self.source)
         data = np.array(self.data, dtype=np.int8)
         if data.ndim != 2 or data.size == 0:
             raise InputError(f"occupancy data must be a non-empty 2-D array, got shape {data.shape}")
@@ -176,6 +177,31 @@ class OccupancyGrid:
             "origin": list(self.origin),
             "data": self.data.ravel().tolist(),
         }
+
+
+GRID_BYTES_PER_CELL = 64.0
+"""Peak bytes per cell of a grid in use: its int8 cells, the float64 distance transform kept for
+clearances, and scipy's feature transform while it is computed (measured: 35)."""
+
+
+def check_grid_cells(shape: tuple[int, ...], source: object = None) -> None:
+    """Refuse an occupancy grid of ``shape`` (H, W) whose use would not fit the memory cap.
+
+    Every grid is checked when it is made (:class:`OccupancyGrid`); a caller that builds one from
+    a size it reads (a message's width and height) calls this first.
+
+    Raises:
+        InputError: one line with the cell count and the limit.
+    """
+    cells = float(np.prod(shape, dtype=float))
+    cap = memory_cap_bytes()
+    limit = int(cap / GRID_BYTES_PER_CELL)
+    if cells > limit:
+        raise InputError(
+            f"{'' if source is None else f'{source}: '}an occupancy grid of {' x '.join(str(int(v)) for v in shape)} = {cells:.3g} cells is over the limit "
+            f"of {limit:.3g} cells ({GRID_BYTES_PER_CELL:.0f} bytes each within BASEPLACE_MAX_MEMORY_MB="
+            f"{cap / 2**20:.0f}); use a coarser or smaller map"
+        )
 
 
 def _number(doc: dict[str, Any], key: str, where: str) -> float:
