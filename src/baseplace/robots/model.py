@@ -27,7 +27,7 @@ from numpy.typing import ArrayLike, NDArray
 from baseplace.errors import InputError, unknown
 from baseplace.geometry.poses import FloatArray
 from baseplace.robots.spec import RobotSpec, load_spec
-from baseplace.robots.urdf import robot_urdf
+from baseplace.robots.urdf import check_urdf_file, check_urdf_tree, robot_urdf
 
 REVOLUTE, PRISMATIC = 0, 1
 
@@ -69,10 +69,13 @@ def load_urdf(path: Path, xml: str | None = None) -> pin.Model:
     """
     if not path.is_file():
         raise InputError(f"URDF {path} does not exist")
+    if xml is None:
+        check_urdf_file(path)
     try:
-        ElementTree.fromstring(xml) if xml is not None else ElementTree.parse(path)
+        root = ElementTree.fromstring(xml) if xml is not None else ElementTree.parse(path).getroot()
     except ElementTree.ParseError as exc:
         raise InputError(f"cannot parse URDF {path}: malformed XML ({exc})") from None
+    check_urdf_tree(root, path)  # urdfdom and pinocchio recurse once per joint of a chain
     native: list[str] = []
     try:
         with native_stderr_captured() as native:

@@ -19,11 +19,20 @@ from dataclasses import dataclass
 from pathlib import Path
 from xml.etree import ElementTree
 
-from baseplace.errors import InputError
+from baseplace.errors import InputError, brief
 from baseplace.robots.spec import BASE_CLEARANCE, RobotSpec, ros_package_roots
 
 PACKAGE = "package://"
 FILE = "file://"
+
+MAX_URDF_BYTES = 16 * 2**20
+"""The largest URDF file read (a robot's URDF with inline meshes' names is a few hundred kB)."""
+MAX_LINKS = MAX_JOINTS = 512
+"""The most links and joints of a URDF (PR2 has 94 links, TIAGo dual about 90)."""
+MAX_CHAIN_DEPTH = 256
+"""The most joints from the root link to any link (a 7-joint arm on a torso is about 20)."""
+MAX_XML_DEPTH = 64
+"""The deepest nesting of XML elements (a URDF nests 5: robot, link, visual, geometry, mesh)."""
 
 
 @dataclass(frozen=True)
@@ -41,6 +50,67 @@ class RobotUrdf:
     package_dirs: tuple[Path, ...]
     root_link: str
     missing_visual: tuple[str, ...] = ()
+
+
+def check_urdf_file(path: Path) -> None:
+    """Refuse a URDF file over :data:`MAX_URDF_BYTES` before it is read.
+
+    Raises:
+        InputError: one line with the size and the limit.
+    """
+    try:
+        size = path.stat().st_size
+    except OSError as exc:
+        raise InputError(f"cannot read URDF {path}: {exc.strerror or exc}") from None
+    if size > MAX_URDF_BYTES:
+        raise InputError(
+            f"URDF {path} is {size} bytes; the limit is {MAX_URDF_BYTES} ({MAX_URDF_BYTES >> 20} MB)"
+        )
+
+
+def check_urdf_tree(robot: ElementTree.Element, path: Path) -> None:
+    """Refuse a URDF whose size or kinematic depth no robot has, before pinocchio or a viewer walks it.
+
+    pinocchio's and urdfdom's parsers recurse once per joint of a chain, and a deep chain
+    exhausts the C stack (a segfault) or memory; the limits (:data:`MAX_LINKS`,
+    :data:`MAX_JOINTS`, :data:`MAX_CHAIN_DEPTH`, :data:`MAX_XML_DEPTH`) are checked here
+    without recursion.
+
+    Raises:
+        InputError: one line naming the count and the limit, or a joint cycle.
+    """
+    stack = [(robot, 1)]
+    while stack:
+        element, depth = stack.pop()
+        if depth > MAX_XML_DEPTH:
+            raise InputError(f"URDF {path}: XML elements nested over {MAX_XML_DEPTH} deep; a URDF nests 5")
+        stack.extend((child, depth + 1) for child in element)
+    n_links, joints = len(robot.findall("link")), robot.findall("joint")
+    for what, count, limit in (("links", n_links, MAX_LINKS), ("joints", len(joints), MAX_JOINTS)):
+        if count > limit:
+            raise InputError(f"URDF {path} has {count} {what}; the limit is {limit}")
+    parent_of: dict[str | None, str | None] = {}
+    for joint in joints:
+        child, parent = joint.find("child"), joint.find("parent")
+        if child is not None and parent is not None:
+            parent_of[child.get("link")] = parent.get("link")
+    depth_of: dict[str | None, int] = {}
+    for link in parent_of:
+        chain: list[str | None] = []
+        node: str | None = link
+        while node in parent_of and node not in depth_of:
+            chain.append(node)
+            if len(chain) > len(parent_of):
+                raise InputError(f"URDF {path}: the joints form a cycle through link {brief(node, 60)}")
+            node = parent_of[node]
+        base = depth_of.get(node, 0)
+        for k, name in enumerate(reversed(chain), start=1):
+            depth_of[name] = base + k
+        if depth_of.get(link, 0) > MAX_CHAIN_DEPTH:
+            raise InputError(
+                f"URDF {path}: link {brief(link, 60)} is {depth_of[link]} joints from the root; "
+                f"the limit is {MAX_CHAIN_DEPTH}"
+            )
 
 
 def _package_name(uri: str) -> str:
@@ -124,9 +194,12 @@ def robot_urdf(spec: RobotSpec) -> RobotUrdf:
     """The URDF text of ``spec``: absolute mesh paths, and the arm on its base if it has a mount.
 
     Raises:
-        InputError: malformed XML, a URDF without exactly one root link, a collision mesh found in
-            none of the package folders, or a mount whose ``base_frame`` is already a link.
+        InputError: a file, chain or tree over the limits (:func:`check_urdf_file`,
+            :func:`check_urdf_tree`), malformed XML, a URDF without exactly one root link, a
+            collision mesh found in none of the package folders, or a mount whose
+            ``base_frame`` is already a link.
     """
+    check_urdf_file(spec.urdf)
     try:
         tree = ElementTree.parse(spec.urdf)
     except ElementTree.ParseError as exc:
@@ -136,6 +209,7 @@ def robot_urdf(spec: RobotSpec) -> RobotUrdf:
     robot = tree.getroot()
     if robot.tag != "robot":
         raise InputError(f"cannot parse URDF {spec.urdf}: its root element is <{robot.tag}>, not <robot>")
+    check_urdf_tree(robot, spec.urdf)
     links = [link.get("name", "") for link in robot.findall("link")]
     children = {child.get("link") for child in robot.findall("joint/child")}
     roots = [name for name in links if name not in children]
