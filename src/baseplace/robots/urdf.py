@@ -28,7 +28,7 @@ FILE = "file://"
 MAX_URDF_BYTES = 16 * 2**20
 """The largest URDF file read (a robot's URDF with inline meshes' names is a few hundred kB)."""
 MAX_LINKS = MAX_JOINTS = 512
-"""The most links and joints of a URDF (PR2 has 94 links, TIAGo dual about 90)."""
+"""The most links and joints of a URDF (TIAGo dual has 130 links, PR2 82)."""
 MAX_CHAIN_DEPTH = 256
 """The most joints from the root link to any link (a 7-joint arm on a torso is about 20)."""
 MAX_XML_DEPTH = 64
