@@ -9,7 +9,7 @@ Reads ROS 2 bags (a rosbag2 directory, or a single ``.db3`` (sqlite3) or ``.mcap
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from baseplace.errors import InputError, brief
+from baseplace.io.bag_limits import bound_mcap_decompression, check_chunks, check_tf_message
 from baseplace.io.messages import (
     OCCUPANCY_GRID,
     POINTCLOUD2,
@@ -26,7 +27,7 @@ from baseplace.io.messages import (
     grid_from_msg,
     stamp_ns,
 )
-from baseplace.io.tf import TfTree
+from baseplace.io.tf import MAX_TRANSFORMS, TfTree
 from baseplace.world.occupancy import OccupancyGrid
 
 FloatArray = NDArray[np.float64]
@@ -93,14 +94,25 @@ def _open(path: Path) -> Any:
 
     if not path.exists():
         raise InputError(f"bag {path} does not exist")
+    bound_mcap_decompression()  # an MCAP file without a summary is inflated while it is opened
     try:
         reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
         reader.open()
+    except InputError as exc:
+        raise InputError(f"bag {path}: {exc}") from None
     except Exception as exc:  # rosbags raises its own errors, and OSError/ValueError on odd files
         raise InputError(
             f"cannot read bag {path}: {type(exc).__name__}: {brief(str(exc), 120)} (need a rosbag2 "
             "directory, a .db3 or .mcap file, or a ROS 1 .bag)"
         ) from None
+    try:
+        check_chunks(reader, path)
+    except InputError:
+        reader.close()
+        raise
+    except Exception as exc:
+        reader.close()
+        raise InputError(f"cannot read bag {path}: its chunks are damaged: {brief(str(exc), 120)}") from None
     return reader
 
 
@@ -125,14 +137,49 @@ def _connections(reader: Any, topic: str, msgtype: str, path: Path, option: str)
     return conns
 
 
-def _messages(reader: Any, conns: list[Any], path: Path) -> list[tuple[Any, Any]]:
-    out = []
+def _raw_messages(reader: Any, conns: list[Any], path: Path) -> Iterator[tuple[Any, bytes]]:
+    """(connection, serialized message) of ``conns`` in time order, one at a time."""
+    messages = reader.messages(connections=conns)
+    while True:
+        try:
+            conn, _, raw = next(messages)
+        except StopIteration:
+            return
+        except InputError as exc:
+            raise InputError(f"bag {path}: {exc}") from None
+        except Exception as exc:
+            raise InputError(
+                f"cannot decode {conns[0].topic} in bag {path}: {brief(str(exc), 120)}"
+            ) from None
+        yield conn, raw
+
+
+def _decode(reader: Any, conn: Any, raw: bytes, path: Path) -> Any:
     try:
-        for conn, _, raw in reader.messages(connections=conns):
-            out.append((conn, reader.deserialize(raw, conn.msgtype)))
+        return reader.deserialize(raw, conn.msgtype)
     except Exception as exc:
-        raise InputError(f"cannot decode {conns[0].topic} in bag {path}: {brief(str(exc), 120)}") from None
-    return out
+        raise InputError(f"cannot decode {conn.topic} in bag {path}: {brief(str(exc), 120)}") from None
+
+
+def _chosen(reader: Any, conns: list[Any], path: Path, which: str) -> Iterator[Any]:
+    """The decoded messages of ``conns`` that ``which`` selects ("first", "last", "all"), one at a time.
+
+    Only the selected messages are decoded, and only one is held at a time.
+    """
+    last = None
+    for conn, raw in _raw_messages(reader, conns, path):
+        if which == "all":
+            yield _decode(reader, conn, raw, path)
+        elif which == "first":
+            yield _decode(reader, conn, raw, path)
+            return
+        last = (conn, raw)
+    if which == "last" and last is not None:
+        yield _decode(reader, *last, path)
+
+
+TF_BATCH = 4096
+"""Transforms gathered from /tf messages before they are recorded together (one sort per batch)."""
 
 
 def _read_tf(reader: Any, path: Path, tolerance_ns: int) -> TfTree:
@@ -143,14 +190,27 @@ def _read_tf(reader: Any, path: Path, tolerance_ns: int) -> TfTree:
             raise InputError(
                 f"bag {path}: topic {c.topic!r} carries unknown message type {c.msgtype}; expected {TF_MESSAGE}"
             )
-    if not conns:
-        return tree
-    for conn, msg in _messages(reader, conns, path):
-        for t in msg.transforms:
-            tr, q = t.transform.translation, t.transform.rotation
-            tree.add(t.header.frame_id, t.child_frame_id, stamp_ns(t.header), np.array([tr.x, tr.y, tr.z]),
-                     np.array([q.x, q.y, q.z, q.w]), static=conn.topic == "/tf_static")  # fmt: skip
+    batches: dict[bool, list[Any]] = {False: [], True: []}  # TransformStamped messages of /tf, /tf_static
+    seen = 0  # transforms read, recorded or in a batch
+    for conn, raw in _raw_messages(reader, conns, path) if conns else ():
+        seen += check_tf_message(raw, reader.is2, seen, MAX_TRANSFORMS, f"bag {path}")
+        batch = batches[conn.topic == "/tf_static"]
+        batch.extend(_decode(reader, conn, raw, path).transforms)
+        if len(batch) >= TF_BATCH:
+            _record(tree, batch, conn.topic == "/tf_static")
+    for static, batch in batches.items():
+        _record(tree, batch, static)
     return tree
+
+
+def _record(tree: TfTree, transforms: list[Any], static: bool) -> None:
+    """Record a batch of geometry_msgs/TransformStamped in ``tree``, and empty it."""
+    poses = [(t.transform.translation.x, t.transform.translation.y, t.transform.translation.z,
+              t.transform.rotation.x, t.transform.rotation.y, t.transform.rotation.z, t.transform.rotation.w)
+             for t in transforms]  # fmt: skip
+    tree.add_many([t.header.frame_id for t in transforms], [t.child_frame_id for t in transforms],
+                  [stamp_ns(t.header) for t in transforms], poses or np.zeros((0, 7)), static)  # fmt: skip
+    transforms.clear()
 
 
 def read_bag(
@@ -189,23 +249,23 @@ def read_bag(
         map_conns = _connections(reader, map_topic, OCCUPANCY_GRID, path, "--map-topic") if map_topic else []
         tree = _read_tf(reader, path, int(tf_tolerance * 1e9))
         out: list[BagCloud] = []
+        n_points = 0  # of the clouds read so far, bounded together
         for topic, conns in cloud_conns.items():
-            msgs = _messages(reader, conns, path)
-            if not msgs:
-                raise InputError(f"bag {path}: topic {topic!r} has no messages")
-            chosen = msgs if clouds == "all" else [msgs[-1] if clouds == "last" else msgs[0]]
-            for _, msg in chosen:
-                where = f"{topic} in {path}"
-                points, organized = cloud_points(msg, where)
+            where, before = f"{topic} in {path}", len(out)
+            for msg in _chosen(reader, conns, path, clouds):
+                points, organized = cloud_points(msg, where, n_points)
+                n_points += len(points)
                 frame, ns = msg.header.frame_id.lstrip("/"), stamp_ns(msg.header)
                 T = tree.lookup(world_frame, frame, ns)
                 out.append(BagCloud(topic, frame, ns, points, T, organized))
+            if len(out) == before:
+                raise InputError(f"bag {path}: topic {topic!r} has no messages")
         grid = None
         if map_conns:
-            msgs = _messages(reader, map_conns, path)
-            if not msgs:
+            maps = list(_chosen(reader, map_conns, path, "last"))
+            if not maps:
                 raise InputError(f"bag {path}: topic {map_topic!r} has no messages")
-            msg = msgs[-1][1]
+            msg = maps[-1]
             grid = grid_from_msg(msg, f"{map_topic} in {path}")
             frame = msg.header.frame_id.lstrip("/") or world_frame
             if frame != world_frame:

@@ -10,6 +10,7 @@ builder takes the typestore, so one code path writes ROS 1 bags (headers with ``
 from __future__ import annotations
 
 import math
+from itertools import pairwise
 from typing import Any, Literal
 
 import numpy as np
@@ -17,6 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
 from baseplace.errors import InputError
+from baseplace.guards import check_alloc
 from baseplace.world.occupancy import OccupancyGrid
 
 FloatArray = NDArray[np.float64]
@@ -30,6 +32,10 @@ _FLOAT_TYPES: dict[int, np.dtype[Any]] = {
 }  # sensor_msgs/PointField FLOAT32, FLOAT64
 MAX_CLOUD_POINTS = 50_000_000
 """Most points a PointCloud2 may declare (width x height), checked before any allocation."""
+CLOUD_BYTES_PER_POINT = 48
+"""Memory one cloud point takes once read: float64 x, y, z in the sensor frame and in the world frame."""
+GRID_BYTES_PER_CELL = 10
+"""Memory one grid cell takes once read: the grid's int8 copy, a float64 distance transform, slack."""
 
 
 def stamp_ns(header: Any) -> int:
@@ -37,13 +43,20 @@ def stamp_ns(header: Any) -> int:
     return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
 
 
-def cloud_points(msg: Any, where: str) -> tuple[FloatArray, bool]:
+def cloud_points(msg: Any, where: str, points_before: int = 0) -> tuple[FloatArray, bool]:
     """Finite points (N, 3) [m] of a PointCloud2 in its frame, and whether it is organized (height > 1).
 
+    Every declared size is checked before an array is made: the layout against the message's
+    bytes, and the points (:data:`CLOUD_BYTES_PER_POINT` each), alone and with the
+    ``points_before`` points of the clouds already read from the same recording, against the
+    memory cap (:func:`baseplace.guards.check_alloc`).
+
     Raises:
-        InputError: no float x, y, z fields, or a data size that does not match the layout.
+        InputError: no float x, y, z fields, fields that overlap or lie outside the point, a data
+            size that does not match the layout, or points beyond the cap.
     """
-    n = int(msg.width) * int(msg.height)
+    width, height = int(msg.width), int(msg.height)
+    n = width * height
     if n > MAX_CLOUD_POINTS:
         raise InputError(f"{where}: the cloud declares {n} points, more than {MAX_CLOUD_POINTS}")
     fields = {f.name: f for f in msg.fields}
@@ -54,40 +67,55 @@ def cloud_points(msg: Any, where: str) -> tuple[FloatArray, bool]:
             f"{where}: PointCloud2 needs float fields x, y, z; missing {missing} (fields: {have})"
         )
     step, row_step = int(msg.point_step), int(msg.row_step)
-    data = np.asarray(msg.data, dtype=np.uint8)
-    if step <= 0 or row_step < step * int(msg.width) or len(data) < row_step * int(msg.height):
+    data = np.asarray(msg.data, dtype=np.uint8)  # a view of the message's bytes
+    if step <= 0 or width < 0 or height < 0 or row_step < step * width or len(data) < row_step * height:
         raise InputError(
             f"{where}: PointCloud2 data of {len(data)} bytes does not fit {msg.width} x {msg.height} points "
             f"of {step} bytes (row_step {row_step})"
         )
     order: Literal[">", "<"] = ">" if msg.is_bigendian else "<"
-    rows = data[: row_step * int(msg.height)].reshape(int(msg.height), row_step)[:, : step * int(msg.width)]
-    raw = np.ascontiguousarray(rows).reshape(n, step)
-    cols = []
+    spans = []
     for c in "xyz":
-        f = fields[c]
-        dt = _FLOAT_TYPES[int(f.datatype)].newbyteorder(order)
-        off = int(f.offset)
-        if off + dt.itemsize > step:
+        off, size = int(fields[c].offset), _FLOAT_TYPES[int(fields[c].datatype)].itemsize
+        if off < 0 or off + size > step:
             raise InputError(f"{where}: field {c} at offset {off} lies outside the {step}-byte point")
-        cols.append(np.ascontiguousarray(raw[:, off : off + dt.itemsize]).view(dt).ravel().astype(np.float64))
-    pts = np.stack(cols, axis=1)
-    return pts[np.isfinite(pts).all(axis=1)], int(msg.height) > 1
+        spans.append((off, off + size))
+    if any(a[1] > b[0] for a, b in pairwise(sorted(spans))):
+        offsets = ", ".join(str(a) for a, _ in spans)
+        raise InputError(
+            f"{where}: PointCloud2 fields x, y, z overlap (offsets {offsets}); each needs its own bytes"
+        )
+    check_alloc(n * CLOUD_BYTES_PER_POINT, f"{n} points", where)
+    check_alloc(
+        (points_before + n) * CLOUD_BYTES_PER_POINT, f"{points_before + n} points of all clouds", where
+    )
+    rows = data[: row_step * height].reshape(height, row_step)[:, : step * width].reshape(height, width, step)
+    pts = np.empty((n, 3))
+    grid = pts.reshape(height, width, 3)  # a view: columns written in place, no float copies
+    for k, (off, end) in enumerate(spans):
+        dt = _FLOAT_TYPES[int(fields["xyz"[k]].datatype)].newbyteorder(order)
+        grid[:, :, k] = rows[:, :, off:end].view(dt)[:, :, 0]
+    finite = np.isfinite(pts).all(axis=1)
+    return (pts if finite.all() else pts[finite]), height > 1
 
 
 def grid_from_msg(msg: Any, where: str) -> OccupancyGrid:
     """The OccupancyGrid of a nav_msgs/OccupancyGrid message, in the message's frame (yaw-only origin).
 
     Raises:
-        InputError: a data size other than width x height, or an origin that is not level.
+        InputError: a data size other than width x height, a grid beyond the memory cap
+            (:data:`GRID_BYTES_PER_CELL` per cell), or an origin that is not level.
     """
     info = msg.info
     w, h = int(info.width), int(info.height)
-    data = np.asarray(msg.data, dtype=np.int8)
-    if w * h == 0 or len(data) != w * h:
+    data = np.asarray(msg.data, dtype=np.int8)  # a view of the message's bytes
+    if w <= 0 or h <= 0 or len(data) != w * h:
         raise InputError(f"{where}: OccupancyGrid has {len(data)} cells for {w} x {h}")
+    check_alloc(w * h * GRID_BYTES_PER_CELL, f"the occupancy grid of {w} x {h} cells", where)
     o = info.origin
     q = np.array([o.orientation.x, o.orientation.y, o.orientation.z, o.orientation.w], dtype=float)
+    if not np.all(np.isfinite(q)):
+        raise InputError(f"{where}: the grid's origin has a non-finite orientation {q.tolist()}")
     if np.linalg.norm(q) < 1e-9:
         q = np.array([0.0, 0.0, 0.0, 1.0])
     R = Rotation.from_quat(q).as_matrix()

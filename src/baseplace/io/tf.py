@@ -9,8 +9,9 @@ tf2 does. A stamp outside a dynamic edge's recorded range by more than ``toleran
 
 from __future__ import annotations
 
-import bisect
+from array import array
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -30,12 +31,55 @@ def transform_matrix(translation: FloatArray, quaternion_xyzw: FloatArray) -> Fl
     return T
 
 
+MAX_TRANSFORMS = 1_000_000
+"""Most stamped transforms one tree (one recording's /tf and /tf_static) may record."""
+
+
 @dataclass
 class _Edge:
-    stamps: list[int] = field(default_factory=list)
-    translations: list[FloatArray] = field(default_factory=list)
-    quaternions: list[FloatArray] = field(default_factory=list)
+    """One parent -> child edge: its transforms appended as they come, sorted once when looked up.
+
+    A stamp recorded twice keeps its first transform.
+    """
+
     static: bool = False
+    _stamps: array[int] = field(default_factory=lambda: array("q"))
+    _poses: array[float] = field(default_factory=lambda: array("d"))  # tx ty tz qx qy qz qw per stamp
+    _in_order: bool = True
+    _sorted: tuple[NDArray[np.int64], FloatArray] | None = None
+
+    def extend(self, stamps: NDArray[np.int64], poses: FloatArray) -> None:
+        """Append transforms (n,) stamps and (n, 7) poses, dropping stamps equal to the one before."""
+        keep = np.r_[True, stamps[1:] != stamps[:-1]]
+        if self._stamps and stamps[0] == self._stamps[-1]:
+            keep[0] = False
+        stamps, poses = stamps[keep], poses[keep]
+        if not len(stamps):
+            return
+        ascending = (not self._stamps or stamps[0] > self._stamps[-1]) and bool(
+            np.all(stamps[1:] > stamps[:-1])
+        )
+        self._in_order = self._in_order and ascending
+        self._stamps.frombytes(stamps.astype(np.int64).tobytes())
+        self._poses.frombytes(np.ascontiguousarray(poses, dtype=np.float64).tobytes())
+        self._sorted = None
+
+    def replace(self, stamp_ns: int, pose: FloatArray) -> None:
+        self._stamps, self._poses = array("q", [stamp_ns]), array("d", pose.tolist())
+        self._in_order, self._sorted = True, None
+
+    def arrays(self) -> tuple[NDArray[np.int64], FloatArray]:
+        """Stamps (n,) ascending and unique, and poses (n, 7) (translation, quaternion x y z w)."""
+        if self._sorted is None:
+            stamps = np.array(self._stamps, dtype=np.int64)
+            poses = np.array(self._poses, dtype=np.float64).reshape(-1, 7)
+            if not self._in_order:
+                order = np.argsort(stamps, kind="stable")
+                stamps, poses = stamps[order], poses[order]
+                first = np.r_[True, stamps[1:] != stamps[:-1]]
+                stamps, poses = stamps[first], poses[first]
+            self._sorted = (stamps, poses)
+        return self._sorted
 
 
 def _fmt_stamp(ns: int) -> str:
@@ -46,11 +90,16 @@ def _fmt_stamp(ns: int) -> str:
 class TfTree:
     """Recorded transforms, keyed by (parent frame, child frame).
 
+    Recording is linear in the number of transforms (appended, sorted once per edge at the first
+    lookup); at most :data:`MAX_TRANSFORMS` may be recorded.
+
     Attributes:
         tolerance_ns: how far a stamp may lie outside a dynamic edge's recorded range [ns].
+        count: transforms recorded so far (duplicates included).
     """
 
     tolerance_ns: int = 100_000_000
+    count: int = 0
     _edges: dict[tuple[str, str], _Edge] = field(default_factory=dict)
 
     def add(
@@ -58,28 +107,68 @@ class TfTree:
         parent: str,
         child: str,
         stamp_ns: int,
-        translation: FloatArray,
-        quaternion_xyzw: FloatArray,
+        translation: Sequence[float] | FloatArray,
+        quaternion_xyzw: Sequence[float] | FloatArray,
         static: bool,
     ) -> None:
-        """Record ``T_parent_child`` at ``stamp_ns`` (static: valid at every time)."""
-        parent, child = parent.lstrip("/"), child.lstrip("/")
-        edge = self._edges.setdefault((parent, child), _Edge(static=static))
-        q = np.asarray(quaternion_xyzw, dtype=float)
-        if not np.all(np.isfinite(q)) or np.linalg.norm(q) < 1e-9:
-            raise InputError(f"transform {parent} -> {child} has an invalid quaternion {q.tolist()}")
-        if static:
-            edge.static = True
-            edge.stamps, edge.translations, edge.quaternions = (
-                [stamp_ns],
-                [np.asarray(translation, float)],
-                [q],
+        """Record ``T_parent_child`` at ``stamp_ns`` (static: valid at every time).
+
+        Raises:
+            InputError: as :meth:`add_many`.
+        """
+        pose = np.concatenate(
+            [np.asarray(translation, dtype=float), np.asarray(quaternion_xyzw, dtype=float)]
+        )
+        self.add_many([parent], [child], [stamp_ns], pose.reshape(1, -1), static)
+
+    def add_many(
+        self,
+        parents: Sequence[str],
+        children: Sequence[str],
+        stamps_ns: Sequence[int],
+        poses: FloatArray | Sequence[Sequence[float]],
+        static: bool,
+    ) -> None:
+        """Record n transforms ``T_parent_child``: poses (n, 7) are translation [m] and quaternion (x, y, z, w).
+
+        Raises:
+            InputError: a translation or quaternion that is not finite, a quaternion of zero
+                norm, or more than :data:`MAX_TRANSFORMS` transforms in all.
+        """
+        n = len(stamps_ns)
+        if self.count + n > MAX_TRANSFORMS:
+            raise InputError(
+                f"more than {MAX_TRANSFORMS} transforms on /tf and /tf_static; the limit is {MAX_TRANSFORMS}"
             )
+        self.count += n
+        if not n:
             return
-        k = bisect.bisect_left(edge.stamps, stamp_ns)
-        edge.stamps.insert(k, stamp_ns)
-        edge.translations.insert(k, np.asarray(translation, dtype=float))
-        edge.quaternions.insert(k, q)
+        pose = np.asarray(poses, dtype=float)
+        if pose.shape != (n, 7):
+            raise InputError(f"need {n} transforms of 3 + 4 numbers, got an array of shape {pose.shape}")
+        bad = ~np.isfinite(pose).all(axis=1) | ~(np.einsum("ij,ij->i", pose[:, 3:], pose[:, 3:]) >= 1e-18)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise InputError(
+                f"transform {parents[i]} -> {children[i]} has an invalid translation or quaternion "
+                f"{pose[i].tolist()}"
+            )
+        stamps = np.asarray(stamps_ns, dtype=np.int64)
+        groups: dict[tuple[str, str], list[int]] = {}
+        for i, key in enumerate(zip(parents, children, strict=True)):
+            groups.setdefault(key, []).append(i)
+        for (parent, child), rows in groups.items():
+            key = (parent.lstrip("/"), child.lstrip("/"))
+            edge = self._edges.get(key)
+            if edge is None:
+                edge = self._edges[key] = _Edge(static=static)
+            if static:
+                edge.static = True
+                edge.replace(int(stamps[rows[-1]]), pose[rows[-1]])
+            elif len(rows) == n:
+                edge.extend(stamps, pose)
+            else:
+                edge.extend(stamps[rows], pose[rows])
 
     @property
     def frames(self) -> set[str]:
@@ -88,27 +177,27 @@ class TfTree:
 
     def _edge_at(self, parent: str, child: str, stamp_ns: int, target: str, source: str) -> FloatArray:
         edge = self._edges[(parent, child)]
-        if edge.static or (len(edge.stamps) == 1 and abs(edge.stamps[0] - stamp_ns) <= self.tolerance_ns):
-            return transform_matrix(edge.translations[0], edge.quaternions[0])
-        stamps = edge.stamps
-        k = bisect.bisect_left(stamps, stamp_ns)
+        stamps, poses = edge.arrays()
+        if edge.static or (len(stamps) == 1 and abs(int(stamps[0]) - stamp_ns) <= self.tolerance_ns):
+            return transform_matrix(poses[0, :3], poses[0, 3:])
+        k = int(np.searchsorted(stamps, stamp_ns, side="left"))
         if k < len(stamps) and stamps[k] == stamp_ns:
-            return transform_matrix(edge.translations[k], edge.quaternions[k])
+            return transform_matrix(poses[k, :3], poses[k, 3:])
         if 0 < k < len(stamps):
-            t0, t1 = stamps[k - 1], stamps[k]
+            t0, t1 = int(stamps[k - 1]), int(stamps[k])
             a = (stamp_ns - t0) / (t1 - t0)
-            rot = Slerp([0.0, 1.0], Rotation.from_quat([edge.quaternions[k - 1], edge.quaternions[k]]))([a])
+            rot = Slerp([0.0, 1.0], Rotation.from_quat(poses[k - 1 : k + 1, 3:]))([a])
             T = np.eye(4)
             T[:3, :3] = rot.as_matrix()[0]
-            T[:3, 3] = (1 - a) * edge.translations[k - 1] + a * edge.translations[k]
+            T[:3, 3] = (1 - a) * poses[k - 1, :3] + a * poses[k, :3]
             return T
-        nearest = stamps[0] if k == 0 else stamps[-1]
+        j = 0 if k == 0 else len(stamps) - 1
+        nearest = int(stamps[j])
         if abs(nearest - stamp_ns) <= self.tolerance_ns:
-            j = 0 if k == 0 else len(stamps) - 1
-            return transform_matrix(edge.translations[j], edge.quaternions[j])
+            return transform_matrix(poses[j, :3], poses[j, 3:])
         raise InputError(
             f"no transform from {source!r} to {target!r} at {_fmt_stamp(stamp_ns)}: the edge {parent} -> "
-            f"{child} is recorded from {_fmt_stamp(stamps[0])} to {_fmt_stamp(stamps[-1])} "
+            f"{child} is recorded from {_fmt_stamp(int(stamps[0]))} to {_fmt_stamp(int(stamps[-1]))} "
             f"({len(stamps)} stamps; nearest {_fmt_stamp(nearest)})"
         )
 
