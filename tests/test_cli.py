@@ -312,18 +312,12 @@ def test_place_command(tmp_path):
     assert end[:2] == pytest.approx([out["placements"][0]["x"], out["placements"][0]["y"]], abs=1e-3)
     assert_one_line_error(run("place", "--cloud", str(cloud), "--target", target, "--map", str(map_file),
                               "--start", "9 9 0"), 2, "--start", "outside the scanned area")  # fmt: skip
-    # Unreachable (3.5 m up): exit 3 with the failure counts.
-    proc = run(
-        "place",
-        "--cloud",
-        str(cloud),
-        "--target",
-        "1.0 0.5 3.5 0 0 0",
-        "--map",
-        str(map_file),
-        "--tries",
-        "20",
-    )
+    # Out of reach (3.5 m up): refused before the search, with how far (tests/test_input_units.py).
+    proc = run("place", "--cloud", str(cloud), "--target", "1.0 0.5 3.5 0 0 0", "--map", str(map_file))
+    assert_one_line_error(proc, 2, "m higher than tiago's 'arm' arm reaches")
+    # Within the arm's bound but unreachable in this scene (1.85 m up, an arm tilted down): exit 3 with the counts.
+    proc = run("place", "--cloud", str(cloud), "--target", "1.0 0.5 1.85 0 1.5708 0", "--map", str(map_file),
+               "--tries", "20")  # fmt: skip
     assert_one_line_error(proc, 3, "no verified placement", "failures")
     # A map of another robot is refused.
     assert_one_line_error(run("place", "--robot", "pr2", "--cloud", str(cloud), "--target", target, "--map",

@@ -440,21 +440,26 @@ def check_in_reach(
     """
     lo, hi = bounds
     arm = f"{robot_name}'s {bound.arm if bound.arm == 'any arm' else repr(bound.arm) + ' arm'}"
-    for label, p in zip(labels, np.asarray(points, dtype=float).reshape(-1, 3), strict=True):
-        outside = float(np.linalg.norm(p - np.clip(p, lo, hi)))
-        aside = float(np.linalg.norm(p[:2] - np.clip(p[:2], lo[:2], hi[:2])))
-        above = float(p[2] - hi[2])
-        if aside <= bound.radius + extra + CHECK_MARGIN and above > bound.height + extra + CHECK_MARGIN:
-            raise InputError(
-                f"{label} at {xyz_text(p)} m is {above - bound.height - extra:.2f} m higher than {arm} reaches: "
-                f"{bound.height + extra:.2f} m above its base, which stands at most at z {hi[2]:.2f} m "
-                f"(the top of {scene}); coordinates are in metres"
-            )
-        if outside > bound.radius + extra + CHECK_MARGIN:
-            raise InputError(
-                f"{label} at {xyz_text(p)} m is {outside:.1f} m outside {scene} ({_box_text(lo, hi)}), farther "
-                f"than {arm} reaches ({bound.radius + extra:.2f} m); coordinates are in metres"
-            )
+    P = np.asarray(points, dtype=float).reshape(-1, 3)
+    outside = np.linalg.norm(P - np.clip(P, lo, hi), axis=1)
+    aside = np.linalg.norm(P[:, :2] - np.clip(P[:, :2], lo[:2], hi[:2]), axis=1)
+    above = P[:, 2] - hi[2]
+    radius, height = bound.radius + extra, bound.height + extra
+    too_high = (aside <= radius + CHECK_MARGIN) & (above > height + CHECK_MARGIN)  # else: say how far aside
+    bad = too_high | (outside > radius + CHECK_MARGIN)
+    if not bad.any():
+        return
+    k = int(np.argmax(bad))
+    if too_high[k]:
+        raise InputError(
+            f"{labels[k]} at {xyz_text(P[k])} m is {above[k] - height:.2f} m higher than {arm} reaches: "
+            f"{height:.2f} m above its base, which stands at most at z {hi[2]:.2f} m (the top of {scene}); "
+            "coordinates are in metres"
+        )
+    raise InputError(
+        f"{labels[k]} at {xyz_text(P[k])} m is {outside[k]:.1f} m outside {scene} ({_box_text(lo, hi)}), "
+        f"farther than {arm} reaches ({radius:.2f} m); coordinates are in metres"
+    )
 
 
 def check_on_scene(
