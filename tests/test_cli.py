@@ -78,8 +78,10 @@ def test_reach_single_and_batch(map_file, tmp_path):
     assert proc.returncode == 0, proc.stderr
     value = json.loads(proc.stdout)["values"][0]
     assert value > 0
-    far = run("reach", "--map", str(map_file), "--target", target, "--base", "9 9 0")
-    assert far.returncode == 0 and float(far.stdout) == 0.0
+    far = run(
+        "reach", "--map", str(map_file), "--target", target, "--base", "9 9 0"
+    )  # every value would be 0
+    assert_one_line_error(far, 2, "beyond the arm's reach from --base", "coordinates are in metres")
 
     (tmp_path / "t.txt").write_text(f"{target}\n# comment\n{target}\n")
     (tmp_path / "b.txt").write_text("1 2 0.7\n9 9 0\n")

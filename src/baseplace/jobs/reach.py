@@ -105,11 +105,12 @@ def _echo_poses(poses: str | Sequence[str] | None) -> str | list[str] | None:
     return poses if isinstance(poses, str | None) else list(poses)
 
 
-def _map_box(rmap: ReachabilityMap | str) -> tuple[np.ndarray, np.ndarray] | None:
-    """The box of a map's voxel grid in the base frame [m], read without its cells; None if unreadable.
+def _map_box(rmap: ReachabilityMap | str, robot: Robot | None) -> tuple[np.ndarray, np.ndarray] | None:
+    """The box of a map's voxel grid in the base frame [m], read without its cells.
 
     The build sizes the grid to hold every TCP position the arm can reach (``rmap.reach_bounds``):
-    outside it, every value is 0.
+    outside it, every value is 0. None where the file is unreadable or the map is not ``robot``'s:
+    loading the map says what is wrong.
     """
     if not isinstance(rmap, str):
         g = rmap.grid
@@ -122,6 +123,9 @@ def _map_box(rmap: ReachabilityMap | str) -> tuple[np.ndarray, np.ndarray] | Non
     try:
         with h5py.File(rmap, "r") as f:
             grid = json.loads(read_text(f, "grid"))
+            info = json.loads(read_text(f, "info"))
+        if robot is not None and (info["robot"], info["urdf_sha256"]) != (robot.name, robot.spec.urdf_sha256):
+            return None
         lo = np.array([float(v) for v in grid["origin"]])
         hi = lo + np.array([int(v) for v in grid["shape"]], dtype=float) * float(grid["voxel_size"])
     except (*CORRUPT_FILE_ERRORS, TypeError):
@@ -129,7 +133,7 @@ def _map_box(rmap: ReachabilityMap | str) -> tuple[np.ndarray, np.ndarray] | Non
     return (lo, hi) if lo.shape == hi.shape == (3,) and np.isfinite([lo, hi]).all() else None
 
 
-def _check_in_reach(job: ReachJob, T_base_target: np.ndarray, n_targets: int) -> None:
+def _check_in_reach(job: ReachJob, robot: Robot | None, T_base_target: np.ndarray, n_targets: int) -> None:
     """Refuse a query in which no target lies within the arm's reach of its base pose.
 
     Every value would be 0: most likely millimetres, or a target in another frame. The arm's
@@ -137,10 +141,11 @@ def _check_in_reach(job: ReachJob, T_base_target: np.ndarray, n_targets: int) ->
 
     Args:
         job: the query (for the map and the message).
+        robot: the robot the map must be for, if given.
         T_base_target: (P, 4, 4) each target in the frame of the base pose it pairs with.
         n_targets: targets given (1: paired with every base pose, else row by row).
     """
-    box = _map_box(job.map)
+    box = _map_box(job.map, robot)
     if box is None:
         return
     lo, hi = box
@@ -192,7 +197,7 @@ def reach_job(job: ReachJob) -> ReachReport:
         raise InputError(
             f"--targets has {len(targets)} poses but --bases has {len(bases)}; they pair row by row"
         )
-    _check_in_reach(job, invert_transforms(bases) @ targets, len(targets))  # before the map is read
+    _check_in_reach(job, robot, invert_transforms(bases) @ targets, len(targets))  # before the map is read
     rmap = job.map if not isinstance(job.map, str) else load_map(job.map)
     if robot is not None:
         check_map_matches(rmap, robot, rmap.info.arm, str(job.map))
