@@ -78,8 +78,10 @@ def test_reach_single_and_batch(map_file, tmp_path):
     assert proc.returncode == 0, proc.stderr
     value = json.loads(proc.stdout)["values"][0]
     assert value > 0
-    far = run("reach", "--map", str(map_file), "--target", target, "--base", "9 9 0")
-    assert far.returncode == 0 and float(far.stdout) == 0.0
+    far = run(
+        "reach", "--map", str(map_file), "--target", target, "--base", "9 9 0"
+    )  # every value would be 0
+    assert_one_line_error(far, 2, "beyond the arm's reach from --base", "coordinates are in metres")
 
     (tmp_path / "t.txt").write_text(f"{target}\n# comment\n{target}\n")
     (tmp_path / "b.txt").write_text("1 2 0.7\n9 9 0\n")
@@ -312,18 +314,12 @@ def test_place_command(tmp_path):
     assert end[:2] == pytest.approx([out["placements"][0]["x"], out["placements"][0]["y"]], abs=1e-3)
     assert_one_line_error(run("place", "--cloud", str(cloud), "--target", target, "--map", str(map_file),
                               "--start", "9 9 0"), 2, "--start", "outside the scanned area")  # fmt: skip
-    # Unreachable (3.5 m up): exit 3 with the failure counts.
-    proc = run(
-        "place",
-        "--cloud",
-        str(cloud),
-        "--target",
-        "1.0 0.5 3.5 0 0 0",
-        "--map",
-        str(map_file),
-        "--tries",
-        "20",
-    )
+    # Out of reach (3.5 m up): refused before the search, with how far (tests/test_input_units.py).
+    proc = run("place", "--cloud", str(cloud), "--target", "1.0 0.5 3.5 0 0 0", "--map", str(map_file))
+    assert_one_line_error(proc, 2, "m higher than tiago's 'arm' arm reaches")
+    # Within the arm's bound but unreachable in this scene (1.85 m up, an arm tilted down): exit 3 with the counts.
+    proc = run("place", "--cloud", str(cloud), "--target", "1.0 0.5 1.85 0 1.5708 0", "--map", str(map_file),
+               "--tries", "20")  # fmt: skip
     assert_one_line_error(proc, 3, "no verified placement", "failures")
     # A map of another robot is refused.
     assert_one_line_error(run("place", "--robot", "pr2", "--cloud", str(cloud), "--target", target, "--map",

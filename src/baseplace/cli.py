@@ -16,7 +16,7 @@ from collections.abc import Callable, Sequence
 from typing import Any, NoReturn
 
 from baseplace import __version__
-from baseplace.argtypes import count, finite_float, nonneg_int
+from baseplace.argtypes import count, finite_float, in_radians, nonneg_int
 from baseplace.errors import BaseplaceError
 from baseplace.jobs import candidates, demo, navigate, place, reach, surface, world
 from baseplace.jobs.inputs import DEFAULT_MAP_SAMPLES, Progress, motion_and_robustness
@@ -199,7 +199,14 @@ def _add_motion_and_robustness_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sigma-xy", type=float, default=0.03, help="base position error sigma [m] (default 0.03)")  # fmt: skip
     p.add_argument("--sigma-yaw-deg", type=float, default=2.0, help="base heading error sigma [deg] (default 2)")  # fmt: skip
     p.add_argument("--xy-tolerance", type=float, default=0.25, help="goal xy tolerance [m] (Nav2 default 0.25)")  # fmt: skip
-    p.add_argument("--yaw-tolerance", type=float, default=0.25, help="goal yaw tolerance [rad] (Nav2 default 0.25)")  # fmt: skip
+    p.add_argument("--yaw-tolerance", type=float, default=None,
+                   help="goal yaw tolerance [rad, deg with --degrees] (default 0.25 rad, Nav2's)")  # fmt: skip
+
+
+def _add_degrees_argument(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--degrees", action="store_true",
+                   help="the angles given here (pose headings and roll/pitch/yaw, pose files, --yaw-tolerance, "
+                        "an object's yaw) are in degrees; without it radians, and values beyond 2 pi are refused")  # fmt: skip
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -253,6 +260,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--targets", help="file with one target pose per line")
     p.add_argument("--base", help='base pose "x y yaw" [m, rad]')
     p.add_argument("--bases", help="file with one base pose per line, paired with --targets")
+    _add_degrees_argument(p)
 
     p = command("place", "verified base placements for TCP targets in a scanned scene")
     p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
@@ -283,6 +291,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--floor", type=finite_float, default=None,
                    help="add a floor plane at this height [m] (z up) under and around a cloud that shows none")  # fmt: skip
     _add_motion_and_robustness_arguments(p)
+    _add_degrees_argument(p)
 
     p = command("candidates", "base placement candidates around an object")
     p.add_argument("--occupancy", default=None, help="occupancy grid: map_server YAML (or --bag --map-topic)")
@@ -304,6 +313,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--object-shape", default="auto",
                    help=OBJECT_HELP.replace("first target's grasp point", "--object position"))  # fmt: skip
     _add_motion_and_robustness_arguments(p)
+    _add_degrees_argument(p)
 
     p = command("navigate", "a base path across the planar regions of a scanned scene")  # fmt: skip
     p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
@@ -321,6 +331,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="height-map cell [m] (default: from the cloud's extent and point spacing, 0.02-0.05)")  # fmt: skip
     p.add_argument("--seed", type=nonneg_int, default=0, help="random seed (default 0)")
     p.add_argument("--out", default=None, help="PNG of the path over regions and obstacles (as Fig. 4)")
+    _add_degrees_argument(p)
 
     p = command("surface-map", "where to stand to work on a whole table or shelf")
     p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
@@ -427,6 +438,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     bars = ProgressBars(enabled=not as_json)
     try:
         with elapsed_status(f"baseplace {args.command}", enabled=not as_json):
+            args = in_radians(args)
             report = args.job(args, bars) if hasattr(args, "job") else args.func(args)
     except NoResultError as exc:
         if as_json:

@@ -4,11 +4,13 @@
   to a: ``p_a = T_a_b @ p_b``. Batches are (N, 4, 4).
 * Euler angles follow ROS (REP 103): ``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)``, radians.
 * A 6D pose on the command line is ``"x y z roll pitch yaw"`` (metres, radians); a base pose on
-  the floor is ``"x y yaw"``.
+  the floor is ``"x y yaw"``. Parsed angles beyond +-2 pi (pitch: +-pi) are refused
+  (:func:`check_angles`): such a value is almost always degrees.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -140,18 +142,48 @@ def _parse_numbers(text: str, count: int, what: str) -> FloatArray:
     return values
 
 
+RPY_LIMITS = (("roll", 2.0 * math.pi, "2 pi"), ("pitch", math.pi, "pi"), ("yaw", 2.0 * math.pi, "2 pi"))
+"""(name, largest magnitude [rad], as written) of each Euler angle a parsed pose may have."""
+YAW_LIMIT = RPY_LIMITS[2]
+
+
+def check_angles(values: ArrayLike, limits: tuple[tuple[str, float, str], ...]) -> None:
+    """Refuse angles [rad] beyond their limits, as degrees given where radians are read.
+
+    Args:
+        values: one angle per entry of ``limits``, shape (len(limits),).
+        limits: (name, largest magnitude [rad], that magnitude as written) per angle.
+
+    Raises:
+        InputError: the first angle out of range, with its value converted as if it were degrees.
+    """
+    for value, (name, limit, written) in zip(np.asarray(values, dtype=float), limits, strict=True):
+        if abs(value) > limit + 1e-9:
+            raise InputError(
+                f"{name} {value:g} is outside [-{written}, {written}] rad; angles are in radians "
+                f"({value:g} deg = {math.radians(value):.4f} rad), or pass --degrees"
+            )
+
+
 def parse_pose6(text: str) -> FloatArray:
-    """Parse ``"x y z roll pitch yaw"`` (metres, radians) into a (4, 4) pose."""
-    return pose_from_xyz_rpy(_parse_numbers(text, 6, "pose 'x y z roll pitch yaw'"))
+    """Parse ``"x y z roll pitch yaw"`` (metres, radians) into a (4, 4) pose.
+
+    Raises:
+        InputError: not 6 finite numbers, or an angle out of range (:data:`RPY_LIMITS`).
+    """
+    values = _parse_numbers(text, 6, "pose 'x y z roll pitch yaw'")
+    check_angles(values[3:], RPY_LIMITS)
+    return pose_from_xyz_rpy(values)
 
 
 def parse_base_pose(text: str) -> BasePose:
     """Parse ``"x y yaw"`` (metres, radians) into a :class:`BasePose`.
 
-    The heading may be given in any range (5.328 or -0.955, say); it comes back wrapped to
-    (-pi, pi], the range every planner, map and result uses.
+    The heading may be given in any range within +-2 pi (5.328 or -0.955, say); it comes back
+    wrapped to (-pi, pi], the range every planner, map and result uses.
     """
     x, y, yaw = _parse_numbers(text, 3, "base pose 'x y yaw'")
+    check_angles([yaw], (YAW_LIMIT,))
     return BasePose(float(x), float(y), float(wrap_angle(yaw)))
 
 

@@ -17,11 +17,17 @@ import numpy as np
 
 from baseplace.errors import InputError
 from baseplace.jobs.inputs import (
+    CHECK_MARGIN,
     PLOT_SUFFIXES,
     CloudInput,
     Progress,
+    ReachBound,
     bag_stamp,
     base_xyyaw,
+    check_in_reach,
+    check_object_yaw,
+    check_on_scene,
+    grid_bounds,
     load_robot,
     occupancy_grid,
     out_path,
@@ -155,11 +161,22 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
     robust = job.robustness or RobustnessSettings()
     p_o = parse_xyz(job.object, "--object")
     robot_pose = None if job.robot_pose is None else base_xyyaw(job.robot_pose, "--robot-pose")
+    check_object_yaw(job.object_shape, "--object-shape")
     shape = parse_grasped_object(job.object_shape, "--object-shape")
     grid = occupancy_grid(job.occupancy, job.cloud.bag, job.cloud)
     if grid is None:
         raise InputError("give --occupancy MAP.yaml or --bag FILE --map-topic TOPIC")
     robot = load_robot(job.robot)
+    # before the map: an object no base on the grid brings within reach, a robot off the grid
+    arm_name = job.arm
+    if arm_name is None and not isinstance(job.map, str):  # else the map file's arm, not read yet: every arm
+        arm_name = robot.spec.default_arm if job.map is None else job.map.info.arm
+    standoff = grasp_standoff(robot) if job.standoff is None else job.standoff
+    scene, bounds = "the occupancy grid's bounds", grid_bounds(grid)
+    check_in_reach(p_o[None], ["--object"], bounds, scene, ReachBound.of_robot(robot, arm_name), robot.name,
+                   extra=abs(standoff))  # fmt: skip
+    if robot_pose is not None:
+        check_on_scene(robot_pose, "--robot-pose", bounds, scene, CHECK_MARGIN + grid.resolution)
     rmap = map_or_default(robot, job.map, job.arm,
                           step_progress(progress, f"default {robot.name} map (first run only)", 50_000_000))  # fmt: skip
     arm = robot.arm(rmap.info.arm)
@@ -198,7 +215,6 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
             motion = MotionChecker(robot, arm, environment, None, job.motion)
         else:
             motion = MotionChecker(robot, arm, transit, environment, job.motion)
-    standoff = grasp_standoff(robot) if job.standoff is None else job.standoff
     grasps = grasp_poses(p_o, n=16, top_down=True, standoff=standoff, approach_axis=arm.approach_axis)
     rng = np.random.default_rng(job.seed)
     rejected: list[tuple[tuple[float, float], str]] = []

@@ -18,7 +18,7 @@ if TYPE_CHECKING:
     from pathlib import Path
 
     from baseplace.io.bag import BagScene
-    from baseplace.robots.model import Robot
+    from baseplace.robots.model import Arm, Robot
     from baseplace.terrain.io import Cloud
     from baseplace.world.occupancy import OccupancyGrid
 
@@ -44,7 +44,7 @@ def motion_and_robustness(options: Mapping[str, Any]) -> tuple[Any, Any]:
     """The reaching-motion and robustness settings from the front ends' options, by their CLI names.
 
     ``options``: ``no_motion_check``, ``robustness_samples``, ``error_model``, ``sigma_xy`` [m],
-    ``sigma_yaw_deg``, ``xy_tolerance`` [m], ``yaw_tolerance`` [rad], ``rank_by_robustness``,
+    ``sigma_yaw_deg``, ``xy_tolerance`` [m], ``yaw_tolerance`` [rad; None: the default], ``rank_by_robustness``,
     ``min_robustness`` and ``seed`` (the CLI's parsed arguments, or a service request).
 
     Returns:
@@ -57,8 +57,9 @@ def motion_and_robustness(options: Mapping[str, Any]) -> tuple[Any, Any]:
 
     o = options
     motion = None if o["no_motion_check"] else MotionSettings()
+    yaw_tolerance = BaseErrorModel.yaw_tolerance if o["yaw_tolerance"] is None else o["yaw_tolerance"]
     error = BaseErrorModel(o["error_model"], o["sigma_xy"], math.radians(o["sigma_yaw_deg"]),
-                           o["xy_tolerance"], o["yaw_tolerance"])  # fmt: skip
+                           o["xy_tolerance"], yaw_tolerance)  # fmt: skip
     robustness = RobustnessSettings(o["robustness_samples"], error,
                                     "robustness" if o["rank_by_robustness"] else "reachability",
                                     o["min_robustness"], seed=o["seed"])  # fmt: skip
@@ -253,7 +254,11 @@ def parse_xyz(text: str | Sequence[float], what: str) -> np.ndarray:
 
 
 def base_xyyaw(pose: str | Sequence[float], what: str) -> np.ndarray:
-    """A base pose "x y yaw" [m, rad] (text or numbers) as (3,), the heading wrapped to (-pi, pi]."""
+    """A base pose "x y yaw" [m, rad] (text or numbers) as (3,), the heading wrapped to (-pi, pi].
+
+    Raises:
+        InputError: not 3 finite numbers, or a heading beyond +-2 pi (degrees, most likely).
+    """
     from baseplace.geometry.poses import parse_base_pose
 
     text = pose if isinstance(pose, str) else " ".join(repr(float(v)) for v in pose)
@@ -262,6 +267,213 @@ def base_xyyaw(pose: str | Sequence[float], what: str) -> np.ndarray:
     except InputError as exc:
         raise InputError(f"{what}: {exc}") from None
     return np.array([p.x, p.y, p.yaw])
+
+
+def target_pose(target: str | Sequence[float], what: str) -> np.ndarray:
+    """A TCP pose "x y z roll pitch yaw" [m, rad] (text or 6 numbers) as (4, 4).
+
+    Raises:
+        InputError: not 6 finite numbers, or an angle out of range (degrees, most likely).
+    """
+    from baseplace.geometry.poses import RPY_LIMITS, check_angles, parse_pose6, pose_from_xyz_rpy
+
+    try:
+        if isinstance(target, str):
+            return parse_pose6(target)
+        values = np.asarray(target, dtype=float)
+        if values.shape != (6,) or not np.isfinite(values).all():
+            raise InputError(f"a target needs 6 finite numbers x y z roll pitch yaw, got {list(values)}")
+        check_angles(values[3:], RPY_LIMITS)
+    except InputError as exc:
+        raise InputError(f"{what}: {exc}") from None
+    return np.asarray(pose_from_xyz_rpy(values))
+
+
+def check_object_yaw(spec: str, what: str) -> None:
+    """Refuse a grasped-object spec ``"box CX CY CZ SX SY SZ YAW"`` whose yaw [rad] is beyond +-2 pi."""
+    from baseplace.geometry.poses import YAW_LIMIT, check_angles
+
+    words = spec.replace(",", " ").split()
+    if len(words) == 8 and words[0].lower() == "box":
+        try:
+            yaw = float(words[7])
+        except ValueError:
+            return  # the spec's own parser names the problem
+        try:
+            check_angles([yaw], (YAW_LIMIT,))
+        except InputError as exc:
+            raise InputError(f"{what}: box {exc}") from None
+
+
+CHECK_MARGIN = 0.25
+"""Slack [m] of the scene checks below: a support's fitted height or a height-map cell may lie a
+little beyond the points it came from."""
+
+
+@dataclass(frozen=True)
+class ReachBound:
+    """Upper bounds on where an arm's TCP can be in its base frame, from the robot model alone [m].
+
+    The chain is split at its first revolute joint, the mount (shoulder): the prismatic joints
+    before it (a torso lift) move the mount along straight lines within their limits; after it,
+    each joint offset can at most add its length (rotations keep lengths). True bounds by the
+    triangle inequality, however loose; tests check them against pinocchio FK.
+
+    Attributes:
+        arm: the arm's name ("any arm" for the largest of several).
+        mount_top: highest z of the mount over the lift joints' limits.
+        mount_far: farthest the mount gets from the base origin.
+        length: sum of |translation| of the joint placements from the mount to the TCP, plus the
+            strokes of the prismatic joints after it.
+    """
+
+    arm: str
+    mount_top: float
+    mount_far: float
+    length: float
+
+    @property
+    def height(self) -> float:
+        """Highest the TCP gets above the base frame's origin."""
+        return self.mount_top + self.length
+
+    @property
+    def radius(self) -> float:
+        """Farthest the TCP gets from the base frame's origin."""
+        return self.mount_far + self.length
+
+    @staticmethod
+    def of_arm(arm: Arm) -> ReachBound:
+        """The bound of one arm's chain (:class:`~baseplace.robots.model.Arm`)."""
+        import itertools
+
+        from baseplace.robots.model import REVOLUTE
+
+        n = arm.n_joints
+        k = next((i for i in range(n) if arm.kinds[i] == REVOLUTE), n)
+        T = np.eye(4)
+        strokes = []  # each lift joint moves the mount by q * direction, q within its limits
+        for i in range(k):
+            T = T @ arm.placements[i]
+            strokes.append((T[:3, :3] @ arm.axes[i], arm.lower[i], arm.upper[i]))
+        mount = (T @ (arm.placements[k] if k < n else arm.T_last_tcp))[:3, 3]
+        corners = np.array([mount + sum((q * d for (d, _, _), q in zip(strokes, qs, strict=True)), np.zeros(3))
+                            for qs in itertools.product(*[(lo, hi) for _, lo, hi in strokes])])  # fmt: skip
+        length = 0.0
+        if k < n:
+            length = float(np.linalg.norm(arm.placements[k + 1 :, :3, 3], axis=1).sum())
+            length += float(np.linalg.norm(arm.T_last_tcp[:3, 3]))
+            after = np.arange(n) > k
+            prismatic = after & (arm.kinds != REVOLUTE)
+            length += float(np.maximum(np.abs(arm.lower), np.abs(arm.upper))[prismatic].sum())
+        # an affine map of a box: its largest height and norm lie at corners
+        return ReachBound(
+            arm.name, float(corners[:, 2].max()), float(np.linalg.norm(corners, axis=1).max()), length
+        )
+
+    @staticmethod
+    def of_robot(robot: Robot, arm: str | None = None) -> ReachBound:
+        """The bound of ``arm``, or the largest over every arm (None: the map's arm is not known yet)."""
+        if arm is not None:
+            return ReachBound.of_arm(robot.arm(arm))
+        bounds = [ReachBound.of_arm(robot.arm(a)) for a in robot.spec.arms]
+        if len(bounds) == 1:
+            return bounds[0]
+        return ReachBound("any arm", max(b.height for b in bounds), max(b.radius for b in bounds), 0.0)
+
+
+def _box_text(lo: np.ndarray, hi: np.ndarray) -> str:
+    axes = zip("xyz", lo, hi, strict=False)
+    return ", ".join(f"{name} {a:.2f}..{b:.2f}" for name, a, b in axes)
+
+
+def xyz_text(p: np.ndarray) -> str:
+    """A point as "(x, y, z)" for messages."""
+    return "(" + ", ".join(f"{v:.4g}" for v in p) + ")"
+
+
+def points_bounds(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper corners (3,) of the finite points (N, 3) [m]."""
+    p = np.asarray(points, dtype=float).reshape(-1, 3)
+    p = p[np.isfinite(p).all(axis=1)]
+    if not len(p):
+        raise InputError("the cloud holds no finite points")
+    return p.min(axis=0), p.max(axis=0)
+
+
+def grid_bounds(grid: OccupancyGrid) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper corners (3,) of an occupancy grid's area [m], floor at z = 0."""
+    w, h = grid.width * grid.resolution, grid.height * grid.resolution
+    c, s = np.cos(grid.origin[2]), np.sin(grid.origin[2])
+    corners = (
+        np.array([[0.0, 0.0], [w, 0.0], [0.0, h], [w, h]]) @ np.array([[c, s], [-s, c]]) + grid.origin[:2]
+    )
+    return np.r_[corners.min(axis=0), 0.0], np.r_[corners.max(axis=0), 0.0]
+
+
+def check_in_reach(
+    points: np.ndarray,
+    labels: Sequence[str],
+    bounds: tuple[np.ndarray, np.ndarray],
+    scene: str,
+    bound: ReachBound,
+    robot_name: str,
+    extra: float = 0.0,
+) -> None:
+    """Refuse points the arm cannot reach from any support within ``bounds``, before any search.
+
+    A base stands on a support of the scene, inside its bounding box ``bounds`` (lower, upper
+    corners (3,) [m]); its TCP is then at most ``bound.radius`` from the box and ``bound.height``
+    above its top (plus ``extra`` [m]: a grasp point ahead of the TCP).
+
+    Args:
+        points: (K, 3) targets [m], world frame.
+        labels: a name per point for the message ("target 0", "--object").
+        bounds: the scene's (lower, upper) corners.
+        scene: the scene's name for the message ("the cloud's bounds").
+        bound: the arm's :class:`ReachBound`.
+        robot_name: the robot's name for the message.
+        extra: how far [m] a point may lie beyond the TCP.
+
+    Raises:
+        InputError: the first point out of reach, with its distance.
+    """
+    lo, hi = bounds
+    arm = f"{robot_name}'s {bound.arm if bound.arm == 'any arm' else repr(bound.arm) + ' arm'}"
+    P = np.asarray(points, dtype=float).reshape(-1, 3)
+    outside = np.linalg.norm(P - np.clip(P, lo, hi), axis=1)
+    aside = np.linalg.norm(P[:, :2] - np.clip(P[:, :2], lo[:2], hi[:2]), axis=1)
+    above = P[:, 2] - hi[2]
+    radius, height = bound.radius + extra, bound.height + extra
+    too_high = (aside <= radius + CHECK_MARGIN) & (above > height + CHECK_MARGIN)  # else: say how far aside
+    bad = too_high | (outside > radius + CHECK_MARGIN)
+    if not bad.any():
+        return
+    k = int(np.argmax(bad))
+    if too_high[k]:
+        raise InputError(
+            f"{labels[k]} at {xyz_text(P[k])} m is {above[k] - height:.2f} m higher than {arm} reaches: "
+            f"{height:.2f} m above its base, which stands at most at z {hi[2]:.2f} m (the top of {scene}); "
+            "coordinates are in metres"
+        )
+    raise InputError(
+        f"{labels[k]} at {xyz_text(P[k])} m is {outside[k]:.1f} m outside {scene} ({_box_text(lo, hi)}), "
+        f"farther than {arm} reaches ({radius:.2f} m); coordinates are in metres"
+    )
+
+
+def check_on_scene(
+    xy: np.ndarray, what: str, bounds: tuple[np.ndarray, np.ndarray], scene: str, margin: float
+) -> None:
+    """Refuse a base position (2,) [m] farther than ``margin`` [m] outside the scene's ``bounds``."""
+    lo, hi = bounds[0][:2], bounds[1][:2]
+    p = np.asarray(xy, dtype=float)[:2]
+    outside = float(np.linalg.norm(p - np.clip(p, lo, hi)))
+    if outside > margin:
+        raise InputError(
+            f"{what} {xyz_text(p)} m is {outside:.1f} m outside the scanned area ({scene} "
+            f"{_box_text(lo, hi)}); coordinates are in metres"
+        )
 
 
 def write_mcap(path: Path, world_frame: str, stamp_ns: int, terrain: Any = None, **poses: Any) -> None:

@@ -13,12 +13,15 @@ from typing import TYPE_CHECKING, Any
 
 from baseplace.errors import InputError
 from baseplace.jobs.inputs import (
+    CHECK_MARGIN,
     PLOT_SUFFIXES,
     CloudInput,
     bag_stamp,
     base_xyyaw,
+    check_on_scene,
     load_robot,
     out_path,
+    points_bounds,
     world_cloud,
     write_mcap,
 )
@@ -34,7 +37,7 @@ class NavigateJob:
     """The inputs of :func:`navigate_job`.
 
     Attributes:
-        start, goal: base poses "x y yaw" [m, rad]; any heading range (wrapped to (-pi, pi]).
+        start, goal: base poses "x y yaw" [m, rad]; headings within +-2 pi (wrapped to (-pi, pi]).
         cloud: the scene cloud.
         robot: built-in name, robot file or loaded Robot (its footprint radius).
         planner: rrt (OMPL RRTConnect) or regions (the region graph).
@@ -88,6 +91,11 @@ def navigate_job(job: NavigateJob) -> NavigateReport:
     start, goal = base_xyyaw(job.start, "--start"), base_xyyaw(job.goal, "--goal")
     robot = load_robot(job.robot)
     cloud = world_cloud(job.cloud)
+    bounds = points_bounds(cloud.points)  # poses off the scene: refused before the segmentation
+    for what, pose in (("--start", start), ("--goal", goal)):
+        check_on_scene(
+            pose, what, bounds, "the cloud's bounds", CHECK_MARGIN + max(job.resolution or 0.0, 0.05)
+        )
     t_load = time.perf_counter()
     if job.cache is not None:
         terrain = job.cache.terrain(job.resolution)

@@ -16,15 +16,23 @@ import numpy as np
 
 from baseplace.errors import BaseplaceError, InputError
 from baseplace.jobs.inputs import (
+    CHECK_MARGIN,
     PLOT_SUFFIXES,
     CloudInput,
     Progress,
+    ReachBound,
     bag_stamp,
     base_xyyaw,
+    check_in_reach,
+    check_object_yaw,
+    check_on_scene,
+    grid_bounds,
     load_robot,
     occupancy_grid,
     out_path,
+    points_bounds,
     step_progress,
+    target_pose,
     world_cloud,
     write_mcap,
 )
@@ -105,15 +113,38 @@ class PlaceJob:
         return out_path(self.png, "--out", PLOT_SUFFIXES), out_path(self.mcap, "--mcap", (".mcap",))
 
 
-def _target_matrix(target: str | Sequence[float]) -> np.ndarray:
-    from baseplace.geometry.poses import parse_pose6, pose_from_xyz_rpy
+def _target_label(job: PlaceJob, k: int, option: str = "target") -> str:
+    return option if len(job.targets) == 1 else f"{option} {k}"
 
-    if isinstance(target, str):
-        return parse_pose6(target)
-    values = np.asarray(target, dtype=float)
-    if values.shape != (6,) or not np.isfinite(values).all():
-        raise InputError(f"a target needs 6 finite numbers x y z roll pitch yaw, got {list(values)}")
-    return np.asarray(pose_from_xyz_rpy(values))
+
+def _check_scene(
+    job: PlaceJob,
+    robot: Robot,
+    targets: np.ndarray,
+    start: np.ndarray | None,
+    points: np.ndarray | None,
+    grid: OccupancyGrid | None,
+    resolution: float | None,
+) -> None:
+    """Refuse targets no support of the scene brings within the arm's reach, and a start off the scene.
+
+    The scene's supports lie within the bounds of the cloud (and of the occupancy grid, floor at
+    z = 0); the arm's reach is :class:`ReachBound`'s, from the robot model alone.
+    """
+    boxes = ([points_bounds(points)] if points is not None else []) + (
+        [grid_bounds(grid)] if grid is not None else []
+    )
+    bounds = (np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0))
+    scene = {1: "the cloud's bounds", 2: "the occupancy grid's bounds"}.get(
+        (points is not None) + 2 * (grid is not None), "the bounds of the cloud and the occupancy grid"
+    )
+    arm = job.arm
+    if arm is None and not isinstance(job.map, str):  # else the map file's arm, not read yet: every arm
+        arm = robot.spec.default_arm if job.map is None else job.map.info.arm
+    labels = [f"target {k}" for k in range(len(targets))]
+    check_in_reach(targets[:, :3, 3], labels, bounds, scene, ReachBound.of_robot(robot, arm), robot.name)
+    if start is not None:
+        check_on_scene(start, "--start", bounds, scene, CHECK_MARGIN + max(resolution or 0.0, 0.05))
 
 
 def drivable(
@@ -182,7 +213,8 @@ def place_job(job: PlaceJob, progress: Progress | None = None) -> PlaceReport:
     t0 = time.perf_counter()
     if not job.targets:
         raise InputError('give at least one --target "x y z roll pitch yaw"')
-    targets = np.stack([_target_matrix(t) for t in job.targets])
+    targets = np.stack([target_pose(t, _target_label(job, k, "--target")) for k, t in enumerate(job.targets)])
+    check_object_yaw(job.object, "--object")
     grasped = parse_grasped_object(job.object)
     settings = job.settings or PlaceSettings()
     start = None if job.start is None else base_xyyaw(job.start, "--start")
@@ -196,6 +228,9 @@ def place_job(job: PlaceJob, progress: Progress | None = None) -> PlaceReport:
     points = None
     if cloud is not None:
         points = cloud.points if job.floor is None else with_floor(cloud.points, job.floor)
+    _check_scene(
+        job, robot, targets, start, points, grid, settings.resolution
+    )  # before the map and segmentation
     t_load = time.perf_counter()
     rmap = map_or_default(robot, job.map, job.arm,
                           step_progress(progress, f"default {robot.name} map (first run only)", 50_000_000))  # fmt: skip

@@ -13,7 +13,16 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from baseplace.errors import InputError
-from baseplace.jobs.inputs import Progress, load_robot, out_path, step_progress
+from baseplace.jobs.inputs import (
+    CHECK_MARGIN,
+    Progress,
+    base_xyyaw,
+    load_robot,
+    out_path,
+    step_progress,
+    target_pose,
+    xyz_text,
+)
 from baseplace.jobs.report import BuildMapReport, ReachReport, RobotRef
 
 if TYPE_CHECKING:
@@ -24,8 +33,15 @@ if TYPE_CHECKING:
 MAP_SUFFIXES = (".rmap", ".h5", ".hdf5")
 
 
-def read_pose_file(path: str, width: int, what: str) -> np.ndarray:
-    """Rows of ``width`` finite numbers, one pose a line ("#" comments, commas or spaces)."""
+def read_pose_file(
+    path: str, width: int, what: str, angles: tuple[tuple[str, float, str], ...] = ()
+) -> np.ndarray:
+    """Rows of ``width`` finite numbers, one pose a line ("#" comments, commas or spaces).
+
+    ``angles``: the limits of the last columns, angles [rad] (:func:`~baseplace.geometry.poses.check_angles`).
+    """
+    from baseplace.geometry.poses import check_angles
+
     p = Path(path)
     if not p.is_file():
         raise InputError(f"{what} file {p} does not exist")
@@ -42,6 +58,10 @@ def read_pose_file(path: str, width: int, what: str) -> np.ndarray:
             raise InputError(f"{p}:{lineno}: a {what} needs {width} numbers, got {len(values)}")
         if not all(math.isfinite(v) for v in values):
             raise InputError(f"{p}:{lineno}: {what} contains NaN or infinity")
+        try:
+            check_angles(values[width - len(angles) :], angles)
+        except InputError as exc:
+            raise InputError(f"{p}:{lineno}: {exc}") from None
         rows.append(values)
     if not rows:
         raise InputError(f"{what} file {p} holds no poses")
@@ -85,19 +105,72 @@ def _echo_poses(poses: str | Sequence[str] | None) -> str | list[str] | None:
     return poses if isinstance(poses, str | None) else list(poses)
 
 
+def _map_box(rmap: ReachabilityMap | str, robot: Robot | None) -> tuple[np.ndarray, np.ndarray] | None:
+    """The box of a map's voxel grid in the base frame [m], read without its cells.
+
+    The build sizes the grid to hold every TCP position the arm can reach (``rmap.reach_bounds``):
+    outside it, every value is 0. None where the file is unreadable or the map is not ``robot``'s:
+    loading the map says what is wrong.
+    """
+    if not isinstance(rmap, str):
+        g = rmap.grid
+        lo = np.asarray(g.origin, dtype=float)
+        return lo, lo + np.asarray(g.shape, dtype=float) * g.voxel_size
+    import h5py
+
+    from baseplace.h5files import CORRUPT_FILE_ERRORS, read_text
+
+    try:
+        with h5py.File(rmap, "r") as f:
+            grid = json.loads(read_text(f, "grid"))
+            info = json.loads(read_text(f, "info"))
+        if robot is not None and (info["robot"], info["urdf_sha256"]) != (robot.name, robot.spec.urdf_sha256):
+            return None
+        lo = np.array([float(v) for v in grid["origin"]])
+        hi = lo + np.array([int(v) for v in grid["shape"]], dtype=float) * float(grid["voxel_size"])
+    except (*CORRUPT_FILE_ERRORS, TypeError):
+        return None  # loading the map says what is wrong
+    return (lo, hi) if lo.shape == hi.shape == (3,) and np.isfinite([lo, hi]).all() else None
+
+
+def _check_in_reach(job: ReachJob, robot: Robot | None, T_base_target: np.ndarray, n_targets: int) -> None:
+    """Refuse a query in which no target lies within the arm's reach of its base pose.
+
+    Every value would be 0: most likely millimetres, or a target in another frame. The arm's
+    reach is the box of the map's grid, read from the file's header before its cells.
+
+    Args:
+        job: the query (for the map and the message).
+        robot: the robot the map must be for, if given.
+        T_base_target: (P, 4, 4) each target in the frame of the base pose it pairs with.
+        n_targets: targets given (1: paired with every base pose, else row by row).
+    """
+    box = _map_box(job.map, robot)
+    if box is None:
+        return
+    lo, hi = box
+    p = T_base_target[:, :3, 3]
+    outside = np.linalg.norm(p - np.clip(p, lo, hi), axis=1)
+    if (outside <= CHECK_MARGIN).any():
+        return
+    i = int(np.argmin(outside))
+    pair = "--target" if job.target is not None else f"target {i if n_targets > 1 else 0}"
+    base = "--base" if job.base is not None else f"base pose {i}"
+    box_text = ", ".join(f"{a} {u:.2f}..{v:.2f}" for a, u, v in zip("xyz", lo, hi, strict=True))
+    raise InputError(
+        f"{pair} is {outside[i]:.2f} m beyond the arm's reach from {base}"
+        f"{' (the nearest pair)' if len(p) > 1 else ''}: at {xyz_text(p[i])} m in the base frame, outside "
+        f"the map's reach box ({box_text}); coordinates are in metres"
+    )
+
+
 def reach_job(job: ReachJob) -> ReachReport:
     """Inverse-reachability values of the targets from the base poses, in [0, 1].
 
     Raises:
         InputError: not exactly one of each pair, malformed poses, a map of another robot.
     """
-    from baseplace.geometry.poses import (
-        BasePose,
-        invert_transforms,
-        parse_base_pose,
-        parse_pose6,
-        pose_from_xyz_rpy,
-    )
+    from baseplace.geometry.poses import RPY_LIMITS, YAW_LIMIT, BasePose, invert_transforms, pose_from_xyz_rpy
     from baseplace.reachability.storage import check_map_matches, load_map
 
     t0 = time.perf_counter()
@@ -105,27 +178,29 @@ def reach_job(job: ReachJob) -> ReachReport:
         raise InputError("give exactly one of --target or --targets FILE")
     if (job.base is None) == (job.bases is None):
         raise InputError("give exactly one of --base or --bases FILE")
-    rmap = job.map if not isinstance(job.map, str) else load_map(job.map)
-    robot = None
-    if job.robot is not None:
-        robot = load_robot(job.robot)
-        check_map_matches(rmap, robot, rmap.info.arm, str(job.map))
+    robot = None if job.robot is None else load_robot(job.robot)
     if job.target is not None:
-        targets = parse_pose6(job.target)[None]
+        targets = target_pose(job.target, "--target")[None]
     elif isinstance(job.targets, str):
-        targets = pose_from_xyz_rpy(read_pose_file(job.targets, 6, "target pose"))
+        targets = pose_from_xyz_rpy(read_pose_file(job.targets, 6, "target pose", RPY_LIMITS))
     else:
-        targets = _given_poses([parse_pose6(t) for t in job.targets or ()], "target", "x y z roll pitch yaw")
+        given = [target_pose(t, f"--targets {k}") for k, t in enumerate(job.targets or ())]
+        targets = _given_poses(given, "target", "x y z roll pitch yaw")
     if job.base is not None:
-        bases = parse_base_pose(job.base).matrix()[None]
+        bases = BasePose(*base_xyyaw(job.base, "--base")).matrix()[None]
     elif isinstance(job.bases, str):
-        bases = BasePose.batch_matrix(read_pose_file(job.bases, 3, "base pose"))
+        bases = BasePose.batch_matrix(read_pose_file(job.bases, 3, "base pose", (YAW_LIMIT,)))
     else:
-        bases = _given_poses([parse_base_pose(b).matrix() for b in job.bases or ()], "base pose", "x y yaw")
+        given = [BasePose(*base_xyyaw(b, f"--bases {k}")).matrix() for k, b in enumerate(job.bases or ())]
+        bases = _given_poses(given, "base pose", "x y yaw")
     if len(targets) != len(bases) and len(targets) != 1:
         raise InputError(
             f"--targets has {len(targets)} poses but --bases has {len(bases)}; they pair row by row"
         )
+    _check_in_reach(job, robot, invert_transforms(bases) @ targets, len(targets))  # before the map is read
+    rmap = job.map if not isinstance(job.map, str) else load_map(job.map)
+    if robot is not None:
+        check_map_matches(rmap, robot, rmap.info.arm, str(job.map))
     t_load = time.perf_counter()
     if len(targets) == 1:
         values = rmap.inverse(targets[0], bases)
