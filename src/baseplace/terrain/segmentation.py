@@ -13,7 +13,13 @@ Two algorithms behind one interface, :class:`Segmenter` (``segment(hmap) -> Segm
   largest component go to the closest neighbouring region).
 
 Local normals come from least-squares planes over a window of the smoothed height map; plane
-distances use the unsmoothed heights, which keep step edges sharp.
+distances use the unsmoothed heights, which keep step edges sharp. Beyond the seed, a cell only
+ever moves to a region whose plane fits it (within ``extend_dist`` of its raw or smoothed height,
+:func:`_fits`), so neither the reassignment nor the cleanup hands a cell to a neighbour across a
+step (a corner of a ramp cut off by the platform once went to the floor 0.29 m below); where
+several planes fit (a crease), the reassignment picks the closest by the smoothed height and
+one-cell notches of the border are filled (:func:`_straighten`), so a path across a continuous
+crease enters each region once.
 """
 
 from __future__ import annotations
@@ -241,8 +247,25 @@ def _extend(labels, heights, X, Y, normals, d, max_dist):  # pragma: no cover
 
 
 @nb.njit(cache=True)
-def _reassign(labels, heights, X, Y, normals, d):  # pragma: no cover
-    """One reassignment round: a cell moves to a 4-neighbour's region whose plane is closer."""
+def _fits(normal, d, x, y, z, zs, max_dist):  # pragma: no cover
+    """Whether the plane ``normal . p + d = 0`` fits a cell: within ``max_dist`` of its height.
+
+    Of its raw height ``z`` or of its smoothed height ``zs``: a step misses both, a noisy cell on
+    the plane fits one of them.
+    """
+    base = normal[0] * x + normal[1] * y + d
+    return abs(base + normal[2] * z) <= max_dist or abs(base + normal[2] * zs) <= max_dist
+
+
+@nb.njit(cache=True)
+def _reassign(labels, heights, smooth, X, Y, normals, d, max_dist):  # pragma: no cover
+    """One reassignment round: a cell moves to a 4-neighbour's region whose plane is closer.
+
+    Only a plane within ``max_dist`` of the cell's height can take it, so no cell crosses a step.
+    Where several planes fit (the crease where a ramp meets the floor or a platform), the closer
+    one is judged by the smoothed height: on the raw heights the noise decides each cell near the
+    crease on its own and the border frays into slivers of both regions.
+    """
     H, W = labels.shape
     out = labels.copy()
     changed = 0
@@ -254,8 +277,11 @@ def _reassign(labels, heights, X, Y, normals, d):  # pragma: no cover
             z = heights[r, c]
             if not np.isfinite(z):
                 continue
+            zs = smooth[r, c] if np.isfinite(smooth[r, c]) else z
             x, y = X[r, c], Y[r, c]
-            best = abs(normals[lab, 0] * x + normals[lab, 1] * y + normals[lab, 2] * z + d[lab])
+            best = abs(normals[lab, 0] * x + normals[lab, 1] * y + normals[lab, 2] * zs + d[lab])
+            if not _fits(normals[lab], d[lab], x, y, z, zs, max_dist):
+                best = np.inf  # its own plane does not fit it either: any neighbour's that fits is better
             best_lab = lab
             for k in range(4):
                 rr = r + (1 if k == 0 else -1 if k == 1 else 0)
@@ -265,13 +291,57 @@ def _reassign(labels, heights, X, Y, normals, d):  # pragma: no cover
                 other = labels[rr, cc]
                 if other < 0 or other == best_lab:
                     continue
-                dist = abs(normals[other, 0] * x + normals[other, 1] * y + normals[other, 2] * z + d[other])
+                if not _fits(normals[other], d[other], x, y, z, zs, max_dist):
+                    continue
+                dist = abs(normals[other, 0] * x + normals[other, 1] * y + normals[other, 2] * zs + d[other])
                 if dist < best:
                     best, best_lab = dist, other
             if best_lab != lab:
                 out[r, c] = best_lab
                 changed += 1
     return out, changed
+
+
+@nb.njit(cache=True)
+def _straighten(labels, heights, smooth, X, Y, normals, d, max_dist):  # pragma: no cover
+    """Move every cell with 3 or 4 of its 4-neighbours in another region whose plane fits it there.
+
+    Where two regions meet continuously (both planes fit the cells along the crease) noise leaves
+    one-cell notches in the border, and a path across it enters a region twice. In place, until no
+    cell moves: each move lowers the number of unlike neighbour pairs, so it ends. Returns the moves.
+    """
+    H, W = labels.shape
+    moved = 0
+    changed = True
+    while changed:
+        changed = False
+        for r in range(H):
+            for c in range(W):
+                lab = labels[r, c]
+                z = heights[r, c]
+                if lab < 0 or not np.isfinite(z):
+                    continue
+                for k in range(4):  # the candidate: each neighbour's region in turn
+                    rr = r + (1 if k == 0 else -1 if k == 1 else 0)
+                    cc = c + (1 if k == 2 else -1 if k == 3 else 0)
+                    if rr < 0 or cc < 0 or rr >= H or cc >= W:
+                        continue
+                    other = labels[rr, cc]
+                    if other < 0 or other == lab:
+                        continue
+                    votes = 0
+                    for m in range(4):
+                        r2 = r + (1 if m == 0 else -1 if m == 1 else 0)
+                        c2 = c + (1 if m == 2 else -1 if m == 3 else 0)
+                        if 0 <= r2 < H and 0 <= c2 < W and labels[r2, c2] == other:
+                            votes += 1
+                    zs = smooth[r, c] if np.isfinite(smooth[r, c]) else z
+                    if votes >= 3 and _fits(normals[other], d[other], X[r, c], Y[r, c], z, zs, max_dist):
+                        labels[r, c] = other
+                        moved += 1
+                        changed = True
+                    break
+    return moved
 
 
 def _seed_order(rms: FloatArray) -> NDArray[np.int64]:
@@ -402,12 +472,16 @@ class RobustSegmenter:
         for _ in range(2):  # reassignment can reunite pieces of one plane: merge them, reassign again
             for _ in range(s.reassign_rounds):
                 normals, d, _, _ = fit_region_planes(hmap, labels, n)
-                labels, changed = _reassign(
-                    labels, z, X, Y, np.nan_to_num(normals), np.nan_to_num(d, nan=1e9)
-                )
+                planes = np.nan_to_num(normals), np.nan_to_num(d, nan=1e9)
+                labels, changed = _reassign(labels, z, hmap.smooth, X, Y, *planes, s.extend_dist)
                 if changed == 0:
                     break
             labels, n = self._merge(hmap, labels, n)
+        normals, d, _, _ = fit_region_planes(hmap, labels, n)
+        planes = np.nan_to_num(normals), np.nan_to_num(d, nan=1e9)
+        _straighten(labels, z, hmap.smooth, X, Y, *planes, s.extend_dist)
+        # A region refitted to cells that fit no other plane can tilt up into a wall: no support.
+        labels = _drop_steep(hmap, labels, n, s.max_tilt_deg)
         lap("reassignment")
 
         labels = self._largest_components(hmap, labels, n)
@@ -486,8 +560,11 @@ class RobustSegmenter:
         normals, d, _, _ = fit_region_planes(hmap, labels, n)
         X, Y = hmap.cell_centres()
         z = np.where(hmap.known, hmap.raw, np.nan)
-        # Orphans join the neighbouring region whose plane is closest, spreading inward.
-        _extend_closest(labels, orphan, z, X, Y, np.nan_to_num(normals), np.nan_to_num(d, nan=1e9))
+        # Orphans join the neighbouring region whose plane is closest and fits them, spreading inward;
+        # an orphan no neighbour's plane fits (a piece of a ramp cut off by a step) stays unlabelled
+        # for the final extension, which only gives a cell to a region whose plane fits it.
+        _extend_closest(labels, orphan, z, hmap.smooth, X, Y, np.nan_to_num(normals), np.nan_to_num(d, nan=1e9),
+                        self.settings.extend_dist)  # fmt: skip
         return labels
 
 
@@ -502,8 +579,13 @@ def _adjacent_pairs(labels: Labels) -> list[tuple[int, int]]:
 
 
 @nb.njit(cache=True)
-def _extend_closest(labels, todo, heights, X, Y, normals, d):  # pragma: no cover
-    """Give each ``todo`` cell the region of a labelled 4-neighbour with the closest plane."""
+def _extend_closest(labels, todo, heights, smooth, X, Y, normals, d, max_dist):  # pragma: no cover
+    """Give each ``todo`` cell the region of a labelled 4-neighbour with the closest plane that fits it.
+
+    A cell no neighbouring plane fits (see :func:`_fits`) stays unlabelled: the surface steps
+    there, and the neighbour across the step is not its region. An unknown cell takes its first
+    labelled neighbour.
+    """
     H, W = labels.shape
     while True:
         changed = 0
@@ -513,6 +595,7 @@ def _extend_closest(labels, todo, heights, X, Y, normals, d):  # pragma: no cove
                 if not todo[r, c] or labels[r, c] >= 0:
                     continue
                 z = heights[r, c]
+                zs = smooth[r, c] if np.isfinite(smooth[r, c]) else z
                 best = np.inf
                 best_lab = -1
                 for k in range(4):
@@ -523,14 +606,13 @@ def _extend_closest(labels, todo, heights, X, Y, normals, d):  # pragma: no cove
                     other = labels[rr, cc]
                     if other < 0:
                         continue
-                    dist = abs(
-                        normals[other, 0] * X[r, c]
-                        + normals[other, 1] * Y[r, c]
-                        + normals[other, 2] * z
-                        + d[other]
-                    )
                     if not np.isfinite(z):
                         dist = 0.0
+                    elif _fits(normals[other], d[other], X[r, c], Y[r, c], z, zs, max_dist):
+                        dist = abs(normals[other, 0] * X[r, c] + normals[other, 1] * Y[r, c]
+                                   + normals[other, 2] * z + d[other])  # fmt: skip
+                    else:
+                        continue
                     if dist < best:
                         best, best_lab = dist, other
                 if best_lab >= 0:
