@@ -14,8 +14,7 @@ Topics (all in the world frame, stamped with the input's stamp):
 from __future__ import annotations
 
 import math
-import shutil
-import tempfile
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from baseplace.errors import InputError
+from baseplace.files import atomic_write, staged_directory
 from baseplace.io.messages import header, pose_msg
 
 FloatArray = NDArray[np.float64]
@@ -111,8 +111,7 @@ def write_result_mcap(path: str | Path, res: ResultMessages) -> None:
         raise InputError(f"cannot write {path}: directory {path.parent} does not exist")
     ts = get_typestore(Stores.ROS2_HUMBLE)
     g = ts.types
-    tmp = Path(tempfile.mkdtemp(prefix=".baseplace-", dir=path.parent))
-    try:
+    with staged_directory(path, "MCAP result") as tmp:
         bag = tmp / "bag"
         writer = Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP)
         writer.open()
@@ -144,9 +143,8 @@ def write_result_mcap(path: str | Path, res: ResultMessages) -> None:
         files = list(bag.glob("*.mcap"))
         if len(files) != 1:
             raise InputError(f"the MCAP writer left {len(files)} files in {bag}")
-        shutil.move(str(files[0]), str(path))
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        with atomic_write(path, "MCAP result") as out:
+            os.replace(files[0], out)
 
 
 def read_result_mcap(path: str | Path) -> dict[str, list[Any]]:
