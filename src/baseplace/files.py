@@ -185,7 +185,7 @@ def check_free_space(path: str | Path, n_bytes: int, what: str = "file") -> None
 
 
 def _size(n: int) -> str:
-    return f"{n / 1e6:.1f} MB" if n >= 100_000 else f"{n / 1e3:.1f} kB"
+    return f"{n / 1e6:.1f} MB" if n >= 1_000_000 else f"{n / 1e3:.1f} kB"
 
 
 def write_bytes(path: str | Path, data: bytes | memoryview, what: str = "file") -> None:

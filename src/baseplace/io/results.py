@@ -13,6 +13,7 @@ Topics (all in the world frame, stamped with the input's stamp):
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 from collections.abc import Sequence
@@ -138,13 +139,27 @@ def write_result_mcap(path: str | Path, res: ResultMessages) -> None:
                 for poses in res.paths])  # fmt: skip
             if res.regions:
                 put(REGIONS_TOPIC, "visualization_msgs/msg/MarkerArray", [_marker_array(ts, res)])
-        finally:
             writer.close()
+        except BaseException:
+            _abandon(writer)
+            raise
         files = list(bag.glob("*.mcap"))
         if len(files) != 1:
             raise InputError(f"the MCAP writer left {len(files)} files in {bag}")
         with atomic_write(path, "MCAP result") as out:
             os.replace(files[0], out)
+
+
+def _abandon(writer: Any) -> None:
+    """Close the file a failed writer holds open.
+
+    rosbags keeps it when a write or its ``close`` fails (a full disk), and a long-running service
+    would leak the descriptor.
+    """
+    bio = getattr(getattr(writer, "storage", None), "bio", None)
+    if bio is not None:
+        with contextlib.suppress(OSError):
+            bio.close()  # closes the file even when its last flush fails
 
 
 def read_result_mcap(path: str | Path) -> dict[str, list[Any]]:
