@@ -242,3 +242,19 @@ def test_writers_turn_a_full_disk_into_one_output_error(small_disk):
                 write_bytes(disk.path / "b.bin", b"x" * 100_000)
         assert all((disk.path / name).read_bytes() == b"old" for name in ("r.mcap", "f.png", "b.bin"))
         assert disk.temporaries() == []
+
+
+def test_a_report_redirected_to_a_full_disk_is_one_line(small_disk):
+    """``baseplace ... --json > FILE`` with FILE on a full disk: one line, not a traceback at exit."""
+    with small_disk(64) as disk:
+        disk.fill(leave_kb=0)
+        with open(disk.path / "r.json", "w") as stdout:
+
+            def limit() -> None:
+                if disk.fsize is not None:
+                    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+                    resource.setrlimit(resource.RLIMIT_FSIZE, (disk.fsize, disk.fsize))
+
+            proc = subprocess.run([sys.executable, "-m", "baseplace.cli", "robots", "--json"], stdout=stdout,
+                                  stderr=subprocess.PIPE, text=True, timeout=120, preexec_fn=limit)  # fmt: skip
+        one_line_error(proc, "cannot write the report to stdout")

@@ -11,6 +11,7 @@ internal failure. A cache that does not fit is a ``warning: ...`` line, never a 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import sys
@@ -447,7 +448,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             report = args.job(args, bars) if hasattr(args, "job") else args.func(args)
     except NoResultError as exc:
         if as_json:
-            sys.stdout.write(exc.report.dumps() + "\n")
+            _out(exc.report.dumps() + "\n")
         sys.stderr.write(f"error: {exc}\n")
         return exc.exit_code
     except BaseplaceError as exc:
@@ -474,8 +475,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not isinstance(report, Report):  # view and the experiments print their own output
         return int(report)
     obj = report.to_json()
-    sys.stdout.write((json.dumps(obj) if as_json else report_text(obj)) + "\n")
-    return 0
+    return _out((json.dumps(obj) if as_json else report_text(obj)) + "\n") or 0
+
+
+def _out(text: str) -> int | None:
+    """Print ``text`` on stdout; None, or 2 when stdout is a file on a full disk (one error line)."""
+    try:
+        sys.stdout.write(text)
+        sys.stdout.flush()
+    except OSError as exc:
+        from baseplace.files import disk_full_reason, is_disk_full
+
+        if not is_disk_full(exc):
+            raise
+        with contextlib.suppress(OSError, ValueError):  # the rest of the buffer goes nowhere, not into a
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # traceback at exit
+        sys.stderr.write(f"error: cannot write the report to stdout: {disk_full_reason(exc)}\n")
+        return 2
+    return None
 
 
 if __name__ == "__main__":  # pragma: no cover
