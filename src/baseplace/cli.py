@@ -2,16 +2,20 @@
 
 Every command takes ``--json`` (exactly one JSON object on stdout, the report of docs/results.md,
 also on failure) and ``--help``; commands with randomness take ``--seed``. Exit codes: 0 ok,
-2 bad input (one ``error: ...`` line on stderr), 3 ran but found nothing. The work is done by
+2 bad input or an output that does not fit (a full disk, quota or file size limit; one
+``error: ...`` line on stderr, the previous file untouched), 3 ran but found nothing; 1 is an
+internal failure. A cache that does not fit is a ``warning: ...`` line, never a failure. The work is done by
 :mod:`baseplace.jobs`; nothing here loops over results or touches geometry.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import sys
+import warnings
 from collections.abc import Callable, Sequence
 from typing import Any, NoReturn
 
@@ -418,6 +422,19 @@ def _add_robot_commands(sub: Any, command: Callable[..., argparse.ArgumentParser
     p.add_argument("--pairs", action="store_true", help="list the active self-collision pairs")
 
 
+def _cache_warnings_in_one_line(show: Callable[..., None]) -> Callable[..., None]:
+    """``warnings.showwarning`` that prints a skipped cache entry as ``warning: ...``, others with ``show``."""
+    from baseplace.files import CacheSkipped
+
+    def showwarning(message: Warning | str, category: type[Warning], *where: Any, **kw: Any) -> None:
+        if issubclass(category, CacheSkipped):
+            sys.stderr.write(f"warning: {message}\n")
+        else:
+            show(message, category, *where, **kw)
+
+    return showwarning
+
+
 def _echo(args: argparse.Namespace) -> dict[str, Any]:
     """The arguments as given, for a failure report."""
     return {k: v for k, v in vars(args).items() if k not in ("func", "job", "json") and not k.startswith("_")}
@@ -437,12 +454,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     as_json = getattr(args, "json", False)
     bars = ProgressBars(enabled=not as_json)
     try:
-        with elapsed_status(f"baseplace {args.command}", enabled=not as_json):
+        with elapsed_status(f"baseplace {args.command}", enabled=not as_json), warnings.catch_warnings():
+            warnings.showwarning = _cache_warnings_in_one_line(warnings.showwarning)
             args = in_radians(args)
             report = args.job(args, bars) if hasattr(args, "job") else args.func(args)
     except NoResultError as exc:
         if as_json:
-            sys.stdout.write(exc.report.dumps() + "\n")
+            _out(exc.report.dumps() + "\n")
         sys.stderr.write(f"error: {exc}\n")
         return exc.exit_code
     except BaseplaceError as exc:
@@ -450,6 +468,17 @@ def main(argv: Sequence[str] | None = None) -> int:
             _emit_error(KINDS.get(args.command), str(exc), exc.exit_code, _echo(args))
         sys.stderr.write(f"error: {exc}\n")
         return exc.exit_code
+    except OSError as exc:
+        from baseplace.files import disk_full_reason, is_disk_full
+
+        if not is_disk_full(exc):
+            raise
+        # a writer that does not go through baseplace.files: its message is a library's, maybe lines long
+        message = f"cannot write {exc.filename or 'an output'}: {disk_full_reason(exc)}; free some space"
+        if as_json:
+            _emit_error(KINDS.get(args.command), message, 2, _echo(args))
+        sys.stderr.write(f"error: {message}\n")
+        return 2
     except KeyboardInterrupt:
         sys.stderr.write("error: interrupted\n")
         return 130
@@ -463,8 +492,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not isinstance(report, Report):  # view and the experiments print their own output
         return int(report)
     obj = report.to_json()
-    sys.stdout.write((json.dumps(obj) if as_json else report_text(obj)) + "\n")
-    return 0
+    return _out((json.dumps(obj) if as_json else report_text(obj)) + "\n") or 0
+
+
+def _out(text: str) -> int | None:
+    """Print ``text`` on stdout; None, or 2 when stdout is a file on a full disk (one error line)."""
+    try:
+        sys.stdout.write(text)
+        sys.stdout.flush()
+    except OSError as exc:
+        from baseplace.files import disk_full_reason, is_disk_full
+
+        if not is_disk_full(exc):
+            raise
+        with contextlib.suppress(OSError, ValueError):  # the rest of the buffer goes nowhere, not into a
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # traceback at exit
+        sys.stderr.write(f"error: cannot write the report to stdout: {disk_full_reason(exc)}\n")
+        return 2
+    return None
 
 
 if __name__ == "__main__":  # pragma: no cover

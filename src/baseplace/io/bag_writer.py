@@ -5,6 +5,7 @@ For converting files into the recordings robots make, and for tests of :func:`~b
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -14,6 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from baseplace.errors import InputError
+from baseplace.files import staged_directory
 from baseplace.io.messages import OCCUPANCY_GRID, POINTCLOUD2, TF_MESSAGE, cloud_msg, grid_msg, tf_msg
 from baseplace.world.occupancy import OccupancyGrid
 
@@ -83,6 +85,14 @@ def write_input_bag(
             (topic, TF_MESSAGE, t.stamp_ns, tf_msg(ts, [(t.parent, t.child, np.asarray(t.T))], t.stamp_ns))
         )
     messages.sort(key=lambda m: m[2])
+    if path.exists():  # as rosbags' writers: a recording is never overwritten
+        raise InputError(f"recording {path} exists already; not overwriting it")
+    with staged_directory(path, "recording") as staged:  # a full disk leaves nothing at path
+        _write(staged / path.name, fmt, ts, messages)
+        os.replace(staged / path.name, path)
+
+
+def _write(path: Path, fmt: str, ts: Any, messages: list[tuple[str, str, int, Any]]) -> None:
     if fmt == "ros1":
         from rosbags.rosbag1 import Writer as Writer1
 

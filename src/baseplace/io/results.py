@@ -13,9 +13,9 @@ Topics (all in the world frame, stamped with the input's stamp):
 
 from __future__ import annotations
 
+import contextlib
 import math
-import shutil
-import tempfile
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from baseplace.errors import InputError
+from baseplace.files import atomic_write, staged_directory
 from baseplace.io.messages import header, pose_msg
 
 FloatArray = NDArray[np.float64]
@@ -111,8 +112,7 @@ def write_result_mcap(path: str | Path, res: ResultMessages) -> None:
         raise InputError(f"cannot write {path}: directory {path.parent} does not exist")
     ts = get_typestore(Stores.ROS2_HUMBLE)
     g = ts.types
-    tmp = Path(tempfile.mkdtemp(prefix=".baseplace-", dir=path.parent))
-    try:
+    with staged_directory(path, "MCAP result") as tmp:
         bag = tmp / "bag"
         writer = Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP)
         writer.open()
@@ -139,14 +139,27 @@ def write_result_mcap(path: str | Path, res: ResultMessages) -> None:
                 for poses in res.paths])  # fmt: skip
             if res.regions:
                 put(REGIONS_TOPIC, "visualization_msgs/msg/MarkerArray", [_marker_array(ts, res)])
-        finally:
             writer.close()
+        except BaseException:
+            _abandon(writer)
+            raise
         files = list(bag.glob("*.mcap"))
         if len(files) != 1:
             raise InputError(f"the MCAP writer left {len(files)} files in {bag}")
-        shutil.move(str(files[0]), str(path))
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        with atomic_write(path, "MCAP result") as out:
+            os.replace(files[0], out)
+
+
+def _abandon(writer: Any) -> None:
+    """Close the file a failed writer holds open.
+
+    rosbags keeps it when a write or its ``close`` fails (a full disk), and a long-running service
+    would leak the descriptor.
+    """
+    bio = getattr(getattr(writer, "storage", None), "bio", None)
+    if bio is not None:
+        with contextlib.suppress(OSError):
+            bio.close()  # closes the file even when its last flush fails
 
 
 def read_result_mcap(path: str | Path) -> dict[str, list[Any]]:

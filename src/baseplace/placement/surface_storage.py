@@ -17,7 +17,7 @@ import h5py
 import numpy as np
 
 from baseplace.errors import InputError
-from baseplace.files import atomic_write
+from baseplace.files import atomic_hdf5
 from baseplace.guards import check_alloc
 from baseplace.h5files import (
     CORRUPT_FILE_ERRORS,
@@ -50,7 +50,7 @@ def save_surface_map(smap: SurfaceMap, path: str | Path) -> int:
         "polygon": smap.polygon.tolist(), "height": smap.height, "robot": smap.robot, "arms": list(smap.arms),
         "combine": smap.combine, "cone": smap.cone, "tcp_height": smap.tcp_height,
     }  # fmt: skip
-    with atomic_write(path, "surface map") as tmp, h5py.File(tmp, "w") as f:
+    with atomic_hdf5(path, "surface map") as f:
         write_header(f, FORMAT, FORMAT_VERSION)
         meta_text = write_text(f, "meta", json.dumps(meta))
         f.create_dataset("index", data=index, compression="gzip", shuffle=True)

@@ -309,6 +309,7 @@ def build_map(
     checkpoint_every: int = DEFAULT_CHECKPOINT_EVERY,
     save_to: str | Path | None = None,
     checkpoint_every_s: float = DEFAULT_CHECKPOINT_EVERY_S,
+    cache: bool = False,
 ) -> ReachabilityMap:
     """Build a reachability map of one arm by random joint sampling.
 
@@ -334,6 +335,8 @@ def build_map(
         checkpoint_every: samples between checkpoints, rounded up to whole chunks of 2^20.
         save_to: map file to write, or None (the caller saves the returned map).
         checkpoint_every_s: build time [s] between checkpoints.
+        cache: ``save_to`` and ``checkpoint`` are a cache entry: when they do not fit on the
+            disk they are skipped with a one-line warning, and the map is still returned.
 
     Returns:
         The map; ``info.build_time_s`` sums the wall time of every run of a resumed build.
@@ -341,6 +344,8 @@ def build_map(
     Raises:
         InputError: the checkpoint is corrupt or from another build (delete it to start over),
             its directory does not exist, or ``checkpoint_every`` < 1.
+        OutputError: the map or a checkpoint does not fit on the disk (not for a cache); the
+            previous files are untouched.
         KeyboardInterrupt: Ctrl-C; with a checkpoint, it holds every chunk finished.
     """
     settings = settings or BuildSettings()
@@ -359,7 +364,7 @@ def build_map(
         for path in (save_to, checkpoint):
             if path is not None:
                 remove_stray_temporaries(path)
-        return _build(acc, progress, checkpoint, checkpoint_every, checkpoint_every_s, save_to)
+        return _build(acc, progress, checkpoint, checkpoint_every, checkpoint_every_s, save_to, cache)
 
 
 def _stat(path: str | Path | None) -> tuple[int, int] | None:
@@ -398,6 +403,7 @@ def _build(
     checkpoint_every: int,
     checkpoint_every_s: float,
     save_to: str | Path | None = None,
+    cache: bool = False,
 ) -> ReachabilityMap:
     settings = acc.settings
     if checkpoint is None:
@@ -415,7 +421,7 @@ def _build(
 
     from baseplace.reachability.checkpoint import Checkpoints  # it builds on this module
 
-    with Checkpoints(acc, checkpoint, checkpoint_every, checkpoint_every_s) as saver:
+    with Checkpoints(acc, checkpoint, checkpoint_every, checkpoint_every_s, cache) as saver:
         if progress is not None and saver.resumed_chunks:
             progress(acc.samples_done)
         for k in acc.pending_chunks():

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from baseplace.errors import InputError
+from baseplace.files import OutputError, skip_cache_entry
 from baseplace.reachability.build import BuildSettings, build_map
 from baseplace.reachability.checkpoint import default_checkpoint_path
 from baseplace.reachability.storage import FORMAT_VERSION, is_compressed, load_map, save_map
@@ -54,7 +55,9 @@ def cached_map(
         progress: called with the samples done so far while a map is built.
 
     Returns:
-        (map, path, built) where built tells whether it was built now.
+        (map, path, built) where built tells whether it was built now; with the cache's disk
+        full, the map is built and returned but not stored at ``path`` (a one-line warning,
+        :class:`~baseplace.files.CacheSkipped`).
     """
     arm_name = arm or robot.spec.default_arm
     path = cached_map_path(robot, settings, arm_name)
@@ -63,12 +66,21 @@ def cached_map(
         if is_compressed(path):  # built (or cached by an older baseplace) with gzip: store it plain once
             try:
                 save_map(rmap, path, compress=False)
+            except OutputError as exc:
+                skip_cache_entry("the uncompressed map", path.parent, exc)
             except (OSError, InputError):
                 pass  # a read-only cache opens slower, nothing else
         return rmap, path, False
-    private_dir(path.parent)
-    # build_map locks the entry: a second process waits, then reuses the first one's map
-    rmap = build_map(robot, arm_name, settings, progress, default_checkpoint_path(path), save_to=path)
+    try:
+        private_dir(path.parent)
+    except OutputError as exc:  # no room for the folder: the map is built all the same
+        skip_cache_entry("the map", path.parent, exc)
+        return build_map(robot, arm_name, settings, progress), path, True
+    # build_map locks the entry: a second process waits, then reuses the first one's map. A full
+    # disk skips the checkpoints and the entry, not the map.
+    rmap = build_map(
+        robot, arm_name, settings, progress, default_checkpoint_path(path), save_to=path, cache=True
+    )
     return rmap, path, True
 
 

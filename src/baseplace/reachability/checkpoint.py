@@ -10,9 +10,9 @@ Layout: datasets ``chunks`` (int64), ``cells`` (int64), ``counts`` (uint32) and,
 manipulability, ``best`` (float32), and the text ``build`` (JSON of the identity) as a uint8 dataset
 (see :mod:`baseplace.h5files`); attributes ``format``, ``format_version``, ``dropped``,
 ``elapsed_s`` (build wall time so far) and ``sha256`` over all of it.
-Writes go through :func:`baseplace.files.atomic_write`, so a build killed at any moment, even
-with SIGKILL while writing, leaves either the previous checkpoint or the new one, never a torn
-file. The convention for a map written to ``OUT`` is the checkpoint ``OUT.partial``
+Writes go through :func:`baseplace.files.atomic_hdf5` (built in memory, then a temporary file
+renamed), so a build killed at any moment, even with SIGKILL while writing, leaves either the
+previous checkpoint or the new one, never a torn file; a full disk leaves the previous one too. The convention for a map written to ``OUT`` is the checkpoint ``OUT.partial``
 (:func:`default_checkpoint_path`).
 
 Ctrl-C: while a checkpointed build runs in the main thread, the first SIGINT is deferred to the
@@ -37,7 +37,7 @@ import h5py
 import numpy as np
 
 from baseplace.errors import InputError
-from baseplace.files import atomic_write
+from baseplace.files import OutputError, atomic_hdf5, skip_cache_entry
 from baseplace.h5files import (
     CORRUPT_FILE_ERRORS,
     attr_text,
@@ -97,13 +97,14 @@ def save_checkpoint(path: str | Path, acc: MapAccumulator, elapsed_s: float) -> 
 
     Raises:
         InputError: the directory of ``path`` does not exist.
+        OutputError: the disk cannot hold it; the previous checkpoint is untouched.
     """
     part = acc.partial()
     build = json.dumps(build_identity(acc), sort_keys=True)
     arrays: list[np.ndarray] = [part.chunks, part.cells, part.counts]
     if part.best is not None:
         arrays.append(part.best)
-    with atomic_write(path, "checkpoint") as tmp, h5py.File(tmp, "w") as f:
+    with atomic_hdf5(path, "checkpoint") as f:
         write_header(f, FORMAT, FORMAT_VERSION)
         build_text = write_text(f, "build", build)
         f.attrs["dropped"] = part.dropped
@@ -230,18 +231,25 @@ class Checkpoints:
         every: samples between checkpoints, rounded to whole chunks (at least one chunk).
         every_s: build time [s] between checkpoints (whichever of the two comes first), so a
             kill loses at most about this much work.
+        cache: the build of a cache entry: a checkpoint or a map that does not fit on the disk is
+            skipped with a one-line warning (:class:`~baseplace.files.CacheSkipped`) and the
+            build goes on; otherwise it raises :class:`~baseplace.files.OutputError`.
 
     Raises:
         InputError: ``every`` < 1 or ``every_s`` <= 0, the directory of ``path`` does not exist,
             or the existing checkpoint is corrupt or from another build.
     """
 
-    def __init__(self, acc: MapAccumulator, path: str | Path, every: int, every_s: float = 30.0) -> None:
+    def __init__(
+        self, acc: MapAccumulator, path: str | Path, every: int, every_s: float = 30.0, cache: bool = False
+    ) -> None:
         if every < 1:
             raise InputError(f"checkpoint interval must be at least 1 sample, got {every}")
         if not every_s > 0:
             raise InputError(f"checkpoint interval must be more than 0 s, got {every_s}")
         self.every_s = every_s
+        self.cache = cache
+        self._full = False  # a cache's disk was full: no more checkpoints
         self.acc = acc
         self.path = Path(path)
         directory = self.path.parent if str(self.path.parent) else Path(".")
@@ -273,8 +281,19 @@ class Checkpoints:
         return self._previous_s + time.perf_counter() - self._start
 
     def save(self) -> None:
-        """Write the checkpoint now."""
-        save_checkpoint(self.path, self.acc, self.elapsed_s)
+        """Write the checkpoint now (a cache's, unless its disk was found full).
+
+        Raises:
+            OutputError: the checkpoint does not fit (not for a cache); the previous one is kept.
+        """
+        if not self._full:
+            try:
+                save_checkpoint(self.path, self.acc, self.elapsed_s)
+            except OutputError as exc:
+                if not self.cache:
+                    raise
+                self._full = True
+                skip_cache_entry("the build's checkpoint", self.path.parent, exc)
         self._since = 0
         self._last_save = time.perf_counter()
 
@@ -308,6 +327,12 @@ class Checkpoints:
             if time.perf_counter() - self._last_save > self.every_s / 2:
                 self.save()  # so a kill during the map's save loses at most half an interval
 
-            save_map(rmap, save_to)
+            try:
+                save_map(rmap, save_to)
+            except OutputError as exc:
+                if not self.cache:
+                    raise  # the checkpoint stays: free some space and rerun to save the map
+                skip_cache_entry("the map", Path(save_to).parent, exc)
+                return rmap
         remove_checkpoint(self.path)
         return rmap

@@ -18,7 +18,7 @@ import h5py
 import numpy as np
 
 from baseplace.errors import InputError
-from baseplace.files import atomic_write
+from baseplace.files import atomic_hdf5
 from baseplace.h5files import (
     CORRUPT_FILE_ERRORS,
     attr_text,
@@ -47,7 +47,7 @@ def save_map(rmap: ReachabilityMap, path: str | Path, compress: bool = True) -> 
     path = Path(path)
     packed = {"compression": "gzip", "compression_opts": 4, "shuffle": True} if compress else {}
     gzip = {"compression": "gzip"} if compress else {}  # the optional arrays: gzip's default level
-    with atomic_write(path, "map") as tmp, h5py.File(tmp, "w") as f:
+    with atomic_hdf5(path, "map") as f:
         write_header(f, FORMAT, FORMAT_VERSION)
         grid = rmap.grid
         grid_text = json.dumps(

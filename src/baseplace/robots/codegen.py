@@ -5,7 +5,9 @@ placements are constants, mostly identities and axis permutations, and most join
 aligned with a coordinate axis, so unrolling the chain symbolically with the constants folded
 in removes most of the arithmetic. The source is written to a cache directory
 (``$BASEPLACE_CACHE`` or ``~/.cache/baseplace``) and imported, so numba's on-disk cache holds
-the machine code across processes. ``fk.py``'s generic kernel stays the test oracle.
+the machine code across processes. ``fk.py``'s generic kernel stays the test oracle. A cache
+on a full disk costs the compilation, never the command: the kernels are then compiled from
+memory, or numba's copy is skipped, with a one-line warning.
 """
 
 from __future__ import annotations
@@ -14,9 +16,9 @@ import hashlib
 import importlib.util
 import os
 import sys
-import tempfile
 from pathlib import Path
 from types import ModuleType
+from typing import Any
 
 import numpy as np
 
@@ -192,11 +194,17 @@ def private_dir(directory: Path) -> Path:
 
     Raises:
         InputError: the directory cannot be created or belongs to another user.
+        OutputError: no room on its disk for the directory.
     """
+    from baseplace.files import OutputError, disk_full_reason, is_disk_full
+
     try:
         directory.mkdir(mode=0o700, parents=True, exist_ok=True)
         st = directory.stat()
     except OSError as exc:
+        if is_disk_full(exc):
+            reason = disk_full_reason(exc)
+            raise OutputError(f"cannot create cache directory {directory}: {reason}", reason) from None
         raise InputError(f"cannot create cache directory {directory}: {exc.strerror}") from None
     if st.st_uid != os.getuid():
         raise InputError(
@@ -221,13 +229,44 @@ def _kernel_file(directory: Path, key: str, source: str) -> Path:
     except OSError:
         current = None
     if current != data:
-        fd, name = tempfile.mkstemp(prefix=f".chain_{key}.", suffix=".tmp", dir=directory)
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(name, path)
+        from baseplace.files import write_bytes
+
+        write_bytes(path, data, "kernel")
     return path
+
+
+def _from_memory(name: str, source: str) -> ModuleType:
+    """The kernel module compiled from ``source`` with numba's disk cache off (no file needed)."""
+    module = ModuleType(name)
+    sys.modules[name] = module
+    exec(compile(source.replace("cache=True", "cache=False"), f"<{name}>", "exec"), module.__dict__)
+    return module
+
+
+def _skip_full_cache(module: ModuleType, directory: Path) -> None:
+    """Let numba's cache of ``module``'s kernels skip a save that finds the disk full.
+
+    numba raises the ``OSError`` of a failed cache save out of the compilation (it tolerates
+    only Windows' permission errors), which would end a build over a cache.
+    """
+    from numba.core.dispatcher import Dispatcher
+
+    from baseplace.files import is_disk_full, skip_cache_entry
+
+    for kernel in vars(module).values():
+        cache = getattr(kernel, "_cache", None) if isinstance(kernel, Dispatcher) else None
+        if cache is None or not hasattr(cache, "save_overload"):
+            continue
+
+        def save_overload(sig: Any, data: Any, save: Any = cache.save_overload) -> None:
+            try:
+                save(sig, data)
+            except OSError as exc:
+                if not is_disk_full(exc):
+                    raise
+                skip_cache_entry("a compiled kernel", directory, exc)
+
+        cache.save_overload = save_overload
 
 
 def arm_kernels(arm: Arm) -> ModuleType:
@@ -244,11 +283,20 @@ def arm_kernels(arm: Arm) -> ModuleType:
     key = hashlib.sha256((source + deps).encode()).hexdigest()[:20]
     if key in _loaded:
         return _loaded[key]
-    path = _kernel_file(private_dir(cache_dir()), key, source)
-    spec = importlib.util.spec_from_file_location(f"baseplace_chain_{key}", path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # numba's cache re-imports the module by name
-    spec.loader.exec_module(module)
+    from baseplace.files import OutputError, skip_cache_entry
+
+    name = f"baseplace_chain_{key}"
+    try:
+        path = _kernel_file(private_dir(cache_dir()), key, source)
+    except OutputError as exc:
+        skip_cache_entry("the kernels", cache_dir(), exc)
+        module = _from_memory(name, source)
+    else:
+        spec = importlib.util.spec_from_file_location(name, path)
+        assert spec is not None and spec.loader is not None
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = module  # numba's cache re-imports the module by name
+        spec.loader.exec_module(module)
+        _skip_full_cache(module, path.parent)
     _loaded[key] = module
     return module

@@ -146,11 +146,16 @@ def cached_terrain(
 
     terrain = terrain_from_points(pts, algorithm, resolution, voxel_size, graph_settings)
     from baseplace.errors import InputError
+    from baseplace.files import OutputError, is_disk_full, skip_cache_entry
 
+    # a cache that cannot be written (full, read-only, another user's) costs the next run the segmentation
     try:
         write_terrain(path, key, terrain)
-    except (OSError, InputError):
-        pass  # a cache that cannot be written (read-only, another user's) costs the next run the segmentation
+    except (OutputError, OSError) as exc:
+        if isinstance(exc, OutputError) or is_disk_full(exc):
+            skip_cache_entry("the segmentation", path.parent, exc)
+    except InputError:
+        pass
     return terrain
 
 
@@ -201,15 +206,13 @@ def _digest(key: str, arrays: dict[str, np.ndarray]) -> str:
 
 def write_terrain(path: Path, key: str, terrain: Terrain) -> None:
     """Store ``terrain`` under ``key`` at ``path`` (atomically), then drop the oldest entries."""
-    import h5py
-
-    from baseplace.files import atomic_write
+    from baseplace.files import atomic_hdf5
     from baseplace.h5files import short_text, write_header
     from baseplace.robots.codegen import private_dir
 
     private_dir(path.parent)
     arrays = _arrays(terrain)
-    with atomic_write(path, "terrain cache entry") as tmp, h5py.File(tmp, "w") as f:
+    with atomic_hdf5(path, "terrain cache entry") as f:
         write_header(f, FORMAT, FORMAT_VERSION)
         f.attrs["key"] = short_text(key)
         f.attrs["sha256"] = short_text(_digest(key, arrays))

@@ -11,6 +11,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from baseplace.viz.figures import save_figure
+
 REASONS = ("no_ik", "collision", "footprint", "exhausted")
 
 
@@ -30,5 +32,4 @@ def plot_failure_rates(rows: list[dict[str, Any]], path: Path) -> None:
     ax.legend(fontsize=8)
     ax.set_title("Failure reasons per strategy (as seed 000 Fig. 5)", fontsize=9)
     fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    save_figure(fig, path)

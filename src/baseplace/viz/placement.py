@@ -14,6 +14,7 @@ from matplotlib.patches import Polygon as PatchPolygon
 
 from baseplace.placement.osrm import OSRM
 from baseplace.placement.verify import Placement
+from baseplace.viz.figures import save_figure
 from baseplace.world.environment import GRASPED
 from baseplace.world.grasped_object import GraspedObject
 
@@ -96,5 +97,4 @@ def plot_placement(
     ax.set_ylabel("y [m]")
     ax.set_title(title, fontsize=9)
     fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    save_figure(fig, path)

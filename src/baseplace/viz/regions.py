@@ -12,6 +12,7 @@ import networkx as nx
 import numpy as np
 
 from baseplace.terrain.segmentation import Segmentation
+from baseplace.viz.figures import save_figure
 
 
 def region_colours(n: int) -> np.ndarray:
@@ -49,5 +50,4 @@ def plot_regions(seg: Segmentation, graph: nx.MultiGraph | None, path: Path, tit
     ax.set_title(title or f"{len(seg.regions)} planar regions (black: non-planar; green/red: traversable/not)",
                  fontsize=9)  # fmt: skip
     fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    save_figure(fig, path)

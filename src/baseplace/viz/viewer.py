@@ -25,17 +25,20 @@ the OSRM heat map, made in one call::
     obj["view_data"] = "demo_view.npz"
 
 The server binds to 127.0.0.1 unless told otherwise; it exposes the scene to whoever can reach
-the port.
+the port. A result is data: every string it carries (an error, a robot name, a file name) reaches
+the page as text (:func:`markdown_text`), never as HTML or a link.
 """
 
 from __future__ import annotations
 
 import contextlib
 import errno
+import html
 import io
 import itertools
 import math
 import socket
+import string
 import sys
 import time
 import zipfile
@@ -423,6 +426,26 @@ def _camera(server: viser.ViserServer, view: ResultView, inputs: SceneInputs, la
     server.initial_camera.position = np.asarray(look + direction * 1.05 * size, dtype=np.float64)
 
 
+def markdown_text(text: str) -> str:
+    """``text`` as markdown that shows it literally, on one line.
+
+    viser's markdown passes raw HTML through (``<iframe srcdoc=...>`` would run), and markdown
+    makes links, emphasis and code of punctuation: HTML's special characters become entities
+    (:func:`html.escape`), every other ASCII punctuation is backslash-escaped (CommonMark's
+    escapes: no link, image, autolink, emphasis, code or table), and line breaks and other
+    control characters become spaces.
+    """
+    out = []
+    for c in " ".join(text.split()):
+        if c in "&<>\"'":
+            out.append(html.escape(c))
+        elif c in string.punctuation:
+            out.append("\\" + c)
+        else:
+            out.append(c if c.isprintable() else " ")
+    return "".join(out)
+
+
 def _gui(server: viser.ViserServer, layers: dict[str, Any], view: ResultView, robot: str | None) -> None:
     """Checkboxes that show and hide each layer, and a line about the result."""
     groups = {
@@ -447,11 +470,14 @@ def _gui(server: viser.ViserServer, layers: dict[str, Any], view: ResultView, ro
                 h.visible = box.value
 
         box.on_update(toggle)
-    text = f"**{view.command}**: {view.summary}"
+    text = f"**{markdown_text(view.command)}**: {markdown_text(view.summary)}"
     T = layers.get("robot_pose")
     if T is not None:
         yaw = math.degrees(math.atan2(T[1, 0], T[0, 0]))
-        text += f"; **{robot}** at x = {T[0, 3]:.2f} m, y = {T[1, 3]:.2f} m, z = {T[2, 3]:.2f} m, yaw = {yaw:.0f}°"
+        text += (
+            f"; **{markdown_text(str(robot))}** at x = {T[0, 3]:.2f} m, y = {T[1, 3]:.2f} m, "
+            f"z = {T[2, 3]:.2f} m, yaw = {yaw:.0f}°"
+        )
     server.gui.add_markdown(text)
 
 
