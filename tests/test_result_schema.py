@@ -85,6 +85,7 @@ BAD_INPUTS = {
     "build-map": (["build-map", "--out", "map.txt"], "suffix"),
     "reach": (["reach", "--map", "nowhere.rmap", "--target", "1 0 1 0 0 0", "--base", "0 0 0"], "nowhere.rmap"),
     "place": (["place", "--cloud", "nowhere.ply", "--target", "1 0 1 0 0 0"], "does not exist"),
+    "explain": (["explain", "--map", "nowhere.rmap", "--target", "1 0 1 0 0 0", "--base", "0 0 0"], "nowhere.rmap"),
     "candidates": (["candidates", "--occupancy", "nowhere.yaml", "--object", "1 2 0.5"], "not found"),
     "navigate": (["navigate", "--cloud", "nowhere.ply", "--start", "0 0 0", "--goal", "1 0 0"], "does not exist"),
     "surface-map": (["surface-map", "--polygon", "0,0;1,0", "--height", "0.7", "--out", "s.smap"], "polygon"),

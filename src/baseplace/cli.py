@@ -22,14 +22,14 @@ from typing import Any, NoReturn
 from baseplace import __version__
 from baseplace.argtypes import count, finite_float, in_radians, nonneg_int
 from baseplace.errors import BaseplaceError
-from baseplace.jobs import candidates, demo, navigate, place, reach, surface, world
+from baseplace.jobs import candidates, demo, explain, navigate, place, reach, surface, world
 from baseplace.jobs.inputs import DEFAULT_MAP_SAMPLES, Progress, motion_and_robustness
 
 DEFAULT_CHECKPOINT_EVERY = 50_000_000  # baseplace.reachability.build's, without importing numba for --help
 KINDS = {"robots": "robots", "robot": "robot_check", "build-map": "build_map", "reach": "reach", "place": "place",
          "candidates": "candidates", "navigate": "navigate", "surface-map": "surface_map",
          "surface-sample": "surface_samples", "occupancy": "occupancy", "segment": "segment", "scene": "scene",
-         "demo": "demo"}  # fmt: skip
+         "demo": "demo", "explain": "explain"}  # fmt: skip
 """Command -> the kind of report it prints."""
 
 
@@ -127,6 +127,20 @@ def _place(a: argparse.Namespace, progress: Progress) -> Any:
     return place.place_job(job, progress)
 
 
+def _explain(a: argparse.Namespace, progress: Progress) -> Any:
+    from dataclasses import replace
+
+    from baseplace.placement.pipeline import PlaceSettings
+
+    settings = PlaceSettings(resolution=a.resolution)
+    if a.no_motion_check:
+        settings = replace(settings, motion=None)
+    job = explain.ExplainJob(
+        a.base, a.target, a.map, a.robot, a.arm, _cloud(a), a.object, a.floor, settings, a.seed
+    )
+    return explain.explain_job(job, progress)
+
+
 def _candidates(a: argparse.Namespace, progress: Progress) -> Any:
     job = candidates.CandidatesJob(a.object, a.occupancy, _cloud(a), a.robot_pose, a.method, a.robot, a.arm, a.map,
                                    a.standoff, a.seed, a.object_shape, None, None, a.png, a.mcap)  # fmt: skip
@@ -148,6 +162,7 @@ JOBS: dict[str, Callable[[argparse.Namespace, Progress], Any]] = {
     "build-map": _build_map,
     "reach": lambda a, _: reach.reach_job(reach.ReachJob(a.map, a.target, a.targets, a.base, a.bases, a.robot)),
     "place": _place,
+    "explain": _explain,
     "candidates": _candidates,
     "navigate": lambda a, _: navigate.navigate_job(navigate.NavigateJob(
         a.start, a.goal, _cloud(a), a.robot, a.planner, a.time_limit, a.resolution, a.seed, a.out, a.mcap)),
@@ -296,6 +311,31 @@ def build_parser() -> argparse.ArgumentParser:
                    help="add a floor plane at this height [m] (z up) under and around a cloud that shows none")  # fmt: skip
     _add_motion_and_robustness_arguments(p)
     _add_degrees_argument(p)
+
+    p = command("explain", "why one base pose can or cannot reach one target: map, IK, collisions, motion")
+    p.add_argument(
+        "--base", help='base pose "x y yaw" [m, rad]; on a scene it stands on the region under (x, y)'
+    )
+    p.add_argument("--target", help='TCP target "x y z roll pitch yaw" [m, rad]')
+    p.add_argument("--map", default=None, help="reachability map (default: the cached default map)")
+    p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
+    p.add_argument("--arm", default=None, help="arm (default: the robot's default arm)")
+    p.add_argument("--cloud", action="append", default=None,
+                   help="scene cloud, as place takes it (none: IK and self-collision only); repeat for several")  # fmt: skip
+    p.add_argument("--transform", action="append", default=None,
+                   help='world_T_sensor file, or the sensor-frame up vector "ux uy uz"; one per --cloud')  # fmt: skip
+    _add_bag_args(p, grid=False)
+    p.add_argument("--object", default="auto", help=OBJECT_HELP)
+    p.add_argument("--floor", type=finite_float, default=None,
+                   help="add a floor plane at this height [m] (z up) under and around a cloud that shows none")  # fmt: skip
+    p.add_argument("--resolution", type=finite_float, default=None,
+                   help="height-map cell [m] (default: from the cloud, as place)")  # fmt: skip
+    p.add_argument(
+        "--no-motion-check", action="store_true", help="skip the reaching-motion check, as place's"
+    )
+    p.add_argument(
+        "--seed", type=nonneg_int, default=0, help="random seed of IK and the motion planner (default 0)"
+    )
 
     p = command("candidates", "base placement candidates around an object")
     p.add_argument("--occupancy", default=None, help="occupancy grid: map_server YAML (or --bag --map-topic)")

@@ -13,6 +13,7 @@ from functools import cache
 from importlib import resources
 from typing import Any
 
+from baseplace.jobs.explain import ExplainJob, ExplainReport, explain_job
 from baseplace.jobs.report import SCHEMA_VERSION, NoResultError, PoseRecord, Report, RobotRef, wrap_angle
 
 
@@ -26,10 +27,13 @@ def result_schema() -> dict[str, Any]:
 
 __all__ = [
     "SCHEMA_VERSION",
+    "ExplainJob",
+    "ExplainReport",
     "NoResultError",
     "PoseRecord",
     "Report",
     "RobotRef",
+    "explain_job",
     "result_schema",
     "wrap_angle",
 ]

@@ -143,10 +143,26 @@ def _reach(o: dict[str, Any]) -> list[str]:
     return [f"{v:.6g}" for v in o["values"]]
 
 
+def _explain(o: dict[str, Any]) -> list[str]:
+    m, ik, b = o["map"], o["ik"], o["base"]
+    lines = [o["verdict"]["summary"],
+             f"  base x={b['x']:.3f} y={b['y']:.3f} z={b['z']:.3f} yaw={b['yaw']:.3f} region {b['region']}",
+             f"  map value {m['value']:.3f} (cell {m['cell_value']:.3f}, support test {m['support']})",
+             f"  IK {'solved' if ik['solved'] else 'failed'} from {ik['starts']} starts: "
+             f"{ik['position_error']:.4f} m, {ik['rotation_error']:.4f} rad from the target"]  # fmt: skip
+    lines += [f"  collision: link {c['link']} touched {c['touched']}" for c in o["collisions"]]
+    mo = o["motion"]
+    if mo["checked"]:
+        lines.append(f"  reaching motion {'found' if mo['found'] else 'not found'}")
+        lines += [f"  motion blocked: link {c['link']} touched {c['touched']}" for c in mo["contacts"]]
+    return lines
+
+
 RENDERERS: dict[str, Callable[[dict[str, Any]], list[str]]] = {
     "place": _place, "candidates": _candidates, "surface_map": _surface_map, "surface_samples": _surface_samples,
     "navigate": _navigate, "segment": _segment, "demo": _demo, "build_map": _build_map, "robots": _robots,
     "robot_check": _robot_check, "occupancy": _occupancy, "scene": _scene, "reach": _reach,
+    "explain": _explain,
 }  # fmt: skip
 
 

@@ -171,42 +171,9 @@ def place(
             f"(bounding radius {size:.2f} m)"
         )
     t2 = time.perf_counter()
-    obj, note = _grasped_object(robot, rmap.info.arm, points, T_targets, grasped, cache)
-    key = "floor" if s.strategy == "orm" else "regions"
-    if cache is None:
-        cache = SceneCache(points, terrain, s.resolution)  # this query only
-    obstacles = cache.shared(("obstacles", key, s.resolution, s.support_dist, outline.tobytes()),
-                             lambda: _obstacles(terrain, seg, s, outline))  # fmt: skip
-    transit = None
-    if obj is not None:  # the allowed contact: per grasped object, kept for the scene's next queries
-
-        def environments_for_object() -> tuple[Environment, Environment | None]:
-            # the surface under it: a slab fitted to the cloud where it is planar, else voxels
-            groups, object_voxels = contact_groups(terrain.voxels, obstacles, obj, cache.points)
-            hand = Environment(robot, groups, grasped=object_voxels, hand_arm=rmap.info.arm)
-            # on the way to the pre-grasp the hand may not touch it either
-            return hand, transit_environment(robot, groups, object_voxels)
-
-        env, transit = cache.per_object(
-            ("environment", robot, rmap.info.arm, key, s.resolution, s.support_dist, object_key(obj)),
-            environments_for_object,
-        )
-    elif environments is not None:
-        if key not in environments:
-            environments[key] = Environment(robot, obstacles)
-        env = environments[key]
-    else:
-        env = scene_environment(robot, cache, s)
-    arm = robot.arm(rmap.info.arm)
-    motion = None
-    if s.motion is not None:  # only the final approach may touch the grasped object, with the hand
-        if transit is None:  # no grasped object: nothing may be touched anywhere
-            motion = MotionChecker(robot, arm, env, None, s.motion)
-        else:
-            motion = MotionChecker(robot, arm, transit, env, s.motion)
-    verifier = Verifier(arm, DampedLeastSquaresIK(arm), env, T_targets,
-                        {r.id: terrain.polygons[r.id] for r in seg.regions}, outline,
-                        motion=motion)  # fmt: skip
+    checks = scene_checks(robot, rmap.info.arm, points, terrain, T_targets, s, grasped, cache, environments)
+    verifier, motion, obj, note = checks.verifier, checks.verifier.motion, checks.grasped, checks.grasped_note
+    env, arm = verifier.environment, verifier.arm
     rs = s.robustness
     estimator = RobustnessEstimator(arm, env, T_targets, rs) if rs.samples > 0 else None
     t3 = time.perf_counter()
@@ -246,6 +213,80 @@ def place(
     }
     return PlacementResult(placements, verifier.failures, tries, timings, terrain, osrm, verifier.contacts,
                            verifier.rejected, obj, note)  # fmt: skip
+
+
+@dataclass
+class SceneChecks:
+    """The checks :func:`place` runs on every candidate, assembled once for a scene and its targets.
+
+    Attributes:
+        verifier: footprint, IK, collision and (with ``settings.motion``) reaching-motion checks.
+        grasped: the object only the hand may touch, or None.
+        grasped_note: how it was found ("given", "auto: ..." or "none").
+    """
+
+    verifier: Verifier
+    grasped: GraspedObject | None
+    grasped_note: str
+
+
+def scene_checks(
+    robot: Robot,
+    arm_name: str,
+    points: ArrayLike,
+    terrain: Terrain,
+    targets: FloatArray,
+    settings: PlaceSettings,
+    grasped: GraspedObject | str | None,
+    cache: SceneCache | None = None,
+    environments: dict[str, Environment] | None = None,
+) -> SceneChecks:
+    """The verification of :func:`place` for one scene (cloud (N, 3), its terrain) and targets (K, 4, 4).
+
+    The one assembly of the collision model (support, obstacles, grasped object), IK and reaching
+    motion: :func:`place` checks its candidates with it, ``explain`` one given base pose.
+    ``grasped``, ``cache`` and ``environments`` as in :func:`place`.
+    """
+    s = settings
+    seg = terrain.segmentation
+    outline = footprint_outline(robot.spec.footprint_radius, robot.spec.footprint_polygon)
+    obj, note = _grasped_object(robot, arm_name, points, targets, grasped, cache)
+    key = "floor" if s.strategy == "orm" else "regions"
+    if cache is None:
+        cache = SceneCache(points, terrain, s.resolution)  # this query only
+    obstacles = cache.shared(("obstacles", key, s.resolution, s.support_dist, outline.tobytes()),
+                             lambda: _obstacles(terrain, seg, s, outline))  # fmt: skip
+    transit = None
+    if obj is not None:  # the allowed contact: per grasped object, kept for the scene's next queries
+
+        def environments_for_object() -> tuple[Environment, Environment | None]:
+            # the surface under it: a slab fitted to the cloud where it is planar, else voxels
+            groups, object_voxels = contact_groups(terrain.voxels, obstacles, obj, cache.points)
+            hand = Environment(robot, groups, grasped=object_voxels, hand_arm=arm_name)
+            # on the way to the pre-grasp the hand may not touch it either
+            return hand, transit_environment(robot, groups, object_voxels)
+
+        env, transit = cache.per_object(
+            ("environment", robot, arm_name, key, s.resolution, s.support_dist, object_key(obj)),
+            environments_for_object,
+        )
+    elif environments is not None:
+        if key not in environments:
+            environments[key] = Environment(robot, obstacles)
+        env = environments[key]
+    else:
+        env = scene_environment(robot, cache, s)
+    arm = robot.arm(arm_name)
+    motion = None
+    if s.motion is not None:  # only the final approach may touch the grasped object, with the hand
+        if transit is None:  # no grasped object: nothing may be touched anywhere
+            motion = MotionChecker(robot, arm, env, None, s.motion)
+        else:
+            motion = MotionChecker(robot, arm, transit, env, s.motion)
+    verifier = Verifier(arm, DampedLeastSquaresIK(arm), env, targets,
+                        {r.id: terrain.polygons[r.id] for r in seg.regions}, outline,
+                        motion=motion)  # fmt: skip
+    return SceneChecks(verifier, obj, note)
 
 
 def scene_environment(robot: Robot, cache: SceneCache, settings: PlaceSettings | None = None) -> Environment:

@@ -109,7 +109,7 @@ class Verifier:
     def check(self, candidate: Candidate, rng: np.random.Generator) -> Placement | None:
         """The verified placement, or None (the reason is counted in ``failures``)."""
         T = candidate.T_world_base
-        if candidate.region >= 0 and not footprint_inside(self.polygons[candidate.region], self.outline, T):
+        if not self.footprint_fits(candidate):
             self._reject(T, "footprint")
             return None
         T_base_world = invert_transforms(T)
@@ -121,8 +121,8 @@ class Verifier:
                 return None
             joints.append(q)
         for q in joints:
-            if self.environment.colliding_arm(self.arm, q, T):
-                contacts = self.environment.contacts_arm(self.arm, q, T)
+            contacts = self.collisions(q, T)
+            if contacts is not None:
                 self.contacts.update(contacts)
                 self._reject(T, "collision", contacts[0] if contacts else None)
                 return None
@@ -140,6 +140,21 @@ class Verifier:
                 joints[k] = motion.approach[-1]  # the motion may end in another checked grasp configuration
         return Placement(T.copy(), candidate.region, candidate.reachability, joints, self.arm.joint_names,
                          motions)  # fmt: skip
+
+    def footprint_fits(self, candidate: Candidate) -> bool:
+        """Check (1): the footprint lies inside its region's polygon (always True off the regions)."""
+        if candidate.region < 0:
+            return True
+        return bool(footprint_inside(self.polygons[candidate.region], self.outline, candidate.T_world_base))
+
+    def collisions(self, q: FloatArray, T_world_base: FloatArray) -> list[tuple[str, str]] | None:
+        """Check (3) of arm joints (n,) at a base pose (4, 4): None when free, else every contact.
+
+        A contact is (robot link, what it touched), as :attr:`contacts` counts them.
+        """
+        if not self.environment.colliding_arm(self.arm, q, T_world_base):
+            return None
+        return self.environment.contacts_arm(self.arm, q, T_world_base)
 
     def _reject(self, T: FloatArray, reason: str, contact: tuple[str, str] | None = None) -> None:
         self.failures[reason] += 1

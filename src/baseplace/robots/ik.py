@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError
 from baseplace.geometry.poses import FloatArray, invert_transforms
-from baseplace.robots.fk import NO_FRAMES, chain_frames
+from baseplace.robots.fk import NO_FRAMES, chain_frames, forward_kinematics
 from baseplace.robots.model import Arm
 
 
@@ -98,6 +98,7 @@ def _solve_one(T_goal, seeds, placements, axes, kinds, T_last, lower, upper, con
     E = np.empty((3, 3))
     w = np.empty(3)
     q = np.empty(n)
+    best = np.inf  # the least err_p + err_r seen: its configuration is q_out if no attempt converges
     for attempt in range(seeds.shape[0]):
         for j in range(n):
             q[j] = seeds[attempt, j]
@@ -116,6 +117,10 @@ def _solve_one(T_goal, seeds, placements, axes, kinds, T_last, lower, upper, con
                 for j in range(n):
                     q_out[j] = q[j]
                 return attempt
+            if err_p + err_r < best:
+                best = err_p + err_r
+                for j in range(n):
+                    q_out[j] = q[j]
             if it % 10 == 9:  # stalled (usually against a joint limit): restart elsewhere
                 if err_p + err_r > 0.95 * checkpoint:
                     break
@@ -142,6 +147,26 @@ def _solve_batch(T_goals, seeds, placements, axes, kinds, T_last, lower, upper, 
     for i in nb.prange(T_goals.shape[0]):
         attempts[i] = _solve_one(T_goals[i], seeds[i], placements, axes, kinds, T_last, lower,
                                  upper, continuous, max_iter, tol_p, tol_r, damping, q_out[i])  # fmt: skip
+
+
+@dataclass(frozen=True)
+class IKAttempt:
+    """What one IK solve found, converged or not (for a "why not" answer).
+
+    Attributes:
+        q: (n,) the solution when ``solved``, else the configuration of the least residual seen
+            (position error [m] + rotation error [rad]) over all starts and iterations.
+        solved: whether some start converged within the tolerances.
+        position_error: |p_target - p_tcp(q)| [m], TCP frame origin, arm base frame.
+        rotation_error: angle of R_target R_tcp(q)^T [rad].
+        starts: starts the solver had (the seed or mid-range, then the random restarts).
+    """
+
+    q: FloatArray
+    solved: bool
+    position_error: float
+    rotation_error: float
+    starts: int
 
 
 @dataclass(frozen=True)
@@ -192,6 +217,22 @@ class DampedLeastSquaresIK:
         T = _check_poses(T_base_tcp)
         q, attempts = self._run(T, self._seeds(rng, 1, q_seed))
         return q[0] if attempts[0] >= 0 else None
+
+    def attempt(
+        self, T_base_tcp: ArrayLike, rng: np.random.Generator, q_seed: ArrayLike | None = None
+    ) -> IKAttempt:
+        """:meth:`solve` with its residual: the same starts from the same ``rng`` state, the same answer.
+
+        When no start converges, ``q`` is the configuration that came closest and the errors say
+        how close (pose ``T_base_tcp`` (4, 4), errors measured by :func:`forward_kinematics`).
+        """
+        T = _check_poses(T_base_tcp)
+        q, attempts = self._run(T, self._seeds(rng, 1, q_seed))
+        reached = forward_kinematics(self.arm, q[0])
+        position_error = float(np.linalg.norm(T[0, :3, 3] - reached[:3, 3]))
+        cos = 0.5 * (float(np.trace(T[0, :3, :3] @ reached[:3, :3].T)) - 1.0)
+        return IKAttempt(q[0], bool(attempts[0] >= 0), position_error, math.acos(min(1.0, max(-1.0, cos))),
+                         1 + self.restarts)  # fmt: skip
 
     def solve_batch(
         self, T_base_tcp: ArrayLike, rng: np.random.Generator, q_seed: ArrayLike | None = None
