@@ -122,7 +122,14 @@ def _robot_check(o: dict[str, Any]) -> list[str]:
     if pairs:
         lines += [f"  {a} - {b}" for a, b in col["pair_names"]]
     lines.append(f"wrote {o['outputs']['png']}")
-    return lines + ([f"warning: {w}" for w in o["warnings"]] or ["no warnings"])
+    lines += [f"warning: {w}" for w in o["warnings"]] or ["no warnings"]
+    if col.get("srdf_fix"):
+        lines.append(
+            "paste into the SRDF, inside <robot> (the touching pairs, then the other adjacent links, "
+            "as MoveIt's setup assistant disables them):"
+        )
+        lines += [f"  {line}" for line in col["srdf_fix"]]
+    return lines
 
 
 def _occupancy(o: dict[str, Any]) -> list[str]:
