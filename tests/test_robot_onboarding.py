@@ -481,3 +481,56 @@ def test_the_docs_pinocchio_check_handles_continuous_joints(tmp_path):
         expected = T_world_base @ forward_kinematics(arm, q[None])[0]
         assert np.abs(T_docs[:3, 3] - expected[:3, 3]).max() < 1e-3
         assert np.abs(T_docs[:3, :3] - expected[:3, :3]).max() < 1e-3
+
+
+LOW_RECALL, LOW_PRECISION, LOW_ROBUSTNESS = 0.95, 0.85, 0.8  # as docs/maps.md and docs/placement.md say
+
+
+def _measured(stdout: str) -> tuple[float, float]:
+    m = re.search(r"measured: recall ([0-9.]+)% on \d+ FK poses, precision ([0-9.]+)%", stdout)
+    assert m, stdout
+    return float(m.group(1)) / 100, float(m.group(2)) / 100
+
+
+def test_build_map_prints_a_hint_below_the_documented_recall_and_precision(tmp_path):
+    """TIAGo, 2e6 samples in 0.1 m voxels: with the support test's threshold 0.8 the recall is low
+    (88 %); at threshold 0.05 the recall is back above 95 % and the precision low (84 %)."""
+    hints = []
+    for threshold in ("0.8", "0.05"):
+        proc = run("build-map", "--samples", "2e6", "--voxel-size", "0.1", "--support-threshold", threshold,
+                   "--out", str(tmp_path / f"t{threshold}.rmap"))  # fmt: skip
+        assert proc.returncode == 0, proc.stderr
+        recall, precision = _measured(proc.stdout)
+        recall_hint = [line for line in proc.stdout.splitlines() if line.startswith("hint: recall")]
+        precision_hint = [line for line in proc.stdout.splitlines() if line.startswith("hint: precision")]
+        assert len(recall_hint) == (recall < LOW_RECALL) and len(precision_hint) == (
+            precision < LOW_PRECISION
+        )
+        for line in recall_hint:
+            assert f"recall {recall:.1%} is low (below 95%)" in line and line.endswith("(--samples 2e8)")
+        for line in precision_hint:
+            assert f"precision {precision:.1%} is low (below 85%)" in line and "finer cells" in line
+        hints += recall_hint + precision_hint
+    assert [h.split()[1] for h in hints] == ["recall", "precision"], hints  # one of each fired
+
+
+def test_place_prints_a_hint_below_the_documented_robustness(tmp_path):
+    cloud, rmap = tmp_path / "flat.ply", tmp_path / "tiago.rmap"
+    assert run("scene", "generate", "--planes", "0", "--no-box", "--extent", "6", "--seed", "2",
+               "--out", str(cloud)).returncode == 0  # fmt: skip
+    assert run("build-map", "--samples", "5e6", "--out", str(rmap)).returncode == 0
+    args = ["place", "--cloud", str(cloud), "--target", "1.0 0.5 0.75 0 1.5708 0", "--map", str(rmap),
+            "--placements", "2", "--tries", "200", "--no-motion-check"]  # fmt: skip
+    rates = {}
+    for extra in ([], ["--rank-by-robustness", "--min-robustness", str(LOW_ROBUSTNESS)]):
+        proc = run(*args, *extra)
+        assert proc.returncode == 0, proc.stderr
+        lines = proc.stdout.splitlines()
+        shown = [float(r) for r in re.findall(r"robustness ([0-9.]+) \[", proc.stdout)]
+        hint = [line for line in lines if line.startswith("hint:")]
+        assert len(shown) == 2 and len(hint) == (min(shown) < LOW_ROBUSTNESS), proc.stdout
+        if hint:
+            assert hint[0].startswith(f"hint: robustness {min(shown):.2f} is low (below 0.8)")
+            assert f"fails from {1 - min(shown):.0%} of the drawn base stops" in hint[0]
+        rates[bool(extra)] = min(shown)
+    assert rates[False] < LOW_ROBUSTNESS <= rates[True]  # the hint fired, and --min-robustness silenced it
