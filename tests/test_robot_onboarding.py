@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import shutil
 from pathlib import Path
 
@@ -17,6 +18,7 @@ import pinocchio as pin
 import pytest
 
 from baseplace.errors import InputError
+from baseplace.jobs.text import report_text
 from baseplace.robots.check import check_robot
 from baseplace.robots.codegen import arm_kernels
 from baseplace.robots.fk import forward_kinematics
@@ -29,6 +31,38 @@ EXAMPLES = ROOT / "examples"
 ERD = example_robot_data_dir() / "example-robot-data" / "robots"
 UR5_URDF = ERD / "ur_description" / "urdf" / "ur5_robot.urdf"
 PANDA_URDF = ERD / "panda_description" / "urdf" / "panda.urdf"
+KINOVA_URDF = ERD / "kinova_description" / "robots" / "kinova.urdf"
+KINOVA_SRDF = ERD / "kinova_description" / "srdf" / "kinova.srdf"  # disables no pair
+# the SRDF's "arm_up" pose, joint 3 at +pi/2 (its -pi/2 lies outside [0.33, 5.95])
+KINOVA_REFERENCE = {"j2s6s200_joint_1": 1.5707, "j2s6s200_joint_2": 2.618, "j2s6s200_joint_3": 1.5707,
+                    "j2s6s200_joint_4": 3.1415, "j2s6s200_joint_5": 2.618, "j2s6s200_joint_6": 0.0}  # fmt: skip
+
+
+def _kinova_file(folder: Path, srdf: Path = KINOVA_SRDF, name: str = "kinova_base") -> Path:
+    """example-robot-data's Kinova Jaco (continuous joints 1, 4 and 6) on a mobile base."""
+    path = folder / f"{name}.toml"
+    path.write_text(
+        f'name = "{name}"\n'
+        'urdf = "package://example-robot-data/robots/kinova_description/robots/kinova.urdf"\n'
+        f"srdf = {json.dumps(str(srdf))}\n"
+        'base_frame = "base_footprint"\nfootprint = { radius = 0.3 }\n'
+        "[mount]\nxyz = [0.0, 0.0, 0.4]\nrpy = [0.0, 0.0, 0.0]\n"
+        f"[arms.arm]\njoints = {json.dumps(list(KINOVA_REFERENCE))}\n"
+        'tcp_frame = "j2s6s200_end_effector"\napproach = "x"\n'
+        "[reference]\n" + "".join(f"{j} = {v}\n" for j, v in KINOVA_REFERENCE.items())
+    )
+    return path
+
+
+def _pinocchio_q(model: pin.Model, joints: dict[str, float]) -> np.ndarray:
+    """pinocchio's configuration for joint angles: (cos, sin) in the two slots of a continuous joint."""
+    q = pin.neutral(model)
+    for name, value in joints.items():
+        joint = model.joints[model.getJointId(name)]
+        q[joint.idx_q : joint.idx_q + joint.nq] = (
+            [math.cos(value), math.sin(value)] if joint.nq == 2 else [value]
+        )
+    return q
 
 
 def _pinocchio_mounted_fk(urdf: Path, root: str, xyz, rpy, tcp: str, joint_names, Q) -> np.ndarray:
@@ -362,3 +396,141 @@ def test_approach_check_when_the_tcp_sits_on_the_wrist(tmp_path, approach, flagg
     assert bool(warnings) == flagged
     if flagged:
         assert 'set approach = "y"' in warnings[0]
+
+
+def _pinocchio_touching_links(urdf: Path, joints: dict[str, float]) -> set[frozenset[str]]:
+    """The link pairs coal finds touching with every geometry pair enabled, on the unmounted URDF.
+
+    Pairs of geometry on one joint (fixed joints between) are left out: no configuration moves
+    them apart, so no self-collision checker tests them.
+    """
+    model = pin.buildModelFromUrdf(str(urdf))
+    geom = pin.buildGeomFromUrdf(
+        model, str(urdf), pin.COLLISION, package_dirs=[str(example_robot_data_dir())]
+    )
+    geom.addAllCollisionPairs()
+    geom_data = pin.GeometryData(geom)
+    pin.computeCollisions(model, model.createData(), geom, geom_data, _pinocchio_q(model, joints), False)
+    objects, frames = geom.geometryObjects, model.frames
+    return {
+        frozenset((frames[objects[p.first].parentFrame].name, frames[objects[p.second].parentFrame].name))
+        for p, res in zip(geom.collisionPairs, geom_data.collisionResults, strict=True)
+        if res.isCollision() and objects[p.first].parentJoint != objects[p.second].parentJoint
+    }
+
+
+def test_robot_check_names_the_pairs_in_self_collision_and_prints_the_srdf_lines_that_fix_it(tmp_path):
+    """Kinova's SRDF disables nothing: its adjacent links touch at the reference configuration."""
+    robot_file = _kinova_file(tmp_path)
+    expected = _pinocchio_touching_links(KINOVA_URDF, KINOVA_REFERENCE)
+    assert len(expected) >= 2, expected
+    proc = run("robot", "check", str(robot_file), "--png", str(tmp_path / "k.png"), "--json")
+    assert proc.returncode == 0, proc.stderr
+    report = json.loads(proc.stdout)
+    [warning] = [w for w in report["warnings"] if "self-collision" in w]
+    named = re.search(r"in self-collision: (.*?); disable these pairs in the robot's SRDF", warning)
+    assert named, warning
+    pairs = [re.fullmatch(r"(\S+) - (\S+) \(([0-9.]+) mm deep\)", p) for p in named.group(1).split(", ")]
+    assert all(pairs) and {frozenset(m.group(1, 2)) for m in pairs if m} == expected, warning
+    assert "[reference]" in warning
+    touching = report["collision"]["colliding_at_reference"]
+    assert {frozenset((c["link1"], c["link2"])) for c in touching} == expected
+    assert all(0 < c["depth_m"] < 0.01 and c["adjacent"] for c in touching)
+    fix = report["collision"]["srdf_fix"]
+    for pair in expected:  # each touching pair, ready to paste, first
+        a, b = sorted(pair)
+        assert any(f'"{a}"' in line and f'"{b}"' in line and 'reason="Adjacent"' in line
+                   for line in fix[: len(expected)]), fix  # fmt: skip
+    # the text output (what the command prints without --json) has the same lines
+    text = report_text(report).splitlines()
+    assert f"warning: {warning}" in text and [f"  {line}" for line in fix] == text[-len(fix) :]
+    # pasted into a copy of the SRDF, they fix it
+    srdf = tmp_path / "kinova_fixed.srdf"
+    srdf.write_text(KINOVA_SRDF.read_text().replace("</robot>", "\n".join(fix) + "\n</robot>"))
+    fixed = check_robot(Robot(_kinova_file(tmp_path, srdf, "kinova_fixed")))
+    assert not [w for w in fixed.warnings if "self-collision" in w], fixed.warnings
+    assert fixed.collision["pairs"] == report["collision"]["pairs"] - len(fix)
+    assert fixed.collision["colliding_at_reference"] == [] and fixed.collision["srdf_fix"] == []
+
+
+def _docs_python_block(containing: str) -> str:
+    blocks = re.findall(r"```python\n(.*?)```", (ROOT / "docs" / "robots.md").read_text(), re.S)
+    [block] = [b for b in blocks if containing in b]
+    return block
+
+
+def test_the_docs_pinocchio_check_handles_continuous_joints(tmp_path):
+    """docs/robots.md's tcp_in_world on a Kinova against baseplace's FK (its own chain kernel)."""
+    namespace: dict[str, object] = {}
+    exec(_docs_python_block("def tcp_in_world"), namespace)
+    tcp_in_world = namespace["tcp_in_world"]
+    robot_file = _kinova_file(tmp_path)
+    arm = Robot(robot_file).arm()
+    assert arm.continuous.sum() == 3
+    rng = np.random.default_rng(11)
+    Q = arm.sample(rng, 40)
+    assert np.abs(Q[:, arm.continuous]).max() > 2.0  # angles far from 0, where one slot is far off
+    for q, (x, y, yaw) in zip(Q, rng.uniform([-3, -3, -math.pi], [3, 3, math.pi], (len(Q), 3)), strict=True):
+        T_world_base = np.array([[math.cos(yaw), -math.sin(yaw), 0, x], [math.sin(yaw), math.cos(yaw), 0, y],
+                                 [0, 0, 1, 0], [0, 0, 0, 1]])  # fmt: skip
+        placement = {  # as `place --json` writes one: joints to 6 decimals
+            "base_pose": np.round(T_world_base, 6).tolist(),
+            "joints": [dict(zip(arm.joint_names, np.round(q, 6).tolist(), strict=True))],
+        }
+        T_docs = tcp_in_world(str(robot_file), placement, arm.tcp_frame)  # type: ignore[operator]
+        expected = T_world_base @ forward_kinematics(arm, q[None])[0]
+        assert np.abs(T_docs[:3, 3] - expected[:3, 3]).max() < 1e-3
+        assert np.abs(T_docs[:3, :3] - expected[:3, :3]).max() < 1e-3
+
+
+LOW_RECALL, LOW_PRECISION, LOW_ROBUSTNESS = 0.95, 0.85, 0.8  # as docs/maps.md and docs/placement.md say
+
+
+def _measured(stdout: str) -> tuple[float, float]:
+    m = re.search(r"measured: recall ([0-9.]+)% on \d+ FK poses, precision ([0-9.]+)%", stdout)
+    assert m, stdout
+    return float(m.group(1)) / 100, float(m.group(2)) / 100
+
+
+def test_build_map_prints_a_hint_below_the_documented_recall_and_precision(tmp_path):
+    """TIAGo, 2e6 samples in 0.1 m voxels: with the support test's threshold 0.8 the recall is low
+    (88 %); at threshold 0.05 the recall is back above 95 % and the precision low (84 %)."""
+    hints = []
+    for threshold in ("0.8", "0.05"):
+        proc = run("build-map", "--samples", "2e6", "--voxel-size", "0.1", "--support-threshold", threshold,
+                   "--out", str(tmp_path / f"t{threshold}.rmap"))  # fmt: skip
+        assert proc.returncode == 0, proc.stderr
+        recall, precision = _measured(proc.stdout)
+        recall_hint = [line for line in proc.stdout.splitlines() if line.startswith("hint: recall")]
+        precision_hint = [line for line in proc.stdout.splitlines() if line.startswith("hint: precision")]
+        assert len(recall_hint) == (recall < LOW_RECALL) and len(precision_hint) == (
+            precision < LOW_PRECISION
+        )
+        for line in recall_hint:
+            assert f"recall {recall:.1%} is low (below 95%)" in line and line.endswith("(--samples 2e8)")
+        for line in precision_hint:
+            assert f"precision {precision:.1%} is low (below 85%)" in line and "finer cells" in line
+        hints += recall_hint + precision_hint
+    assert [h.split()[1] for h in hints] == ["recall", "precision"], hints  # one of each fired
+
+
+def test_place_prints_a_hint_below_the_documented_robustness(tmp_path):
+    cloud, rmap = tmp_path / "flat.ply", tmp_path / "tiago.rmap"
+    assert run("scene", "generate", "--planes", "0", "--no-box", "--extent", "6", "--seed", "2",
+               "--out", str(cloud)).returncode == 0  # fmt: skip
+    assert run("build-map", "--samples", "5e6", "--out", str(rmap)).returncode == 0
+    args = ["place", "--cloud", str(cloud), "--target", "1.0 0.5 0.75 0 1.5708 0", "--map", str(rmap),
+            "--placements", "2", "--tries", "200", "--no-motion-check"]  # fmt: skip
+    rates = {}
+    for extra in ([], ["--rank-by-robustness", "--min-robustness", str(LOW_ROBUSTNESS)]):
+        proc = run(*args, *extra)
+        assert proc.returncode == 0, proc.stderr
+        lines = proc.stdout.splitlines()
+        shown = [float(r) for r in re.findall(r"robustness ([0-9.]+) \[", proc.stdout)]
+        hint = [line for line in lines if line.startswith("hint:")]
+        assert len(shown) == 2 and len(hint) == (min(shown) < LOW_ROBUSTNESS), proc.stdout
+        if hint:
+            assert hint[0].startswith(f"hint: robustness {min(shown):.2f} is low (below 0.8)")
+            assert f"fails from {1 - min(shown):.0%} of the drawn base stops" in hint[0]
+        rates[bool(extra)] = min(shown)
+    assert rates[False] < LOW_ROBUSTNESS <= rates[True]  # the hint fired, and --min-robustness silenced it

@@ -5,6 +5,17 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+from baseplace.jobs.inputs import DEFAULT_MAP_SAMPLES
+
+# Below these a one-line hint follows the figure (the text form only): docs/maps.md and
+# docs/placement.md say what the values mean and why these thresholds.
+LOW_RECALL = 0.95
+"""A map's recall below which it misses enough reachable poses that more samples are needed."""
+LOW_PRECISION = 0.85
+"""A map's precision below which many of the bases it proposes fail IK (slower queries)."""
+LOW_ROBUSTNESS = 0.8
+"""A placement's robustness below which one stop in five or more misses the grasp."""
+
 
 def _robust(row: dict[str, Any]) -> str:
     r = row.get("robustness")
@@ -15,12 +26,25 @@ def _wrote(obj: dict[str, Any], *keys: str) -> list[str]:
     return [f"wrote {obj['outputs'][k]}" for k in keys if k in obj["outputs"]]
 
 
+def _robustness_hint(rows: list[dict[str, Any]]) -> list[str]:
+    low = [
+        r["robustness"]["rate"]
+        for r in rows
+        if r.get("robustness") and r["robustness"]["rate"] < LOW_ROBUSTNESS
+    ]
+    if not low:
+        return []
+    return [f"hint: robustness {min(low):.2f} is low (below {LOW_ROBUSTNESS}): the grasp fails from "
+            f"{1 - min(low):.0%} of the drawn base stops; --rank-by-robustness puts robust placements first, "
+            f"--min-robustness {LOW_ROBUSTNESS} rejects the rest (docs/placement.md)"]  # fmt: skip
+
+
 def _place(o: dict[str, Any]) -> list[str]:
     lines = [f"{len(o['placements'])} verified placement(s) in {o['tries']} tries ({o['strategy']}, "
              f"{o['timings_ms']['total']:.0f} ms)"]  # fmt: skip
     lines += [f"  x={r['x']:.3f} y={r['y']:.3f} z={r['z']:.3f} yaw={r['yaw']:.3f} region {r['region']} "
               f"reachability {r['reachability']:.3f}{_robust(r)}" for r in o["placements"]]  # fmt: skip
-    return lines + _wrote(o, "png", "mcap")
+    return lines + _robustness_hint(o["placements"]) + _wrote(o, "png", "mcap")
 
 
 def _candidates(o: dict[str, Any]) -> list[str]:
@@ -28,7 +52,7 @@ def _candidates(o: dict[str, Any]) -> list[str]:
     lines = [f"{len(o['candidates'])} verified {o['method']} candidate(s), best first ({rank}):"]
     lines += [f"  x={r['x']:.3f} y={r['y']:.3f} yaw={r['yaw']:.3f} cost {r['motion_cost']:.2f} m{_robust(r)}"
               for r in o["candidates"]]  # fmt: skip
-    return lines + _wrote(o, "png", "mcap")
+    return lines + _robustness_hint(o["candidates"]) + _wrote(o, "png", "mcap")
 
 
 def _surface_map(o: dict[str, Any]) -> list[str]:
@@ -81,6 +105,15 @@ def _build_map(o: dict[str, Any]) -> list[str]:
         q = o["quality"]
         lines.append(f"measured: recall {q['recall']:.2%} on {q['n_recall']} FK poses, precision "
                      f"{q['precision']:.1%} against IK on {q['n_precision']} poses (docs/maps.md)")  # fmt: skip
+        if q["recall"] < LOW_RECALL:
+            more = f"{max(4 * o['samples'], DEFAULT_MAP_SAMPLES):.0e}".replace("e+0", "e").replace("e+", "e")
+            lines.append(f"hint: recall {q['recall']:.1%} is low (below {LOW_RECALL:.0%}): the map misses "
+                         f"reachable poses; build with more samples (--samples {more})")  # fmt: skip
+        if q["precision"] < LOW_PRECISION:
+            lines.append(f"hint: precision {q['precision']:.1%} is low (below {LOW_PRECISION:.0%}): many poses "
+                         "it calls reachable fail IK (more tries per placement); build with the support test's "
+                         "threshold 0.8 or finer cells (--voxel-size 0.05, --orientation-resolution 0.4) and "
+                         "more samples")  # fmt: skip
     return lines
 
 
@@ -122,7 +155,14 @@ def _robot_check(o: dict[str, Any]) -> list[str]:
     if pairs:
         lines += [f"  {a} - {b}" for a, b in col["pair_names"]]
     lines.append(f"wrote {o['outputs']['png']}")
-    return lines + ([f"warning: {w}" for w in o["warnings"]] or ["no warnings"])
+    lines += [f"warning: {w}" for w in o["warnings"]] or ["no warnings"]
+    if col.get("srdf_fix"):
+        lines.append(
+            "paste into the SRDF, inside <robot> (the touching pairs, then the other adjacent links, "
+            "as MoveIt's setup assistant disables them):"
+        )
+        lines += [f"  {line}" for line in col["srdf_fix"]]
+    return lines
 
 
 def _occupancy(o: dict[str, Any]) -> list[str]:

@@ -13,7 +13,7 @@ mistakes that otherwise show up only as poor or empty results:
 * a footprint that does not contain the base's collision meshes, or a base frame above the floor
   (geometry of the base below z = 0);
 * visual meshes that cannot be found, and a reference configuration outside the joint limits or
-  in self-collision.
+  in self-collision (naming the touching link pairs, with the SRDF lines that disable them).
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 from xml.etree import ElementTree
+from xml.sax.saxutils import quoteattr
 
 import coal
 import numpy as np
@@ -31,7 +32,7 @@ import shapely
 import trimesh
 
 from baseplace.geometry.poses import FloatArray
-from baseplace.robots.collision import SelfCollision
+from baseplace.robots.collision import Contact, SelfCollision
 from baseplace.robots.model import PRISMATIC, Robot
 from baseplace.robots.spec import APPROACH_AXES, RobotSpec
 
@@ -217,6 +218,48 @@ def _footprint_overhang(spec: RobotSpec, points: FloatArray) -> tuple[float, int
     return float(d[i]), i
 
 
+def disable_collisions_lines(contacts: list[Contact], active: list[tuple[str, str, bool]]) -> list[str]:
+    """SRDF lines, ready to paste, that disable the link pairs of ``contacts`` (empty: none touch).
+
+    The pairs touching at the reference configuration come first ("Adjacent" where their links are
+    joined by one joint, else "Default", MoveIt's reason for pairs in collision at the default
+    pose), then the other ``active`` (link, link, adjacent) pairs of adjacent links, which MoveIt's
+    setup assistant disables too.
+    """
+    if not contacts:
+        return []
+    touching = [(c.link1, c.link2, "Adjacent" if c.adjacent else "Default") for c in contacts]
+    lines, done = [], set()
+    for a, b, reason in touching + [(a, b, "Adjacent") for a, b, adjacent in active if adjacent]:
+        if frozenset((a, b)) not in done:
+            done.add(frozenset((a, b)))
+            lines.append(
+                f"<disable_collisions link1={quoteattr(a)} link2={quoteattr(b)} reason={quoteattr(reason)}/>"
+            )
+    return lines
+
+
+def self_collision_warning(contacts: list[Contact], base_body: str | None = None) -> str:
+    """The warning naming each link pair that touches at the reference configuration, and the fix.
+
+    ``base_body``: the link a mount generates (the base's collision body), whose height is a fix too.
+    Only a robot with an SRDF gets here: without one, pairs touching at the reference are pruned.
+    """
+    deepest: dict[tuple[str, str], float | None] = {}
+    for c in contacts:
+        key = (c.link1, c.link2)
+        deepest[key] = c.depth if deepest.get(key) is None else max(c.depth or 0.0, deepest[key] or 0.0)
+    named = ", ".join(
+        f"{a} - {b}" + ("" if d is None else f" ({d * 1e3:.2f} mm deep)") for (a, b), d in deepest.items()
+    )
+    touches_base = base_body is not None and any(base_body in (c.link1, c.link2) for c in contacts)
+    return (
+        f"the reference configuration is in self-collision: {named}; disable these pairs in the robot's "
+        "SRDF (the <disable_collisions> lines below, collision.srdf_fix in --json) or set another "
+        "reference configuration under [reference]" + ("; or lower mount.base_height" if touches_base else "")
+    )
+
+
 def check_robot(robot: Robot) -> RobotReport:
     """Describe ``robot`` and warn where its robot file looks wrong (see the module docstring)."""
     spec = robot.spec
@@ -307,8 +350,10 @@ def check_robot(robot: Robot) -> RobotReport:
                 f"surface-sample's collision checks) is outside the joint limits: {'; '.join(outside)}; "
                 "set these joints under [reference]"
             )
-    if selfcol.colliding(robot.q_reference):
-        warnings.append("the reference configuration is in self-collision; check the SRDF or the mount")
+    contacts = selfcol.contacts(robot.q_reference)
+    srdf_fix = disable_collisions_lines(contacts, selfcol.active_link_pairs())
+    if contacts:
+        warnings.append(self_collision_warning(contacts, generated))
 
     objects = geom.geometryObjects
     pairs = [[objects[p.first].name, objects[p.second].name] for p in geom.collisionPairs]
@@ -332,6 +377,18 @@ def check_robot(robot: Robot) -> RobotReport:
             "pairs": len(pairs),
             "srdf": None if spec.srdf is None else str(spec.srdf),
             "pair_names": pairs,
+            "colliding_at_reference": [
+                {
+                    "link1": c.link1,
+                    "link2": c.link2,
+                    "geometry1": c.geometry1,
+                    "geometry2": c.geometry2,
+                    "adjacent": c.adjacent,
+                    "depth_m": None if c.depth is None else round(c.depth, 6),
+                }
+                for c in contacts
+            ],
+            "srdf_fix": srdf_fix,
         },
         package_dirs=[str(d) for d in robot.urdf.package_dirs],
         warnings=warnings,

@@ -9,6 +9,7 @@ configuration (parts that are in contact by design).
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from pathlib import Path
 from xml.etree import ElementTree
 
@@ -91,6 +92,32 @@ def _remove_srdf_pairs(model: pin.Model, geom: pin.GeometryModel, srdf: Path) ->
         ) from None
 
 
+def _adjacent(parents: list[int], a: pin.GeometryObject, b: pin.GeometryObject) -> bool:
+    """True where one geometry's joint is the other's parent joint (MoveIt's "Adjacent" links)."""
+    return bool(parents[a.parentJoint] == b.parentJoint or parents[b.parentJoint] == a.parentJoint)
+
+
+@dataclass(frozen=True)
+class Contact:
+    """Two collision geometries of one robot that touch.
+
+    Attributes:
+        geometry1, geometry2: pinocchio's geometry names (link name and index).
+        link1, link2: the URDF links they belong to (the names an SRDF's ``disable_collisions`` uses).
+        adjacent: True where one link's joint is the other's parent joint (fixed joints merged), the
+            pairs MoveIt's setup assistant disables as "Adjacent".
+        depth: the penetration depth [m] coal reports for its deepest contact (for two meshes, that
+            of the intersecting triangles); None where coal gives no contact point.
+    """
+
+    geometry1: str
+    geometry2: str
+    link1: str
+    link2: str
+    adjacent: bool
+    depth: float | None
+
+
 class SelfCollision:
     """Self-collision checker for one robot.
 
@@ -166,6 +193,41 @@ class SelfCollision:
             )
             if geom_data.activeCollisionPairs[k] and res.isCollision()
         ]
+
+    def contacts(self, q_full: ArrayLike) -> list[Contact]:
+        """Every active pair that touches at the full pinocchio configuration, with its depth.
+
+        Slower than :meth:`colliding` (coal computes contact points): meant for reports.
+        """
+        q = np.asarray(q_full, dtype=float)
+        geom_data = pin.GeometryData(self.geom)
+        for request in geom_data.collisionRequests:
+            request.enable_contact = True
+        pin.computeCollisions(self.model, self.data, self.geom, geom_data, q, False)
+        objects, frames, parents = self.geom.geometryObjects, self.model.frames, self.model.parents
+        out = []
+        for pair, res in zip(self.geom.collisionPairs, geom_data.collisionResults, strict=True):
+            if not res.isCollision():
+                continue
+            a, b = objects[pair.first], objects[pair.second]
+            depths = [abs(float(c.penetration_depth)) for c in res.getContacts()]
+            out.append(Contact(
+                geometry1=str(a.name), geometry2=str(b.name),
+                link1=str(frames[a.parentFrame].name), link2=str(frames[b.parentFrame].name),
+                adjacent=_adjacent(parents, a, b),
+                depth=max(depths) if depths else None,
+            ))  # fmt: skip
+        return out
+
+    def active_link_pairs(self) -> list[tuple[str, str, bool]]:
+        """The (link, link, adjacent) pairs with at least one active geometry pair, in pair order."""
+        objects, frames, parents = self.geom.geometryObjects, self.model.frames, self.model.parents
+        seen: dict[tuple[str, str], bool] = {}
+        for pair in self.geom.collisionPairs:
+            a, b = objects[pair.first], objects[pair.second]
+            key = (str(frames[a.parentFrame].name), str(frames[b.parentFrame].name))
+            seen[key] = _adjacent(parents, a, b)
+        return [(a, b, adjacent) for (a, b), adjacent in seen.items()]
 
     def _arm_geometry_data(self, arm: Arm) -> pin.GeometryData:
         """GeometryData with only the pairs whose relative pose changes when ``arm`` moves.
