@@ -333,6 +333,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--no-motion-check", action="store_true", help="skip the reaching-motion check, as place's"
     )
+    _add_degrees_argument(p)
     p.add_argument(
         "--seed", type=nonneg_int, default=0, help="random seed of IK and the motion planner (default 0)"
     )
