@@ -86,6 +86,12 @@ def test_pcd_with_a_long_comment_before_a_huge_count(tmp_path):
     path = tmp_path / "comment.pcd"
     path.write_bytes(b"# " + b"c" * 70_000 + b"\n" + HUGE_COUNT_HEADER.encode() + b"\0" * 12)
     assert 70_000 < path.stat().st_size < 71_000
+    assert_refused("cloud", path, "can hold", ["segment", str(path)])
+
+
+def test_pcd_of_no_points_with_a_huge_count(tmp_path):
+    path = tmp_path / "empty.pcd"  # pypcd4 builds one numpy field per value even for no points
+    path.write_bytes(HUGE_COUNT_HEADER.replace("WIDTH 1", "WIDTH 0").replace("POINTS 1", "POINTS 0").encode())
     assert_refused("cloud", path, "values per point", ["segment", str(path)])
 
 
@@ -250,9 +256,15 @@ def test_surface_map_with_external_storage_is_refused_without_opening_it(tmp_pat
 
 
 def test_terrain_cache_entry_with_external_storage_is_not_read(tmp_path):
-    from baseplace.errors import InputError
-    from baseplace.h5files import read_array
-
+    # the cache reads every array through read_array; opening the FIFO would block, so in a subprocess
     path = _hdf5_naming_a_fifo(tmp_path, ".h5", "baseplace-terrain", "labels", "external storage")
-    with h5py.File(path, "r") as f, pytest.raises(InputError, match="external files"):
-        read_array(f, "labels", path)  # the cache reads every array so; opening the FIFO would block
+    script = (
+        "import sys, h5py; from pathlib import Path; from baseplace.h5files import read_array\n"
+        "from baseplace.errors import InputError\n"
+        "with h5py.File(sys.argv[1], 'r') as f:\n"
+        "    try: read_array(f, 'labels', Path(sys.argv[1])); print('read')\n"
+        "    except InputError as exc: print('error: ' + str(exc))\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", script, str(path)], capture_output=True, text=True,
+                          timeout=20, env=ENV)  # fmt: skip
+    assert proc.stdout.startswith("error: ") and "external files" in proc.stdout, proc.stdout + proc.stderr

@@ -523,19 +523,20 @@ def _check_pcd(path: Path) -> None:
         raise InputError(
             f"cannot read cloud {path}: the PCD header names {n} FIELDS but gives fewer SIZE, TYPE or COUNT"
         )
-    columns = sum(meta.count[:n])
-    if columns > _MAX_PCD_COLUMNS:
-        raise InputError(
-            f"cannot read cloud {path}: the PCD header declares {columns} values per point (sum of COUNT); "
-            f"the limit is {_MAX_PCD_COLUMNS}"
-        )
     if meta.width * meta.height != meta.points:
         raise InputError(
             f"cannot read cloud {path}: the PCD header says {meta.points} POINTS but WIDTH x HEIGHT is "
             f"{meta.width} x {meta.height}; the file is corrupt"
         )
     n_bytes = float(meta.points) * sum(s * c for s, c in zip(meta.size[:n], meta.count[:n], strict=False))
-    data = meta.data.value
+    data = meta.data.value if meta.data.value in ("ascii", "binary") else "binary_compressed"  # as pypcd4
+    check_alloc(n_bytes, "point data", path, file_bytes - offset, _PER_FILE_BYTE[data])
+    columns = sum(meta.count[:n])
+    if columns > _MAX_PCD_COLUMNS:
+        raise InputError(  # pypcd4 builds its dtype even for 0 points
+            f"cannot read cloud {path}: the PCD header declares {columns} values per point (sum of COUNT); "
+            f"the limit is {_MAX_PCD_COLUMNS}"
+        )
     if data == "binary_compressed" and meta.points > 0:
         if len(compressed_sizes) < 8:
             raise InputError(
@@ -553,8 +554,6 @@ def _check_pcd(path: Path) -> None:
                 f"{file_bytes - offset - 8}; the file is truncated or corrupt"
             )
         check_alloc(n_bytes, "point data", path, compressed, _PER_FILE_BYTE[data])
-    else:
-        check_alloc(n_bytes, "point data", path, file_bytes - offset, _PER_FILE_BYTE.get(data, 1.0))
     # pypcd4 holds the decompressed buffer, its records and one field's copy at once
     check_alloc(n_bytes * 3.0 + meta.points * _BYTES_PER_POINT, "points", path)
 
