@@ -60,6 +60,7 @@ def read_header(f: h5py.File, path: Path, fmt: str, version: int, what: str, rem
         what: the kind of file, for messages ("reachability map").
         remedy: what to do with a file of an older format ("rebuild it with build-map").
     """
+    check_self_contained(f, path)
     stored = f.attrs.get("format_version")
     if attr_text(f.attrs, "format") != fmt:
         if stored == 1 and _is_variable_string(f.attrs, "format"):
@@ -91,13 +92,68 @@ def read_array(f: h5py.File, name: str, path: Path) -> np.ndarray:
         ValueError: not a numeric dataset.
         InputError: the declared size is beyond the file or the cap.
     """
-    data = f[name]
-    if not (isinstance(data, h5py.Dataset) and data.dtype.kind in "iuf" and data.dtype.itemsize <= 8):
+    data = _local_dataset(f, name, path)
+    if not (data.dtype.kind in "iuf" and data.dtype.itemsize <= 8):
         raise ValueError(f"{name} is not a numeric dataset")
     ratio = DEFLATE_MAX_RATIO if data.compression is not None else 1.0
     n_bytes = float(np.prod(data.shape, dtype=float)) * data.dtype.itemsize
     check_alloc(n_bytes, f"dataset {name!r}", path, path.stat().st_size, ratio)
     return np.asarray(data[()])
+
+
+MAX_LINKS = 1000
+"""Most links a file of ours may hold (a terrain cache entry, the largest, has about 30)."""
+
+
+def check_self_contained(f: h5py.File, path: Path) -> None:
+    """Raise InputError unless every object of ``f`` lives inside the file.
+
+    Soft and external links, datasets stored in external files (an HDF5 external file list) and
+    virtual datasets are refused: HDF5 would open the files they name (another HDF5 file, any
+    path, a FIFO that blocks) when the object is read. Only link and creation-property metadata
+    is read here; no data, and no link is followed.
+    """
+    found: list[tuple[str, str]] = []
+
+    def visit(name: str, link: h5py.HardLink | h5py.SoftLink | h5py.ExternalLink) -> bool | None:
+        found.append((name, "" if isinstance(link, h5py.HardLink) else type(link).__name__))
+        return len(found) > MAX_LINKS or None  # a true value stops the walk
+
+    f.visititems_links(visit)
+    if len(found) > MAX_LINKS:
+        raise InputError(f"{path} holds more than {MAX_LINKS} HDF5 objects; baseplace files hold a few dozen")
+    for name, kind in found:
+        if kind:
+            raise InputError(
+                f"{path}: {name!r} is an HDF5 {kind}; baseplace reads no links (the file is not ours)"
+            )
+        _check_storage(f[name], name, path)
+
+
+def _local_dataset(f: h5py.File, name: str, path: Path) -> h5py.Dataset:
+    """The dataset ``name`` reached by a hard link, its data stored inside the file."""
+    link = f.get(name, getlink=True)
+    if link is None:
+        raise KeyError(name)
+    if not isinstance(link, h5py.HardLink):
+        raise InputError(f"{path}: {name!r} is an HDF5 {type(link).__name__}; baseplace reads no links")
+    data = f[name]
+    if not isinstance(data, h5py.Dataset):
+        raise ValueError(f"{name} is not a dataset")
+    _check_storage(data, name, path)
+    return data
+
+
+def _check_storage(obj: h5py.Dataset | h5py.Group | h5py.Datatype, name: str, path: Path) -> None:
+    if not isinstance(obj, h5py.Dataset):
+        return
+    dcpl = obj.id.get_create_plist()
+    if dcpl.get_layout() == h5py.h5d.VIRTUAL:
+        raise InputError(f"{path}: dataset {name!r} is virtual (its data lies in other files); refused")
+    if dcpl.get_external_count():
+        raise InputError(
+            f"{path}: dataset {name!r} keeps its data in external files (HDF5 external storage); refused"
+        )
 
 
 def write_text(f: h5py.File, name: str, text: str) -> bytes:
@@ -114,8 +170,8 @@ def read_text(f: h5py.File, name: str) -> bytes:
         KeyError: no such text.
         ValueError: ``name`` is not a 1-D uint8 dataset of at most :data:`MAX_TEXT` bytes.
     """
-    data = f[name]
-    if not (isinstance(data, h5py.Dataset) and data.dtype == np.uint8 and data.ndim == 1):
+    data = _local_dataset(f, name, Path(f.filename))
+    if not (data.dtype == np.uint8 and data.ndim == 1):
         raise ValueError(f"{name} is not a text")
     if data.shape[0] > MAX_TEXT:
         raise ValueError(f"{name} is too long")

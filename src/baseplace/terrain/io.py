@@ -11,12 +11,14 @@ from __future__ import annotations
 
 import dataclasses
 import io
+import itertools
 import re
+import struct
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any, BinaryIO, TextIO
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -277,21 +279,43 @@ def _pcd_colors(data: np.ndarray, names: tuple[str, ...]) -> ColorArray | None:
 
 
 def _read_ply(path: Path) -> _Raw:
-    from plyfile import PlyData
-
-    # memory-mapped: one array read, not a Python loop per property (the declared size is checked already)
-    ply = PlyData.read(str(path), mmap="r")
-    elements = [e.name for e in ply.elements]
-    if "vertex" not in elements:
-        raise InputError(f"PLY {path} has no 'vertex' element; elements: {', '.join(elements) or 'none'}")
-    vertex = ply["vertex"].data
-    names = vertex.dtype.names or ()
-    missing = [f for f in "xyz" if f not in names]
+    # Only the vertex element is read, by numpy from the header's layout: plyfile reads every
+    # element, a Python object per list row (8 MB of empty faces cost it 1.2 GB).
+    fmt, elements, offset = _ply_header(path)
+    names = [name for name, _, _ in elements]
+    if "vertex" not in names:
+        raise InputError(f"PLY {path} has no 'vertex' element; elements: {', '.join(names) or 'none'}")
+    before = elements[: names.index("vertex")]
+    _, count, properties = elements[len(before)]
+    lists = [name for name, kind in properties if not isinstance(kind, str)]
+    if lists:
+        raise InputError(
+            f"PLY {path} vertices have list properties ({', '.join(lists)}); only scalars are read"
+        )
+    order = {"binary_little_endian": "<", "binary_big_endian": ">"}.get(fmt, "=")
+    dtype = np.dtype([(name, order + kind) for name, kind in properties if isinstance(kind, str)])
+    fields = dtype.names or ()
+    check_alloc(count * float(dtype.itemsize), "vertex data", path, path.stat().st_size - offset,
+                _PER_FILE_BYTE["ascii" if fmt == "ascii" else "binary"])  # fmt: skip
+    check_alloc(count * (dtype.itemsize + _BYTES_PER_POINT), "points", path)
+    with path.open("rb") as f:
+        f.seek(offset)
+        if fmt == "ascii":
+            vertex = _ply_ascii_rows(f, before, dtype, count, path)
+        else:
+            f.seek(sum(n * _ply_row_bytes(props, path) for _, n, props in before), io.SEEK_CUR)
+            vertex = np.fromfile(f, dtype=dtype, count=count)
+    if len(vertex) != count:
+        raise InputError(
+            f"cannot read cloud {path}: header says {count} vertices, data holds {len(vertex)}; "
+            "the file is truncated or corrupt"
+        )
+    missing = [f for f in "xyz" if f not in fields]
     if missing:
-        raise InputError(f"PLY {path} vertices have no {', '.join(missing)}; properties: {', '.join(names)}")
+        raise InputError(f"PLY {path} vertices have no {', '.join(missing)}; properties: {', '.join(fields)}")
     points = np.column_stack([vertex[f].astype(np.float64) for f in "xyz"])
     rgb = ("red", "green", "blue")
-    colors = _to_uint8(np.column_stack([vertex[c] for c in rgb])) if all(c in names for c in rgb) else None
+    colors = _to_uint8(np.column_stack([vertex[c] for c in rgb])) if all(c in fields for c in rgb) else None
     return points, colors, None
 
 
@@ -312,11 +336,28 @@ def _read_npy(path: Path) -> _Raw:
 
 
 def _read_xyz(path: Path) -> _Raw:
-    text = path.read_text().replace(",", " ")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)  # "input contained no data": reported below
-        array = np.loadtxt(io.StringIO(text), comments="#", usecols=(0, 1, 2), ndmin=2)
-    return array.astype(np.float64), None, None
+    # Read in blocks of lines, the points so far checked against the cap after each block: the
+    # text's size says little about the count (a line may hold one point or a comment).
+    blocks = []
+    n_points = 0
+    with path.open("r", encoding="utf-8") as f:
+        lines = _text_lines(f, path)
+        while block_lines := [line.replace(",", " ") for line in itertools.islice(lines, _TEXT_BLOCK_LINES)]:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", UserWarning)  # "input contained no data": reported below
+                block = np.loadtxt(block_lines, comments="#", usecols=(0, 1, 2), ndmin=2, dtype=np.float64)
+            n_points += len(block)
+            check_alloc(n_points * _BYTES_PER_POINT, "points", path)
+            blocks.append(block)
+    return (np.concatenate(blocks) if blocks else np.empty((0, 3))), None, None
+
+
+def _text_lines(f: TextIO, path: Path) -> Iterator[str]:
+    """The lines of a text file, each at most :data:`_MAX_TEXT_LINE` characters."""
+    while line := f.readline(_MAX_TEXT_LINE + 1):
+        if len(line) > _MAX_TEXT_LINE:
+            raise InputError(f"cannot read cloud {path}: a line is longer than {_MAX_TEXT_LINE} characters")
+        yield line
 
 
 def _read_bt(path: Path) -> _Raw:
@@ -360,6 +401,7 @@ def _check_bt(path: Path) -> float:
     0 none) in depth-first order, so a complete stream has one record per inner node and
     ``size`` = 1 + the number of children.
     """
+    check_alloc(path.stat().st_size * 6.0, "the OctoMap node stream", path)  # 4 codes per byte below
     blob = path.read_bytes()
     if not blob.startswith(_BT_HEADER):
         raise InputError(
@@ -390,96 +432,204 @@ def _check_bt(path: Path) -> float:
             f"cannot read OctoMap {path}: header says {size} nodes, the data does not match; "
             "truncated or corrupt"
         )
+    _check_bt_nodes(path, codes, n_nodes)
     return resolution
 
 
-_HEADER_BYTES = 65536
+_MAX_HEADER_BYTES = 2**20
+"""Most bytes a PCD or PLY header may take, comments included (real headers take under 1 kB)."""
+_MAX_PCD_COLUMNS = 10_000
+"""Most values per PCD point (sum of COUNT): pypcd4 makes one numpy field per value; PCL's widest
+descriptor (ShapeContext1980) has 1989."""
+_BYTES_PER_POINT = 72.0
+"""Memory per point beyond the file's own data: three float64 coordinates in up to three copies
+(the reader's, load_cloud's finite rows, a temporary)."""
 # Bytes in memory per byte of file, at most: binary data is stored as it is held; an ASCII value
 # takes at least 2 bytes ("0 ") and at most 8 in memory; LZF (PCD binary_compressed) expands at
-# most ~100:1. The readers then make float64 copies: ~40 bytes per point more.
-_PER_FILE_BYTE = {"binary": 1.05, "ascii": 4.0, "binary_compressed": 110.0}
-_PLY_TYPES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2,
-              "uint16": 2, "int": 4, "uint": 4, "int32": 4, "uint32": 4, "float": 4, "float32": 4,
-              "double": 8, "float64": 8}  # fmt: skip
+# most 88:1 (a 3-byte back reference copies 264 bytes).
+_PER_FILE_BYTE = {"binary": 1.0, "ascii": 4.0, "binary_compressed": 110.0}
+_PLY_TYPES = {"char": "i1", "uchar": "u1", "int8": "i1", "uint8": "u1", "short": "i2", "ushort": "u2",
+              "int16": "i2", "uint16": "u2", "int": "i4", "uint": "u4", "int32": "i4", "uint32": "u4",
+              "float": "f4", "float32": "f4", "double": "f8", "float64": "f8"}  # fmt: skip
+_TEXT_BLOCK_LINES = 100_000
+_MAX_TEXT_LINE = 65536
+# a PLY property: (name, numpy type code) or (name, (length code, value code)) for a list
+_PlyProperty = tuple[str, "str | tuple[str, str]"]
+_PlyElement = tuple[str, int, list[_PlyProperty]]
 
 
 def _check_declared_size(path: Path) -> None:
     """Refuse a cloud whose header declares more data than its file can hold, or than the cap.
 
-    PCD (``FIELDS``/``SIZE``/``COUNT``/``POINTS``/``DATA``), PLY (``element``/``property``) and
-    ``.npy`` headers declare their sizes; pypcd4, plyfile and numpy allocate them before reading.
-    A 182-byte PCD with ``COUNT 1 1 1000000000`` must fail here, not after 10 GB.
+    PCD (``FIELDS``/``SIZE``/``COUNT``/``POINTS``/``DATA`` and binary_compressed's sizes) and
+    ``.npy`` headers declare their sizes; pypcd4 and numpy allocate them before reading. A 182-byte
+    PCD with ``COUNT 1 1 1000000000`` must fail here, not after 10 GB. PLY, ``.bt`` and text are
+    checked by their readers, which allocate nothing before their checks.
 
     Raises:
         InputError: the declared size does not fit the file or the memory cap (one line).
     """
     suffix = path.suffix.lower()
-    file_bytes = path.stat().st_size
-    with path.open("rb") as f:
-        head = f.read(_HEADER_BYTES)
     if suffix == ".npy":
-        with path.open("rb") as f:
-            version = np.lib.format.read_magic(f)
-            read = (
-                np.lib.format.read_array_header_1_0
-                if version == (1, 0)
-                else np.lib.format.read_array_header_2_0
+        _check_npy(path)
+    elif suffix == ".pcd":
+        _check_pcd(path)
+
+
+def _check_npy(path: Path) -> None:
+    with path.open("rb") as f:
+        version = np.lib.format.read_magic(f)
+        read = (
+            np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+        )
+        shape, _, dtype = read(f)
+    if dtype.hasobject:
+        raise InputError(f"{path} holds Python objects ({dtype}); only numeric arrays are read (no pickle)")
+    n_bytes = float(np.prod(shape, dtype=float)) * dtype.itemsize
+    check_alloc(n_bytes, "the array", path, path.stat().st_size, 1.0)
+    check_alloc(n_bytes / max(dtype.itemsize, 1) * 8 + n_bytes, "points", path)
+
+
+def _check_pcd(path: Path) -> None:
+    """Check a PCD header as pypcd4 will read it, before pypcd4 allocates what it declares.
+
+    pypcd4 skips blank and ``#`` lines of any length, takes at most 10 other lines up to the one
+    starting with ``DATA``, and parses them with its own :class:`pypcd4.MetaData`; so does this
+    check, on a header of at most :data:`_MAX_HEADER_BYTES`. It then allocates one numpy field per
+    value (sum of ``COUNT``), ``POINTS`` records of the summed ``SIZE x COUNT``, and for
+    binary_compressed the uncompressed size written after the header.
+    """
+    from pypcd4 import MetaData
+
+    file_bytes = path.stat().st_size
+    lines: list[str] = []
+    with path.open("rb") as f:
+        while len(lines) < 10 and not (lines and lines[-1].startswith("DATA")):
+            raw = f.readline(_MAX_HEADER_BYTES + 1 - f.tell())
+            if f.tell() > _MAX_HEADER_BYTES:
+                raise InputError(
+                    f"cannot read cloud {path}: the PCD header is longer than {_MAX_HEADER_BYTES} bytes"
+                )
+            if not raw:
+                break
+            line = raw.decode("utf-8").strip()
+            if line and not line.startswith("#"):
+                lines.append(line)
+        offset = f.tell()
+        compressed_sizes = f.read(8)
+    meta = MetaData.parse_header(lines)
+    n = len(meta.fields)
+    if min(len(meta.size), len(meta.type), len(meta.count)) < n:
+        raise InputError(
+            f"cannot read cloud {path}: the PCD header names {n} FIELDS but gives fewer SIZE, TYPE or COUNT"
+        )
+    if meta.width * meta.height != meta.points:
+        raise InputError(
+            f"cannot read cloud {path}: the PCD header says {meta.points} POINTS but WIDTH x HEIGHT is "
+            f"{meta.width} x {meta.height}; the file is corrupt"
+        )
+    n_bytes = float(meta.points) * sum(s * c for s, c in zip(meta.size[:n], meta.count[:n], strict=False))
+    data = meta.data.value if meta.data.value in ("ascii", "binary") else "binary_compressed"  # as pypcd4
+    check_alloc(n_bytes, "point data", path, file_bytes - offset, _PER_FILE_BYTE[data])
+    columns = sum(meta.count[:n])
+    if columns > _MAX_PCD_COLUMNS:
+        raise InputError(  # pypcd4 builds its dtype even for 0 points
+            f"cannot read cloud {path}: the PCD header declares {columns} values per point (sum of COUNT); "
+            f"the limit is {_MAX_PCD_COLUMNS}"
+        )
+    if data == "binary_compressed" and meta.points > 0:
+        if len(compressed_sizes) < 8:
+            raise InputError(
+                f"cannot read cloud {path}: the compressed PCD data has no sizes; the file is truncated or corrupt"
             )
-            shape, _, dtype = read(f)
-        n_bytes = float(np.prod(shape, dtype=float)) * dtype.itemsize
-        check_alloc(n_bytes, "the array", path, file_bytes, 1.0)
-        check_alloc(n_bytes / max(dtype.itemsize, 1) * 8 + n_bytes, "points", path)
-        return
-    if suffix == ".bt":  # the node stream is unpacked to 4 codes per byte before it is checked
-        check_alloc(file_bytes * 6.0, "the OctoMap node stream", path)
-    if suffix not in (".pcd", ".ply"):
-        return  # text (bounded by the file) and .bt (bounded by MAX_OCTOMAP_POINTS)
-    lines = head.split(b"\n")
-    if suffix == ".pcd":
-        fields: dict[str, list[str]] = {}
-        for raw in lines:
-            words = raw.decode("ascii", "replace").split()
-            if words and not words[0].startswith("#"):
-                fields[words[0].upper()] = words[1:]
-            if words and words[0].upper() == "DATA":
-                break
-        try:
-            sizes = [int(v) for v in fields.get("SIZE", [])]
-            counts = [int(v) for v in fields.get("COUNT", ["1"] * len(sizes))]
-            n_points = int(fields.get("POINTS", fields.get("WIDTH", ["0"]))[0])
-            width = int(fields.get("WIDTH", ["0"])[0])
-            height = int(fields.get("HEIGHT", ["1"])[0])
-            data = fields.get("DATA", ["ascii"])[0].lower()
-        except (ValueError, IndexError):
-            return  # pypcd4 reports a malformed header
-        if min([n_points, width, height, *sizes, *counts], default=0) < 0:
-            raise InputError(f"cannot read cloud {path}: negative size in the PCD header")
-        point_bytes = float(sum(a * b for a, b in zip(sizes, counts, strict=False)))
-        n_points = max(n_points, width * height)
-    else:  # every element's rows are allocated (a face list of 10^9 faces as well as vertices)
-        data, elements = "ascii", []
-        for raw in lines:
-            words = raw.decode("ascii", "replace").split()
-            if not words:
-                continue
-            if words[0] == "format" and len(words) > 1:
-                data = "ascii" if words[1] == "ascii" else "binary"
-            elif words[0] == "element" and len(words) == 3:
-                try:
-                    elements.append([int(words[2]), 0.0])
-                except ValueError:
-                    return  # plyfile reports a malformed header
-                if elements[-1][0] < 0:
-                    raise InputError(f"cannot read cloud {path}: negative element count in the PLY header")
-            elif words[0] == "property" and elements and len(words) >= 3:
-                elements[-1][1] += _PLY_TYPES.get(words[2] if words[1] == "list" else words[1], 8)
-            elif words[0] == "end_header":
-                break
-        n_points = int(sum(count for count, _ in elements))
-        point_bytes = sum(count * max(row, 1.0) for count, row in elements) / max(n_points, 1)
-    n_bytes = n_points * max(point_bytes, 1.0)
-    check_alloc(n_bytes, "point data", path, file_bytes, _PER_FILE_BYTE.get(data, 1.05))
-    check_alloc(n_bytes + n_points * 40.0, "points", path)
+        compressed, uncompressed = struct.unpack("II", compressed_sizes)  # pypcd4 reads them so
+        if uncompressed != n_bytes:
+            raise InputError(
+                f"cannot read cloud {path}: the compressed data says {uncompressed} bytes, the header's "
+                f"points take {n_bytes:.0f}; the file is truncated or corrupt"
+            )
+        if compressed > file_bytes - offset - 8:
+            raise InputError(
+                f"cannot read cloud {path}: the compressed data says {compressed} bytes, the file holds "
+                f"{file_bytes - offset - 8}; the file is truncated or corrupt"
+            )
+        check_alloc(n_bytes, "point data", path, compressed, _PER_FILE_BYTE[data])
+    # pypcd4 holds the decompressed buffer, its records and one field's copy at once
+    check_alloc(n_bytes * 3.0 + meta.points * _BYTES_PER_POINT, "points", path)
+
+
+def _ply_header(path: Path) -> tuple[str, list[_PlyElement], int]:
+    """Parse a PLY header of at most :data:`_MAX_HEADER_BYTES`: (format, elements, data offset).
+
+    Lines end in LF, CR or CRLF; ``comment`` and ``obj_info`` lines are skipped.
+    """
+    with path.open("rb") as f:
+        head = f.read(_MAX_HEADER_BYTES)
+    end = re.search(rb"(?:^|[\r\n])end_header(?:\r\n|\r|\n)", head)
+    if end is None:
+        if len(head) == _MAX_HEADER_BYTES:
+            raise InputError(
+                f"cannot read cloud {path}: the PLY header is longer than {_MAX_HEADER_BYTES} bytes"
+            )
+        raise InputError(f"cannot read cloud {path}: the PLY header has no end_header; truncated or corrupt")
+    lines = head[: end.start()].decode("ascii").splitlines()
+    if not lines or lines[0] != "ply":
+        raise InputError(f"{path} is not a PLY file: the first line is not 'ply'")
+    fmt = ""
+    elements: list[_PlyElement] = []
+    for line in lines[1:]:
+        words = line.split()
+        if not words or words[0] in ("comment", "obj_info"):
+            continue
+        if words[0] == "format" and len(words) == 3 and words[2] == "1.0":
+            fmt = words[1]
+        elif words[0] == "element" and len(words) == 3 and words[2].isdigit():
+            elements.append((words[1], int(words[2]), []))
+        elif words[0] == "property" and elements and len(words) == 3 and words[1] in _PLY_TYPES:
+            elements[-1][2].append((words[2], _PLY_TYPES[words[1]]))
+        elif (
+            words[0] == "property" and elements and len(words) == 5 and words[1] == "list"
+            and words[2] in _PLY_TYPES and words[3] in _PLY_TYPES
+        ):  # fmt: skip
+            elements[-1][2].append((words[4], (_PLY_TYPES[words[2]], _PLY_TYPES[words[3]])))
+        else:
+            raise InputError(f"cannot read cloud {path}: bad PLY header line {brief(line, 60)}")
+    if fmt not in ("ascii", "binary_little_endian", "binary_big_endian"):
+        raise InputError(
+            f"cannot read cloud {path}: PLY format {fmt or 'missing'!r}; valid: ascii, "
+            "binary_little_endian, binary_big_endian (version 1.0)"
+        )
+    return fmt, elements, end.end()
+
+
+def _ply_row_bytes(properties: list[_PlyProperty], path: Path) -> int:
+    """Bytes of one binary row of an element before the vertices (lists cannot be skipped unread)."""
+    sizes = [np.dtype(kind).itemsize for _, kind in properties if isinstance(kind, str)]
+    if len(sizes) < len(properties):
+        raise InputError(
+            f"cannot read cloud {path}: a PLY element with list properties comes before 'vertex'"
+        )
+    return sum(sizes)
+
+
+def _ply_ascii_rows(
+    f: BinaryIO, before: list[_PlyElement], dtype: np.dtype, count: int, path: Path
+) -> np.ndarray:
+    """The vertex rows of an ASCII PLY: one line per row of every element, vertices after ``before``."""
+    lines = _text_lines(io.TextIOWrapper(f, encoding="ascii"), path)
+    for _ in itertools.islice(lines, sum(n for _, n, _ in before)):
+        pass
+    return np.loadtxt(itertools.islice(lines, count), dtype=dtype, comments=None, ndmin=1)
+
+
+def _check_bt_nodes(path: Path, codes: np.ndarray, n_nodes: int) -> None:
+    """Refuse a tree whose nodes, as octomap builds them and the leaves are listed, exceed the cap.
+
+    octomap takes about 42 bytes per node; listing an occupied leaf takes about 200 bytes of
+    Python objects (both measured, rounded up).
+    """
+    occupied = int(np.count_nonzero(codes == 2))
+    check_alloc(n_nodes * 48.0 + occupied * 256.0, f"the OctoMap's {n_nodes} nodes", path)
 
 
 _READERS: dict[str, Callable[[Path], _Raw]] = {
