@@ -10,13 +10,12 @@ from __future__ import annotations
 import json
 
 import pytest
+from hypothesis import HealthCheck, Phase, given, settings
 
 pytest.importorskip("fastapi")
 schemathesis = pytest.importorskip("schemathesis")
 
-from hypothesis import HealthCheck, Phase, given, settings
-
-from test_serve import make_app
+from test_serve import make_app  # noqa: E402  (needs FastAPI)
 
 SEEN: dict[str, int] = {"requests": 0, "500": 0, "non_json": 0}
 
@@ -44,7 +43,9 @@ def _fuzz(app, examples: int) -> None:
                 failures.append(f"{where}: not JSON: {response.text[:200]!r}")
 
         one()
-    print(f"fuzz: {SEEN['requests']} requests, {SEEN['500']} answers of 500, {SEEN['non_json']} non-JSON bodies")
+    print(
+        f"fuzz: {SEEN['requests']} requests, {SEEN['500']} answers of 500, {SEEN['non_json']} non-JSON bodies"
+    )
     assert not failures, failures[:10]
 
 
