@@ -190,13 +190,13 @@ def small_map_cache(folder: Path) -> Path:
     kernels = cache_dir()
     root = folder / "cache"
     root.mkdir(mode=0o700)
+    if kernels.is_dir():
+        (root / "kernels").symlink_to(kernels)
     os.environ["BASEPLACE_CACHE"] = str(root)
     robot = Robot("tiago")
     path = cached_map_path(robot, BuildSettings())
     path.parent.mkdir(parents=True, mode=0o700)
     save_map(build_map(robot, None, BuildSettings(samples=2_000_000, seed=3)), path)
-    if kernels.is_dir():
-        (root / "kernels").symlink_to(kernels)
     return root
 
 
