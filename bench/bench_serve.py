@@ -39,6 +39,7 @@ from baseplace.terrain.io import Cloud, save_cloud
 from common import report
 
 SEED000 = {"no_motion_check": True, "robustness_samples": 0}
+UPLOAD = {"content-type": "application/octet-stream"}  # the service refuses an upload of any other type (415)
 
 
 def free_port() -> int:
@@ -122,12 +123,14 @@ def main() -> None:
             time.sleep(0.2)
         result["server_start_s"] = round(time.time() - t0, 2)
         for s in scenes:
-            r = http.post("/scenes", params={"format": "ply"}, content=s["cloud"].read_bytes())
+            r = http.post(
+                "/scenes", params={"format": "ply"}, content=s["cloud"].read_bytes(), headers=UPLOAD
+            )
             r.raise_for_status()
             s["id"] = r.json()["scene_id"]
             s["regions"] = r.json()["regions"]
             r = http.post(f"/scenes/{s['id']}/grid", params={"resolution": s["resolution"], "format": "png",
-                                                              "origin_x": -5.0, "origin_y": -5.0}, content=s["png"])  # fmt: skip
+                                                              "origin_x": -5.0, "origin_y": -5.0}, content=s["png"], headers=UPLOAD)  # fmt: skip
             r.raise_for_status()
         result["regions_per_scene"] = [s["regions"] for s in scenes]
         first = scenes[0]

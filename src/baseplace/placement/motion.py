@@ -34,6 +34,7 @@ from numpy.typing import ArrayLike
 
 from baseplace.errors import InputError
 from baseplace.geometry.poses import FloatArray, invert_transforms
+from baseplace.placement import deadline
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Arm, Robot
 from baseplace.terrain.voxels import VoxelMap
@@ -251,6 +252,7 @@ class MotionChecker:
                 return back[::-1]
         rng = np.random.default_rng(seed)
         for _ in range(s.approach_restarts):
+            deadline.check()
             q_pre = self._ik_any.solve(line[-1], rng, q_seed=self.arm.sample(rng, 1)[0])
             if q_pre is None or not self._approach_free(q_pre, T_world_base):
                 continue
@@ -351,15 +353,18 @@ class MotionChecker:
             setup.setStartAndGoalStates(a, b, 1e-6)
             setup.setPlanner(og.RRTConnect(info))
             limit = self.settings.max_checks
-            if limit is None:
+            if limit is None and not deadline.active():
                 solved = setup.solve(self.settings.time_limit)
-            else:
+            else:  # a check budget, or a request's time limit: planning stops when either is spent
                 solved = setup.solve(
                     ob.plannerOrTerminationCondition(
                         ob.timedPlannerTerminationCondition(self.settings.time_limit),
-                        ob.PlannerTerminationCondition(lambda: checks[0] >= limit),
+                        ob.PlannerTerminationCondition(
+                            lambda: (limit is not None and checks[0] >= limit) or deadline.expired()
+                        ),
                     )
                 )
+                deadline.check()
             if not solved or not setup.haveExactSolutionPath():
                 return None
             states = setup.getSolutionPath().getStates()
@@ -383,6 +388,7 @@ class MotionChecker:
             T_world_tcp: (4, 4) the grasp (TCP target) in the world.
             seed: OMPL's random seed.
         """
+        deadline.check()  # one planning call per target: a request past its time limit stops before it
         t0 = time.perf_counter()
         self.last_contacts, self._blocked = [], None
         try:

@@ -23,6 +23,7 @@ from numpy.typing import ArrayLike
 
 from baseplace.errors import InputError
 from baseplace.geometry.poses import FloatArray
+from baseplace.placement import deadline
 from baseplace.placement.motion import MotionChecker, MotionSettings, transit_environment
 from baseplace.placement.osrm import OSRM, build_osrm, footprint_kernels
 from baseplace.placement.robustness import RobustnessEstimator, RobustnessSettings, rank_by_robustness
@@ -183,6 +184,7 @@ def place(
     candidates = strategy.candidates(osrm, rmap, rng)
     robustness_s = 0.0
     while tries < s.tries and len(placements) < wanted:
+        deadline.check()  # a service request past its time limit stops here
         candidate = next(candidates, None)
         if candidate is None:
             verifier.failures["exhausted"] += 1

@@ -27,6 +27,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError, unknown
 from baseplace.geometry.poses import FloatArray, invert_transforms, planar_offsets
+from baseplace.placement import deadline
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Arm
 from baseplace.world.environment import Environment
@@ -241,6 +242,7 @@ class RobustnessEstimator:
             ok = np.ones(len(todo), dtype=bool)
             T_base_world = invert_transforms(poses[todo])
             for k, target in enumerate(self.targets):
+                deadline.check()
                 live = np.flatnonzero(ok)
                 if len(live) == 0:
                     break
@@ -248,6 +250,8 @@ class RobustnessEstimator:
                 T_base_tcp = T_base_world[live] @ target
                 q, found = self._ik.solve_batch(T_base_tcp, self._rng, seed)
                 for j, row in enumerate(live.tolist()):
+                    if j % 64 == 0:
+                        deadline.check()
                     ok[row] = bool(found[j]) and not self.environment.colliding_arm(
                         self.arm, q[j], poses[todo[row]]
                     )

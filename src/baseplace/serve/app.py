@@ -3,9 +3,12 @@
 Every job's answer is the jobs layer's ``baseplace.result/1`` report, the CLI's ``--json`` for the
 same inputs. Errors carry ``"error": "<the CLI's one line>"``: 400 (bad input, the CLI's exit 2)
 and, on a job's endpoint, 404 (unknown scene id) and 422 (a request that does not fit the
-schema) answer the CLI's failure report of that kind (``exit_code`` 2); 413 (request too large)
-and 504 (over the time limit) answer ``{"error": ...}``. A job that ran and found nothing
-answers 200 with its report (``exit_code`` 3, ``error``) and ``"found": false``.
+schema) answer the CLI's failure report of that kind (``exit_code`` 2); the HTTP-level refusals
+of :mod:`baseplace.serve.guard` (400, 401, 403, 408, 413, 415, 503), a full queue (503), a
+request over the time limit (504, its job stopped) and an internal failure (500, one generic
+line) answer ``{"error": ...}``. A job that ran and found nothing answers 200 with its report
+(``exit_code`` 3, ``error``) and ``"found": false``. No error line carries more than a short
+escaped excerpt of what the client sent.
 """
 
 from __future__ import annotations
@@ -21,47 +24,84 @@ import numpy as np
 from fastapi import FastAPI, Query, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, Response
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, StringConstraints, model_validator
+from starlette.exceptions import HTTPException
 
 from baseplace.errors import BaseplaceError
+from baseplace.placement.deadline import Deadline, DeadlineExceeded, limited
 from baseplace.serve import jobs
+from baseplace.serve.guard import Guard, authorized
 from baseplace.serve.state import ServeSettings, ServiceState, UnknownSceneError
 
 STRATEGIES = Literal["MR", "TO", "MRTO", "orm", "grid", "random"]
 
 
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)  # NaN, Infinity, 1e999: 422
+
+
+Pose = Annotated[str, StringConstraints(max_length=200)]
+"""A pose as text ("x y z roll pitch yaw", "x y yaw"): short, so that no answer echoes much."""
+
+SEED = Field(0, ge=0, le=2**32 - 1, description="random seed")
+
+MAX_PLACE_WORK = 20_000
+"""targets x tries of one /place: what one request finishes within the default 30 s time limit."""
+
+MAX_ROBUSTNESS_WORK = 16_384
+"""targets x robustness samples x placements of one request (error draws checked by IK and collision)."""
+
+MAX_SURFACE_CELLS = 4_000_000
+"""Cells x orientations of one /surface-map (the polygon's bounding box at the resolution)."""
+
+
+def _robustness_work(targets: int, samples: int, placements: int) -> None:
+    work = targets * samples * placements
+    if work > MAX_ROBUSTNESS_WORK:
+        raise ValueError(
+            f"targets x robustness_samples x placements = {work} is over the limit of {MAX_ROBUSTNESS_WORK} "
+            "for one request: fewer samples or placements"
+        )
 
 
 class RobustnessFields(_Model):
     """The CLI's reaching-motion and robustness options (``place``, ``candidates``)."""
 
     no_motion_check: bool = Field(False, description="skip the reaching-motion check")
-    robustness_samples: int = Field(64, ge=0, le=4096, description="base-error draws per placement (0: none)")
+    robustness_samples: int = Field(64, ge=0, le=1024, description="base-error draws per placement (0: none)")
     rank_by_robustness: bool = Field(False, description="most robust placements first")
     min_robustness: float = Field(0.0, ge=0.0, le=1.0, description="reject placements below this rate")
     error_model: Literal["gaussian", "box"] = "gaussian"
-    sigma_xy: float = Field(0.03, ge=0.0, description="base position error sigma [m]")
-    sigma_yaw_deg: float = Field(2.0, ge=0.0, description="base heading error sigma [deg]")
-    xy_tolerance: float = Field(0.25, gt=0.0, description="goal xy tolerance [m]")
-    yaw_tolerance: float = Field(0.25, gt=0.0, description="goal yaw tolerance [rad]")
+    sigma_xy: float = Field(0.03, ge=0.0, le=10.0, description="base position error sigma [m]")
+    sigma_yaw_deg: float = Field(2.0, ge=0.0, le=180.0, description="base heading error sigma [deg]")
+    xy_tolerance: float = Field(0.25, gt=0.0, le=10.0, description="goal xy tolerance [m]")
+    yaw_tolerance: float = Field(0.25, gt=0.0, le=3.15, description="goal yaw tolerance [rad]")
 
 
 class PlaceRequest(RobustnessFields):
     """``baseplace place`` on an uploaded scene."""
 
     scene_id: str = Field(..., max_length=64, description="id from POST /scenes")
-    targets: list[str] = Field(..., min_length=1, max_length=64,
-                               description='TCP targets "x y z roll pitch yaw" [m, rad]')  # fmt: skip
+    targets: list[Pose] = Field(..., min_length=1, max_length=16,
+                                description='TCP targets "x y z roll pitch yaw" [m, rad]')  # fmt: skip
     robot: str = Field("tiago", max_length=64, description="built-in robot name")
     arm: str | None = Field(None, max_length=64, description="arm (default: the robot's default arm)")
     strategy: STRATEGIES = "MR"
-    placements: int = Field(1, ge=1, le=100, description="M: placements to return")
-    tries: int = Field(100, ge=1, le=10_000, description="N: candidates to check at most")
-    seed: int = Field(0, ge=0, description="random seed")
+    placements: int = Field(1, ge=1, le=20, description="M: placements to return")
+    tries: int = Field(100, ge=1, le=2_000, description="N: candidates to check at most")
+    seed: int = SEED
     object: str = Field("auto", max_length=200, description='"auto", "none", "box x y z sx sy sz [yaw]" ...')
-    resolution: float | None = Field(None, gt=0.0, le=1.0, description="height-map cell [m]")
+    resolution: float | None = Field(None, ge=0.005, le=1.0, description="height-map cell [m]")
+
+    @model_validator(mode="after")
+    def _work(self) -> PlaceRequest:
+        work = len(self.targets) * self.tries
+        if work > MAX_PLACE_WORK:
+            raise ValueError(
+                f"targets x tries = {work} is over the limit of {MAX_PLACE_WORK} for one request: fewer tries"
+            )
+        _robustness_work(len(self.targets), self.robustness_samples, self.placements)
+        return self
 
 
 class CandidatesRequest(RobustnessFields):
@@ -74,16 +114,21 @@ class CandidatesRequest(RobustnessFields):
     robot: str = Field("tiago", max_length=64)
     arm: str | None = Field(None, max_length=64)
     standoff: float | None = Field(None, ge=0.0, le=1.0)
-    seed: int = Field(0, ge=0)
+    seed: int = SEED
     object_shape: str = Field("auto", max_length=200)
     use_cloud: bool = Field(True, description="verify against the scene's cloud (else the grid alone)")
+
+    @model_validator(mode="after")
+    def _work(self) -> CandidatesRequest:
+        _robustness_work(1, self.robustness_samples, 1)
+        return self
 
 
 class ReachRequest(_Model):
     """``baseplace reach`` on the robot's default map: targets and bases paired row by row."""
 
-    targets: list[str] = Field(..., min_length=1, max_length=10_000)
-    bases: list[str] = Field(..., min_length=1, max_length=10_000, description='base poses "x y yaw"')
+    targets: list[Pose] = Field(..., min_length=1, max_length=10_000)
+    bases: list[Pose] = Field(..., min_length=1, max_length=10_000, description='base poses "x y yaw"')
     robot: str = Field("tiago", max_length=64)
     arm: str | None = Field(None, max_length=64)
 
@@ -96,20 +141,36 @@ class NavigateRequest(_Model):
     goal: str = Field(..., max_length=100)
     robot: str = Field("tiago", max_length=64)
     planner: Literal["rrt", "regions"] = "rrt"
-    time_limit: float = Field(2.0, gt=0.0, le=60.0)
-    resolution: float | None = Field(None, gt=0.0, le=1.0)
-    seed: int = Field(0, ge=0)
+    time_limit: float = Field(2.0, gt=0.0, le=20.0, description="planning time [s]")
+    resolution: float | None = Field(None, ge=0.005, le=1.0)
+    seed: int = SEED
 
 
 class SurfaceMapRequest(_Model):
     """``baseplace surface-map``: where to stand to work on a whole surface (seed 002)."""
 
     polygon: str = Field(..., max_length=10_000, description='"x1,y1;x2,y2;..." [m]')
-    height: float
+    height: float = Field(..., ge=-10.0, le=10.0, description="the surface's height [m]")
     robot: str = Field("tiago", max_length=64)
     arms: str = Field("any", max_length=64)
-    resolution: float = Field(0.05, gt=0.0, le=1.0)
+    resolution: float = Field(0.05, ge=0.005, le=1.0)
     orientations: int = Field(16, ge=1, le=360)
+
+    @model_validator(mode="after")
+    def _cells(self) -> SurfaceMapRequest:
+        try:  # the bounding box's cells; a polygon that does not parse is the job's to refuse
+            xy = np.array([[float(v) for v in p.split(",")] for p in self.polygon.split(";") if p.strip()])
+            extent = np.ptp(xy, axis=0) if xy.ndim == 2 and xy.shape[1] == 2 and len(xy) else None
+        except ValueError:
+            extent = None
+        if extent is not None and np.isfinite(extent).all():
+            cells = float(np.prod(np.floor(extent / self.resolution) + 1)) * self.orientations
+            if cells > MAX_SURFACE_CELLS:
+                raise ValueError(
+                    f"the polygon's box at resolution {self.resolution:g} m x {self.orientations} orientations "
+                    f"is {cells:.3g} cells, over the limit of {MAX_SURFACE_CELLS}: a coarser resolution"
+                )
+        return self
 
 
 class SurfaceSamplesRequest(_Model):
@@ -119,82 +180,10 @@ class SurfaceSamplesRequest(_Model):
     n: int = Field(5, ge=1, le=1000)
     candidates: int = Field(40, ge=1, le=100_000)
     no_discount: bool = False
-    seed: int = Field(0, ge=0)
+    seed: int = SEED
     scene_id: str | None = Field(
         None, max_length=64, description="a scene whose grid is the operational area"
     )
-
-
-class SizeLimit:
-    """ASGI middleware: refuse a body over ``limit`` bytes with 413, by header or while it streams.
-
-    Also counts requests (``state.requests``) and adds the server-side time as ``x-server-time-ms``.
-    """
-
-    def __init__(self, app: Any, limit: int, state: ServiceState) -> None:
-        self.app = app
-        self.limit = limit
-        self.state = state
-
-    async def __call__(self, scope: dict[str, Any], receive: Any, send: Any) -> None:
-        """Pass the request on, counting its body's bytes."""
-        if scope["type"] != "http":
-            await self.app(scope, receive, send)
-            return
-        self.state.requests += 1
-        t0 = time.perf_counter()
-        for name, value in scope.get("headers", []):
-            if name == b"content-length" and value.isdigit() and int(value) > self.limit:
-                await _send_json(send, 413, self._message(int(value)))
-                return
-        received = 0
-        started = False
-
-        async def limited_receive() -> dict[str, Any]:
-            nonlocal received
-            message: dict[str, Any] = await receive()
-            if message["type"] == "http.request":
-                received += len(message.get("body", b""))
-                if received > self.limit:
-                    raise _TooLarge(received)
-            return message
-
-        async def tracking_send(message: dict[str, Any]) -> None:
-            nonlocal started
-            if message["type"] == "http.response.start":
-                started = True
-                elapsed = f"{(time.perf_counter() - t0) * 1e3:.2f}".encode()
-                message = {
-                    **message,
-                    "headers": [*message.get("headers", []), (b"x-server-time-ms", elapsed)],
-                }
-            await send(message)
-
-        try:
-            await self.app(scope, limited_receive, tracking_send)
-        except _TooLarge as exc:
-            if not started:
-                await _send_json(send, 413, self._message(exc.size, streamed=True))
-
-    def _message(self, size: int, streamed: bool = False) -> str:
-        what = f"more than {size}" if streamed else f"{size}"
-        return (
-            f"request body of {what} bytes is over the limit of {self.limit} bytes (serve --max-request-mb)"
-        )
-
-
-class _TooLarge(Exception):
-    def __init__(self, size: int) -> None:
-        self.size = size
-
-
-async def _send_json(send: Any, status: int, error: str) -> None:
-    import json
-
-    body = json.dumps({"error": error}).encode()
-    await send({"type": "http.response.start", "status": status,
-                "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]})  # fmt: skip
-    await send({"type": "http.response.body", "body": body})
 
 
 def create_app(settings: ServeSettings | None = None, state: ServiceState | None = None) -> FastAPI:
@@ -206,7 +195,7 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
         if settings.warm_up:
             await asyncio.get_running_loop().run_in_executor(st.executor, functools.partial(warm_up, st))
         yield
-        st.close()
+        st.close(wait_s=min(5.0, settings.timeout_s))  # the jobs were cancelled: they end at their next check
 
     app = FastAPI(title="baseplace", version=_version(),
                   description="Where should a mobile manipulator stand? The CLI's jobs over HTTP/JSON; "
@@ -215,19 +204,46 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
     app.state.service = st
 
     async def run(fn: Callable[..., Any], *args: Any, lookup: bool = False, lane: Any = None) -> Any:
-        """Run a job on its thread within the time limit.
+        """Run a job on its thread within the time limit, stopped when it is up.
 
         Placements and scenes on the worker, a read-only lookup on the lookup threads,
         candidates, navigation and surface maps on the command thread (``lane``: the job whose
-        thread ``fn`` runs on, if not ``fn`` itself).
+        thread ``fn`` runs on, if not ``fn`` itself). A lane holds at most ``max_queue`` jobs,
+        waiting or running (503 past it). The job runs under a deadline of the request's time
+        limit, counted from now: it stops at its next check once the request is answered 504,
+        and a job that waited out its time in the queue does not start.
         """
         loop = asyncio.get_running_loop()
         job = fn if lane is None else lane
-        pool = st.lookups if lookup else st.commands if job in COMMAND_LANE else st.executor
-        future = loop.run_in_executor(pool, functools.partial(fn, *args))
+        name = "lookups" if lookup else "commands" if job in COMMAND_LANE else "jobs"
+        pool = {"lookups": st.lookups, "commands": st.commands, "jobs": st.executor}[name]
+        if st.closing:
+            raise _Busy("shutdown", settings)
+        if st.queued[name] >= settings.max_queue:
+            raise _Busy(name, settings)
+        deadline = Deadline.after(settings.timeout_s)
+
+        def limited_job() -> Any:
+            with limited(deadline):
+                return fn(*args)
+
+        st.queued[name] += 1
+        st.deadlines.add(deadline)
+        future = loop.run_in_executor(pool, limited_job)
+
+        def ended(f: asyncio.Future[Any]) -> None:
+            st.queued[name] -= 1
+            st.deadlines.discard(deadline)
+            if not f.cancelled():
+                f.exception()  # retrieved: a job stopped after its 504 is no error to log
+
+        future.add_done_callback(ended)
         try:
             return await asyncio.wait_for(asyncio.shield(future), settings.timeout_s)
-        except asyncio.TimeoutError:
+        except (asyncio.TimeoutError, DeadlineExceeded):
+            deadline.cancel()
+            if st.closing:
+                raise _Busy("shutdown", settings) from None
             raise _Timeout(settings.timeout_s) from None
 
     async def answer(
@@ -247,17 +263,41 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
 
     @app.exception_handler(BaseplaceError)
     async def _baseplace_error(request: Request, exc: BaseplaceError) -> JSONResponse:
-        message = str(exc).replace(str(st.folder) + "/", "")  # the scene's files, not the server's paths
+        message = _line(
+            str(exc).replace(str(st.folder) + "/", "")
+        )  # the scene's files, not the server's paths
         if isinstance(exc, jobs.JobFailed) and exc.exit_code == 3:
-            return JSONResponse({**exc.report, "found": False}, status_code=200)
+            return JSONResponse({**exc.report, "error": _line(exc.report.get("error")), "found": False},
+                                status_code=200)  # fmt: skip
         if isinstance(exc, jobs.JobFailed):
-            return JSONResponse(exc.report, status_code=400)
+            return JSONResponse({**exc.report, "error": _line(exc.report.get("error"))}, status_code=400)
         status = 404 if isinstance(exc, UnknownSceneError) else 400
         return JSONResponse(_error_body(request, message), status_code=status)
 
     @app.exception_handler(_Timeout)
     async def _timeout(request: Request, exc: _Timeout) -> JSONResponse:
         return JSONResponse({"error": str(exc)}, status_code=504)
+
+    @app.exception_handler(_Busy)
+    async def _busy(request: Request, exc: _Busy) -> JSONResponse:
+        retry = str(max(1, round(settings.timeout_s)))
+        return JSONResponse({"error": str(exc)}, status_code=503, headers={"Retry-After": retry})
+
+    @app.exception_handler(HTTPException)
+    async def _http_error(request: Request, exc: HTTPException) -> JSONResponse:
+        detail = exc.detail if isinstance(exc.detail, str) else "invalid request"
+        if exc.status_code == 400:  # FastAPI's: the body did not parse (too deep, not UTF-8)
+            detail = "the request body is not valid JSON (not UTF-8, or nested too deeply)"
+        return JSONResponse(_error_body(request, _line(detail)), status_code=exc.status_code,
+                            headers=getattr(exc, "headers", None))  # fmt: skip
+
+    @app.exception_handler(Exception)
+    async def _internal(request: Request, exc: Exception) -> JSONResponse:
+        # no traceback and no exception text: they may name the server's paths or echo the input
+        return JSONResponse(
+            {"error": f"internal error ({type(exc).__name__}); the service goes on answering"},
+            status_code=500,
+        )
 
     @app.exception_handler(RequestValidationError)
     async def _invalid(request: Request, exc: RequestValidationError) -> JSONResponse:
@@ -266,6 +306,9 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
             at = [p for p in first.get("loc", ()) if p != "body"]
             where = f" at character {at[0]}" if at else ""
             message = f"the request body is not valid JSON{where} ({first.get('msg', 'decode error')})"
+        elif first.get("type") == "finite_number":
+            where = ".".join(str(p) for p in first.get("loc", ()) if p != "body")
+            message = f"{where}: NaN and infinite numbers are not accepted (a finite number)"
         else:
             where = ".".join(str(p) for p in first.get("loc", ()) if p != "body")
             message = (
@@ -273,10 +316,13 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
                 if where
                 else str(first.get("msg", "invalid"))
             )
-        return JSONResponse(_error_body(request, message.replace("\n", " ")), status_code=422)
+        return JSONResponse(_error_body(request, _line(message.replace("\n", " "))), status_code=422)
 
-    @app.get("/health", summary="liveness, scenes held, resident memory")
-    async def health() -> dict[str, Any]:
+    @app.get("/health", summary="liveness; with the token also scenes held, resident memory")
+    async def health(request: Request) -> dict[str, Any]:
+        headers = {k.lower(): v for k, v in request.scope["headers"]}
+        if not authorized(headers, settings.token):
+            return {"status": "ok"}
         return {"status": "ok", "version": _version(), "uptime_s": round(time.time() - st.started, 1),
                 "scenes": len(st.scene_ids()), "requests": st.requests, "rss_mb": round(_rss_mb(), 1),
                 "robots_warm": sorted(st._robots)}  # fmt: skip
@@ -284,6 +330,7 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
     @app.post(
         "/scenes",
         summary="upload a cloud or a ROS recording (body: the file) once; later requests name its scene_id",
+        openapi_extra=_UPLOAD,
     )
     async def upload_scene(
         request: Request,
@@ -291,10 +338,11 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
             ..., description="cloud file format, or a recording: rosbag2 .mcap file, ROS 1 .bag"
         ),
         cloud_topic: Annotated[
-            list[str] | None, Query(description="recordings: PointCloud2 topic(s)")
+            list[Annotated[str, StringConstraints(max_length=200)]] | None,
+            Query(description="recordings: PointCloud2 topic(s)", max_length=16),
         ] = None,
         map_topic: str | None = Query(
-            None, description="recordings: an OccupancyGrid topic, the scene's grid"
+            None, max_length=200, description="recordings: an OccupancyGrid topic, the scene's grid"
         ),
         world_frame: str = Query("map", max_length=200, description="recordings: the frame of the scene"),
         bag_clouds: Literal["last", "first", "all"] = Query(
@@ -323,19 +371,21 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
         return {"deleted": scene_id}
 
     @app.post(
-        "/scenes/{scene_id}/grid", summary="attach an occupancy grid (body: PGM/PNG; map_server YAML fields)"
+        "/scenes/{scene_id}/grid",
+        summary="attach an occupancy grid (body: PGM/PNG; map_server YAML fields)",
+        openapi_extra=_UPLOAD,
     )
     async def upload_grid(
         scene_id: str,
         request: Request,
-        resolution: float = Query(..., gt=0.0, le=10.0),
+        resolution: float = Query(..., gt=0.0, le=10.0, allow_inf_nan=False),
         format: Literal["pgm", "png"] = "pgm",
-        origin_x: float = 0.0,
-        origin_y: float = 0.0,
-        origin_yaw: float = 0.0,
+        origin_x: float = Query(0.0, ge=-1e6, le=1e6, allow_inf_nan=False),
+        origin_y: float = Query(0.0, ge=-1e6, le=1e6, allow_inf_nan=False),
+        origin_yaw: float = Query(0.0, ge=-10.0, le=10.0, allow_inf_nan=False),
         negate: bool = False,
-        occupied_thresh: float = 0.65,
-        free_thresh: float = 0.196,
+        occupied_thresh: float = Query(0.65, ge=0.0, le=1.0, allow_inf_nan=False),
+        free_thresh: float = Query(0.196, ge=0.0, le=1.0, allow_inf_nan=False),
         mode: Literal["trinary", "scale", "raw"] = "trinary",
     ) -> dict[str, Any]:
         scene = st.scene(scene_id)
@@ -345,7 +395,9 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
         return await run(jobs.add_grid, scene, data, format, meta)
 
     @app.get("/scenes/{scene_id}/segmentation", summary="baseplace segment --json of the scene (cached)")
-    async def segmentation(scene_id: str, resolution: float | None = Query(None, gt=0.0, le=1.0)) -> Response:
+    async def segmentation(
+        scene_id: str, resolution: float | None = Query(None, ge=0.005, le=1.0, allow_inf_nan=False)
+    ) -> Response:
         return await answer(jobs.segment, st.scene(scene_id), resolution)
 
     @app.post("/place", summary="baseplace place --json on an uploaded scene")
@@ -388,9 +440,7 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
         scene = None if req.scene_id is None else st.scene(req.scene_id)
         return await answer(jobs.surface_samples, st, req.model_dump(), str(path), scene)
 
-    app.add_middleware(
-        SizeLimit, limit=settings.max_request_bytes, state=st
-    )  # outermost: before any body is read
+    app.add_middleware(Guard, settings=settings, state=st)  # outermost: before any body is read
     return app
 
 
@@ -415,9 +465,37 @@ def _error_body(request: Request, message: str) -> dict[str, Any]:
 class _Timeout(Exception):
     def __init__(self, limit: float) -> None:
         super().__init__(
-            f"the request took longer than {limit:g} s (serve --timeout); it finishes in the background "
-            "and its scene caches stay warm"
+            f"the request took longer than {limit:g} s (serve --timeout); its job was stopped, the scene's "
+            "caches stay warm"
         )
+
+
+class _Busy(Exception):
+    def __init__(self, lane: str, settings: ServeSettings) -> None:
+        super().__init__(
+            "the service is shutting down"
+            if lane == "shutdown"
+            else f"the service has {settings.max_queue} {lane} waiting or running already "
+            "(serve --max-queue); try again shortly"
+        )
+
+
+_UPLOAD: dict[str, Any] = {
+    "requestBody": {
+        "required": True,
+        "content": {"application/octet-stream": {"schema": {"type": "string", "format": "binary"}}},
+    }
+}
+"""The file body of an upload endpoint, in the OpenAPI document."""
+
+
+def _line(message: Any, limit: int = 400) -> str:
+    """An error line of at most ``limit`` characters: a long one (an echoed input) keeps its ends."""
+    text = str(message)
+    if len(text) <= limit:
+        return text
+    half = limit // 2
+    return f"{text[:half]} ... ({len(text) - 2 * half} characters cut) ... {text[-half:]}"
 
 
 def warm_up(state: ServiceState) -> None:

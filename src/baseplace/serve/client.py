@@ -14,6 +14,9 @@ import httpx
 
 from baseplace.errors import BaseplaceError, InputError, NothingFoundError
 
+UPLOAD = {"Content-Type": "application/octet-stream"}
+"""The content type of a file upload (the service refuses any other with 415)."""
+
 
 class ServiceError(BaseplaceError):
     """The service answered with an error; ``status`` is the HTTP status, the message its one line."""
@@ -29,12 +32,24 @@ class Client:
     Args:
         url: the service's base URL.
         timeout_s: per-request time limit of the client [s].
+        token: the service's API token (default ``$BASEPLACE_TOKEN``), sent as
+            ``Authorization: Bearer TOKEN``.
     """
 
     def __init__(
-        self, url: str = "http://127.0.0.1:8000", timeout_s: float = 60.0, **httpx_args: Any
+        self,
+        url: str = "http://127.0.0.1:8000",
+        timeout_s: float = 60.0,
+        token: str | None = None,
+        **httpx_args: Any,
     ) -> None:
-        self._http = httpx.Client(base_url=url, timeout=timeout_s, **httpx_args)
+        import os
+
+        token = token if token is not None else os.environ.get("BASEPLACE_TOKEN") or None
+        headers = {**httpx_args.pop("headers", {})}
+        if token is not None:
+            headers["Authorization"] = f"Bearer {token}"
+        self._http = httpx.Client(base_url=url, timeout=timeout_s, headers=headers, **httpx_args)
 
     def __enter__(self) -> Client:
         return self
@@ -53,7 +68,7 @@ class Client:
             body = {"error": response.text.strip()[:200] or f"HTTP {response.status_code}"}
         if response.status_code >= 400:
             error = str(body.get("error", f"HTTP {response.status_code}"))
-            if response.status_code in (400, 404, 413, 422):
+            if response.status_code in (400, 404, 413, 415, 422):
                 raise InputError(error)
             raise ServiceError(error, response.status_code)
         return body
@@ -74,7 +89,11 @@ class Client:
             data, fmt = path.read_bytes(), format or path.suffix.lstrip(".").lower()
         if not fmt:
             raise InputError("give the cloud's format: ply, pcd, npy or xyz")
-        return str(self._answer(self._http.post("/scenes", params={"format": fmt}, content=data))["scene_id"])
+        return str(
+            self._answer(self._http.post("/scenes", params={"format": fmt}, content=data, headers=UPLOAD))[
+                "scene_id"
+            ]
+        )
 
     def upload_grid(
         self, scene_id: str, image: str | Path, resolution: float, **yaml_fields: Any
@@ -83,7 +102,9 @@ class Client:
         path = Path(image)
         params = {"resolution": resolution, "format": path.suffix.lstrip(".").lower(), **yaml_fields}
         return self._answer(
-            self._http.post(f"/scenes/{scene_id}/grid", params=params, content=path.read_bytes())
+            self._http.post(
+                f"/scenes/{scene_id}/grid", params=params, content=path.read_bytes(), headers=UPLOAD
+            )
         )
 
     def segmentation(self, scene_id: str) -> dict[str, Any]:

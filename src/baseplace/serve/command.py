@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from typing import Any
 
@@ -28,6 +29,21 @@ def add_serve_command(sub: Any) -> None:
         "--max-scenes", type=int, default=16, help="scenes kept, least recently used dropped (default 16)"
     )
     p.add_argument("--no-warm-up", action="store_true", help="skip the warm-up placement at start")
+    p.add_argument("--token", default=None,
+                   help="API token clients send as 'Authorization: Bearer TOKEN' (default $BASEPLACE_TOKEN; "
+                        "required off loopback)")  # fmt: skip
+    p.add_argument("--allow-host", action="append", default=[],
+                   help="another name clients reach the service by (Host header; repeat)")  # fmt: skip
+    p.add_argument("--allow-origin", action="append", default=[],
+                   help="a web origin whose pages may call the service, e.g. https://ui.example:8443 (repeat)")  # fmt: skip
+    p.add_argument("--max-queue", type=int, default=16,
+                   help="jobs waiting or running per lane; more get 503 (default 16)")  # fmt: skip
+    p.add_argument("--read-timeout", type=float, default=10.0,
+                   help="request headers within, and no body stall over, this many seconds (default 10)")  # fmt: skip
+    p.add_argument("--max-inflight-mb", type=float, default=256.0,
+                   help="request bodies being received, all together; more get 503 (default 256 MiB)")  # fmt: skip
+    p.add_argument("--max-connections", type=int, default=128,
+                   help="open connections; more get 503 (default 128)")  # fmt: skip
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
@@ -35,15 +51,17 @@ def cmd_serve(args: argparse.Namespace) -> int:
     from baseplace.serve.server import serve
     from baseplace.serve.state import ServeSettings
 
-    if not (args.max_request_mb > 0):
-        raise InputError(f"--max-request-mb must be > 0, got {args.max_request_mb}")
+    for name in ("max_request_mb", "max_inflight_mb", "timeout", "read_timeout"):
+        if not (getattr(args, name) > 0):  # NaN too
+            raise InputError(f"--{name.replace('_', '-')} must be > 0, got {getattr(args, name)}")
+    token = args.token if args.token is not None else os.environ.get("BASEPLACE_TOKEN") or None
     settings = ServeSettings(host=args.host, port=args.port, max_request_bytes=int(args.max_request_mb * 2**20),
                              timeout_s=args.timeout, max_scenes=args.max_scenes,
-                             robots=tuple(args.robot or ("tiago",)), warm_up=not args.no_warm_up)  # fmt: skip
-    if args.host not in ("127.0.0.1", "localhost", "::1"):
-        sys.stderr.write(
-            f"warning: serving on {args.host}: reachable from other machines, with no authentication\n"
-        )
+                             robots=tuple(args.robot or ("tiago",)), warm_up=not args.no_warm_up, token=token,
+                             allow_hosts=tuple(args.allow_host), allow_origins=tuple(args.allow_origin),
+                             max_queue=args.max_queue, read_timeout_s=args.read_timeout,
+                             max_inflight_bytes=int(args.max_inflight_mb * 2**20),
+                             max_connections=args.max_connections)  # fmt: skip
     warm = f"warming {', '.join(settings.robots)}, then " if settings.warm_up else ""
     sys.stderr.write(f"baseplace serve: {warm}http://{args.host}:{args.port} (docs at /docs)\n")
     serve(settings)

@@ -1,4 +1,4 @@
-"""Run the service on uvicorn: loopback by default, graceful shutdown on SIGINT/SIGTERM."""
+"""Run the service on uvicorn: loopback by default, limits on connections and reads, shutdown within the time limit."""
 
 from __future__ import annotations
 
@@ -19,15 +19,38 @@ def create_app(settings: ServeSettings | None = None, state: Any = None) -> Any:
     return make(settings, state)
 
 
+def uvicorn_server(app: Any, settings: ServeSettings, log_level: str = "warning") -> Any:
+    """A uvicorn server of ``app`` with the service's limits.
+
+    Connections over ``max_connections`` get 503; a connection whose request headers are not in
+    within ``read_timeout_s`` is closed (:class:`~baseplace.serve.guard.TimedH11Protocol`); an
+    idle keep-alive connection after 5 s; headers over 16 KiB get 400 (h11's limit). On SIGINT or
+    SIGTERM every job is cancelled at once (it stops at its next deadline check), requests in
+    flight are answered, and the process ends within the time limit.
+    """
+    import uvicorn
+
+    from baseplace.serve.guard import TimedH11Protocol
+
+    protocol = type("ServiceH11Protocol", (TimedH11Protocol,), {"header_timeout": settings.read_timeout_s})
+    config = uvicorn.Config(app, host=settings.host, port=settings.port, log_level=log_level, lifespan="on",
+                            http=protocol, limit_concurrency=settings.max_connections, timeout_keep_alive=5,
+                            h11_max_incomplete_event_size=16 * 1024,
+                            timeout_graceful_shutdown=max(1, int(settings.timeout_s)), access_log=False)  # fmt: skip
+    state = app.state.service
+
+    class Server(uvicorn.Server):
+        def handle_exit(self, sig: int, frame: Any) -> None:
+            state.stop_jobs()
+            super().handle_exit(sig, frame)
+
+    return Server(config)
+
+
 def serve(settings: ServeSettings | None = None, log_level: str = "warning") -> None:
-    """Serve until SIGINT/SIGTERM: new connections stop, requests in flight finish (within the time limit).
+    """Serve until SIGINT/SIGTERM: new connections stop, jobs are cancelled, requests in flight are answered.
 
     The robots named in ``settings.robots`` are warmed before the port opens.
     """
     s = settings or ServeSettings()
-    app = create_app(s)
-    import uvicorn
-
-    config = uvicorn.Config(app, host=s.host, port=s.port, log_level=log_level, lifespan="on",
-                            timeout_graceful_shutdown=max(1, int(s.timeout_s)), access_log=False)  # fmt: skip
-    uvicorn.Server(config).run()
+    uvicorn_server(create_app(s), s, log_level).run()

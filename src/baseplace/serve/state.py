@@ -55,6 +55,17 @@ class ServeSettings:
             requests side by side on its own threads; a parallel kernel in each of them would
             oversubscribe the cores (on 2 shared cores a warm OSRM took 16 ms with numba's 2
             threads, 1.9 ms with 1).
+        token: API token every request but /health and the docs must send as
+            ``Authorization: Bearer TOKEN``; required when ``host`` is not loopback.
+        allow_hosts: more names the ``Host`` header may give (besides loopback and ``host``).
+        allow_origins: web origins (``https://app.example:8443``) whose pages may call the
+            service; none by default (a browser page's own origin is the service's).
+        max_queue: jobs waiting or running per lane (placements, commands, lookups); more get
+            503 with ``Retry-After``.
+        read_timeout_s: request headers must be complete, and a body must not stall, within
+            this many seconds; a whole body within 4 times that [s].
+        max_inflight_bytes: request bodies being received, all together; past it 503.
+        max_connections: open connections (uvicorn's ``limit_concurrency``); past it 503.
     """
 
     host: str = "127.0.0.1"
@@ -65,6 +76,13 @@ class ServeSettings:
     robots: tuple[str, ...] = ("tiago",)
     warm_up: bool = True
     kernel_threads: int = 1
+    token: str | None = None
+    allow_hosts: tuple[str, ...] = ()
+    allow_origins: tuple[str, ...] = ()
+    max_queue: int = 16
+    read_timeout_s: float = 10.0
+    max_inflight_bytes: int = 256 * 1024 * 1024
+    max_connections: int = 128
 
     def __post_init__(self) -> None:
         if not (0 <= self.port <= 65535):
@@ -77,6 +95,37 @@ class ServeSettings:
             raise InputError(f"kernel_threads must be >= 1, got {self.kernel_threads}")
         if self.max_scenes < 1:
             raise InputError(f"max_scenes must be >= 1, got {self.max_scenes}")
+        if self.max_queue < 1:
+            raise InputError(f"max_queue must be >= 1, got {self.max_queue}")
+        if not (self.read_timeout_s > 0):
+            raise InputError(f"read_timeout_s must be > 0, got {self.read_timeout_s}")
+        if self.max_inflight_bytes < self.max_request_bytes:
+            raise InputError(
+                f"max_inflight_bytes ({self.max_inflight_bytes}) must be >= max_request_bytes "
+                f"({self.max_request_bytes}): one request of the largest size must fit"
+            )
+        if self.max_connections < 1:
+            raise InputError(f"max_connections must be >= 1, got {self.max_connections}")
+        if self.token is not None and len(self.token) < 16:
+            raise InputError("the API token must be at least 16 characters (e.g. python -c "
+                             "'import secrets; print(secrets.token_urlsafe())')")  # fmt: skip
+        if not is_loopback(self.host) and self.token is None:
+            raise InputError(
+                f"serving on {self.host} (reachable from other machines) needs an API token: "
+                "--token or $BASEPLACE_TOKEN"
+            )
+
+
+def is_loopback(host: str) -> bool:
+    """True for an address only this machine reaches (127.0.0.0/8, ::1, localhost)."""
+    import ipaddress
+
+    if host.strip("[]").lower() == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
 
 
 @dataclass
@@ -140,6 +189,16 @@ class ServiceState:
         self._scenes: OrderedDict[str, Scene] = OrderedDict()
         self._lock = threading.Lock()  # scenes are added from the worker and read from the loop
         self.requests = 0
+        self.inflight_bytes = 0  # request bodies being received (the event loop's count)
+        self.queued: dict[str, int] = {"jobs": 0, "commands": 0, "lookups": 0}  # per lane, waiting or running
+        self.deadlines: set[Any] = set()  # of the jobs submitted and not ended: cancelled at shutdown
+        self.closing = False
+
+    def stop_jobs(self) -> None:
+        """Shutting down: every job stops at its next deadline check, no new one starts (any thread)."""
+        self.closing = True
+        for deadline in list(self.deadlines):
+            deadline.cancel()
 
     # ---- robots and maps (worker thread only) ----
     def robot(self, name: str, lane: str = "jobs") -> Any:
@@ -271,9 +330,18 @@ class ServiceState:
         with self._lock:
             return list(self._scenes)
 
-    def close(self) -> None:
-        """Stop the worker after the job it runs, and delete the scenes' files."""
-        self.lookups.shutdown(wait=True, cancel_futures=True)
-        self.commands.shutdown(wait=True, cancel_futures=True)
-        self.executor.shutdown(wait=True, cancel_futures=True)
+    def close(self, wait_s: float | None = None) -> None:
+        """Cancel every job, wait up to ``wait_s`` (default: the time limit) for them, delete the scenes' files.
+
+        A job stops at its next deadline check; one that does not within ``wait_s`` is left to
+        the process's exit (the worker threads are daemons of a process that is ending).
+        """
+        self.stop_jobs()
+        pools = (self.lookups, self.commands, self.executor)
+        for pool in pools:
+            pool.shutdown(wait=False, cancel_futures=True)
+        end = time.monotonic() + (self.settings.timeout_s if wait_s is None else wait_s)
+        for pool in pools:
+            for thread in list(getattr(pool, "_threads", ())):
+                thread.join(max(0.0, end - time.monotonic()))
         shutil.rmtree(self.folder, ignore_errors=True)
