@@ -36,7 +36,7 @@ def step_progress(progress: Progress | None, step: str, total: int) -> Callable[
 
 def map_step(robot_name: str, arm: str) -> str:
     """The progress step of building one arm's reachability map: one bar per map, named by its arm."""
-    return f"reachability map, {robot_name} {arm} arm"
+    return f"reachability map, {robot_name} {arm if arm.endswith('arm') else arm + ' arm'}"
 
 
 def map_timing(chosen: MapChoice, seconds: float) -> dict[str, float]:
