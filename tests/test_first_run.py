@@ -168,7 +168,7 @@ def test_build_map_reuses_the_cached_default_map_and_says_where(monkeypatch, sma
     code, err = _on_a_terminal(monkeypatch, "build-map", "--samples", str(SMALL), "--out", str(second))
     out = capsys.readouterr().out
     assert code == 0 and _bars(err) == set(), err  # not rebuilt: no sampling, no bar
-    assert f"not rebuilt: the same map was already built and cached at {cached}" in out, out
+    assert f"not rebuilt, the same map was already built and cached at {cached}" in out, out
     a, b = load_map(first), load_map(second)
     assert a.info == b.info and np.array_equal(a.cells, b.cells) and np.array_equal(a.counts, b.counts)
     assert main(["build-map", "--samples", str(SMALL), "--out", str(second), "--json"]) == 0

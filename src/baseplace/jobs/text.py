@@ -111,13 +111,15 @@ def _demo(o: dict[str, Any]) -> list[str]:
 
 
 def _build_map(o: dict[str, Any]) -> list[str]:
-    lines = [f"wrote {o['outputs']['map']}: {o['cells_reached']} cells reached by {o['samples']:.3g} samples "
-             f"in {o['build_time_s']:.1f} s ({o['samples_per_s'] / 1e6:.2f} M samples/s), "
-             f"{o['file_bytes'] / 1e6:.1f} MB"]  # fmt: skip
     if o.get("reused"):
-        lines.append(f"not rebuilt: the same map was already built and cached at {o['cached_at']} "
-                     "(place, reach and explain use it without --map)")  # fmt: skip
-    elif o.get("cached_at"):
+        lines = [f"wrote {o['outputs']['map']}: not rebuilt, the same map was already built and cached at "
+                 f"{o['cached_at']} ({o['cells_reached']} cells reached by {o['samples']:.3g} samples, built "
+                 f"in {o['build_time_s']:.1f} s), {o['file_bytes'] / 1e6:.1f} MB"]  # fmt: skip
+    else:
+        lines = [f"wrote {o['outputs']['map']}: {o['cells_reached']} cells reached by {o['samples']:.3g} samples "
+                 f"in {o['build_time_s']:.1f} s ({o['samples_per_s'] / 1e6:.2f} M samples/s), "
+                 f"{o['file_bytes'] / 1e6:.1f} MB"]  # fmt: skip
+    if o.get("cached_at") and not o.get("reused"):
         lines.append(f"also cached at {o['cached_at']} (place, reach and explain use it without --map)")
     if o.get("support"):
         lines.append(f"support test: count {o['support']['count']}, threshold {o['support']['threshold']}")
