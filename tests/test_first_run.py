@@ -189,3 +189,11 @@ def test_reach_without_map_uses_the_cached_default_map(small_default, capsys):
     assert [f"{v:.6g}" for v in obj["values"]] == out[:1] and "map" in obj["timings_ms"]
     assert main(["reach", "--map", str(cached), "--robot", "tiago", *query]) == 0
     assert capsys.readouterr().out.splitlines() == out[:1]
+
+
+def test_surface_map_draws_one_bar_per_arm_named_by_it(monkeypatch, small_default, tmp_path):
+    code, err = _on_a_terminal(monkeypatch, "surface-map", "--robot", "pr2", "--arms", "both", "--samples",
+                               str(SMALL), "--polygon", "0,0;1.4,0;1.4,0.65;0,0.65", "--height", "0.74",
+                               "--out", str(tmp_path / "t.smap"))  # fmt: skip
+    assert code == 0, err
+    assert _bars(err) == {"reachability map, pr2 left arm", "reachability map, pr2 right arm"}, err
