@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import re
 import subprocess
 import sys
@@ -11,6 +12,13 @@ from baseplace.cli import main
 from conftest import SHARED
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+class _Terminal(io.StringIO):
+    """A stream that says it is a terminal, as a user's stderr is."""
+
+    def isatty(self) -> bool:
+        return True
 
 
 def test_version_prints_the_project_version():
@@ -27,19 +35,25 @@ def test_first_candidates_run_shows_a_progress_bar_while_it_builds_the_map(monke
     import baseplace.reachability.build as build
 
     monkeypatch.setenv("BASEPLACE_CACHE", str(tmp_path / "cache"))
+    import baseplace.reachability.cache as cache
+
     full = build.BuildSettings
-    monkeypatch.setattr(build, "BuildSettings", lambda: full(samples=300_000))  # a small "default" map
+    for module in (build, cache):  # a small "default" map
+        monkeypatch.setattr(module, "BuildSettings", lambda: full(samples=300_000))
     args = ["candidates", "--occupancy", str(SHARED / "maps" / "tb3_sandbox.yaml"), "--object",
             "-1.025 -0.775 0.6"]  # fmt: skip
+    terminal = _Terminal()
+    monkeypatch.setattr(sys, "stderr", terminal)  # bars show on a terminal only
     code = main(args)
-    first = capsys.readouterr()
-    assert code in (0, 3), first.err
-    assert "default tiago map (first run only)" in first.err and "samples" in first.err
+    assert code in (0, 3), terminal.getvalue()
+    assert "reachability map, tiago arm" in terminal.getvalue() and "samples" in terminal.getvalue()
     assert list((tmp_path / "cache" / "maps").glob("map-*.rmap"))  # built and cached
-    code = main(args)  # second run: the cached map, no bar
-    assert code in (0, 3) and "first run only" not in capsys.readouterr().err
-    code = main([*args, "--json"])  # --json: nothing but the JSON object
-    assert "first run only" not in capsys.readouterr().err
+    for run in (args, [*args, "--json"]):  # second run: the cached map, no bar; --json: nothing but the JSON
+        terminal.seek(0)
+        terminal.truncate()
+        code = main(run)
+        assert code in (0, 3) and "reachability map" not in terminal.getvalue()
+    capsys.readouterr()
 
 
 def test_help_lists_the_robot_command_and_version(capsys):
@@ -112,11 +126,10 @@ def test_a_step_past_two_seconds_shows_a_status_line_on_a_terminal(tmp_path):
 
 def test_one_progress_bar_type_counts_loops_in_their_own_unit():
     """The experiments' loops use the jobs' ProgressBars (one type): ``count(k)`` adds k done."""
-    import io
 
     from baseplace.status import ProgressBars
 
-    out = io.StringIO()
+    out = _Terminal()
     with ProgressBars(stream=out) as bars:
         count = bars.counter("osrm experiment", 10, "scenes")
         count(3)
@@ -127,3 +140,6 @@ def test_one_progress_bar_type_counts_loops_in_their_own_unit():
     with ProgressBars(enabled=False) as quiet:  # --json: nothing shown
         quiet.counter("x", 5)(5)
     assert quiet.bars == {}
+    with ProgressBars(stream=io.StringIO()) as redirected:  # not a terminal (a log, a pipe): nothing shown
+        redirected.counter("x", 5)(5)
+    assert redirected.bars == {}

@@ -160,7 +160,9 @@ JOBS: dict[str, Callable[[argparse.Namespace, Progress], Any]] = {
     "robots": lambda a, _: world.robots_job(),
     "check": lambda a, _: world.robot_check_job(world.RobotCheckJob(a.robot, a.png, a.pairs)),
     "build-map": _build_map,
-    "reach": lambda a, _: reach.reach_job(reach.ReachJob(a.map, a.target, a.targets, a.base, a.bases, a.robot)),
+    "reach": lambda a, progress: reach.reach_job(
+        reach.ReachJob(a.map, a.target, a.targets, a.base, a.bases, a.robot), progress
+    ),
     "place": _place,
     "explain": _explain,
     "candidates": _candidates,
@@ -273,8 +275,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-resume", action="store_true", help="ignore and write no OUT.partial checkpoint")
 
     p = command("reach", "reachability of TCP targets from base poses (IRM lookup)")
-    p.add_argument("--map", required=True, help="map file from build-map")
-    p.add_argument("--robot", default=None, help="check the map was built for this robot")
+    p.add_argument("--map", default=None,
+                   help='map file from build-map (default, or "default": the cached default map of --robot, built once)')  # fmt: skip
+    p.add_argument("--robot", default=None,
+                   help="check the map was built for this robot; without --map, the default map's robot (default: tiago)")  # fmt: skip
     p.add_argument("--target", help='world TCP pose "x y z roll pitch yaw" [m, rad]')
     p.add_argument("--targets", help="file with one target pose per line")
     p.add_argument("--base", help='base pose "x y yaw" [m, rad]')

@@ -73,7 +73,8 @@ def elapsed_status(label: str, enabled: bool = True, stream: Any = None) -> Iter
 class ProgressBars:
     """A job's progress callback (``progress(step, done, total)``) shown as one tqdm bar per step on stderr.
 
-    A step's bar appears on its first update; nothing is shown when ``enabled`` is False (``--json``).
+    A step's bar appears on its first update; nothing is shown when ``enabled`` is False (``--json``)
+    or when the stream is not a terminal (a redirected stderr: a log gets no bars).
     """
 
     def __init__(self, enabled: bool = True, stream: Any = None) -> None:
@@ -88,6 +89,8 @@ class ProgressBars:
             from tqdm import tqdm
 
             out = sys.stderr if self.stream is None else self.stream
+            if not getattr(out, "isatty", lambda: False)():
+                return
             unit = self.units.get(step, "samples")
             self.bars[step] = tqdm(
                 total=total, desc=step, unit=unit, unit_scale=unit == "samples", file=out, leave=False

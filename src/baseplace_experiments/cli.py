@@ -17,7 +17,7 @@ from typing import Any
 
 from baseplace.argtypes import nonneg_int
 from baseplace.errors import InputError
-from baseplace.jobs.inputs import PLOT_SUFFIXES, out_path, step_progress
+from baseplace.jobs.inputs import PLOT_SUFFIXES, out_path
 from baseplace.status import ProgressBars
 
 
@@ -45,13 +45,10 @@ def _bars(args: argparse.Namespace) -> ProgressBars:
 
 def _default_map(args: argparse.Namespace, robot: Any, arm: str | None = None) -> Any:
     """The robot's cached default map, built on first use (tens of seconds) behind a progress bar."""
-    from baseplace.reachability.build import BuildSettings
-    from baseplace.reachability.cache import cached_map
+    from baseplace.reachability.cache import resolve_map
 
-    settings = BuildSettings()
     with _bars(args) as bars:
-        return cached_map(robot, settings, arm, step_progress(bars, f"default {robot.name} map (first run only)",
-                                                              settings.samples))[0]  # fmt: skip
+        return resolve_map(robot, None, arm, bars).rmap
 
 
 def _results_path(path: str | None) -> Path | None:

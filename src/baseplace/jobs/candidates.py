@@ -29,10 +29,11 @@ from baseplace.jobs.inputs import (
     check_on_scene,
     grid_bounds,
     load_robot,
+    map_output,
+    map_timing,
     occupancy_grid,
     out_path,
     parse_xyz,
-    step_progress,
     world_cloud,
     write_mcap,
 )
@@ -151,7 +152,7 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
     )
     from baseplace.placement.robustness import RobustnessSettings
     from baseplace.placement.scene_cache import object_key
-    from baseplace.reachability.cache import map_or_default
+    from baseplace.reachability.cache import resolve_map
     from baseplace.terrain.voxels import VoxelMap
     from baseplace.world.environment import Environment, contact_groups
     from baseplace.world.grasped_object import GraspedObject, find_grasped_object, parse_grasped_object
@@ -177,8 +178,9 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
                    extra=abs(standoff))  # fmt: skip
     if robot_pose is not None:
         check_on_scene(robot_pose, "--robot-pose", bounds, scene, CHECK_MARGIN + grid.resolution)
-    rmap = map_or_default(robot, job.map, job.arm,
-                          step_progress(progress, f"default {robot.name} map (first run only)", 50_000_000))  # fmt: skip
+    t_map = time.perf_counter()
+    map_choice = resolve_map(robot, job.map, job.arm, progress)
+    rmap, map_s = map_choice.rmap, time.perf_counter() - t_map
     arm = robot.arm(rmap.info.arm)
     settings = RadialSettings.for_robot(robot, rmap)
     check_object(grid, p_o, settings.d_max)
@@ -293,7 +295,8 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
                    paths=[] if route is None else [route.poses])  # fmt: skip
         report.outputs["mcap"] = str(mcap)
     now = time.perf_counter()
-    report.timings_ms = {"load": (t_load - t0) * 1e3, "cloud": (t_search - t_load) * 1e3,
+    report.outputs.update(map_output(map_choice))
+    report.timings_ms = {"load": (t_load - t0 - map_s) * 1e3, **map_timing(map_choice, map_s), "cloud": (t_search - t_load) * 1e3,
                          "search": (t_verify - t_search) * 1e3, "robustness": (t_rank - t_verify) * 1e3,
                          "navigation": (now - t_rank) * 1e3, "total": (now - t0) * 1e3}  # fmt: skip
     if not ranked:

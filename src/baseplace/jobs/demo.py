@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from baseplace.jobs.inputs import DEFAULT_MAP_SAMPLES, Progress, step_progress
+from baseplace.jobs.inputs import DEFAULT_MAP_SAMPLES, Progress, map_step, step_progress
 from baseplace.jobs.report import DemoReport, NoResultError, PoseRecord, RobotRef, path_json
 
 if TYPE_CHECKING:
@@ -83,7 +83,7 @@ def demo_job(job: DemoJob, progress: Progress | None = None) -> DemoReport:
     t0 = time.perf_counter()
     robot = Robot("tiago")
     settings = BuildSettings(samples=job.samples, seed=job.seed)
-    update = step_progress(progress, "default TIAGo map (first run only)", job.samples)
+    update = step_progress(progress, map_step(robot.name, robot.spec.default_arm), settings.samples)
     rmap, map_path, built = cached_map(robot, settings, progress=update)
     t_map = time.perf_counter()
     rng = np.random.default_rng(job.seed)

@@ -21,7 +21,15 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 from baseplace.errors import InputError
-from baseplace.jobs.inputs import CloudInput, Progress, base_xyyaw, load_robot, step_progress, world_cloud
+from baseplace.jobs.inputs import (
+    CloudInput,
+    Progress,
+    base_xyyaw,
+    load_robot,
+    map_output,
+    map_timing,
+    world_cloud,
+)
 from baseplace.jobs.report import PoseRecord, Report, RobotRef
 
 if TYPE_CHECKING:
@@ -118,7 +126,7 @@ def explain_job(job: ExplainJob, progress: Progress | None = None) -> ExplainRep
     from baseplace.geometry.poses import invert_transforms
     from baseplace.placement.pipeline import PlaceSettings, scene_checks, with_floor
     from baseplace.placement.verify import Candidate
-    from baseplace.reachability.cache import map_or_default
+    from baseplace.reachability.cache import resolve_map
     from baseplace.robots.ik import DampedLeastSquaresIK
     from baseplace.world.grasped_object import parse_grasped_object
 
@@ -139,8 +147,8 @@ def explain_job(job: ExplainJob, progress: Progress | None = None) -> ExplainRep
     elif job.floor is not None:
         raise InputError("--floor adds a floor under a cloud: give --cloud too")
     t_load = time.perf_counter()
-    rmap = map_or_default(robot, job.map, job.arm,
-                          step_progress(progress, f"default {robot.name} map (first run only)", 50_000_000))  # fmt: skip
+    chosen = resolve_map(robot, job.map, job.arm, progress)
+    rmap = chosen.rmap
     t_map = time.perf_counter()
     arm = robot.arm(rmap.info.arm)
     rng = np.random.default_rng(job.seed)
@@ -182,9 +190,9 @@ def explain_job(job: ExplainJob, progress: Progress | None = None) -> ExplainRep
     t_checks = time.perf_counter()
     verdict = _verdict(value, footprint, ik_json, collisions, motion, points is not None, settings)
     return ExplainReport(
-        robot=RobotRef.of(robot, arm.name), inputs=job.echo(),
+        robot=RobotRef.of(robot, arm.name), inputs=job.echo(), outputs=map_output(chosen),
         failures={verdict["failed_check"]: 1} if verdict["failed_check"] else {},
-        timings_ms={"load": (t_load - t0) * 1e3, "map": (t_map - t_load) * 1e3,
+        timings_ms={"load": (t_load - t0) * 1e3, **map_timing(chosen, t_map - t_load),
                     "collision_setup": (t_setup - t_map) * 1e3, "checks": (t_checks - t_setup) * 1e3},
         target=job.target if isinstance(job.target, str) else " ".join(f"{float(v):g}" for v in job.target),
         base={**PoseRecord(T_base).to_json(), "region": region}, map=value, footprint=footprint, ik=ik_json,

@@ -18,6 +18,7 @@ if TYPE_CHECKING:
     from pathlib import Path
 
     from baseplace.io.bag import BagScene
+    from baseplace.reachability.cache import MapChoice
     from baseplace.robots.model import Arm, Robot
     from baseplace.terrain.io import Cloud
     from baseplace.world.occupancy import OccupancyGrid
@@ -31,6 +32,25 @@ def step_progress(progress: Progress | None, step: str, total: int) -> Callable[
     if progress is None:
         return None
     return lambda done: progress(step, done, total)
+
+
+def map_step(robot_name: str, arm: str) -> str:
+    """The progress step of building one arm's reachability map: one bar per map, named by its arm."""
+    return f"reachability map, {robot_name} {arm if arm.endswith('arm') else arm + ' arm'}"
+
+
+def map_timing(chosen: MapChoice, seconds: float) -> dict[str, float]:
+    """The map's step in ``timings_ms``, apart from the query's steps.
+
+    ``map_build`` when the default map was built now (first run), else ``map`` (loading it).
+    """
+    return {"map_build" if chosen.built else "map": seconds * 1e3}
+
+
+def map_output(chosen: MapChoice) -> dict[str, str]:
+    """``outputs["map"]``: where the cache keeps the default map, when it was built (and stored) now."""
+    path = chosen.cached_at
+    return {"map": str(path)} if chosen.built and path is not None and path.is_file() else {}
 
 
 def load_robot(robot: Robot | str) -> Robot:

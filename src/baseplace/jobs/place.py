@@ -28,10 +28,11 @@ from baseplace.jobs.inputs import (
     check_on_scene,
     grid_bounds,
     load_robot,
+    map_output,
+    map_timing,
     occupancy_grid,
     out_path,
     points_bounds,
-    step_progress,
     target_pose,
     world_cloud,
     write_mcap,
@@ -207,7 +208,7 @@ def place_job(job: PlaceJob, progress: Progress | None = None) -> PlaceReport:
     png, mcap = job.check_outputs()  # outputs first: before the imports and any work
     from baseplace.placement.pipeline import PlaceSettings, place, with_floor
     from baseplace.placement.verify import contact_summary, most_frequent_contact
-    from baseplace.reachability.cache import map_or_default
+    from baseplace.reachability.cache import resolve_map
     from baseplace.world.grasped_object import parse_grasped_object
 
     t0 = time.perf_counter()
@@ -232,8 +233,8 @@ def place_job(job: PlaceJob, progress: Progress | None = None) -> PlaceReport:
         job, robot, targets, start, points, grid, settings.resolution
     )  # before the map and segmentation
     t_load = time.perf_counter()
-    rmap = map_or_default(robot, job.map, job.arm,
-                          step_progress(progress, f"default {robot.name} map (first run only)", 50_000_000))  # fmt: skip
+    chosen = resolve_map(robot, job.map, job.arm, progress)
+    rmap = chosen.rmap
     t_map = time.perf_counter()
     terrain = navmap = None
     if grid is None and job.cache is None and job.segmentation_cache:
@@ -283,7 +284,7 @@ def place_job(job: PlaceJob, progress: Progress | None = None) -> PlaceReport:
 
             rows[-1]["path"] = {"poses": path_json(route.poses), "length": round(route.length, 3),
                                 "planner": route.planner, "time_ms": round(route.time_ms, 1)}  # fmt: skip
-    timings = {"load": (t_load - t0) * 1e3, "map": (t_map - t_load) * 1e3, **result.timings_ms}
+    timings = {"load": (t_load - t0) * 1e3, **map_timing(chosen, t_map - t_load), **result.timings_ms}
     timings.pop("total", None)
     if terrain is not None:  # computed here (read from the cache, or segmented and stored): its time here
         timings["segmentation"] = terrain.timings_ms.get("job", terrain.timings_ms["total"])
@@ -300,6 +301,7 @@ def place_job(job: PlaceJob, progress: Progress | None = None) -> PlaceReport:
                 "allowed": None if result.grasped is None else result.grasped.to_json()},
         floor=job.floor, regions=len(result.terrain.segmentation.regions),
     )  # fmt: skip
+    report.outputs.update(map_output(chosen))
     if png is not None:
         from baseplace.terrain.polygons import footprint_outline
         from baseplace.viz.placement import plot_placement

@@ -18,6 +18,9 @@ from baseplace.jobs.inputs import (
     Progress,
     base_xyyaw,
     load_robot,
+    map_output,
+    map_step,
+    map_timing,
     out_path,
     step_progress,
     target_pose,
@@ -31,6 +34,8 @@ if TYPE_CHECKING:
     from baseplace.robots.model import Robot
 
 MAP_SUFFIXES = (".rmap", ".h5", ".hdf5")
+DEFAULT_MAP = "default"
+"""``--map default``: the robot's cached default map (as ``reachability.cache.DEFAULT_MAP``, without numba)."""
 
 
 def read_pose_file(
@@ -73,15 +78,16 @@ class ReachJob:
     """The inputs of :func:`reach_job`: exactly one of ``target``/``targets`` and of ``base``/``bases``.
 
     Attributes:
-        map: reachability map (loaded or a file).
+        map: reachability map (loaded or a file); None or "default": the robot's cached default map
+            (built on first use).
         target: one world TCP pose "x y z roll pitch yaw" [m, rad].
         targets: a file with one target per line, or the targets' texts, paired row by row with the bases.
         base: one base pose "x y yaw" [m, rad].
         bases: a file with one base pose per line, or the base poses' texts.
-        robot: check the map was built for this robot.
+        robot: check the map was built for this robot (the default map's robot; None: tiago).
     """
 
-    map: ReachabilityMap | str
+    map: ReachabilityMap | str | None = None
     target: str | None = None
     targets: str | Sequence[str] | None = None
     base: str | None = None
@@ -90,7 +96,7 @@ class ReachJob:
 
     def echo(self) -> dict[str, Any]:
         """The inputs as given."""
-        return {"map": self.map if isinstance(self.map, str) else "loaded", "target": self.target,
+        return {"map": self.map if isinstance(self.map, str | None) else "loaded", "target": self.target,
                 "targets": _echo_poses(self.targets), "base": self.base, "bases": _echo_poses(self.bases),
                 "robot": self.robot if isinstance(self.robot, str | None) else self.robot.name}  # fmt: skip
 
@@ -105,13 +111,21 @@ def _echo_poses(poses: str | Sequence[str] | None) -> str | list[str] | None:
     return poses if isinstance(poses, str | None) else list(poses)
 
 
-def _map_box(rmap: ReachabilityMap | str, robot: Robot | None) -> tuple[np.ndarray, np.ndarray] | None:
+def _map_box(rmap: ReachabilityMap | str | None, robot: Robot | None) -> tuple[np.ndarray, np.ndarray] | None:
     """The box of a map's voxel grid in the base frame [m], read without its cells.
 
     The build sizes the grid to hold every TCP position the arm can reach (``rmap.reach_bounds``):
     outside it, every value is 0. None where the file is unreadable or the map is not ``robot``'s:
-    loading the map says what is wrong.
+    loading the map says what is wrong. The default map (not built yet, maybe): the box of the
+    arm's reach bound from the robot model (:class:`~baseplace.jobs.inputs.ReachBound`).
     """
+    if rmap is None or rmap == DEFAULT_MAP:
+        from baseplace.jobs.inputs import ReachBound
+
+        assert robot is not None  # the default map's robot
+        bound = ReachBound.of_robot(robot, robot.spec.default_arm)
+        r = bound.radius
+        return np.array([-r, -r, -r]), np.array([r, r, bound.height])
     if not isinstance(rmap, str):
         g = rmap.grid
         lo = np.asarray(g.origin, dtype=float)
@@ -164,13 +178,17 @@ def _check_in_reach(job: ReachJob, robot: Robot | None, T_base_target: np.ndarra
     )
 
 
-def reach_job(job: ReachJob) -> ReachReport:
+def reach_job(job: ReachJob, progress: Progress | None = None) -> ReachReport:
     """Inverse-reachability values of the targets from the base poses, in [0, 1].
+
+    Without a map (or ``map="default"``), the robot's cached default map, built on first use
+    behind ``progress``.
 
     Raises:
         InputError: not exactly one of each pair, malformed poses, a map of another robot.
     """
     from baseplace.geometry.poses import RPY_LIMITS, YAW_LIMIT, BasePose, invert_transforms, pose_from_xyz_rpy
+    from baseplace.reachability.cache import resolve_map
     from baseplace.reachability.storage import check_map_matches, load_map
 
     t0 = time.perf_counter()
@@ -178,7 +196,10 @@ def reach_job(job: ReachJob) -> ReachReport:
         raise InputError("give exactly one of --target or --targets FILE")
     if (job.base is None) == (job.bases is None):
         raise InputError("give exactly one of --base or --bases FILE")
-    robot = None if job.robot is None else load_robot(job.robot)
+    default = job.map is None or job.map == DEFAULT_MAP
+    robot = (
+        load_robot(job.robot or "tiago") if default else None if job.robot is None else load_robot(job.robot)
+    )
     if job.target is not None:
         targets = target_pose(job.target, "--target")[None]
     elif isinstance(job.targets, str):
@@ -198,9 +219,17 @@ def reach_job(job: ReachJob) -> ReachReport:
             f"--targets has {len(targets)} poses but --bases has {len(bases)}; they pair row by row"
         )
     _check_in_reach(job, robot, invert_transforms(bases) @ targets, len(targets))  # before the map is read
-    rmap = job.map if not isinstance(job.map, str) else load_map(job.map)
-    if robot is not None:
-        check_map_matches(rmap, robot, rmap.info.arm, str(job.map))
+    chosen = None
+    if default:
+        assert robot is not None
+        t_map = time.perf_counter()
+        chosen = resolve_map(robot, None, None, progress)
+        rmap, map_s = chosen.rmap, time.perf_counter() - t_map
+    else:
+        assert job.map is not None
+        rmap, map_s = job.map if not isinstance(job.map, str) else load_map(job.map), 0.0
+        if robot is not None:
+            check_map_matches(rmap, robot, rmap.info.arm, str(job.map))
     t_load = time.perf_counter()
     if len(targets) == 1:
         values = rmap.inverse(targets[0], bases)
@@ -209,7 +238,9 @@ def reach_job(job: ReachJob) -> ReachReport:
     return ReachReport(
         robot=None if robot is None else RobotRef.of(robot, rmap.info.arm), inputs=job.echo(),
         values=[round(float(v), 6) for v in values],
-        timings_ms={"load": (t_load - t0) * 1e3, "query": (time.perf_counter() - t_load) * 1e3},
+        timings_ms={"load": (t_load - t0 - map_s) * 1e3, **({} if chosen is None else map_timing(chosen, map_s)),
+                    "query": (time.perf_counter() - t_load) * 1e3},
+        outputs={} if chosen is None else map_output(chosen),
     )  # fmt: skip
 
 
@@ -254,6 +285,23 @@ def set_workers(workers: int | None) -> None:
     numba.set_num_threads(workers)
 
 
+def store_in_cache(rmap: ReachabilityMap, path: Path) -> bool:
+    """Keep a default map built by ``build-map`` in the per-user cache too; False where it cannot."""
+    from baseplace.files import OutputError, skip_cache_entry
+    from baseplace.reachability.storage import save_map
+    from baseplace.robots.codegen import private_dir
+
+    try:
+        private_dir(path.parent)
+        save_map(rmap, path, compress=False)
+    except OutputError as exc:
+        skip_cache_entry("the map", path.parent, exc)
+        return False
+    except (OSError, InputError):
+        return False  # a read-only cache: the map was written to --out all the same
+    return True
+
+
 def build_map_job(job: BuildMapJob, progress: Progress | None = None) -> BuildMapReport:
     """Build a reachability map by random joint sampling and save it to ``job.out``.
 
@@ -264,6 +312,8 @@ def build_map_job(job: BuildMapJob, progress: Progress | None = None) -> BuildMa
     """
     out = out_path(job.out, "--out", MAP_SUFFIXES)  # outputs first: before the imports and any work
     from baseplace.reachability.build import BuildSettings, build_map
+    from baseplace.reachability.cache import cached_map_path
+    from baseplace.reachability.storage import load_map, save_map
 
     assert out is not None
     if job.scheduler is None:
@@ -271,8 +321,15 @@ def build_map_job(job: BuildMapJob, progress: Progress | None = None) -> BuildMa
     settings = job.settings or BuildSettings()
     robot = load_robot(job.robot)
     robot.arm(job.arm)  # validate before spending time
-    update = step_progress(progress, f"build-map {robot.name}", settings.samples)
-    if job.scheduler is None:
+    arm_name = job.arm or robot.spec.default_arm
+    update = step_progress(progress, map_step(robot.name, arm_name), settings.samples)
+    cached = cached_map_path(robot, settings, arm_name)
+    reused = cached.is_file()
+    if reused:  # the per-user cache holds this very map (the default map after a first run): no rebuild
+        rmap = load_map(cached, robot, arm_name)
+        if out.resolve() != cached.resolve():
+            save_map(rmap, out)
+    elif job.scheduler is None:
         rmap = build_map(robot, job.arm, settings, update, job.checkpoint, job.checkpoint_every, save_to=out)
     else:
         import logging
@@ -293,6 +350,9 @@ def build_map_job(job: BuildMapJob, progress: Progress | None = None) -> BuildMa
             remove_stray_temporaries(out)
             rmap = build_map_distributed(job.robot, job.arm, settings, client, update, job.checkpoint,
                                          job.checkpoint_every, save_to=out)  # fmt: skip
+    # the default map built here is kept in the cache too: place, reach and explain reuse it
+    stored = reused or (settings == BuildSettings() and store_in_cache(rmap, cached))
+    cached_at = str(cached) if stored else None
     inputs = {"out": job.out, "robot": job.robot if isinstance(job.robot, str) else robot.name, "arm": job.arm,
               "samples": settings.samples, "seed": settings.seed, "voxel_size": settings.voxel_size,
               "orientation_resolution": settings.orientation_resolution, "scheduler": job.scheduler,
@@ -305,5 +365,5 @@ def build_map_job(job: BuildMapJob, progress: Progress | None = None) -> BuildMa
         cells_reached=rmap.n_reached, build_time_s=round(info.build_time_s, 3), samples_per_s=round(rate),
         file_bytes=out.stat().st_size, dropped_self_collision=info.dropped_self_collision,
         support={"count": info.support_count, "threshold": info.support_threshold} if info.supported else None,
-        quality=json.loads(info.quality) if info.quality else None,
+        quality=json.loads(info.quality) if info.quality else None, cached_at=cached_at, reused=reused,
     )  # fmt: skip

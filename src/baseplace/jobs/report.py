@@ -392,6 +392,8 @@ class BuildMapReport(Report):
     dropped_self_collision: int = 0
     support: dict[str, Any] | None = None
     quality: dict[str, Any] | None = None
+    cached_at: str | None = None
+    reused: bool = False
 
 
 @dataclass

@@ -20,6 +20,7 @@ from baseplace.jobs.inputs import (
     PLOT_SUFFIXES,
     Progress,
     load_robot,
+    map_step,
     occupancy_grid,
     out_path,
     step_progress,
@@ -110,14 +111,14 @@ def surface_map_job(job: SurfaceMapJob, progress: Progress | None = None) -> Sur
     robot = load_robot(job.robot)
     arms, combine = surface_arms(robot, job.arms)
     settings = BuildSettings(samples=job.samples)
-    update = step_progress(progress, "reachability map", settings.samples)
     if job.maps is not None:
         missing = [arm for arm in arms if arm not in job.maps]
         if missing:
             raise InputError(f"no loaded map of arm(s) {', '.join(missing)}; loaded: {', '.join(job.maps)}")
         rmaps = {arm: job.maps[arm] for arm in arms}
     else:
-        rmaps = {arm: cached_map(robot, settings, arm, update)[0] for arm in arms}
+        rmaps = {arm: cached_map(robot, settings, arm, step_progress(progress, map_step(robot.name, arm),
+                                                                     settings.samples))[0] for arm in arms}  # fmt: skip
     for rmap in rmaps.values():
         _ = rmap.tables  # the dense lookup of the reachability map is built once, outside the timing
     t_maps = time.perf_counter()

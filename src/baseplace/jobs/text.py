@@ -39,12 +39,27 @@ def _robustness_hint(rows: list[dict[str, Any]]) -> list[str]:
             f"--min-robustness {LOW_ROBUSTNESS} rejects the rest (docs/placement.md)"]  # fmt: skip
 
 
+def _query_ms(o: dict[str, Any]) -> float:
+    """The command's time without the map's build (first run) or load."""
+    t = o["timings_ms"]
+    return max(0.0, t["total"] - t.get("map_build", 0.0) - t.get("map", 0.0))
+
+
+def _map_built(o: dict[str, Any]) -> list[str]:
+    """A line where the default map was built now (first run): how long, and where the cache keeps it."""
+    build = o["timings_ms"].get("map_build")
+    if build is None:
+        return []
+    where = f", cached at {o['outputs']['map']}" if "map" in o["outputs"] else " (not cached)"
+    return [f"built the default reachability map in {build / 1e3:.1f} s (first run only){where}"]
+
+
 def _place(o: dict[str, Any]) -> list[str]:
     lines = [f"{len(o['placements'])} verified placement(s) in {o['tries']} tries ({o['strategy']}, "
-             f"{o['timings_ms']['total']:.0f} ms)"]  # fmt: skip
+             f"{_query_ms(o):.0f} ms)"]  # fmt: skip
     lines += [f"  x={r['x']:.3f} y={r['y']:.3f} z={r['z']:.3f} yaw={r['yaw']:.3f} region {r['region']} "
               f"reachability {r['reachability']:.3f}{_robust(r)}" for r in o["placements"]]  # fmt: skip
-    return lines + _robustness_hint(o["placements"]) + _wrote(o, "png", "mcap")
+    return lines + _robustness_hint(o["placements"]) + _wrote(o, "png", "mcap") + _map_built(o)
 
 
 def _candidates(o: dict[str, Any]) -> list[str]:
@@ -52,7 +67,7 @@ def _candidates(o: dict[str, Any]) -> list[str]:
     lines = [f"{len(o['candidates'])} verified {o['method']} candidate(s), best first ({rank}):"]
     lines += [f"  x={r['x']:.3f} y={r['y']:.3f} yaw={r['yaw']:.3f} cost {r['motion_cost']:.2f} m{_robust(r)}"
               for r in o["candidates"]]  # fmt: skip
-    return lines + _robustness_hint(o["candidates"]) + _wrote(o, "png", "mcap")
+    return lines + _robustness_hint(o["candidates"]) + _wrote(o, "png", "mcap") + _map_built(o)
 
 
 def _surface_map(o: dict[str, Any]) -> list[str]:
@@ -96,9 +111,16 @@ def _demo(o: dict[str, Any]) -> list[str]:
 
 
 def _build_map(o: dict[str, Any]) -> list[str]:
-    lines = [f"wrote {o['outputs']['map']}: {o['cells_reached']} cells reached by {o['samples']:.3g} samples "
-             f"in {o['build_time_s']:.1f} s ({o['samples_per_s'] / 1e6:.2f} M samples/s), "
-             f"{o['file_bytes'] / 1e6:.1f} MB"]  # fmt: skip
+    if o.get("reused"):
+        lines = [f"wrote {o['outputs']['map']}: not rebuilt, the same map was already built and cached at "
+                 f"{o['cached_at']} ({o['cells_reached']} cells reached by {o['samples']:.3g} samples, built "
+                 f"in {o['build_time_s']:.1f} s), {o['file_bytes'] / 1e6:.1f} MB"]  # fmt: skip
+    else:
+        lines = [f"wrote {o['outputs']['map']}: {o['cells_reached']} cells reached by {o['samples']:.3g} samples "
+                 f"in {o['build_time_s']:.1f} s ({o['samples_per_s'] / 1e6:.2f} M samples/s), "
+                 f"{o['file_bytes'] / 1e6:.1f} MB"]  # fmt: skip
+    if o.get("cached_at") and not o.get("reused"):
+        lines.append(f"also cached at {o['cached_at']} (place, reach and explain use it without --map)")
     if o.get("support"):
         lines.append(f"support test: count {o['support']['count']}, threshold {o['support']['threshold']}")
     if o.get("quality"):
@@ -180,7 +202,7 @@ def _scene(o: dict[str, Any]) -> list[str]:
 
 
 def _reach(o: dict[str, Any]) -> list[str]:
-    return [f"{v:.6g}" for v in o["values"]]
+    return [f"{v:.6g}" for v in o["values"]] + _map_built(o)
 
 
 def _explain(o: dict[str, Any]) -> list[str]:
@@ -195,7 +217,7 @@ def _explain(o: dict[str, Any]) -> list[str]:
     if mo["checked"]:
         lines.append(f"  reaching motion {'found' if mo['found'] else 'not found'}")
         lines += [f"  motion blocked: link {c['link']} touched {c['touched']}" for c in mo["contacts"]]
-    return lines
+    return lines + _map_built(o)
 
 
 RENDERERS: dict[str, Callable[[dict[str, Any]], list[str]]] = {

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import hashlib
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -84,25 +85,60 @@ def cached_map(
     return rmap, path, True
 
 
-def map_or_default(
+DEFAULT_MAP = "default"
+"""The name a ``--map`` option takes for the robot's cached default map (as if no map were given)."""
+
+
+@dataclass(frozen=True)
+class MapChoice:
+    """The map a job uses: the given file or object, or the cached default.
+
+    Attributes:
+        rmap: the map.
+        cached_at: where the cache keeps the default map (None: a map was given).
+        built: whether the default map was built now (first run).
+    """
+
+    rmap: ReachabilityMap
+    cached_at: Path | None = None
+    built: bool = False
+
+
+def resolve_map(
     robot: Robot,
     rmap: ReachabilityMap | str | Path | None,
     arm: str | None = None,
-    progress: Callable[[int], None] | None = None,
-) -> ReachabilityMap:
+    progress: Callable[[str, int, int], None] | None = None,
+) -> MapChoice:
     """The map given (loaded, or a file checked against ``robot`` and ``arm``), else the cached default.
+
+    ``rmap`` None or ``"default"`` is the robot's cached default map, built on first use; its build
+    reports to ``progress(step, done, total)`` under one step per arm, with the build's sample count.
 
     Raises:
         InputError: the file is missing, corrupt, or built for another robot or arm.
     """
+    from baseplace.jobs.inputs import map_step, step_progress
     from baseplace.reachability.rmap import ReachabilityMap
 
     if isinstance(rmap, ReachabilityMap):
         if arm is not None and rmap.info.arm != arm:
-            from baseplace.errors import InputError
-
             raise InputError(f"the map was built for arm {rmap.info.arm!r}, not {arm!r}")
-        return rmap
-    if rmap is not None:
-        return load_map(rmap, robot, arm)
-    return cached_map(robot, BuildSettings(), arm, progress)[0]
+        return MapChoice(rmap)
+    if rmap is not None and str(rmap) != DEFAULT_MAP:
+        return MapChoice(load_map(rmap, robot, arm))
+    settings = BuildSettings()
+    arm_name = arm or robot.spec.default_arm
+    update = step_progress(progress, map_step(robot.name, arm_name), settings.samples)
+    loaded, path, built = cached_map(robot, settings, arm_name, update)
+    return MapChoice(loaded, path, built)
+
+
+def map_or_default(
+    robot: Robot,
+    rmap: ReachabilityMap | str | Path | None,
+    arm: str | None = None,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> ReachabilityMap:
+    """:func:`resolve_map`'s map alone."""
+    return resolve_map(robot, rmap, arm, progress).rmap

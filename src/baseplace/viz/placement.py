@@ -67,9 +67,12 @@ def plot_placement(
         ax.arrow(T[0, 3], T[1, 3], 0.3 * T[0, 0], 0.3 * T[1, 0], color="white", width=0.015,
                  length_includes_head=True)  # fmt: skip
     colours = {"footprint": "0.35", "no_ik": "tab:orange", "support": "tab:red", "obstacle": "magenta",
-               GRASPED: "tab:blue", "self": "yellow"}  # fmt: skip
+               GRASPED: "tab:blue", "self": "yellow", "motion": "tab:green", "collision": "magenta"}  # fmt: skip
+    kinds = [(p, _rejection_kind(why, c)) for p, why, c in rejected or []]
+    for key in {k for _, k in kinds} - set(colours):  # a reason drawn in no colour of its own (a new one)
+        colours[key] = "white"
     for key, colour in colours.items():
-        xy = np.array([p for p, why, c in rejected or [] if _rejection_kind(why, c) == key]).reshape(-1, 2)
+        xy = np.array([p for p, kind in kinds if kind == key]).reshape(-1, 2)
         if len(xy):
             ax.scatter(xy[:, 0], xy[:, 1], marker="x", s=14, color=colour, linewidths=0.9,
                        label=f"rejected: {key.replace('_', ' ')} ({len(xy)})")  # fmt: skip
@@ -88,7 +91,7 @@ def plot_placement(
         top = "\n".join(f"{link} - {what}: {n}" for (link, what), n in contacts.most_common(4))
         ax.text(0.01, 0.01, "most frequent contacts (link - touched: candidates)\n" + top, transform=ax.transAxes,
                 fontsize=7, va="bottom", ha="left", bbox={"facecolor": "white", "alpha": 0.8})  # fmt: skip
-    if rejected or grasped is not None:
+    if ax.get_legend_handles_labels()[0]:  # a legend of nothing warns
         ax.legend(loc="upper right", fontsize=7)
     for route in routes or []:
         ax.plot(route[:, 0], route[:, 1], color="orange", linewidth=2.0)
