@@ -79,7 +79,7 @@ def _documented_exit(comment: str, output: list[str]) -> tuple[int, str | None]:
     if text.startswith("error:"):
         code = re.search(r"\(exit (\d)", text)
         first = text[len("error:") :].split("...")[0].split("(exit")[0].strip()
-        return (int(code.group(1)) if code else 2), first[:60]
+        return (int(code.group(1)) if code else 2), first
     return 0, None
 
 
