@@ -123,3 +123,26 @@ def test_a_robot_file_names_its_grasp_frame_and_a_moving_one_is_refused(tmp_path
         robot("link1").T_tcp_grasp()
     with pytest.raises(InputError, match="grasp frame"):
         robot("no_such_frame").T_tcp_grasp()
+
+
+def test_explain_with_a_grasp_point_checks_the_tcp_target_behind_it(tiago, tiago_map):
+    from baseplace.jobs.explain import ExplainJob, explain_job
+
+    grasp_text = "0.95 -0.2 0.8 0 0 0.4"
+    T = parse_pose6(grasp_text) @ np.linalg.inv(
+        tiago.frame_pose(tiago.q_reference, "hand_grasping_frame", "arm_tool_link")
+    )
+    by_grasp = explain_job(ExplainJob("0.2 -0.1 0", None, tiago_map, tiago, grasp_point=grasp_text)).to_json()
+    by_tcp = explain_job(ExplainJob("0.2 -0.1 0", _pose_text(T), tiago_map, tiago)).to_json()
+    assert by_grasp["ik"]["solved"], by_grasp["verdict"]
+    assert by_grasp["ik"]["joints"] == pytest.approx(by_tcp["ik"]["joints"], abs=1e-6)
+    assert by_grasp["verdict"] == by_tcp["verdict"] and by_grasp["map"] == by_tcp["map"]
+    row = {"base_pose": by_grasp["base"]["base_pose"]}
+    assert (
+        np.linalg.norm(_grasp_frame_in_world(tiago, row, by_grasp["ik"]["joints"])[:3, 3] - [0.95, -0.2, 0.8])
+        < 0.01
+    )
+    r = run_cli("explain", "--base", "0 0 0", "--target", grasp_text, "--grasp-point", grasp_text)
+    assert r.returncode == 2 and r.stderr.strip().splitlines() == [
+        "error: give --target (the TCP pose) or --grasp-point (the point between the fingertips), not both"
+    ]

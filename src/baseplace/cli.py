@@ -136,7 +136,7 @@ def _explain(a: argparse.Namespace, progress: Progress) -> Any:
     if a.no_motion_check:
         settings = replace(settings, motion=None)
     job = explain.ExplainJob(
-        a.base, a.target, a.map, a.robot, a.arm, _cloud(a), a.object, a.floor, settings, a.seed
+        a.base, a.target, a.map, a.robot, a.arm, _cloud(a), a.object, a.floor, settings, a.seed, a.grasp_point
     )
     return explain.explain_job(job, progress)
 
@@ -320,6 +320,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--base", help='base pose "x y yaw" [m, rad]; on a scene it stands on the region under (x, y)'
     )
     p.add_argument("--target", help='TCP target "x y z roll pitch yaw" [m, rad]')
+    p.add_argument("--grasp-point", default=None,
+                   help='instead of --target: the pose of the point between the fingertips "x y z roll pitch yaw" [m, rad]')  # fmt: skip
     p.add_argument("--map", default=None, help="reachability map (default: the cached default map)")
     p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
     p.add_argument("--arm", default=None, help="arm (default: the robot's default arm)")

@@ -118,7 +118,7 @@ class PlaceJob:
         return out_path(self.png, "--out", PLOT_SUFFIXES), out_path(self.mcap, "--mcap", (".mcap",))
 
 
-def _pose_text(T: np.ndarray) -> str:
+def pose_text(T: np.ndarray) -> str:
     """A (4, 4) pose as "x y z roll pitch yaw" [m, rad], to 0.1 mm and 1e-4 rad."""
     from baseplace.geometry.poses import matrix_to_rpy
 
@@ -312,7 +312,7 @@ def place_job(job: PlaceJob, progress: Progress | None = None) -> PlaceReport:
     report = PlaceReport(
         robot=RobotRef.of(robot, rmap.info.arm), inputs=job.echo(), failures=dict(result.failures),
         targets=[t if isinstance(t, str) else " ".join(f"{float(v):g}" for v in t) for t in job.targets]
-        or [_pose_text(T) for T in targets],
+        or [pose_text(T) for T in targets],
         strategy=settings.strategy, seed=job.seed, placements=rows, tries=result.tries,
         collisions=contact_summary(result.contacts),
         object={"requested": job.object, "found": result.grasped_note,
