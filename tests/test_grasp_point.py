@@ -107,6 +107,7 @@ def test_a_grasp_point_in_degrees_is_refused_with_the_option_named_and_read_with
 def test_a_robot_file_names_its_grasp_frame_and_a_moving_one_is_refused(tmp_path):
     import shutil
 
+    from baseplace.placement.irm_candidates import grasp_standoff
     from baseplace.robots.model import Robot
 
     assert np.allclose(Robot("pr2").T_tcp_grasp(), np.eye(4))  # its TCP is between the fingertips
@@ -119,6 +120,13 @@ def test_a_robot_file_names_its_grasp_frame_and_a_moving_one_is_refused(tmp_path
         return Robot(tmp_path / "r.toml")
 
     assert np.allclose(robot("tool0").T_tcp_grasp(), np.eye(4))
+    assert grasp_standoff(robot("tool0")) == 0.0 and grasp_standoff(Robot("pr2")) == 0.0
+    tiago = Robot(
+        "tiago"
+    )  # candidates' standoff and the auto object's grasp point: the URDF's, no robot names
+    assert grasp_standoff(tiago) == pytest.approx(
+        tiago.frame_pose(tiago.q_reference, "hand_grasping_frame", "arm_tool_link")[0, 3], abs=1e-4
+    )
     with pytest.raises(InputError, match="must be fixed to the link of TCP frame 'tool0'"):
         robot("link1").T_tcp_grasp()
     with pytest.raises(InputError, match="grasp frame"):
