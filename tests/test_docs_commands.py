@@ -37,7 +37,7 @@ PLACEHOLDER = re.compile(
 INPUT_OPTIONS = {"--cloud", "--bag", "--map", "--occupancy", "--targets", "--bases"}
 NEVER_RUN = ("serve",)  # a server: runs until stopped
 SLOW_COMMANDS = ("experiment", "demo", "build-map", "surface-map", "navigate")
-DEFAULT_MAP_COMMANDS = ("place", "explain", "candidates", "reach", "view")
+DEFAULT_MAP_COMMANDS = ("place", "explain", "candidates")  # without --map: the default map
 
 
 @dataclass(frozen=True)
@@ -149,10 +149,8 @@ def doc_commands(path: Path) -> list[DocCommand]:
                 elif not Path(resolve(word)).exists():
                     why_not = f"reads {word}, which nothing provides"
             slow = slow or words[1] in SLOW_COMMANDS or (words[1] == "scene" and "--size-class" not in words)
-            if words[1] in DEFAULT_MAP_COMMANDS and "--map" not in words and words[1] != "reach":
+            if words[1] in DEFAULT_MAP_COMMANDS and "--map" not in words:
                 slow = True  # builds the 2e8-sample default map on a fresh machine
-            if words[1] == "candidates" and "irm" not in words:
-                slow = slow and "--map" in words
             for output_file in _outputs(words) if not why_not else ():
                 made[output_file] = slow
             rel = str(path.relative_to(ROOT))
