@@ -148,7 +148,7 @@ def doc_commands(path: Path) -> list[DocCommand]:
                     slow = slow or made[word]
                 elif not Path(resolve(word)).exists():
                     why_not = f"reads {word}, which nothing provides"
-            slow = slow or words[1] in SLOW_COMMANDS or (words[1] == "scene" and "--size-class" not in words)
+            slow = slow or words[1] in SLOW_COMMANDS
             if words[1] in DEFAULT_MAP_COMMANDS and "--map" not in words:
                 slow = True  # builds the 2e8-sample default map on a fresh machine
             for output_file in _outputs(words) if not why_not else ():
