@@ -117,7 +117,7 @@ def _build_map(args: argparse.Namespace, progress: Progress) -> Any:
 
 def _place(a: argparse.Namespace, progress: Progress) -> Any:
     job = place.PlaceJob(a.target or [], a.robot, a.arm, _cloud(a), a.occupancy, a.map, None, a.seed, a.start,
-                         a.planner, a.object, a.floor, a.out, a.mcap)  # fmt: skip
+                         a.planner, a.object, a.floor, a.out, a.mcap, grasp_points=a.grasp_point or [])  # fmt: skip
     job.check_outputs()  # before the settings' imports (seconds)
     from baseplace.placement.pipeline import PlaceSettings
 
@@ -136,7 +136,7 @@ def _explain(a: argparse.Namespace, progress: Progress) -> Any:
     if a.no_motion_check:
         settings = replace(settings, motion=None)
     job = explain.ExplainJob(
-        a.base, a.target, a.map, a.robot, a.arm, _cloud(a), a.object, a.floor, settings, a.seed
+        a.base, a.target, a.map, a.robot, a.arm, _cloud(a), a.object, a.floor, settings, a.seed, a.grasp_point
     )
     return explain.explain_job(job, progress)
 
@@ -298,6 +298,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_bag_args(p)
     _add_fuse_args(p)
     p.add_argument("--target", action="append", help='TCP target "x y z roll pitch yaw" [m, rad]; repeat for several')  # fmt: skip
+    p.add_argument("--grasp-point", action="append", default=None,
+                   help='instead of --target: the pose of the point between the fingertips "x y z roll pitch yaw" '
+                        "[m, rad] (TIAGo: 0.151 m ahead of the TCP); repeat for several")  # fmt: skip
     p.add_argument("--strategy", default="MR", choices=["MR", "TO", "MRTO", "orm", "grid", "random"],
                    help="MR (most reachable cell), TO (a reachable cell facing the targets), MRTO, or a baseline (default MR)")  # fmt: skip
     p.add_argument("--placements", type=int, default=1, help="M: placements to return (default 1)")
@@ -321,6 +324,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--base", help='base pose "x y yaw" [m, rad]; on a scene it stands on the region under (x, y)'
     )
     p.add_argument("--target", help='TCP target "x y z roll pitch yaw" [m, rad]')
+    p.add_argument("--grasp-point", default=None,
+                   help='instead of --target: the pose of the point between the fingertips "x y z roll pitch yaw" [m, rad]')  # fmt: skip
     p.add_argument("--map", default=None, help="reachability map (default: the cached default map)")
     p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
     p.add_argument("--arm", default=None, help="arm (default: the robot's default arm)")

@@ -172,7 +172,7 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
     arm_name = job.arm
     if arm_name is None and not isinstance(job.map, str):  # else the map file's arm, not read yet: every arm
         arm_name = robot.spec.default_arm if job.map is None else job.map.info.arm
-    standoff = grasp_standoff(robot) if job.standoff is None else job.standoff
+    standoff = grasp_standoff(robot, arm_name) if job.standoff is None else job.standoff
     scene, bounds = "the occupancy grid's bounds", grid_bounds(grid)
     check_in_reach(p_o[None], ["--object"], bounds, scene, ReachBound.of_robot(robot, arm_name), robot.name,
                    extra=abs(standoff))  # fmt: skip

@@ -48,6 +48,8 @@ class ExplainJob:
         base: base pose "x y yaw" [m, rad] (text or 3 numbers); on a scene the base stands on the
             planar region under (x, y), its heading yaw the x axis's in the world xy plane.
         target: TCP target "x y z roll pitch yaw" [m, rad], world frame (text or 6 numbers).
+        grasp_point: instead of ``target``: the pose of the point between the fingertips (the arm
+            spec's ``grasp_frame``), same format, as ``place``'s ``grasp_points``.
         map: reachability map: loaded, a file, or None for the cached default map.
         robot: built-in name, robot file or a loaded Robot.
         arm: the arm (None: the robot's default arm, or the map's).
@@ -68,11 +70,12 @@ class ExplainJob:
     floor: float | None = None
     settings: PlaceSettings | None = None
     seed: int = 0
+    grasp_point: str | Sequence[float] | None = None
 
     def echo(self) -> dict[str, Any]:
         """The inputs as given."""
         return {
-            "base": _echo(self.base), "target": _echo(self.target),
+            "base": _echo(self.base), "target": _echo(self.target), "grasp_point": _echo(self.grasp_point),
             "map": self.map if isinstance(self.map, str | None) else "loaded",
             "robot": self.robot if isinstance(self.robot, str) else self.robot.name, "arm": self.arm,
             **self.cloud.echo(), "object": self.object, "floor": self.floor, "seed": self.seed,
@@ -124,6 +127,7 @@ def explain_job(job: ExplainJob, progress: Progress | None = None) -> ExplainRep
         InputError: a missing or malformed base pose or target, a bad scene or map.
     """
     from baseplace.geometry.poses import invert_transforms
+    from baseplace.jobs.place import pose_text
     from baseplace.placement.pipeline import PlaceSettings, scene_checks, with_floor
     from baseplace.placement.verify import Candidate
     from baseplace.reachability.cache import resolve_map
@@ -133,13 +137,25 @@ def explain_job(job: ExplainJob, progress: Progress | None = None) -> ExplainRep
     t0 = time.perf_counter()
     if job.base is None:
         raise InputError('give the base pose --base "x y yaw" [m, rad]')
-    if job.target is None:
-        raise InputError('give the target --target "x y z roll pitch yaw" [m, rad]')
+    if job.target is not None and job.grasp_point is not None:
+        raise InputError(
+            "give --target (the TCP pose) or --grasp-point (the point between the fingertips), not both"
+        )
+    given: str | Sequence[float]
+    if job.target is not None:
+        given, option = job.target, "--target"
+    elif job.grasp_point is not None:
+        given, option = job.grasp_point, "--grasp-point"
+    else:
+        raise InputError('give the target --target "x y z roll pitch yaw" [m, rad] (the TCP pose) '
+                         "or --grasp-point (the point between the fingertips)")  # fmt: skip
     x, y, yaw = base_xyyaw(job.base, "--base")
-    T_target = _target(job.target)
+    T_target = _target(given, option)
     grasped = parse_grasped_object(job.object)
     settings = job.settings or PlaceSettings()
     robot = load_robot(job.robot)
+    if job.grasp_point is not None:  # T_world_tcp = T_world_grasp T_grasp_tcp
+        T_target = T_target @ np.linalg.inv(robot.T_tcp_grasp(job.arm))
     points = None
     if job.cloud.given:
         points = world_cloud(job.cloud).points
@@ -194,20 +210,21 @@ def explain_job(job: ExplainJob, progress: Progress | None = None) -> ExplainRep
         failures={verdict["failed_check"]: 1} if verdict["failed_check"] else {},
         timings_ms={"load": (t_load - t0) * 1e3, **map_timing(chosen, t_map - t_load),
                     "collision_setup": (t_setup - t_map) * 1e3, "checks": (t_checks - t_setup) * 1e3},
-        target=job.target if isinstance(job.target, str) else " ".join(f"{float(v):g}" for v in job.target),
+        target=pose_text(T_target) if job.target is None else
+        job.target if isinstance(job.target, str) else " ".join(f"{float(v):g}" for v in job.target),
         base={**PoseRecord(T_base).to_json(), "region": region}, map=value, footprint=footprint, ik=ik_json,
         collisions=collisions, motion=motion, verdict=verdict, object=object_json,
     )  # fmt: skip
 
 
-def _target(target: str | Sequence[float]) -> np.ndarray:
+def _target(target: str | Sequence[float], option: str) -> np.ndarray:
     from baseplace.geometry.poses import parse_pose6, pose_from_xyz_rpy
 
     if isinstance(target, str):
         try:
             return parse_pose6(target)
         except InputError as exc:
-            raise InputError(f"--target: {exc}") from None
+            raise InputError(f"{option}: {exc}") from None
     values = np.asarray(target, dtype=float)
     if values.shape != (6,) or not np.isfinite(values).all():
         raise InputError(f"a target needs 6 finite numbers x y z roll pitch yaw, got {list(values)}")

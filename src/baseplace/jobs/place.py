@@ -55,6 +55,9 @@ class PlaceJob:
 
     Attributes:
         targets: TCP targets "x y z roll pitch yaw" [m, rad], world frame (text or 6 numbers each).
+        grasp_points: instead of ``targets``: poses of the grasp point (between the fingertips, the
+            arm spec's ``grasp_frame``), same format; each becomes the TCP target that puts the
+            grasp frame there (TIAGo: 0.151 m back along the approach axis).
         robot: built-in name, robot file or a loaded Robot.
         arm: the arm (None: the robot's default arm, or the map's).
         cloud: the scene cloud (files, a recording or loaded points).
@@ -91,6 +94,7 @@ class PlaceJob:
     mcap: str | None = None
     cache: SceneCache | None = field(default=None, repr=False, compare=False)
     segmentation_cache: bool = field(default=True, compare=False)
+    grasp_points: Sequence[str | Sequence[float]] = ()
 
     def echo(self) -> dict[str, Any]:
         """The inputs as given."""
@@ -103,6 +107,7 @@ class PlaceJob:
             "strategy": None if s is None else s.strategy, "placements": None if s is None else s.placements,
             "tries": None if s is None else s.tries, "start": self.start, "planner": self.planner,
             "object": self.object, "floor": self.floor,
+            "grasp_points": [t if isinstance(t, str) else [float(v) for v in t] for t in self.grasp_points],
         }  # fmt: skip
 
     def check_outputs(self) -> tuple[Path | None, Path | None]:
@@ -114,8 +119,11 @@ class PlaceJob:
         return out_path(self.png, "--out", PLOT_SUFFIXES), out_path(self.mcap, "--mcap", (".mcap",))
 
 
-def _target_label(job: PlaceJob, k: int, option: str = "target") -> str:
-    return option if len(job.targets) == 1 else f"{option} {k}"
+def pose_text(T: np.ndarray) -> str:
+    """A (4, 4) pose as "x y z roll pitch yaw" [m, rad], to 0.1 mm and 1e-4 rad."""
+    from baseplace.geometry.poses import matrix_to_rpy
+
+    return " ".join(f"{v:.4f}" for v in (*T[:3, 3], *matrix_to_rpy(T[:3, :3])))
 
 
 def _check_scene(
@@ -212,14 +220,24 @@ def place_job(job: PlaceJob, progress: Progress | None = None) -> PlaceReport:
     from baseplace.world.grasped_object import parse_grasped_object
 
     t0 = time.perf_counter()
-    if not job.targets:
-        raise InputError('give at least one --target "x y z roll pitch yaw"')
-    targets = np.stack([target_pose(t, _target_label(job, k, "--target")) for k, t in enumerate(job.targets)])
+    if job.targets and job.grasp_points:
+        raise InputError(
+            "give --target (the TCP pose) or --grasp-point (the point between the fingertips), not both"
+        )
+    if not job.targets and not job.grasp_points:
+        raise InputError('give at least one --target "x y z roll pitch yaw" (the TCP pose) '
+                         'or --grasp-point "x y z roll pitch yaw" (the point between the fingertips)')  # fmt: skip
+    option, given = ("--grasp-point", job.grasp_points) if job.grasp_points else ("--target", job.targets)
+    targets = np.stack(
+        [target_pose(t, option if len(given) == 1 else f"{option} {k}") for k, t in enumerate(given)]
+    )
     check_object_yaw(job.object, "--object")
     grasped = parse_grasped_object(job.object)
     settings = job.settings or PlaceSettings()
     start = None if job.start is None else base_xyyaw(job.start, "--start")
     robot = load_robot(job.robot)
+    if job.grasp_points:  # T_world_tcp = T_world_grasp T_grasp_tcp
+        targets = targets @ np.linalg.inv(robot.T_tcp_grasp(job.arm))
     cloud = world_cloud(job.cloud) if job.cloud.given else None
     grid = occupancy_grid(job.occupancy, job.cloud.bag, job.cloud)
     if cloud is None and grid is None:
@@ -294,7 +312,8 @@ def place_job(job: PlaceJob, progress: Progress | None = None) -> PlaceReport:
         timings["navigation"] = (time.perf_counter() - t_nav) * 1e3
     report = PlaceReport(
         robot=RobotRef.of(robot, rmap.info.arm), inputs=job.echo(), failures=dict(result.failures),
-        targets=[t if isinstance(t, str) else " ".join(f"{float(v):g}" for v in t) for t in job.targets],
+        targets=[t if isinstance(t, str) else " ".join(f"{float(v):g}" for v in t) for t in job.targets]
+        or [pose_text(T) for T in targets],
         strategy=settings.strategy, seed=job.seed, placements=rows, tries=result.tries,
         collisions=contact_summary(result.contacts),
         object={"requested": job.object, "found": result.grasped_note,

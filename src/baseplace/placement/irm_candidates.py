@@ -204,13 +204,15 @@ def irm_candidates(
     return found
 
 
-def grasp_standoff(robot: Robot) -> float:
-    """How far [m] behind the grasp point the arm's TCP frame sits, for :func:`grasp_poses`.
+def grasp_standoff(robot: Robot, arm_name: str | None = None) -> float:
+    """How far [m] behind the grasp point the arm's TCP frame sits on its approach axis, for :func:`grasp_poses`.
 
-    TIAGo's ``arm_tool_link`` is the wrist flange, 0.151 m behind ``hand_grasping_frame``; PR2's
-    ``*_gripper_tool_frame`` is between the fingertips already. Custom robots: 0.
+    The arm spec's ``grasp_frame``, read from the URDF: TIAGo's ``arm_tool_link`` is the wrist
+    flange, 0.151 m behind ``hand_grasping_frame``; PR2's ``*_gripper_tool_frame`` is between the
+    fingertips already (no grasp frame: 0).
     """
-    return 0.15 if robot.name in ("tiago", "tiago_dual") else 0.0
+    offset = robot.T_tcp_grasp(arm_name)[:3, 3] @ np.asarray(robot.spec.arm(arm_name).approach_vector)
+    return round(float(offset), 4)
 
 
 def verify_candidates(

@@ -342,12 +342,7 @@ def _grasped_object(
         return grasped, "given"
     if grasped != "auto":
         raise InputError(f'grasped must be a GraspedObject, "auto" or None, got {grasped!r}')
-    from baseplace.placement.irm_candidates import grasp_standoff
-
-    T = targets[0]
-    point = (
-        T[:3, 3] + grasp_standoff(robot) * T[:3, 0]
-    )  # the grasp point, ahead of the TCP on its approach axis
+    point = (targets[0] @ robot.T_tcp_grasp(arm_name))[:3, 3]  # the grasp point, ahead of the TCP
     found = find_grasped_object(points, point) if cache is None else cache.grasped_object(point)
     if found is None:
         return None, f"auto: no object at the grasp point {np.round(point, 3).tolist()}"

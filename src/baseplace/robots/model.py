@@ -306,6 +306,27 @@ class Robot:
             approach_axis=np.array(spec.approach_vector, dtype=float),
         )
 
+    def T_tcp_grasp(self, arm_name: str | None = None) -> FloatArray:
+        """The grasp point's pose in the arm's TCP frame, (4, 4) [m]: fixed, read from the URDF.
+
+        The grasp point is the spec's ``grasp_frame`` (between the fingertips); without one, the TCP.
+
+        Raises:
+            InputError: the grasp frame is not in the URDF, or moves relative to the TCP.
+        """
+        spec = self.spec.arm(arm_name)
+        if spec.grasp_frame is None:
+            return np.eye(4)
+        model = self.model
+        if not model.existFrame(spec.grasp_frame):
+            raise unknown("grasp frame", spec.grasp_frame, self.frame_names, f"robot {self.name!r}")
+        grasp = model.frames[model.getFrameId(spec.grasp_frame)]
+        tcp = model.frames[model.getFrameId(spec.tcp_frame)]
+        if grasp.parentJoint != tcp.parentJoint:  # a joint between them: no fixed offset
+            raise InputError(f"robot {self.name!r}: grasp frame {spec.grasp_frame!r} must be fixed to "
+                             f"the link of TCP frame {spec.tcp_frame!r}")  # fmt: skip
+        return (tcp.placement.inverse() * grasp.placement).homogeneous
+
     def frame_pose(self, q_full: ArrayLike, frame: str, relative_to: str | None = None) -> FloatArray:
         """Pinocchio FK of one frame, (4, 4), in the robot root or in ``relative_to``."""
         data = self.model.createData()

@@ -17,6 +17,7 @@ from a small TOML or YAML file::
     joints = ["joint1", "joint2"]     # the joints sampled for reachability
     tcp_frame = "tool0"
     approach = "z"                    # optional: the TCP axis pointing out of the hand (default "x")
+    grasp_frame = "grasp_link"        # optional: the frame between the fingertips (default: the TCP)
     [joint_limits]                    # optional overrides [rad or m]
     joint1 = [-1.5, 1.5]
     [reference]                       # optional values of joints not in an arm (default 0)
@@ -62,11 +63,16 @@ class ArmSpec:
             of :data:`APPROACH_AXES`. "x" for TIAGo's ``arm_tool_link`` and PR2's
             ``*_gripper_tool_frame``; "z" for ROS-Industrial ``tool0`` frames and Panda's
             ``panda_hand_tcp``. Surface maps and the side/top grasps read it.
+        grasp_frame: the URDF frame at the grasp point, between the fingertips, fixed to the TCP's
+            link (``--grasp-point`` targets it); None: the TCP is the grasp point (PR2's
+            ``*_gripper_tool_frame``). TIAGo's is ``hand_grasping_frame``, 0.151 m ahead of
+            ``arm_tool_link``.
     """
 
     joints: tuple[str, ...]
     tcp_frame: str
     approach: str = "x"
+    grasp_frame: str | None = None
 
     def __post_init__(self) -> None:
         if self.approach not in APPROACH_AXES:
@@ -251,7 +257,11 @@ def _builtin_specs() -> dict[str, RobotSpec]:
             name="tiago",
             urdf=_erd("tiago_description/robots/tiago.urdf"),
             base_frame="base_footprint",
-            arms={"arm": ArmSpec(("torso_lift_joint", *_TIAGO_ARM), "arm_tool_link")},
+            arms={
+                "arm": ArmSpec(
+                    ("torso_lift_joint", *_TIAGO_ARM), "arm_tool_link", grasp_frame="hand_grasping_frame"
+                )
+            },
             default_arm="arm",
             footprint_radius=0.275,
             package_dirs=share,
@@ -282,6 +292,7 @@ def _builtin_specs() -> dict[str, RobotSpec]:
                 side: ArmSpec(
                     ("torso_lift_joint", *(f"arm_{side}_{i}_joint" for i in range(1, 8))),
                     f"arm_{side}_tool_link",
+                    grasp_frame=f"hand_{side}_grasping_frame",
                 )
                 for side in ("left", "right")
             },
@@ -326,7 +337,7 @@ def load_spec(name_or_path: str | Path) -> RobotSpec:
 
 _KEYS = {"name", "urdf", "srdf", "package_dirs", "base_frame", "footprint", "arms", "default_arm",
          "joint_limits", "reference", "mount"}  # fmt: skip
-_ARM_KEYS = {"joints", "tcp_frame", "approach"}
+_ARM_KEYS = {"joints", "tcp_frame", "approach", "grasp_frame"}
 _MOUNT_KEYS = {"xyz", "rpy", "base_height"}
 
 
@@ -379,8 +390,9 @@ def spec_from_dict(data: Any, root: Path, source: str = "robot spec") -> RobotSp
         approach = text(arm.get("approach", "x"), "approach")
         if approach not in APPROACH_AXES:
             raise unknown("TCP approach axis", approach, APPROACH_AXES, f"{source}: arm {brief(arm_name)}")
+        grasp_frame = None if "grasp_frame" not in arm else text(arm["grasp_frame"], "grasp_frame")
         arms[text(arm_name, "an arm name")] = ArmSpec(
-            tuple(joints), text(arm["tcp_frame"], "tcp_frame"), approach
+            tuple(joints), text(arm["tcp_frame"], "tcp_frame"), approach, grasp_frame
         )
 
     fp = data["footprint"]
