@@ -619,7 +619,9 @@ def _ply_ascii_rows(
     lines = _text_lines(io.TextIOWrapper(f, encoding="ascii"), path)
     for _ in itertools.islice(lines, sum(n for _, n, _ in before)):
         pass
-    return np.loadtxt(itertools.islice(lines, count), dtype=dtype, comments=None, ndmin=1)
+    with warnings.catch_warnings():  # an empty body is refused by the caller as "no points", not warned about
+        warnings.filterwarnings("ignore", "loadtxt: input contained no data", UserWarning)
+        return np.loadtxt(itertools.islice(lines, count), dtype=dtype, comments=None, ndmin=1)
 
 
 def _check_bt_nodes(path: Path, codes: np.ndarray, n_nodes: int) -> None:
