@@ -144,12 +144,14 @@ REACH = [
 
 @pytest.mark.parametrize(("args", "fragments"), REACH)
 def test_reach_refuses_before_loading_the_map(scene, args, fragments, monkeypatch):
+    import baseplace.reachability.cache as cache  # imported first: it binds storage.load_map at import
     import baseplace.reachability.storage as storage
 
     def no_load(*_: object, **__: object) -> None:
         raise AssertionError("the map was loaded")
 
     monkeypatch.setattr(storage, "load_map", no_load)
+    monkeypatch.setattr(cache, "load_map", no_load)
     from conftest import run_cli
 
     proc = run_cli("reach", "--map", str(scene["map"]), *args)
