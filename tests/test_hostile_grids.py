@@ -5,15 +5,11 @@ a resolution the user gives; each is compared with what ``$BASEPLACE_MAX_MEMORY_
 structure's bytes per cell before anything of that size is allocated. The CLI cases run in a fresh
 process under ``BASEPLACE_MAX_MEMORY_MB=512`` and an address-space limit (so that code without the
 checks fails with a MemoryError instead of taking the machine's memory); their peak resident memory
-(the kernel's ``ru_maxrss``, VmHWM at exit) must stay under the cap.
+(measured as tests/peak_memory.py does) must stay under the cap.
 """
 
 from __future__ import annotations
 
-import os
-import resource
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -21,29 +17,7 @@ import numpy as np
 import pytest
 
 from baseplace.errors import InputError
-
-SRC = str(Path(__file__).resolve().parents[1] / "src")
-CAP_MB = 512
-ADDRESS_LIMIT = 3 << 30  # bytes: the unchecked code's allocations fail here, not in the machine's memory
-
-
-def _limit_address_space() -> None:
-    resource.setrlimit(resource.RLIMIT_AS, (ADDRESS_LIMIT, ADDRESS_LIMIT))
-
-
-def cli_capped(*args: str, cwd: Path) -> tuple[int, str, float, float]:
-    """Run the CLI in a fresh process under the cap: (exit code, stderr, seconds, peak resident MB)."""
-    env = {**os.environ, "PYTHONPATH": os.environ.get("PYTHONPATH") or SRC, "BASEPLACE_MAX_MEMORY_MB": str(CAP_MB),
-           "BASEPLACE_CACHE": str(cwd / "cache")}  # fmt: skip
-    t0 = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-m", "baseplace.cli", *args], cwd=cwd, env=env, text=True,
-                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                            preexec_fn=_limit_address_space)  # fmt: skip
-    assert proc.stderr is not None
-    err = proc.stderr.read()
-    _, status, usage = os.wait4(proc.pid, 0)
-    proc.returncode = os.waitstatus_to_exitcode(status)
-    return proc.returncode, err, time.perf_counter() - t0, usage.ru_maxrss / 1024.0
+from peak_memory import CAP_MB, cli_peak
 
 
 def assert_one_line_refusal(code: int, err: str, seconds: float, peak_mb: float, *fragments: str) -> None:
@@ -66,7 +40,7 @@ def cap_512(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def test_cli_surface_map_of_a_100_m_square_at_1_cm_is_refused(tmp_path: Path) -> None:
     """The issue's case: 4.9 GB and a MemoryError traceback before; now exit 2 with the cells and the limit."""
-    result = cli_capped("surface-map", "--polygon", "0,0;100,0;100,100;0,100", "--height", "0.7",
+    result = cli_peak("surface-map", "--polygon", "0,0;100,0;100,100;0,100", "--height", "0.7",
                         "--resolution", "0.01", "--samples", "20000", "--out", "big.smap", cwd=tmp_path)  # fmt: skip
     assert_one_line_refusal(*result, "1.6e+09 cells", "over the limit of", "BASEPLACE_MAX_MEMORY_MB=512")
     assert not (tmp_path / "big.smap").exists()
@@ -138,7 +112,7 @@ def _sparse_cloud(side: float) -> np.ndarray:
 def test_cli_segment_of_a_wide_cloud_at_1_cm_is_refused(tmp_path: Path) -> None:
     """49 m at 1 cm: 2.4e7 cells passed the old fixed limit (2.5e7) and took about 8 GB to segment."""
     np.save(tmp_path / "wide.npy", _sparse_cloud(49.0))
-    result = cli_capped("segment", "wide.npy", "--resolution", "0.01", cwd=tmp_path)
+    result = cli_peak("segment", "wide.npy", "--resolution", "0.01", cwd=tmp_path)
     assert_one_line_refusal(*result, "4901 x 4901 = 2.4e+07 cells at 0.01 m", "over the limit of")
 
 

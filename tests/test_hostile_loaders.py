@@ -12,7 +12,6 @@ from __future__ import annotations
 import json
 import os
 import resource
-import signal
 import struct
 import subprocess
 import sys
@@ -22,9 +21,9 @@ import h5py
 import numpy as np
 import pytest
 
+from peak_memory import CAP_MB, cli_peak
 from test_hostile_files import _PROBE, SRC
 
-CAP_MB = 512
 LIMIT_MB = 200.0
 ADDRESS_SPACE = 3 * 2**30  # far above what a capped load needs, far below this machine's memory
 ENV = {**os.environ, "PYTHONPATH": SRC, "BASEPLACE_MAX_MEMORY_MB": str(CAP_MB)}
@@ -41,27 +40,6 @@ def probe(kind: str, path: Path, timeout: float = 120) -> dict[str, object]:
     return json.loads(proc.stdout.strip().splitlines()[-1])  # type: ignore[no-any-return]
 
 
-# runs the CLI as its only child, then prints the child's peak resident set (kB)
-_WRAP = (
-    "import resource, subprocess, sys; code = subprocess.call(sys.argv[1:]); "
-    "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss); sys.exit(code)"
-)
-
-
-def cli_peak(*args: str, timeout: float = 120) -> tuple[int, str, float]:
-    """(exit code, stderr, peak resident MB) of the CLI under the cap."""
-    command = [sys.executable, "-c", _WRAP, sys.executable, "-m", "baseplace.cli", *args]
-    proc = subprocess.Popen(command, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env=ENV, preexec_fn=_limit_address_space, start_new_session=True)  # fmt: skip
-    try:
-        out, err = proc.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        os.killpg(proc.pid, signal.SIGKILL)  # the CLI too, which a blocked open would keep alive
-        proc.communicate()
-        raise
-    return proc.returncode, err, int(out.strip().splitlines()[-1]) / 1024
-
-
 def assert_refused(
     kind: str,
     path: Path,
@@ -74,7 +52,7 @@ def assert_refused(
     assert str(result["outcome"]).startswith("error: "), result
     assert fragment in str(result["outcome"]), result
     assert float(result["peak_mb"]) < limit_mb, result  # type: ignore[arg-type]
-    code, stderr, peak = cli_peak(*cli_args, timeout=timeout)
+    code, stderr, _, peak = cli_peak(*cli_args, timeout=timeout)
     assert code == 2, stderr[-2000:]
     lines = stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: ") and len(lines[0]) < 1000, stderr[-2000:]

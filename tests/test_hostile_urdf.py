@@ -8,24 +8,13 @@ machine's memory); the refusal must be exit 2, one line, quick, and under the me
 
 from __future__ import annotations
 
-import os
-import resource
-import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 
 from baseplace.errors import InputError
-
-SRC = str(Path(__file__).resolve().parents[1] / "src")
-ADDRESS_LIMIT = 3 << 30
-CAP_MB = 512
-
-
-def _limit_address_space() -> None:
-    resource.setrlimit(resource.RLIMIT_AS, (ADDRESS_LIMIT, ADDRESS_LIMIT))
+from peak_memory import CAP_MB, cli_peak
 
 
 def chain_robot(folder: Path, n: int, extra: str = "") -> Path:
@@ -44,24 +33,10 @@ def chain_robot(folder: Path, n: int, extra: str = "") -> Path:
     return robot
 
 
-def cli(*args: str, cwd: Path) -> tuple[int, str, float, float]:
-    """(exit code, stderr, seconds, peak resident MB) of the CLI in a fresh, address-limited process."""
-    env = {**os.environ, "PYTHONPATH": os.environ.get("PYTHONPATH") or SRC, "BASEPLACE_MAX_MEMORY_MB": str(CAP_MB),
-           "BASEPLACE_CACHE": str(cwd / "cache")}  # fmt: skip
-    t0 = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-m", "baseplace.cli", *args], cwd=cwd, env=env, text=True,
-                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                            preexec_fn=_limit_address_space)  # fmt: skip
-    assert proc.stderr is not None
-    err = proc.stderr.read()
-    _, status, usage = os.wait4(proc.pid, 0)
-    return os.waitstatus_to_exitcode(status), err, time.perf_counter() - t0, usage.ru_maxrss / 1024.0
-
-
 @pytest.mark.parametrize("n", [1000, 3000, 10_000])
 def test_robot_check_refuses_a_deep_chain(tmp_path: Path, n: int) -> None:
     robot = chain_robot(tmp_path, n)
-    code, err, seconds, peak_mb = cli("robot", "check", str(robot), "--png", "x.png", cwd=tmp_path)
+    code, err, seconds, peak_mb = cli_peak("robot", "check", str(robot), "--png", "x.png", cwd=tmp_path)
     assert code == 2, (code, err[-2000:])
     lines = err.strip().splitlines()
     assert lines == [f"error: URDF {tmp_path / f'deep{n}.urdf'} has {n + 1} links; the limit is 512"], err[
@@ -82,7 +57,7 @@ def test_robot_check_refuses_a_deep_chain(tmp_path: Path, n: int) -> None:
 def test_other_commands_refuse_a_deep_chain(tmp_path: Path, command: list[str]) -> None:
     robot = chain_robot(tmp_path, 10_000)
     args = [str(robot) if a == "ROBOT" else a for a in command]
-    code, err, seconds, peak_mb = cli(*args, cwd=tmp_path)
+    code, err, seconds, peak_mb = cli_peak(*args, cwd=tmp_path)
     assert code == 2, (code, err[-2000:])
     assert len(err.strip().splitlines()) == 1 and "has 10001 links; the limit is 512" in err, err[-2000:]
     assert seconds < 15.0 and peak_mb < CAP_MB, (seconds, peak_mb)
