@@ -139,7 +139,7 @@ def test_182_byte_pcd_with_a_huge_count(tmp_path):
     data = PCD_HEADER.encode()
     path.write_bytes(data + b"\0" * (182 - len(data)))
     assert path.stat().st_size == 182
-    assert_refused("cloud", path, "can hold", ["segment", "--cloud", str(path)])
+    assert_refused("cloud", path, "can hold", ["segment", str(path)])
 
 
 @pytest.mark.parametrize("fmt", ["binary", "ascii", "binary_compressed"])
@@ -148,19 +148,19 @@ def test_pcd_declaring_more_points_than_its_bytes(tmp_path, fmt):
     header = PCD_HEADER.replace("COUNT 1 1 1000000000", "COUNT 1 1 1").replace("WIDTH 1", "WIDTH 500000000")
     header = header.replace("POINTS 1", "POINTS 500000000").replace("DATA binary", f"DATA {fmt}")
     path.write_bytes(header.encode() + b"\0" * 64)
-    assert_refused("cloud", path, "can hold", ["segment", "--cloud", str(path)])
+    assert_refused("cloud", path, "can hold", ["segment", str(path)])
 
 
 def test_ply_and_npy_declaring_huge_sizes(tmp_path):
     ply = tmp_path / "v.ply"
     ply.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 2000000000\n"
                     b"property float x\nproperty float y\nproperty float z\nend_header\n" + b"\0" * 24)  # fmt: skip
-    assert_refused("cloud", ply, "can hold", ["segment", "--cloud", str(ply)])
+    assert_refused("cloud", ply, "can hold", ["segment", str(ply)])
     npy = tmp_path / "v.npy"
     header = b"{'descr': '<f8', 'fortran_order': False, 'shape': (3000000000, 3), }"
     header += b" " * (117 - len(header)) + b"\n"
     npy.write_bytes(b"\x93NUMPY\x01\x00" + struct.pack("<H", len(header)) + header + b"\0" * 48)
-    assert_refused("cloud", npy, "can hold", ["segment", "--cloud", str(npy)])
+    assert_refused("cloud", npy, "can hold", ["segment", str(npy)])
 
 
 def _png_chunk(kind: bytes, data: bytes) -> bytes:

@@ -254,3 +254,12 @@ def test_terrain_cache_entry_with_external_storage_is_not_read(tmp_path):
     proc = subprocess.run([sys.executable, "-c", script, str(path)], capture_output=True, text=True,
                           timeout=20, env=ENV)  # fmt: skip
     assert proc.stdout.startswith("error: ") and "external files" in proc.stdout, proc.stdout + proc.stderr
+
+
+def test_map_cache_compression_check_follows_no_link(tmp_path):
+    # the default-map cache asks whether a cached map is compressed before it loads it
+    path = _hdf5_naming_a_fifo(tmp_path, ".rmap", "baseplace-reachability-map", "cells", "external link")
+    script = "import sys; from baseplace.reachability.storage import is_compressed; print(is_compressed(sys.argv[1]))"
+    proc = subprocess.run([sys.executable, "-c", script, str(path)], capture_output=True, text=True,
+                          timeout=20, env=ENV)  # fmt: skip
+    assert proc.stdout.strip() == "False", proc.stdout + proc.stderr

@@ -81,6 +81,8 @@ def is_compressed(path: str | Path) -> bool:
     """Whether the map file's cells are stored compressed (False for an unreadable file)."""
     try:
         with h5py.File(path, "r") as f:
+            if not isinstance(f.get("cells", getlink=True), h5py.HardLink):
+                return False  # absent, or a link that load_map refuses: never followed here
             cells = f["cells"]
             return isinstance(cells, h5py.Dataset) and cells.compression is not None
     except CORRUPT_FILE_ERRORS:
