@@ -80,6 +80,7 @@ def assert_refused(kind: str, path: Path, fragment: str, cli_args: list[str]) ->
     assert proc.returncode == 2, proc.stderr[-2000:]
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: ") and len(lines[0]) < 1000, proc.stderr[-2000:]
+    assert fragment in lines[0], lines[0]  # the CLI refused the file, not its arguments
 
 
 # --- the files -----------------------------------------------------------------------------------
