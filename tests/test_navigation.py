@@ -104,3 +104,15 @@ def test_true_traversability_on_the_demo_scene():
     steep = TrueTraversability(demo_scene(), radius=0.3, max_step=0.002)  # the ramp's 2.7 mm step is too much
     assert not steep.connected(floor, platform)
     assert steep.connected(floor, (-3.5, -2.5))
+
+
+@pytest.mark.parametrize("yaw", [np.pi, -np.pi])
+def test_headings_of_pi_at_start_and_goal(ramp_world, yaw):
+    # OMPL's SO(2) holds [-pi, pi); a heading of exactly pi (or -pi, which wraps to pi) is a valid
+    # pose and must plan like any other, ending at the goal's heading
+    _, navmap = ramp_world
+    start, goal = np.array([-2.0, 0.6, yaw]), np.array([1.7, 0.6, yaw])
+    path = plan_path(navmap, start, goal, "rrt")
+    assert np.allclose(path.poses[-1, :2], goal[:2], atol=1e-6)
+    assert abs(np.angle(np.exp(1j * (path.poses[-1, 2] - yaw)))) < 1e-6
+    assert np.all((path.poses[:, 2] > -np.pi) & (path.poses[:, 2] <= np.pi))

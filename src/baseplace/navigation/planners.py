@@ -51,7 +51,7 @@ def plan_path(
     if planner not in PLANNERS:
         raise unknown("planner", planner, PLANNERS)
     start, goal = np.array(start, dtype=float), np.array(goal, dtype=float)
-    start[2], goal[2] = wrap_angle(start[2]), wrap_angle(goal[2])  # OMPL's SE(2) holds (-pi, pi]
+    start[2], goal[2] = wrap_angle(start[2]), wrap_angle(goal[2])
     navmap.check_pose("start", start[:2])
     navmap.check_pose("goal", goal[:2])
     t0 = time.perf_counter()
@@ -95,6 +95,7 @@ def _rrt(
             state.setX(float(x))
             state.setY(float(y))
             state.setYaw(float(yaw))
+            space.enforceBounds(state)  # OMPL's SO(2) holds [-pi, pi): a heading of pi becomes -pi
         setup.setStartAndGoalStates(a, b, 1e-6)
         setup.setPlanner(og.RRTConnect(info))
         solved = setup.solve(time_limit)
@@ -102,7 +103,9 @@ def _rrt(
             return None
         setup.simplifySolution()
         path = setup.getSolutionPath()
-        return np.array([[s.getX(), s.getY(), s.getYaw()] for s in path.getStates()])
+        poses = np.array([[s.getX(), s.getY(), s.getYaw()] for s in path.getStates()])
+        poses[:, 2] = wrap_angle(poses[:, 2])  # back to (-pi, pi], the range headings have here
+        return poses
     finally:
         gc.collect()  # the validity callback forms a cycle with the setup; free it before exit
 
