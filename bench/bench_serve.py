@@ -88,6 +88,37 @@ def pct(values: list[float], q: float) -> float:
     return round(float(np.percentile(values, q)), 2) if values else float("nan")
 
 
+def start_server(env: dict[str, str], timeout_s: float) -> tuple[subprocess.Popen[str], str, int]:
+    """``baseplace serve`` on a free loopback port, request time limit ``timeout_s``: (process, url, port)."""
+    port = free_port()
+    server = subprocess.Popen([sys.executable, "-m", "baseplace.cli", "serve", "--port", str(port), "--timeout",
+                               str(timeout_s)], env=env, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    return server, f"http://127.0.0.1:{port}", port
+
+
+def wait_healthy(http: httpx.Client, server: subprocess.Popen[str], limit_s: float) -> float:
+    """Seconds until ``/health`` answers 200; exits with the server's stderr if it dies or takes too long."""
+    t0 = time.time()
+    while True:
+        try:
+            if http.get("/health").status_code == 200:
+                return round(time.time() - t0, 2)
+        except httpx.TransportError:
+            pass
+        if server.poll() is not None or time.time() - t0 > limit_s:
+            raise SystemExit(f"server did not start: {server.stderr.read() if server.stderr else ''}")
+        time.sleep(0.2)
+
+
+def upload_scene(http: httpx.Client, scene: dict[str, Any]) -> dict[str, Any]:
+    """Upload a scene's cloud; its id goes to ``scene["id"]``; the service's answer."""
+    r = http.post("/scenes", params={"format": "ply"}, content=scene["cloud"].read_bytes(), headers=UPLOAD)
+    r.raise_for_status()
+    answer: dict[str, Any] = r.json()
+    scene["id"] = answer["scene_id"]
+    return answer
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--requests", type=int, default=2000)
@@ -99,36 +130,18 @@ def main() -> None:
     parser.add_argument("--timeout", type=float, default=60.0, help="client time limit per request [s]")
     args = parser.parse_args()
     mix = {k: float(v) for k, v in (p.split(":") for p in args.mix.split(","))}
-    port = free_port()
-    url = f"http://127.0.0.1:{port}"
     folder = Path(tempfile.mkdtemp(prefix="bench-serve-"))
     scenes = [scene_inputs(seed, folder) for seed in range(1, args.scenes + 1)]
     env = dict(os.environ)
-    server = subprocess.Popen([sys.executable, "-m", "baseplace.cli", "serve", "--port", str(port), "--timeout", "120"],
-                              env=env, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    server, url, _ = start_server(env, 120)
     result: dict[str, Any] = {"url": "loopback", "clients": args.clients, "requests": args.requests, "mix": mix,
                               "scenes": "generated 10 x 10 m, floor + 2 inclined planes (3 support regions), box "
                                         "with objects, 25 mm noise; seeds " + ", ".join(str(s["seed"]) for s in scenes)}  # fmt: skip
     try:
         http = httpx.Client(base_url=url, timeout=args.timeout)
-        t0 = time.time()
-        while True:
-            try:
-                if http.get("/health").status_code == 200:
-                    break
-            except httpx.TransportError:
-                pass
-            if server.poll() is not None or time.time() - t0 > 300:
-                raise SystemExit(f"server did not start: {server.stderr.read() if server.stderr else ''}")
-            time.sleep(0.2)
-        result["server_start_s"] = round(time.time() - t0, 2)
+        result["server_start_s"] = wait_healthy(http, server, 300)
         for s in scenes:
-            r = http.post(
-                "/scenes", params={"format": "ply"}, content=s["cloud"].read_bytes(), headers=UPLOAD
-            )
-            r.raise_for_status()
-            s["id"] = r.json()["scene_id"]
-            s["regions"] = r.json()["regions"]
+            s["regions"] = upload_scene(http, s)["regions"]
             r = http.post(f"/scenes/{s['id']}/grid", params={"resolution": s["resolution"], "format": "png",
                                                               "origin_x": -5.0, "origin_y": -5.0}, content=s["png"], headers=UPLOAD)  # fmt: skip
             r.raise_for_status()

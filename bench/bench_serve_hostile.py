@@ -22,7 +22,6 @@ import argparse
 import os
 import socket
 import subprocess
-import sys
 import tempfile
 import threading
 import time
@@ -31,7 +30,15 @@ from typing import Any
 
 import httpx
 
-from bench_serve import SEED000, UPLOAD, free_port, pct, rss_mb, scene_inputs
+from bench_serve import (
+    SEED000,
+    pct,
+    rss_mb,
+    scene_inputs,
+    start_server,
+    upload_scene,
+    wait_healthy,
+)
 from common import report
 
 HEAVY = {"tries": 1000, "placements": 1, "robustness_samples": 1024}
@@ -216,31 +223,15 @@ def main() -> None:
     env = dict(os.environ)
     if args.small_map:
         env["BASEPLACE_CACHE"] = str(small_map_cache(folder))
-    port = free_port()
-    url = f"http://127.0.0.1:{port}"
-    server = subprocess.Popen([sys.executable, "-m", "baseplace.cli", "serve", "--port", str(port), "--timeout",
-                               str(args.server_timeout)], env=env, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    server, url, port = start_server(env, args.server_timeout)
     result: dict[str, Any] = {"url": "loopback", "clients": args.clients, "requests_per_phase": args.requests,
                               "server_timeout_s": args.server_timeout, "small_map": args.small_map,
                               "hostile": {"slowloris": args.slowloris, "stalled_50mb_bodies": args.stalled,
                                           "heavy_place_clients": args.heavy, "malformed_json_clients": 1}}  # fmt: skip
     try:
         http = httpx.Client(base_url=url, timeout=300)
-        t0 = time.time()
-        while True:
-            try:
-                if http.get("/health").status_code == 200:
-                    break
-            except httpx.TransportError:
-                pass
-            if server.poll() is not None or time.time() - t0 > 600:
-                raise SystemExit(f"server did not start: {server.stderr.read() if server.stderr else ''}")
-            time.sleep(0.2)
-        r = http.post(
-            "/scenes", params={"format": "ply"}, content=scene["cloud"].read_bytes(), headers=UPLOAD
-        )
-        r.raise_for_status()
-        scene["id"] = r.json()["scene_id"]
+        wait_healthy(http, server, 600)
+        upload_scene(http, scene)
         honest_load(url, scene, 20, 1, args.timeout)  # warm: the scene's first queries
         result["honest_alone"] = honest_load(url, scene, args.requests, args.clients, args.timeout)
         print("alone", result["honest_alone"], flush=True)
