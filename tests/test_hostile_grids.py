@@ -166,7 +166,7 @@ def test_fusion_is_bounded_before_the_octree_grows(monkeypatch: pytest.MonkeyPat
     monkeypatch.setenv("BASEPLACE_MAX_MEMORY_MB", "8")
     t0 = time.perf_counter()
     with pytest.raises(
-        InputError, match=r"may touch 1.\d+e\+06 voxels of 0.01 m, over the limit of 1.31e\+05"
+        InputError, match=r"may touch 1.\d+e\+06 voxels of 0.01 m is over the limit of 1.31e\+05 voxels"
     ):
         fuse_clouds(clouds, settings)
     assert time.perf_counter() - t0 < 1.0

@@ -87,6 +87,41 @@ def check_alloc(
         )
 
 
+def check_grid_size(
+    count: float,
+    bytes_each: float,
+    what: str,
+    remedy: str,
+    unit: str = "cells",
+    reserved_bytes: float = 0.0,
+    max_count: float = float("inf"),
+) -> None:
+    """Refuse a grid of ``count`` cells (or voxels) sized by the user before it is allocated.
+
+    The limit is what ``$BASEPLACE_MAX_MEMORY_MB``, less ``reserved_bytes``, holds at the grid's
+    measured ``bytes_each`` (and at most ``max_count``).
+
+    Args:
+        count: cells (or voxels) the grid will hold.
+        bytes_each: measured peak bytes per cell.
+        what: the grid with its size, as the message starts ("a height map of 10 x 20 = 200 cells").
+        remedy: what the user can change.
+        unit: what a cell is called in the message.
+        reserved_bytes: bytes of the cap already taken by what is built beside the grid.
+        max_count: a fixed upper limit of cells, whatever the cap.
+
+    Raises:
+        InputError: one line: ``what``, the limit, the bytes per cell, the cap and ``remedy``.
+    """
+    cap = memory_cap_bytes()
+    limit = int(max(0.0, min(max_count, (cap - reserved_bytes) / bytes_each)))
+    if count > limit:
+        raise InputError(
+            f"{what} is over the limit of {limit:.3g} {unit} ({bytes_each:.0f} bytes each within "
+            f"BASEPLACE_MAX_MEMORY_MB={cap / 2**20:.0f}); {remedy}"
+        )
+
+
 MAX_PATH_BYTES = 4095
 MAX_COMPONENT_BYTES = 255
 

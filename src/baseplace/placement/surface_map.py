@@ -34,7 +34,7 @@ from scipy.signal import fftconvolve
 
 from baseplace.errors import InputError, brief, unknown
 from baseplace.geometry.poses import FloatArray
-from baseplace.guards import check_alloc, memory_cap_bytes
+from baseplace.guards import check_alloc, check_grid_size
 from baseplace.placement.osrm import footprint_kernel
 from baseplace.reachability.rmap import ReachabilityMap
 from baseplace.robots.model import Robot
@@ -260,14 +260,11 @@ def check_surface_grid(polygon: FloatArray, resolution: float, orientations: int
     hi = np.ceil(polygon.max(axis=0) / resolution)
     nx, ny = (float(v) + 1 + 2 * k for v in hi - lo)
     per_cell = BYTES_PER_POSE + BYTES_PER_FLOOR_CELL / orientations
-    limit = int(memory_cap_bytes() / per_cell)
     cells = orientations * nx * ny
-    if cells > limit:
-        raise InputError(
-            f"the surface map's grid of {orientations} headings x {nx:.0f} x {ny:.0f} = {cells:.3g} cells is over "
-            f"the limit of {limit:.3g} cells ({per_cell:.0f} bytes each within BASEPLACE_MAX_MEMORY_MB="
-            f"{memory_cap_bytes() / 2**20:.0f}); use a coarser --resolution, fewer --orientations or a smaller polygon"
-        )
+    check_grid_size(
+        cells, per_cell, f"the surface map's grid of {orientations} headings x {nx:.0f} x {ny:.0f} = {cells:.3g} cells",
+        "use a coarser --resolution, fewer --orientations or a smaller polygon",
+    )  # fmt: skip
     return int(cells)
 
 

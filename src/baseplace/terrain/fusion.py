@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError
-from baseplace.guards import memory_cap_bytes
+from baseplace.guards import check_grid_size
 
 FloatArray = NDArray[np.float64]
 
@@ -150,14 +150,10 @@ def check_voxels(clouds: Sequence[tuple[FloatArray, FloatArray]], settings: Fusi
         if per_cloud
         else 0.0
     )
-    cap = memory_cap_bytes()
-    limit = int(cap / BYTES_PER_VOXEL)
-    if bound > limit:
-        raise InputError(
-            f"fusing these clouds may touch {bound:.3g} voxels of {res} m, over the limit of {limit:.3g} "
-            f"({BYTES_PER_VOXEL:.0f} bytes each within BASEPLACE_MAX_MEMORY_MB={cap / 2**20:.0f}); use larger "
-            "voxels, a max range or fewer, nearer points"
-        )
+    check_grid_size(
+        bound, BYTES_PER_VOXEL, f"fusing these clouds may touch {bound:.3g} voxels of {res} m",
+        "use larger voxels, a max range or fewer, nearer points", unit="voxels",
+    )  # fmt: skip
     return int(bound)
 
 

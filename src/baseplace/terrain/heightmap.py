@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError
-from baseplace.guards import memory_cap_bytes
+from baseplace.guards import check_grid_size
 from baseplace.terrain.voxels import VoxelMap
 
 FloatArray = NDArray[np.float64]
@@ -33,15 +33,12 @@ def check_cells(n_cols: float, n_rows: float, resolution: float, reserved_bytes:
         InputError: one line with the cell count and the limit.
     """
     cells = float(n_cols) * float(n_rows)
-    cap = memory_cap_bytes()
-    limit = int(max(0.0, min(MAX_CELLS, (cap - reserved_bytes) / BYTES_PER_CELL)))
-    if cells > limit:
-        raise InputError(
-            f"the cloud spans {n_cols * resolution:.0f} x {n_rows * resolution:.0f} m: a height map of "
-            f"{n_cols:.0f} x {n_rows:.0f} = {cells:.3g} cells at {resolution} m is over the limit of {limit:.3g} cells "
-            f"({BYTES_PER_CELL:.0f} bytes each within BASEPLACE_MAX_MEMORY_MB={cap / 2**20:.0f}); use a coarser "
-            "--resolution or crop the cloud"
-        )
+    check_grid_size(
+        cells, BYTES_PER_CELL,
+        f"the cloud spans {n_cols * resolution:.0f} x {n_rows * resolution:.0f} m: a height map of "
+        f"{n_cols:.0f} x {n_rows:.0f} = {cells:.3g} cells at {resolution} m",
+        "use a coarser --resolution or crop the cloud", reserved_bytes=reserved_bytes, max_count=MAX_CELLS,
+    )  # fmt: skip
 
 
 @dataclass(frozen=True)

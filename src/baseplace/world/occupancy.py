@@ -36,7 +36,7 @@ import yaml
 from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError, brief, unknown
-from baseplace.guards import check_alloc, check_path_length, memory_cap_bytes
+from baseplace.guards import check_alloc, check_grid_size, check_path_length
 
 MODES = ("trinary", "scale", "raw")
 IMAGE_FORMATS = (".bmp", ".pgm", ".png")
@@ -194,14 +194,12 @@ def check_grid_cells(shape: tuple[int, ...], source: object = None) -> None:
         InputError: one line with the cell count and the limit.
     """
     cells = float(np.prod(shape, dtype=float))
-    cap = memory_cap_bytes()
-    limit = int(cap / GRID_BYTES_PER_CELL)
-    if cells > limit:
-        raise InputError(
-            f"{'' if source is None else f'{source}: '}an occupancy grid of {' x '.join(str(int(v)) for v in shape)} = {cells:.3g} cells is over the limit "
-            f"of {limit:.3g} cells ({GRID_BYTES_PER_CELL:.0f} bytes each within BASEPLACE_MAX_MEMORY_MB="
-            f"{cap / 2**20:.0f}); use a coarser or smaller map"
-        )
+    check_grid_size(
+        cells, GRID_BYTES_PER_CELL,
+        f"{'' if source is None else f'{source}: '}an occupancy grid of "
+        f"{' x '.join(str(int(v)) for v in shape)} = {cells:.3g} cells",
+        "use a coarser or smaller map",
+    )  # fmt: skip
 
 
 def _number(doc: dict[str, Any], key: str, where: str) -> float:
