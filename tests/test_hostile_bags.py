@@ -335,3 +335,67 @@ def test_honest_compressed_bags_read_through_the_bounded_decompressors(tmp_path,
     assert len(scene.clouds) == 4
     for k, c in enumerate(scene.clouds):
         assert np.array_equal(c.points, (points + k).astype(np.float64))
+
+
+def _zstd_rosbag2(path: Path, mode: str, n_points: int) -> Path:
+    """A rosbag2 directory (sqlite3) of one zero cloud, compressed per message or per file with zstd."""
+    from rosbags.rosbag2 import Writer
+    from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    writer = Writer(path, version=9)
+    writer.set_compression(getattr(CompressionMode, mode), CompressionFormat.ZSTD)
+    with writer:
+        conn = writer.add_connection("/points", POINTCLOUD2, typestore=ts)
+        writer.write(
+            conn, T0, ts.serialize_cdr(cloud_msg(ts, np.zeros((n_points, 3)), "map", T0), POINTCLOUD2)
+        )
+    return path
+
+
+def test_rosbag2_message_compression_bounded_by_the_cap(tmp_path):
+    # 24 MB of cloud in one zstd message of a few kB; the cap is 16 MB: refused while it inflates
+    path = _zstd_rosbag2(tmp_path / "bomb", "MESSAGE", 2_000_000)
+    assert sum(f.stat().st_size for f in path.iterdir()) < 200_000
+    result = probe("bag", path, 16, {"cloud_topics": ["/points"]})
+    assert str(result["outcome"]).startswith("error: "), result
+    assert "zstd message" in str(result["outcome"]) and "over the limit" in str(result["outcome"]), result
+    assert float(result["growth_mb"]) < 16, result  # type: ignore[arg-type]
+
+
+def test_rosbag2_message_of_undeclared_size_inflated_up_to_the_cap(tmp_path):
+    # a zstd frame need not declare its size: then it is inflated, and refused, at the cap
+    import sqlite3
+
+    from baseplace.io.bag_limits import _zstd_module
+
+    path = _zstd_rosbag2(tmp_path / "bomb", "MESSAGE", 1000)
+    c = _zstd_module().ZstdCompressor()
+    streamed = b"".join(c.compress(b"\0" * 2**20) for _ in range(40)) + c.flush()  # 40 MB, no size declared
+    (db,) = path.glob("*.db3")
+    with sqlite3.connect(db) as con:
+        con.execute("UPDATE messages SET data = ?", (streamed,))
+    result = probe("bag", path, 16, {"cloud_topics": ["/points"]})
+    assert "zstd message" in str(result["outcome"]) and "over the limit of 17 MB" in str(result["outcome"]), (
+        result
+    )
+    assert float(result["growth_mb"]) < 2 * 16 + 8, result  # type: ignore[arg-type]  # the cap, its copy, zstd's window
+
+
+def test_rosbag2_file_compression_bounded_by_the_temporary_folder(tmp_path, monkeypatch):
+    # rosbags inflates a file-compressed bag's files whole into a temporary folder first
+    from baseplace.io import bag_limits
+
+    path = _zstd_rosbag2(tmp_path / "bomb", "FILE", 2_000_000)
+    monkeypatch.setattr(bag_limits, "temporary_space", lambda: 8_000_000)
+    with pytest.raises(InputError, match=r"inflates beyond the 8000000 bytes free .* temporary folder"):
+        read_bag(path, ["/points"])
+    monkeypatch.undo()
+    assert read_bag(path, ["/points"]).clouds[0].points.shape == (2_000_000, 3)
+
+
+@pytest.mark.parametrize("mode", ["MESSAGE", "FILE"])
+def test_honest_rosbag2_compressed_bags_read_through_the_bounded_decompressors(tmp_path, mode):
+    path = _zstd_rosbag2(tmp_path / "rec", mode, 1000)
+    assert read_bag(path, ["/points"]).clouds[0].points.shape == (1000, 3)

@@ -18,7 +18,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from baseplace.errors import InputError, brief
-from baseplace.io.bag_limits import bound_mcap_decompression, check_chunks, check_tf_message
+from baseplace.io.bag_limits import (
+    bound_mcap_decompression,
+    bound_rosbag2_decompression,
+    check_chunks,
+    check_tf_message,
+)
 from baseplace.io.messages import (
     OCCUPANCY_GRID,
     POINTCLOUD2,
@@ -95,6 +100,7 @@ def _open(path: Path) -> Any:
     if not path.exists():
         raise InputError(f"bag {path} does not exist")
     bound_mcap_decompression()  # an MCAP file without a summary is inflated while it is opened
+    bound_rosbag2_decompression()  # a file-compressed rosbag2 directory too
     try:
         reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
         reader.open()

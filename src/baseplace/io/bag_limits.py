@@ -5,19 +5,23 @@ holds every chunk whose time range covers the message being read. A 6 kB chunk c
 gigabytes, so the size each chunk declares (ROS 1 chunk headers carry ``size``, MCAP chunk
 indexes ``uncompressed_size``) is checked against the memory cap before it is read, and the
 chunk is inflated by a decompressor that stops at that size, so the declaration cannot lie.
+A rosbag2 directory compressed per message has no declared sizes: each message is inflated up to
+the memory cap; one compressed per file is inflated into a temporary folder, up to its free space.
 """
 
 from __future__ import annotations
 
 import bz2
+import shutil
 import struct
+import tempfile
 from collections.abc import Callable
 from functools import partial
 from pathlib import Path
 from typing import Any
 
 from baseplace.errors import InputError
-from baseplace.guards import check_alloc
+from baseplace.guards import check_alloc, memory_cap_bytes
 
 TF_MESSAGE_BYTES_PER_TRANSFORM = 1000
 """Memory one transform of a tf2_msgs/TFMessage takes once ``rosbags`` decodes it (about 925 bytes)."""
@@ -32,11 +36,7 @@ def _codec(name: str) -> Callable[[], Any] | None:
 
         return lz4.frame.LZ4FrameDecompressor
     if name == "zstd":
-        try:
-            from compression import zstd
-        except ImportError:
-            from backports import zstd
-        return zstd.ZstdDecompressor
+        return _zstd_module().ZstdDecompressor
     return None
 
 
@@ -82,6 +82,82 @@ def bound_mcap_decompression() -> None:
 
 def _inflate_mcap(data: bytes, size: int, codec: str) -> bytes:
     return inflate(data, codec, size)
+
+
+TEMPORARY_RESERVE = 1 << 30
+"""Bytes of the temporary folder a file-compressed recording must leave free."""
+
+
+def temporary_space() -> int:
+    """Bytes a file-compressed recording may inflate to in the temporary folder (its free space less a reserve)."""
+    return max(0, shutil.disk_usage(tempfile.gettempdir()).free - TEMPORARY_RESERVE)
+
+
+class _BoundedZstdStream:
+    """A zstd stream read as ``shutil.copyfileobj`` reads it, refused past ``limit`` bytes out."""
+
+    def __init__(self, stream: Any, limit: int) -> None:
+        self._stream, self._limit, self._total = stream, limit, 0
+
+    def read(self, size: int = -1) -> bytes:
+        part: bytes = self._stream.read(self._limit + 1 - self._total if size < 0 else size)
+        self._total += len(part)
+        if self._total > self._limit:
+            raise InputError(
+                f"a zstd file of the recording inflates beyond the {self._limit} bytes free in the temporary "
+                f"folder {tempfile.gettempdir()} (less {TEMPORARY_RESERVE >> 20} MB kept free)"
+            )
+        return part
+
+    def __enter__(self) -> _BoundedZstdStream:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stream.close()
+
+
+class _BoundedZstd:
+    """The two calls of the ``zstd`` module that ``rosbags``' rosbag2 reader makes, bounded."""
+
+    @staticmethod
+    def decompress(data: bytes) -> bytes:
+        zstd = _zstd_module()
+        try:
+            declared = zstd.get_frame_info(data).decompressed_size
+        except zstd.ZstdError:
+            raise InputError(
+                "a zstd message of the recording is not a zstd frame; the file is corrupt"
+            ) from None
+        if declared is not None:  # the frame says how large it is: checked before anything is inflated
+            check_alloc(declared, "a zstd message", "the recording")
+        cap = memory_cap_bytes()
+        out: bytes = zstd.ZstdDecompressor().decompress(data, max_length=cap + 1)
+        if len(out) > cap:
+            raise InputError(
+                f"a zstd message of the recording inflates over the limit of {cap / 1e6:.0f} MB "
+                "(raise BASEPLACE_MAX_MEMORY_MB to allow it)"
+            )
+        return out
+
+    @staticmethod
+    def open(file: Any, mode: str = "rb") -> _BoundedZstdStream:
+        zstd = _zstd_module()
+        return _BoundedZstdStream(zstd.open(file, mode), temporary_space())
+
+
+def _zstd_module() -> Any:
+    try:
+        from compression import zstd
+    except ImportError:
+        from backports import zstd
+    return zstd
+
+
+def bound_rosbag2_decompression() -> None:
+    """Make ``rosbags``' rosbag2 reader inflate zstd messages and files through bounded decompressors."""
+    from rosbags.rosbag2 import reader
+
+    reader.zstd = _BoundedZstd  # type: ignore[assignment]
 
 
 def check_chunks(reader: Any, path: Path) -> None:
