@@ -18,6 +18,7 @@ from shapely.geometry import Point, Polygon
 
 from baseplace.errors import InputError
 from baseplace.geometry.poses import BasePose, invert_transforms
+from baseplace.navigation.gridnav import GridNavigator
 from baseplace.navigation.path import Path
 from baseplace.placement.candidates import (
     RadialCandidate,
@@ -41,7 +42,6 @@ from baseplace.placement.pointing import pointed_object, pointing_ray, ray_box_d
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import Environment
-from baseplace.world.gridnav import GridNavigator
 from baseplace.world.occupancy import OccupancyGrid, load_occupancy
 from conftest import SHARED
 

@@ -50,7 +50,7 @@ _LAZY: dict[str, str] = {
     "navigation_map": "baseplace.navigation.navmap",
     "Path": "baseplace.navigation.planners",
     "plan_path": "baseplace.navigation.planners",
-    "GridNavigator": "baseplace.world.gridnav",
+    "GridNavigator": "baseplace.navigation.gridnav",
     "OccupancyGrid": "baseplace.world.occupancy",
     "load_occupancy": "baseplace.world.occupancy",
     # the jobs, their inputs and their report
@@ -107,6 +107,7 @@ if TYPE_CHECKING:  # what type checkers and IDEs see; at run time __getattr__ im
         robots_job,
         scene_job,
     )
+    from baseplace.navigation.gridnav import GridNavigator
     from baseplace.navigation.navmap import NavigationMap, navigation_map
     from baseplace.navigation.planners import Path, plan_path
     from baseplace.placement.candidates import RadialSettings
@@ -125,7 +126,6 @@ if TYPE_CHECKING:  # what type checkers and IDEs see; at run time __getattr__ im
     from baseplace.robots import BUILTIN_ROBOTS, DampedLeastSquaresIK, Robot, forward_kinematics
     from baseplace.terrain.io import Cloud, load_cloud
     from baseplace.terrain.pipeline import Terrain, terrain_from_points
-    from baseplace.world.gridnav import GridNavigator
     from baseplace.world.occupancy import OccupancyGrid, load_occupancy
 
 

@@ -16,6 +16,9 @@ import time
 from collections.abc import Callable, Iterator
 from typing import Any
 
+Progress = Callable[[str, int, int], None]
+"""A job's progress callback: ``progress(step, done, total)``; ``step`` names a long step."""
+
 QUIET_FOR = 2.0
 """Seconds a step may run before the status line appears."""
 REFRESH = 0.5
@@ -120,3 +123,15 @@ class ProgressBars:
         for bar in self.bars.values():
             bar.close()
         self.bars.clear()
+
+
+def step_progress(progress: Progress | None, step: str, total: int) -> Callable[[int], None] | None:
+    """The one-argument callback (samples done) of one step, or None without ``progress``."""
+    if progress is None:
+        return None
+    return lambda done: progress(step, done, total)
+
+
+def map_step(robot_name: str, arm: str) -> str:
+    """The progress step of building one arm's reachability map: one bar per map, named by its arm."""
+    return f"reachability map, {robot_name} {arm if arm.endswith('arm') else arm + ' arm'}"

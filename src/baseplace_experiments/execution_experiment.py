@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from baseplace.geometry.poses import BasePose
+from baseplace.navigation.gridnav import GridNavigator
 from baseplace.placement.candidates import RadialCandidate, pickup, radial_search
 from baseplace.placement.irm_candidates import IrmSettings, irm_candidates
 from baseplace.placement.motion import MotionChecker, MotionSettings
@@ -38,7 +39,6 @@ from baseplace.reachability.rmap import ReachabilityMap
 from baseplace.robots.model import Robot
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import Environment
-from baseplace.world.gridnav import GridNavigator
 from baseplace.world.support_plane import (
     SupportSlab,
     cylinder_distance,

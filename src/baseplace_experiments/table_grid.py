@@ -58,6 +58,7 @@ from numpy.typing import ArrayLike
 
 from baseplace.errors import InputError
 from baseplace.geometry.poses import BasePose, FloatArray, invert_transforms
+from baseplace.navigation.gridnav import GridNavigator
 from baseplace.placement.candidates import (
     RadialCandidate,
     RadialSettings,
@@ -72,7 +73,6 @@ from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Robot
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import Environment
-from baseplace.world.gridnav import GridNavigator
 from baseplace.world.occupancy import FREE, OCCUPIED, OccupancyGrid
 from baseplace_experiments.results import SeedSplit
 

@@ -142,6 +142,7 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
         raise InputError(f"unknown method {job.method!r}; valid: irm, radial")
     png, mcap = job.check_outputs()  # outputs first: before the imports and any work
     from baseplace.geometry.poses import BasePose
+    from baseplace.navigation.gridnav import GridNavigator
     from baseplace.placement.candidates import RadialSettings, motion_costs, pickup, radial_search
     from baseplace.placement.irm_candidates import (
         IrmSettings,
@@ -156,7 +157,6 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
     from baseplace.terrain.voxels import VoxelMap
     from baseplace.world.environment import Environment, contact_groups
     from baseplace.world.grasped_object import GraspedObject, find_grasped_object, parse_grasped_object
-    from baseplace.world.gridnav import GridNavigator
 
     t0 = time.perf_counter()
     robust = job.robustness or RobustnessSettings()

@@ -6,13 +6,16 @@ a service keeps warm between calls).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from baseplace.errors import InputError
+from baseplace.status import Progress as Progress  # re-exported: jobs and the CLI take them from here
+from baseplace.status import map_step as map_step
+from baseplace.status import step_progress as step_progress
 
 if TYPE_CHECKING:
     from pathlib import Path
@@ -22,21 +25,6 @@ if TYPE_CHECKING:
     from baseplace.robots.model import Arm, Robot
     from baseplace.terrain.io import Cloud
     from baseplace.world.occupancy import OccupancyGrid
-
-Progress = Callable[[str, int, int], None]
-"""A job's progress callback: ``progress(step, done, total)``; ``step`` names a long step."""
-
-
-def step_progress(progress: Progress | None, step: str, total: int) -> Callable[[int], None] | None:
-    """The one-argument callback (samples done) of one step, or None without ``progress``."""
-    if progress is None:
-        return None
-    return lambda done: progress(step, done, total)
-
-
-def map_step(robot_name: str, arm: str) -> str:
-    """The progress step of building one arm's reachability map: one bar per map, named by its arm."""
-    return f"reachability map, {robot_name} {arm if arm.endswith('arm') else arm + ' arm'}"
 
 
 def map_timing(chosen: MapChoice, seconds: float) -> dict[str, float]:

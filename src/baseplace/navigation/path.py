@@ -1,7 +1,7 @@
 """The one base-path type.
 
 Every planner returns a :class:`Path`: the scanned scene's planners
-(:mod:`baseplace.navigation.planners`) and the occupancy-grid planner (:mod:`baseplace.world.gridnav`).
+(:mod:`baseplace.navigation.planners`) and the occupancy-grid planner (:mod:`baseplace.navigation.gridnav`).
 """
 
 from __future__ import annotations

@@ -19,7 +19,7 @@ Where the seed leaves details open, this module decides (each documented at its 
   it stands on (``surface_margin``); otherwise every candidate in a real cloud would count them;
 * the disc test is exact (disc against cell squares) and unknown or off-map cells count as
   occupied by default; the candidate must also be a goal the grid planner accepts
-  (:mod:`baseplace.world.gridnav`), so the planner never refuses a candidate as a goal;
+  (:mod:`baseplace.navigation.gridnav`), so the planner never refuses a candidate as a goal;
 * ``theta`` is ``2 arcsin(r_r / (2 d_min))`` as the seed's footnote 5 writes it, and
   ``ceil(2 pi / theta)`` rays are spaced equally by ``2 pi / n <= theta``. The footnote says this
   angle gives a chord of ``2 r_r`` at ``d_min``, but its chord is ``2 d_min sin(theta / 2) = r_r``
@@ -45,12 +45,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError
 from baseplace.geometry.poses import BasePose, FloatArray
+from baseplace.navigation.gridnav import OBSTACLE, GridNavigator, blocked_by_inflation
 from baseplace.navigation.path import Path
 from baseplace.placement.motion import ReachingMotion
 from baseplace.placement.robustness import Robustness
 from baseplace.reachability.rmap import ReachabilityMap
 from baseplace.robots.model import Robot
-from baseplace.world.gridnav import OBSTACLE, GridNavigator, blocked_by_inflation
 from baseplace.world.occupancy import UNKNOWN, OccupancyGrid
 
 Risk = Literal["body", "arm", "occupancy"]
@@ -288,7 +288,7 @@ def occupancy_risk(
 
     True when the closed disc touches the square of an obstacle cell (value >= ``OBSTACLE``; also
     unknown and off-map cells when ``unknown_is_risk``), or when the planner of
-    :mod:`~baseplace.world.gridnav` could not stand there (its inflation measures between cell centres).
+    :mod:`~baseplace.navigation.gridnav` could not stand there (its inflation measures between cell centres).
     """
     pts = np.asarray(xy, dtype=float).reshape(-1, 2)
     res = grid.resolution

@@ -52,7 +52,7 @@ def grid_routes(
 ) -> list[Path | None]:
     """Base paths on the navigation map from ``start`` (x, y, yaw) to each goal (x, y, yaw); None where none.
 
-    The grid planner of seed 004 (:class:`~baseplace.world.gridnav.GridNavigator`, 8-connected,
+    The grid planner of seed 004 (:class:`~baseplace.navigation.gridnav.GridNavigator`, 8-connected,
     obstacles inflated by ``radius`` [m]) on the grid with the cameras' obstacles marked (points
     between 5 cm and 2 m above the floor). Poses along a path head in the direction of travel; the
     first takes the start's yaw, the last the goal's.
@@ -61,7 +61,7 @@ def grid_routes(
         InputError: a start the robot cannot stand on (outside the map, unknown, too near an obstacle).
     """
     from baseplace.geometry.poses import BasePose
-    from baseplace.world.gridnav import GridNavigator
+    from baseplace.navigation.gridnav import GridNavigator
 
     cams = [np.asarray(c, dtype=float).reshape(-1, 3) for c in clouds]
     navigator = GridNavigator(

@@ -21,6 +21,7 @@ from baseplace.reachability.build import BuildSettings, build_map
 from baseplace.reachability.checkpoint import default_checkpoint_path
 from baseplace.reachability.storage import FORMAT_VERSION, is_compressed, load_map, save_map
 from baseplace.robots.codegen import cache_dir, private_dir
+from baseplace.status import map_step, step_progress
 
 if TYPE_CHECKING:
     from baseplace.reachability.rmap import ReachabilityMap
@@ -118,7 +119,6 @@ def resolve_map(
     Raises:
         InputError: the file is missing, corrupt, or built for another robot or arm.
     """
-    from baseplace.jobs.inputs import map_step, step_progress
     from baseplace.reachability.rmap import ReachabilityMap
 
     if isinstance(rmap, ReachabilityMap):
