@@ -59,6 +59,15 @@ def stop_after(samples: int):
     return progress
 
 
+@pytest.fixture()
+def ctrl_c():
+    """Ctrl-C raising KeyboardInterrupt, as in a terminal, even where pytest was started with SIGINT
+    ignored (a shell's background job): the build restores whatever handler it finds."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
 @pytest.fixture(scope="module")
 def reference(planar3: Robot) -> ReachabilityMap:
     return build_map(planar3, None, SETTINGS)
@@ -95,7 +104,9 @@ def test_distributed_build_checks_robot_and_arm_on_the_client(client):
         build_map_distributed("no_such_robot", None, SETTINGS, client)
 
 
-def test_distributed_build_resumes_and_interrupts_with_checkpoints(client, planar3, reference, tmp_path):
+def test_distributed_build_resumes_and_interrupts_with_checkpoints(
+    client, planar3, reference, tmp_path, ctrl_c
+):
     ckpt = tmp_path / "map.h5.partial"
     with pytest.raises(Stop):  # a local build leaves chunks 0-1
         build_map(planar3, None, SETTINGS, stop_after(3 * CHUNK), checkpoint=ckpt, checkpoint_every=1)
@@ -148,7 +159,7 @@ def test_resumed_build_equals_uninterrupted(planar3, reference, tmp_path):
     assert not ckpt.exists() and list(tmp_path.iterdir()) == []
 
 
-def test_sigint_in_process_writes_a_final_checkpoint(planar3, reference, tmp_path):
+def test_sigint_in_process_writes_a_final_checkpoint(planar3, reference, tmp_path, ctrl_c):
     ckpt = tmp_path / "m.partial"
 
     def interrupt(done: int) -> None:
