@@ -94,6 +94,13 @@ def test_the_mug_cloud_with_its_up_vector_and_a_floor(client, files):
     scene = upload(client, MUG, transform=MUG_UP, floor=-1.25)
     svc = post(client, "/place", {"scene_id": scene, "grasp_points": [MUG_GRASP], "no_motion_check": True})
     assert_same_placements(truth, svc)
+    # README's next line, with the reaching-motion check: the same refusal (or the same placements)
+    truth = cli(files, "place", "--cloud", str(MUG), "--transform", MUG_UP, "--floor", "-1.25",
+                "--grasp-point", MUG_GRASP)  # fmt: skip
+    svc = post(client, "/place", {"scene_id": scene, "grasp_points": [MUG_GRASP]})
+    assert_same_placements(truth, svc)
+    assert svc.get("found", True) == (truth["exit_code"] == 0)
+    assert svc["collisions"] == truth["collisions"]
     # the 4x4 matrix of the same rotation, as the CLI reads it from a file: the same scene
     from baseplace.terrain.io import load_transform
 
@@ -116,6 +123,21 @@ def test_the_recording_with_its_grid(client, files):
     scene = upload(client, files / "rec.bag", cloud_topic="/head/points", map_topic="/map", world_frame="map")
     svc = post(client, "/place", {"scene_id": scene, "targets": [BAG_TARGET], "placements": 2})
     assert_same_placements(truth, svc)
+    # with a start on the grid: each placement's path on the navigation map
+    start = "3.0 8.5 0"
+    truth = cli(files, "place", "--bag", str(files / "rec.bag"), "--cloud-topic", "/head/points",
+                "--map-topic", "/map", "--target", BAG_TARGET, "--placements", "2", "--start", start,
+                "--no-motion-check", "--robustness-samples", "0")  # fmt: skip
+    assert truth["exit_code"] == 0 and truth["placements"][0]["path"], truth["error"]
+    svc = post(client, "/place", {"scene_id": scene, "targets": [BAG_TARGET], "placements": 2, "start": start,
+                                  "no_motion_check": True, "robustness_samples": 0})  # fmt: skip
+    assert_same_placements(truth, svc)
+    # the grid left out: the cloud alone, as the CLI without --map-topic (no floor in it: refused alike)
+    refused = run_cli("place", "--bag", str(files / "rec.bag"), "--cloud-topic", "/head/points",
+                      "--target", BAG_TARGET, "--map", str(files / "tiago.rmap"))  # fmt: skip
+    r = client.post("/place", json={"scene_id": scene, "targets": [BAG_TARGET], "use_grid": False})
+    assert refused.returncode == 2 and r.status_code == 400
+    assert r.json()["error"] == refused.stderr.strip().removeprefix("error: ")
 
 
 def test_a_place_with_start_gets_the_same_path(client, files):
@@ -135,6 +157,34 @@ def test_a_place_with_start_gets_the_same_path(client, files):
                                   "robustness_samples": 0})  # fmt: skip
     assert truth["exit_code"] == 0
     assert_same_placements(truth, svc)
+
+
+def test_a_start_on_a_scene_reuses_its_segmentation(client, files, monkeypatch):
+    """The navigation map of ``start`` comes from the scene's kept segmentation, not a new one per request."""
+    import baseplace.terrain.pipeline
+
+    scene = upload(client, files / "scene.ply")
+    made = []
+    real = baseplace.terrain.pipeline.terrain_from_points
+    monkeypatch.setattr(baseplace.terrain.pipeline, "terrain_from_points",
+                        lambda *a, **k: made.append(1) or real(*a, **k))  # fmt: skip
+    out = post(client, "/place", {"scene_id": scene, "targets": [SCENE_TARGET], "start": "-3 -3 0",
+                                  "no_motion_check": True, "robustness_samples": 0})  # fmt: skip
+    assert out["placements"][0]["path"] and made == []
+
+
+def test_navigate_in_degrees_as_the_cli(client, files):
+    """README: ``navigate --cloud scene.ply --start "-3 -3 0" --goal ...``, the goal's heading in degrees."""
+    args = ("--start", "-3 -3 0", "--goal", "0.5 1.4 90", "--degrees")
+    truth = run_cli("navigate", "--cloud", str(files / "scene.ply"), *args, "--planner", "regions", "--json")
+    assert truth.returncode == 0, truth.stderr
+    truth = json.loads(truth.stdout)
+    scene = upload(client, files / "scene.ply")
+    svc = post(client, "/navigate", {"scene_id": scene, "start": "-3 -3 0", "goal": "0.5 1.4 90",
+                                     "degrees": True, "planner": "regions"})  # fmt: skip
+    for key in ("exit_code", "poses", "length", "regions", "start", "goal", "planner"):
+        assert svc[key] == truth[key], key
+    assert svc["goal"]["yaw"] == pytest.approx(np.pi / 2, abs=1e-4)
 
 
 @pytest.mark.parametrize(

@@ -164,6 +164,7 @@ class CandidatesRequest(RobustnessFields):
     seed: int = SEED
     object_shape: str = Field("auto", max_length=200)
     use_cloud: bool = Field(True, description="verify against the scene's cloud (else the grid alone)")
+    degrees: bool = DEGREES
 
     @model_validator(mode="after")
     def _work(self) -> CandidatesRequest:
@@ -191,6 +192,7 @@ class NavigateRequest(_Model):
     time_limit: float = Field(2.0, gt=0.0, le=20.0, description="planning time [s]")
     resolution: float | None = Field(None, ge=0.005, le=1.0)
     seed: int = SEED
+    degrees: bool = DEGREES
 
 
 class SurfaceMapRequest(_Model):

@@ -162,13 +162,14 @@ def candidates(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[s
     from baseplace.jobs.inputs import CloudInput, motion_and_robustness
 
     def job() -> Report:
-        robot = state.robot(req["robot"], lane="commands")
-        rmap = state.reach_map(robot, req["arm"])
-        cloud = CloudInput(points=scene.cloud) if req["use_cloud"] else CloudInput()
-        return candidates_job(CandidatesJob(req["object"], scene.grid, cloud, req["robot_pose"], req["method"],
-                                            robot, req["arm"], rmap, req["standoff"], req["seed"],
-                                            req["object_shape"], *motion_and_robustness(req),
-                                            cache=scene.cache if req["use_cloud"] else None))  # fmt: skip
+        r = in_radians("candidates", req)
+        robot = state.robot(r["robot"], lane="commands")
+        rmap = state.reach_map(robot, r["arm"])
+        cloud = CloudInput(points=scene.cloud) if r["use_cloud"] else CloudInput()
+        return candidates_job(CandidatesJob(r["object"], scene.grid, cloud, r["robot_pose"], r["method"],
+                                            robot, r["arm"], rmap, r["standoff"], r["seed"],
+                                            r["object_shape"], *motion_and_robustness(r),
+                                            cache=scene.cache if r["use_cloud"] else None))  # fmt: skip
 
     return _with_scene(run_job("candidates", req, job, str(state.folder)), scene)
 
@@ -179,9 +180,10 @@ def navigate(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[str
     from baseplace.jobs.navigate import NavigateJob, navigate_job
 
     def job() -> Report:
-        robot = state.robot(req["robot"], lane="commands")
-        return navigate_job(NavigateJob(req["start"], req["goal"], CloudInput(points=scene.cloud), robot,
-                                        req["planner"], req["time_limit"], req["resolution"], req["seed"],
+        r = in_radians("navigate", req)
+        robot = state.robot(r["robot"], lane="commands")
+        return navigate_job(NavigateJob(r["start"], r["goal"], CloudInput(points=scene.cloud), robot,
+                                        r["planner"], r["time_limit"], r["resolution"], r["seed"],
                                         cache=scene.cache))  # fmt: skip
 
     return _with_scene(run_job("navigate", req, job, str(state.folder)), scene)
