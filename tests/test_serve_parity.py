@@ -140,6 +140,20 @@ def test_the_recording_with_its_grid(client, files):
     assert r.json()["error"] == refused.stderr.strip().removeprefix("error: ")
 
 
+def test_the_recording_fused(client, files):
+    """README: ``--bag ... --bag-clouds all --fuse``: every cloud message fused into one OctoMap."""
+    truth = cli(files, "place", "--bag", str(files / "rec.bag"), "--cloud-topic", "/head/points",
+                "--map-topic", "/map", "--bag-clouds", "all", "--fuse", "--fuse-miss", "0.3",
+                "--target", BAG_TARGET, "--no-motion-check", "--robustness-samples", "0")  # fmt: skip
+    assert truth["exit_code"] == 0, truth["error"]
+    scene = upload(client, files / "rec.bag", cloud_topic="/head/points", map_topic="/map", bag_clouds="all",
+                   fuse=True, fuse_miss=0.3)  # fmt: skip
+    svc = post(client, "/place", {"scene_id": scene, "targets": [BAG_TARGET], "no_motion_check": True,
+                                  "robustness_samples": 0})  # fmt: skip
+    assert_same_placements(truth, svc)
+    assert svc["object"] == truth["object"]
+
+
 def test_a_place_with_start_gets_the_same_path(client, files):
     """README: ``place --cloud scene.ply --target ... --start "-3 -3 0"``: placements and their paths."""
     truth = cli(files, "place", "--cloud", str(files / "scene.ply"), "--target", SCENE_TARGET,

@@ -410,6 +410,18 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
             allow_inf_nan=False,
             description="the CLI's --floor: a floor plane at this height [m] under and 2 m around the cloud",
         ),
+        fuse: bool = Query(
+            False,
+            description="the CLI's --fuse: the clouds fused into a 25 mm OctoMap by ray "
+            "casting from each sensor origin (a recording's: bag_clouds=all for all its messages)",
+        ),
+        fuse_miss: float = Query(
+            0.35,
+            gt=0.0,
+            lt=0.5,
+            allow_inf_nan=False,
+            description="the CLI's --fuse-miss: occupancy probability of a ray passing a voxel",
+        ),
     ) -> dict[str, Any]:
         data = await request.body()
         bag = {
@@ -418,10 +430,14 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
             "world_frame": world_frame,
             "clouds": bag_clouds,
         }
-        scene = await run(st.add_scene, data, format, bag, transform, floor)
+        scene = await run(st.add_scene, data, format, bag, transform, floor, fuse_miss if fuse else None)
+        out = {"scene_id": scene.id, "points": scene.points, "grid": scene.grid_yaml is not None}
+        if (
+            scene.segmentation_error is not None
+        ):  # a recording's grid, and a cloud of no region: place on the grid
+            return {**out, "regions": 0, "segmentation_error": _line(scene.segmentation_error)}
         summary = await run(jobs.segment, scene, None)
-        return {"scene_id": scene.id, "points": scene.points, "regions": len(summary["regions"]),
-                "grid": scene.grid_yaml is not None, "timings_ms": summary["timings_ms"]}  # fmt: skip
+        return {**out, "regions": len(summary["regions"]), "timings_ms": summary["timings_ms"]}
 
     @app.get("/scenes", summary="ids of the scenes held")
     async def list_scenes() -> dict[str, Any]:

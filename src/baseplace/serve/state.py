@@ -140,6 +140,7 @@ class Scene:
     created: float = field(default_factory=time.time)
     grid_yaml: Path | None = None
     grid: Any = None  # the OccupancyGrid read from grid_yaml
+    segmentation_error: str | None = None  # why the cloud has no regions (a scene with a grid only)
     _cloud: Any = field(default=None, repr=False)
 
     @property
@@ -253,6 +254,7 @@ class ServiceState:
         bag: dict[str, Any] | None = None,
         transform: str | None = None,
         floor: float | None = None,
+        fuse: float | None = None,
     ) -> Scene:
         """A scene from an uploaded cloud or recording (worker thread): checked, saved, segmented.
 
@@ -267,6 +269,8 @@ class ServiceState:
             transform: a cloud file's ``--transform``: the sensor-frame up vector "ux uy uz", or
                 ``T_world_sensor`` as 16 numbers row by row (what the CLI reads from a file).
             floor: ``--floor``: a floor plane at this height [m] under and around the cloud.
+            fuse: ``--fuse --fuse-miss P``: fuse the clouds into an OctoMap by ray casting from each
+                sensor origin, a ray passing a voxel with occupancy probability P (None: no fusion).
         """
         from baseplace.files import write_bytes
         from baseplace.jobs.inputs import BagInput, CloudInput, occupancy_grid, world_cloud
@@ -282,6 +286,7 @@ class ServiceState:
         folder = self.folder / scene_id
         folder.mkdir(mode=0o700)
         grid = None
+        fusion: dict[str, Any] = {} if fuse is None else {"fuse": True, "fuse_miss": fuse}
         try:
             upload = folder / f"upload.{fmt}"
             write_bytes(upload, data, "the upload")
@@ -290,14 +295,17 @@ class ServiceState:
                 if not b.get("cloud_topics"):
                     raise InputError("with a recording, give the cloud topic: cloud_topic=/camera/points")
                 source = CloudInput(bag=BagInput(str(upload), tuple(b["cloud_topics"]), b.get("map_topic"),
-                                                 b.get("world_frame", "map"), b.get("clouds", "last")))  # fmt: skip
+                                                 b.get("world_frame", "map"), b.get("clouds", "last")),
+                                    **fusion)  # fmt: skip
                 points = world_cloud(source).points
                 if len(points) == 0:
                     raise InputError("the recording's cloud topics hold no points")
                 grid = occupancy_grid(None, source.bag, source)
             else:
                 transforms = [] if transform is None else [_transform_file(folder, transform)]
-                points = world_cloud(CloudInput([str(upload)], transforms)).points  # the CLI's file checks
+                points = world_cloud(
+                    CloudInput([str(upload)], transforms, **fusion)
+                ).points  # the CLI's checks
             if floor is not None:
                 from baseplace.placement.pipeline import with_floor
 
@@ -307,12 +315,19 @@ class ServiceState:
             upload.unlink()
             _save_npy(folder / "cloud.npy", points)
             cache = SceneCache(points)
-            cache.terrain()  # the segmentation, once per scene
-            from baseplace.placement.pipeline import scene_environment
-
-            for robot in list(self._robots.values()):  # the obstacle tree, before the first query
-                scene_environment(robot, cache)
             scene = Scene(scene_id, folder, cache, len(points), f"upload.{fmt}")
+            try:
+                cache.terrain()  # the segmentation, once per scene
+            except InputError as exc:
+                if grid is None:
+                    raise
+                # the grid's free cells are the floor (place --occupancy needs no regions of the cloud)
+                scene.segmentation_error = str(exc)
+            if scene.segmentation_error is None:
+                from baseplace.placement.pipeline import scene_environment
+
+                for robot in list(self._robots.values()):  # the obstacle tree, before the first query
+                    scene_environment(robot, cache)
             if grid is not None:
                 from baseplace.serve.jobs import add_grid_values
 
