@@ -9,7 +9,9 @@ joints, regions), counts, refusal reasons and error lines, the paths' ends. Orac
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -68,6 +70,16 @@ def post(client: TestClient, path: str, body: dict) -> dict:
     assert r.status_code == 200, r.text
     out: dict = r.json()
     return out
+
+
+def counted(fn: Callable[..., Any], calls: list[str]) -> Callable[..., Any]:
+    """``fn`` that notes each call in ``calls``."""
+
+    def call(*args: Any, **kwargs: Any) -> Any:
+        calls.append(fn.__name__)
+        return fn(*args, **kwargs)
+
+    return call
 
 
 def assert_same_placements(cli_out: dict, svc: dict) -> None:
@@ -178,10 +190,9 @@ def test_a_start_on_a_scene_reuses_its_segmentation(client, files, monkeypatch):
     import baseplace.terrain.pipeline
 
     scene = upload(client, files / "scene.ply")
-    made = []
+    made: list[str] = []
     real = baseplace.terrain.pipeline.terrain_from_points
-    monkeypatch.setattr(baseplace.terrain.pipeline, "terrain_from_points",
-                        lambda *a, **k: made.append(1) or real(*a, **k))  # fmt: skip
+    monkeypatch.setattr(baseplace.terrain.pipeline, "terrain_from_points", counted(real, made))
     out = post(client, "/place", {"scene_id": scene, "targets": [SCENE_TARGET], "start": "-3 -3 0",
                                   "no_motion_check": True, "robustness_samples": 0})  # fmt: skip
     assert out["placements"][0]["path"] and made == []
@@ -226,7 +237,7 @@ def test_input_checks_refuse_as_the_cli_does(client, files, body, args):
     assert r.json()["error"] == refused.stderr.strip().removeprefix("error: ")
 
 
-def test_explain_answers_as_the_cli(client, files):
+def test_explain_answers_as_the_cli(client, files, monkeypatch):
     """README: ``explain --cloud scene.ply --base "0.2 0.6 1.05" --target ...``: every check, the verdict."""
     truth = cli(files, "explain", "--cloud", str(files / "scene.ply"), "--base", "0.2 0.6 1.05",
                 "--target", SCENE_TARGET)  # fmt: skip
@@ -235,4 +246,19 @@ def test_explain_answers_as_the_cli(client, files):
     assert svc["kind"] == "explain"
     for key in ("exit_code", "error", "failures", "target", "base", "map", "footprint", "ik", "collisions",
                 "motion", "verdict", "object"):  # fmt: skip
+        assert svc[key] == truth[key], key
+    # again, on the scene's kept segmentation and environment: neither segmented nor read from the cache
+    import baseplace.terrain.cache
+    import baseplace.terrain.pipeline
+
+    made: list[str] = []
+    for module, name in ((baseplace.terrain.pipeline, "terrain_from_points"),
+                         (baseplace.terrain.cache, "cached_terrain")):  # fmt: skip
+        monkeypatch.setattr(module, name, counted(getattr(module, name), made))
+    again = post(client, "/explain", {"scene_id": scene, "base": "0.2 0.6 1.05", "target": SCENE_TARGET})
+    assert again["verdict"] == truth["verdict"] and made == []
+    # no scene: IK and self-collision only, as explain without --cloud
+    truth = cli(files, "explain", "--base", "0.2 0.6 1.05", "--target", SCENE_TARGET)
+    svc = post(client, "/explain", {"base": "0.2 0.6 1.05", "target": SCENE_TARGET})
+    for key in ("exit_code", "map", "ik", "collisions", "motion", "verdict"):
         assert svc[key] == truth[key], key

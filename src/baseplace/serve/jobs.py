@@ -150,7 +150,8 @@ def explain(state: ServiceState, scene: Scene | None, req: dict[str, Any]) -> di
         rmap = state.reach_map(robot, r["arm"])
         cloud = CloudInput() if scene is None else CloudInput(points=scene.cloud)
         return explain_job(ExplainJob(r["base"], r["target"], rmap, robot, r["arm"], cloud, r["object"], None,
-                                      settings, r["seed"], r["grasp_point"]))  # fmt: skip
+                                      settings, r["seed"], r["grasp_point"],
+                                      cache=None if scene is None else scene.cache))  # fmt: skip
 
     report = run_job("explain", req, job, str(state.folder))
     return report if scene is None else _with_scene(report, scene)
