@@ -22,7 +22,7 @@ from fastapi.testclient import TestClient
 
 from baseplace.reachability.storage import save_map
 from conftest import SHARED, run_cli
-from test_serve import UP, make_app
+from test_serve import UP, _valid, make_app
 
 MUG = SHARED / "pointclouds" / "table_scene_mug_stereo_textured.pcd"
 MUG_UP = "0.0162 -0.8378 -0.5458"  # README: the camera frame's up vector
@@ -237,13 +237,29 @@ def test_input_checks_refuse_as_the_cli_does(client, files, body, args):
     assert r.json()["error"] == refused.stderr.strip().removeprefix("error: ")
 
 
+@pytest.mark.parametrize(
+    "body, args",
+    [
+        ({"base": "0.2 0.6 60"}, ("--base", "0.2 0.6 60")),  # a heading in degrees, no flag
+        ({"base": "0.2 0.6 1.05", "grasp_point": SCENE_TARGET}, ("--base", "0.2 0.6 1.05", "--grasp-point",
+                                                                 SCENE_TARGET)),  # both target and grasp point
+    ],
+)  # fmt: skip
+def test_explain_refuses_as_the_cli_does(client, files, body, args):
+    refused = run_cli("explain", "--target", SCENE_TARGET, *args, "--map", str(files / "tiago.rmap"))
+    assert refused.returncode == 2, refused.stderr
+    r = client.post("/explain", json={"target": SCENE_TARGET, **body})
+    assert r.status_code == 400 and _valid(r.json())["kind"] == "explain"
+    assert r.json()["error"] == refused.stderr.strip().removeprefix("error: ")
+
+
 def test_explain_answers_as_the_cli(client, files, monkeypatch):
     """README: ``explain --cloud scene.ply --base "0.2 0.6 1.05" --target ...``: every check, the verdict."""
     truth = cli(files, "explain", "--cloud", str(files / "scene.ply"), "--base", "0.2 0.6 1.05",
                 "--target", SCENE_TARGET)  # fmt: skip
     scene = upload(client, files / "scene.ply")
     svc = post(client, "/explain", {"scene_id": scene, "base": "0.2 0.6 1.05", "target": SCENE_TARGET})
-    assert svc["kind"] == "explain"
+    assert _valid(svc)["kind"] == "explain" and svc["scene_id"] == scene
     for key in ("exit_code", "error", "failures", "target", "base", "map", "footprint", "ik", "collisions",
                 "motion", "verdict", "object"):  # fmt: skip
         assert svc[key] == truth[key], key
