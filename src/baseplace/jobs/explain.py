@@ -34,6 +34,7 @@ from baseplace.jobs.report import PoseRecord, Report, RobotRef
 
 if TYPE_CHECKING:
     from baseplace.placement.pipeline import PlaceSettings
+    from baseplace.placement.scene_cache import SceneCache
     from baseplace.placement.verify import Verifier
     from baseplace.reachability.rmap import ReachabilityMap
     from baseplace.robots.model import Robot
@@ -58,6 +59,8 @@ class ExplainJob:
         floor: add a floor plane at this height [m] under a cloud that shows none.
         settings: ``place``'s settings (the height-map resolution, the motion check); None: defaults.
         seed: random seed of IK's restarts and the motion planner.
+        cache: a :class:`~baseplace.placement.scene_cache.SceneCache` of ``cloud.points``: the
+            segmentation and collision environments kept between queries (the service).
     """
 
     base: str | Sequence[float] | None
@@ -71,6 +74,7 @@ class ExplainJob:
     settings: PlaceSettings | None = None
     seed: int = 0
     grasp_point: str | Sequence[float] | None = None
+    cache: SceneCache | None = field(default=None, repr=False, compare=False)
 
     def echo(self) -> dict[str, Any]:
         """The inputs as given."""
@@ -170,9 +174,9 @@ def explain_job(job: ExplainJob, progress: Progress | None = None) -> ExplainRep
     rng = np.random.default_rng(job.seed)
     object_json: dict[str, Any] = {"requested": job.object, "found": "none", "allowed": None}
     if points is not None:
-        terrain = _terrain(points, settings)
+        terrain = _terrain(points, settings) if job.cache is None else job.cache.terrain(settings.resolution)
         T_base, region = base_on_terrain(terrain, x, y, yaw)
-        checks = scene_checks(robot, arm.name, points, terrain, T_target[None], settings, grasped)
+        checks = scene_checks(robot, arm.name, points, terrain, T_target[None], settings, grasped, job.cache)
         verifier = checks.verifier
         object_json["found"] = checks.grasped_note
         object_json["allowed"] = None if checks.grasped is None else checks.grasped.to_json()

@@ -267,8 +267,13 @@ def place_job(job: PlaceJob, progress: Progress | None = None) -> PlaceReport:
         from baseplace.terrain.pipeline import terrain_from_points
 
         assert points is not None  # a cloud or a grid was given
-        terrain = terrain or terrain_from_points(points, resolution=settings.resolution)
-        navmap = navigation_map(terrain, robot.spec.footprint_bounding_radius)
+        if terrain is None and job.cache is not None:  # the scene's segmentation, kept: no time of this query
+            navmap = navigation_map(
+                job.cache.terrain(settings.resolution), robot.spec.footprint_bounding_radius
+            )
+        else:
+            terrain = terrain or terrain_from_points(points, resolution=settings.resolution)
+            navmap = navigation_map(terrain, robot.spec.footprint_bounding_radius)
         navmap.check_pose("--start", start[:2])
     rng = np.random.default_rng(job.seed)
     if grid is not None:

@@ -75,15 +75,30 @@ class RobustnessFields(_Model):
     sigma_xy: float = Field(0.03, ge=0.0, le=10.0, description="base position error sigma [m]")
     sigma_yaw_deg: float = Field(2.0, ge=0.0, le=180.0, description="base heading error sigma [deg]")
     xy_tolerance: float = Field(0.25, gt=0.0, le=10.0, description="goal xy tolerance [m]")
-    yaw_tolerance: float = Field(0.25, gt=0.0, le=3.15, description="goal yaw tolerance [rad]")
+    yaw_tolerance: float | None = Field(
+        None,
+        gt=0.0,
+        le=360.0,
+        description="goal yaw tolerance [rad, deg with degrees] (default 0.25 rad, Nav2's)",
+    )
+
+
+DEGREES = Field(
+    False,
+    description="the angles of this request (pose headings, roll/pitch/yaw, an object box's yaw, "
+    "yaw_tolerance) are in degrees; without it radians, and values beyond 2 pi are refused",
+)
 
 
 class PlaceRequest(RobustnessFields):
     """``baseplace place`` on an uploaded scene."""
 
     scene_id: str = Field(..., max_length=64, description="id from POST /scenes")
-    targets: list[Pose] = Field(..., min_length=1, max_length=16,
+    targets: list[Pose] = Field([], max_length=16,
                                 description='TCP targets "x y z roll pitch yaw" [m, rad]')  # fmt: skip
+    grasp_points: list[Pose] = Field([], max_length=16,
+                                     description='instead of targets: poses of the point between the fingertips '
+                                                 '"x y z roll pitch yaw" [m, rad] (TIAGo: 0.151 m ahead of the TCP)')  # fmt: skip
     robot: str = Field("tiago", max_length=64, description="built-in robot name")
     arm: str | None = Field(None, max_length=64, description="arm (default: the robot's default arm)")
     strategy: STRATEGIES = "MR"
@@ -92,16 +107,48 @@ class PlaceRequest(RobustnessFields):
     seed: int = SEED
     object: str = Field("auto", max_length=200, description='"auto", "none", "box x y z sx sy sz [yaw]" ...')
     resolution: float | None = Field(None, ge=0.005, le=1.0, description="height-map cell [m]")
+    start: Pose | None = Field(
+        None, description='current base pose "x y yaw": also plan a path to each placement'
+    )
+    planner: Literal["rrt", "regions"] = Field("rrt", description="path planner with start (OMPL RRTConnect or "
+                                               "the region graph; on a scene with a grid, the grid's)")  # fmt: skip
+    use_grid: bool = Field(True, description="the scene's occupancy grid, if it has one (a recording's map topic "
+                           "or POST /scenes/{id}/grid), as the CLI's --occupancy: its free cells are floor")  # fmt: skip
+    degrees: bool = DEGREES
 
     @model_validator(mode="after")
     def _work(self) -> PlaceRequest:
-        work = len(self.targets) * self.tries
+        targets = len(self.targets) + len(self.grasp_points)
+        if not targets:
+            raise ValueError('give targets (TCP poses "x y z roll pitch yaw") or grasp_points (the point between '
+                             "the fingertips), at least one")  # fmt: skip
+        work = targets * self.tries
         if work > MAX_PLACE_WORK:
             raise ValueError(
                 f"targets x tries = {work} is over the limit of {MAX_PLACE_WORK} for one request: fewer tries"
             )
-        _robustness_work(len(self.targets), self.robustness_samples, self.placements)
+        _robustness_work(targets, self.robustness_samples, self.placements)
         return self
+
+
+class ExplainRequest(_Model):
+    """``baseplace explain``: every check of ``place`` at one base pose for one target."""
+
+    scene_id: str | None = Field(None, max_length=64,
+                                 description="id from POST /scenes (none: IK and self-collision only)")  # fmt: skip
+    base: Pose = Field(
+        ..., description='base pose "x y yaw" [m, rad]; on a scene it stands on the region under (x, y)'
+    )
+    target: Pose | None = Field(None, description='TCP target "x y z roll pitch yaw" [m, rad]')
+    grasp_point: Pose | None = Field(None, description="instead of target: the pose of the point between the "
+                                     'fingertips "x y z roll pitch yaw" [m, rad]')  # fmt: skip
+    robot: str = Field("tiago", max_length=64, description="built-in robot name")
+    arm: str | None = Field(None, max_length=64, description="arm (default: the robot's default arm)")
+    object: str = Field("auto", max_length=200, description='"auto", "none", "box x y z sx sy sz [yaw]" ...')
+    resolution: float | None = Field(None, ge=0.005, le=1.0, description="height-map cell [m]")
+    no_motion_check: bool = Field(False, description="skip the reaching-motion check, as place's")
+    seed: int = SEED
+    degrees: bool = DEGREES
 
 
 class CandidatesRequest(RobustnessFields):
@@ -117,6 +164,7 @@ class CandidatesRequest(RobustnessFields):
     seed: int = SEED
     object_shape: str = Field("auto", max_length=200)
     use_cloud: bool = Field(True, description="verify against the scene's cloud (else the grid alone)")
+    degrees: bool = DEGREES
 
     @model_validator(mode="after")
     def _work(self) -> CandidatesRequest:
@@ -144,6 +192,7 @@ class NavigateRequest(_Model):
     time_limit: float = Field(2.0, gt=0.0, le=20.0, description="planning time [s]")
     resolution: float | None = Field(None, ge=0.005, le=1.0)
     seed: int = SEED
+    degrees: bool = DEGREES
 
 
 class SurfaceMapRequest(_Model):
@@ -348,6 +397,31 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
         bag_clouds: Literal["last", "first", "all"] = Query(
             "last", description="recordings: which cloud messages"
         ),
+        transform: str | None = Query(
+            None,
+            max_length=1000,
+            description="cloud files: the CLI's --transform, the sensor-frame up vector "
+            '"ux uy uz" or T_world_sensor as 16 numbers row by row (none: the cloud must be z up, checked)',
+        ),
+        floor: float | None = Query(
+            None,
+            ge=-1e3,
+            le=1e3,
+            allow_inf_nan=False,
+            description="the CLI's --floor: a floor plane at this height [m] under and 2 m around the cloud",
+        ),
+        fuse: bool = Query(
+            False,
+            description="the CLI's --fuse: the clouds fused into a 25 mm OctoMap by ray "
+            "casting from each sensor origin (a recording's: bag_clouds=all for all its messages)",
+        ),
+        fuse_miss: float = Query(
+            0.35,
+            gt=0.0,
+            lt=0.5,
+            allow_inf_nan=False,
+            description="the CLI's --fuse-miss: occupancy probability of a ray passing a voxel",
+        ),
     ) -> dict[str, Any]:
         data = await request.body()
         bag = {
@@ -356,10 +430,14 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
             "world_frame": world_frame,
             "clouds": bag_clouds,
         }
-        scene = await run(st.add_scene, data, format, bag)
+        scene = await run(st.add_scene, data, format, bag, transform, floor, fuse_miss if fuse else None)
+        out = {"scene_id": scene.id, "points": scene.points, "grid": scene.grid_yaml is not None}
+        if (
+            scene.segmentation_error is not None
+        ):  # a recording's grid, and a cloud of no region: place on the grid
+            return {**out, "regions": 0, "segmentation_error": _line(scene.segmentation_error)}
         summary = await run(jobs.segment, scene, None)
-        return {"scene_id": scene.id, "points": scene.points, "regions": len(summary["regions"]),
-                "grid": scene.grid_yaml is not None, "timings_ms": summary["timings_ms"]}  # fmt: skip
+        return {**out, "regions": len(summary["regions"]), "timings_ms": summary["timings_ms"]}
 
     @app.get("/scenes", summary="ids of the scenes held")
     async def list_scenes() -> dict[str, Any]:
@@ -405,6 +483,13 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
         scene = st.scene(req.scene_id)
         return await answer(jobs.place, st, scene, req.model_dump())
 
+    @app.post(
+        "/explain", summary="baseplace explain --json: map value, IK, collisions, motion at one base pose"
+    )
+    async def explain(req: ExplainRequest) -> Response:
+        scene = None if req.scene_id is None else st.scene(req.scene_id)
+        return await answer(jobs.explain, st, scene, req.model_dump())
+
     @app.post("/reach", summary="baseplace reach --json on the robot's default map")
     async def reach(req: ReachRequest) -> Response:
         return await answer(jobs.reach, st, req.model_dump(), lookup=st.is_warm(req.robot, req.arm))
@@ -448,7 +533,7 @@ COMMAND_LANE = (jobs.candidates, jobs.navigate, jobs.surface_map, jobs.surface_s
 """Jobs run on the command thread, on robots of their own, beside the placements."""
 
 KINDS = {"/place": "place", "/candidates": "candidates", "/navigate": "navigate", "/reach": "reach",
-         "/surface-map": "surface_map", "/surface-samples": "surface_samples"}  # fmt: skip
+         "/explain": "explain", "/surface-map": "surface_map", "/surface-samples": "surface_samples"}  # fmt: skip
 """A job's endpoint -> the kind of its report."""
 
 

@@ -80,8 +80,18 @@ class Client:
         """GET /health."""
         return self._answer(self._http.get("/health"))
 
-    def upload_scene(self, cloud: str | Path | bytes, format: str | None = None) -> str:
-        """Upload a cloud file (or its bytes with ``format``); returns the scene id."""
+    def upload_scene(
+        self,
+        cloud: str | Path | bytes,
+        format: str | None = None,
+        transform: str | None = None,
+        floor: float | None = None,
+    ) -> str:
+        """Upload a cloud file (or its bytes with ``format``); returns the scene id.
+
+        ``transform`` (the up vector "ux uy uz" or 16 numbers of ``T_world_sensor``) and ``floor``
+        [m] are the CLI's ``--transform`` and ``--floor``.
+        """
         if isinstance(cloud, bytes):
             data, fmt = cloud, format
         else:
@@ -89,10 +99,10 @@ class Client:
             data, fmt = path.read_bytes(), format or path.suffix.lstrip(".").lower()
         if not fmt:
             raise InputError("give the cloud's format: ply, pcd, npy or xyz")
+        extra = {"transform": transform, "floor": floor}
+        params = {"format": fmt, **{k: v for k, v in extra.items() if v is not None}}
         return str(
-            self._answer(self._http.post("/scenes", params={"format": fmt}, content=data, headers=UPLOAD))[
-                "scene_id"
-            ]
+            self._answer(self._http.post("/scenes", params=params, content=data, headers=UPLOAD))["scene_id"]
         )
 
     def upload_grid(
@@ -122,6 +132,10 @@ class Client:
         if raise_if_none and out.get("found") is False:
             raise NothingFoundError(str(out.get("error")))
         return out
+
+    def explain(self, base: str, target: str | None = None, **options: Any) -> dict[str, Any]:
+        """``baseplace explain --json`` (options: ``scene_id``, ``grasp_point`` and the CLI's, with underscores)."""
+        return self._post("/explain", base=base, target=target, **options)
 
     def candidates(self, scene_id: str, object: str, **options: Any) -> dict[str, Any]:
         """``baseplace candidates --json`` on a scene with a grid."""

@@ -91,23 +91,70 @@ def _cut(value: Any, folder: str | None) -> Any:
     return value
 
 
+CLI_NAMES = {"targets": "target", "grasp_points": "grasp_point"}
+"""Request fields named otherwise than the CLI's options (``--target``, repeated, is ``targets``)."""
+
+
+def in_radians(command: str, req: dict[str, Any]) -> dict[str, Any]:
+    """The request's angles in radians: with ``degrees``, converted as the CLI's ``--degrees`` converts them."""
+    import argparse
+
+    from baseplace.argtypes import in_radians as cli_in_radians
+
+    names = {k: v for k, v in CLI_NAMES.items() if k in req}
+    args = argparse.Namespace(command=command, **{names.get(k, k): v for k, v in req.items()})
+    request_names = {v: k for k, v in names.items()}
+    return {request_names.get(k, k): v for k, v in vars(cli_in_radians(args)).items() if k != "command"}
+
+
 def place(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[str, Any]:
-    """``baseplace place --json`` on an uploaded scene, with the scene's cache and warm robots and maps."""
+    """``baseplace place --json`` on an uploaded scene, with the scene's cache and warm robots and maps.
+
+    The scene's grid (a recording's map topic, or POST /scenes/{id}/grid) is the CLI's
+    ``--occupancy`` unless ``use_grid`` is off.
+    """
     from baseplace.jobs.inputs import CloudInput, motion_and_robustness
     from baseplace.jobs.place import PlaceJob, place_job
     from baseplace.placement.pipeline import PlaceSettings
 
     def job() -> Report:
-        motion, robustness = motion_and_robustness(req)
-        settings = PlaceSettings(strategy=req["strategy"], placements=req["placements"], tries=req["tries"],
-                                 resolution=req["resolution"], motion=motion, robustness=robustness)  # fmt: skip
-        robot = state.robot(req["robot"])
-        rmap = state.reach_map(robot, req["arm"])
-        return place_job(PlaceJob(req["targets"], robot, req["arm"], CloudInput(points=scene.cloud),
-                                  map=rmap, settings=settings, seed=req["seed"], object=req["object"],
-                                  cache=scene.cache))  # fmt: skip
+        r = in_radians("place", req)
+        motion, robustness = motion_and_robustness(r)
+        settings = PlaceSettings(strategy=r["strategy"], placements=r["placements"], tries=r["tries"],
+                                 resolution=r["resolution"], motion=motion, robustness=robustness)  # fmt: skip
+        robot = state.robot(r["robot"])
+        rmap = state.reach_map(robot, r["arm"])
+        grid = scene.grid if r["use_grid"] else None
+        return place_job(PlaceJob(r["targets"], robot, r["arm"], CloudInput(points=scene.cloud), grid,
+                                  map=rmap, settings=settings, seed=r["seed"], start=r["start"],
+                                  planner=r["planner"], object=r["object"], cache=scene.cache,
+                                  grasp_points=r["grasp_points"]))  # fmt: skip
 
     return _with_scene(run_job("place", req, job, str(state.folder)), scene)
+
+
+def explain(state: ServiceState, scene: Scene | None, req: dict[str, Any]) -> dict[str, Any]:
+    """``baseplace explain --json``: the checks of ``place`` at one base pose, on a scene or on none."""
+    from dataclasses import replace
+
+    from baseplace.jobs.explain import ExplainJob, explain_job
+    from baseplace.jobs.inputs import CloudInput
+    from baseplace.placement.pipeline import PlaceSettings
+
+    def job() -> Report:
+        r = in_radians("explain", req)
+        settings = PlaceSettings(resolution=r["resolution"])
+        if r["no_motion_check"]:
+            settings = replace(settings, motion=None)
+        robot = state.robot(r["robot"])
+        rmap = state.reach_map(robot, r["arm"])
+        cloud = CloudInput() if scene is None else CloudInput(points=scene.cloud)
+        return explain_job(ExplainJob(r["base"], r["target"], rmap, robot, r["arm"], cloud, r["object"], None,
+                                      settings, r["seed"], r["grasp_point"],
+                                      cache=None if scene is None else scene.cache))  # fmt: skip
+
+    report = run_job("explain", req, job, str(state.folder))
+    return report if scene is None else _with_scene(report, scene)
 
 
 def candidates(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[str, Any]:
@@ -116,13 +163,14 @@ def candidates(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[s
     from baseplace.jobs.inputs import CloudInput, motion_and_robustness
 
     def job() -> Report:
-        robot = state.robot(req["robot"], lane="commands")
-        rmap = state.reach_map(robot, req["arm"])
-        cloud = CloudInput(points=scene.cloud) if req["use_cloud"] else CloudInput()
-        return candidates_job(CandidatesJob(req["object"], scene.grid, cloud, req["robot_pose"], req["method"],
-                                            robot, req["arm"], rmap, req["standoff"], req["seed"],
-                                            req["object_shape"], *motion_and_robustness(req),
-                                            cache=scene.cache if req["use_cloud"] else None))  # fmt: skip
+        r = in_radians("candidates", req)
+        robot = state.robot(r["robot"], lane="commands")
+        rmap = state.reach_map(robot, r["arm"])
+        cloud = CloudInput(points=scene.cloud) if r["use_cloud"] else CloudInput()
+        return candidates_job(CandidatesJob(r["object"], scene.grid, cloud, r["robot_pose"], r["method"],
+                                            robot, r["arm"], rmap, r["standoff"], r["seed"],
+                                            r["object_shape"], *motion_and_robustness(r),
+                                            cache=scene.cache if r["use_cloud"] else None))  # fmt: skip
 
     return _with_scene(run_job("candidates", req, job, str(state.folder)), scene)
 
@@ -133,9 +181,10 @@ def navigate(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[str
     from baseplace.jobs.navigate import NavigateJob, navigate_job
 
     def job() -> Report:
-        robot = state.robot(req["robot"], lane="commands")
-        return navigate_job(NavigateJob(req["start"], req["goal"], CloudInput(points=scene.cloud), robot,
-                                        req["planner"], req["time_limit"], req["resolution"], req["seed"],
+        r = in_radians("navigate", req)
+        robot = state.robot(r["robot"], lane="commands")
+        return navigate_job(NavigateJob(r["start"], r["goal"], CloudInput(points=scene.cloud), robot,
+                                        r["planner"], r["time_limit"], r["resolution"], r["seed"],
                                         cache=scene.cache))  # fmt: skip
 
     return _with_scene(run_job("navigate", req, job, str(state.folder)), scene)
@@ -217,12 +266,18 @@ def add_grid(scene: Scene, image: bytes, suffix: str, meta: dict[str, Any]) -> d
 
     name = f"grid-{uuid.uuid4().hex[:8]}"  # a new grid never breaks the one the scene has until it is read
     image_path, yaml_path = scene.folder / f"{name}.{suffix}", scene.folder / f"{name}.yaml"
-    image_path.write_bytes(image)
+    from baseplace.files import write_bytes
+
+    write_bytes(image_path, image, "the grid image")
     origin = [float(meta["origin_x"]), float(meta["origin_y"]), float(meta["origin_yaw"])]
     doc = {"image": image_path.name, "resolution": float(meta["resolution"]), "origin": origin,
            "negate": int(bool(meta["negate"])), "occupied_thresh": float(meta["occupied_thresh"]),
            "free_thresh": float(meta["free_thresh"]), "mode": str(meta["mode"])}  # fmt: skip
-    yaml_path.write_text(json.dumps(doc) + "\n")  # JSON is YAML
+    try:
+        write_bytes(yaml_path, (json.dumps(doc) + "\n").encode(), "the grid's YAML")  # JSON is YAML
+    except BaseException:
+        image_path.unlink(missing_ok=True)
+        raise
     from baseplace.jobs.world import occupancy_job
 
     try:  # the report as ``baseplace occupancy --json`` gives it, and the grid the jobs read

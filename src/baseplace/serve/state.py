@@ -140,6 +140,7 @@ class Scene:
     created: float = field(default_factory=time.time)
     grid_yaml: Path | None = None
     grid: Any = None  # the OccupancyGrid read from grid_yaml
+    segmentation_error: str | None = None  # why the cloud has no regions (a scene with a grid only)
     _cloud: Any = field(default=None, repr=False)
 
     @property
@@ -246,51 +247,87 @@ class ServiceState:
         return (robot, arm) in self._maps
 
     # ---- scenes ----
-    def add_scene(self, data: bytes, fmt: str, bag: dict[str, Any] | None = None) -> Scene:
+    def add_scene(
+        self,
+        data: bytes,
+        fmt: str,
+        bag: dict[str, Any] | None = None,
+        transform: str | None = None,
+        floor: float | None = None,
+        fuse: float | None = None,
+    ) -> Scene:
         """A scene from an uploaded cloud or recording (worker thread): checked, saved, segmented.
 
-        ``bag``: for a recording, ``cloud_topics``, ``map_topic``, ``world_frame`` and ``clouds``
-        as :func:`baseplace.io.bag.read_bag` takes them; its grid, if any, becomes the scene's.
+        The cloud is read as the CLI's ``--cloud``/``--bag`` reads it
+        (:func:`baseplace.jobs.inputs.world_cloud`): through ``transform``, else checked z up.
+
+        Args:
+            data: the uploaded file.
+            fmt: its format (:data:`CLOUD_FORMATS`, :data:`BAG_FORMATS`).
+            bag: for a recording, ``cloud_topics``, ``map_topic``, ``world_frame`` and ``clouds``
+                as :func:`baseplace.io.bag.read_bag` takes them; its grid, if any, becomes the scene's.
+            transform: a cloud file's ``--transform``: the sensor-frame up vector "ux uy uz", or
+                ``T_world_sensor`` as 16 numbers row by row (what the CLI reads from a file).
+            floor: ``--floor``: a floor plane at this height [m] under and around the cloud.
+            fuse: ``--fuse --fuse-miss P``: fuse the clouds into an OctoMap by ray casting from each
+                sensor origin, a ray passing a voxel with occupancy probability P (None: no fusion).
         """
+        from baseplace.files import write_bytes
+        from baseplace.jobs.inputs import BagInput, CloudInput, occupancy_grid, world_cloud
         from baseplace.placement.scene_cache import SceneCache
-        from baseplace.terrain.io import load_cloud
 
         if fmt not in CLOUD_FORMATS + BAG_FORMATS:
             raise InputError(f"unknown format {fmt!r}; valid: {', '.join(CLOUD_FORMATS + BAG_FORMATS)}")
         if not data:
             raise InputError("the upload is empty: send the cloud or recording file as the request body")
+        if transform is not None and fmt in BAG_FORMATS:
+            raise InputError("transform is for a cloud file: a recording's clouds are posed by its /tf")
         scene_id = uuid.uuid4().hex[:16]
         folder = self.folder / scene_id
         folder.mkdir(mode=0o700)
         grid = None
+        fusion: dict[str, Any] = {} if fuse is None else {"fuse": True, "fuse_miss": fuse}
         try:
             upload = folder / f"upload.{fmt}"
-            upload.write_bytes(data)
+            write_bytes(upload, data, "the upload")
             if fmt in BAG_FORMATS:
-                from baseplace.io.bag import read_bag
-
                 b = bag or {}
                 if not b.get("cloud_topics"):
                     raise InputError("with a recording, give the cloud topic: cloud_topic=/camera/points")
-                recording = read_bag(upload, b["cloud_topics"], b.get("map_topic"), b.get("world_frame", "map"),
-                                     b.get("clouds", "last"))  # fmt: skip
-                points = np.ascontiguousarray(recording.world_points(), dtype=np.float64)
+                source = CloudInput(bag=BagInput(str(upload), tuple(b["cloud_topics"]), b.get("map_topic"),
+                                                 b.get("world_frame", "map"), b.get("clouds", "last")),
+                                    **fusion)  # fmt: skip
+                points = world_cloud(source).points
                 if len(points) == 0:
                     raise InputError("the recording's cloud topics hold no points")
-                grid = recording.grid
+                grid = occupancy_grid(None, source.bag, source)
             else:
-                points = np.ascontiguousarray(
-                    load_cloud(upload).points, dtype=np.float64
-                )  # the CLI's file checks
-            upload.unlink()
-            np.save(folder / "cloud.npy", points, allow_pickle=False)
-            cache = SceneCache(points)
-            cache.terrain()  # the segmentation, once per scene
-            from baseplace.placement.pipeline import scene_environment
+                transforms = [] if transform is None else [_transform_file(folder, transform)]
+                points = world_cloud(
+                    CloudInput([str(upload)], transforms, **fusion)
+                ).points  # the CLI's checks
+            if floor is not None:
+                from baseplace.placement.pipeline import with_floor
 
-            for robot in list(self._robots.values()):  # the obstacle tree, before the first query
-                scene_environment(robot, cache)
+                check_floor(points, floor)
+                points = with_floor(points, floor)
+            points = np.ascontiguousarray(points, dtype=np.float64)
+            upload.unlink()
+            _save_npy(folder / "cloud.npy", points)
+            cache = SceneCache(points)
             scene = Scene(scene_id, folder, cache, len(points), f"upload.{fmt}")
+            try:
+                cache.terrain()  # the segmentation, once per scene
+            except InputError as exc:
+                if grid is None:
+                    raise
+                # the grid's free cells are the floor (place --occupancy needs no regions of the cloud)
+                scene.segmentation_error = str(exc)
+            if scene.segmentation_error is None:
+                from baseplace.placement.pipeline import scene_environment
+
+                for robot in list(self._robots.values()):  # the obstacle tree, before the first query
+                    scene_environment(robot, cache)
             if grid is not None:
                 from baseplace.serve.jobs import add_grid_values
 
@@ -345,3 +382,58 @@ class ServiceState:
             for thread in list(getattr(pool, "_threads", ())):
                 thread.join(max(0.0, end - time.monotonic()))
         shutil.rmtree(self.folder, ignore_errors=True)
+
+
+MAX_FLOOR_POINTS = 4_000_000
+"""Points of the floor one upload may add (``floor``): a 2 cm grid over the cloud's xy extent and
+2 m around it; 4e6 points cover 40 x 40 m."""
+
+
+def check_floor(points: np.ndarray, floor: float) -> None:
+    """Refuse a floor under ``points`` (N, 3) [m] of more than :data:`MAX_FLOOR_POINTS` points, before it is made."""
+    from baseplace.jobs.inputs import points_bounds
+
+    lo, hi = points_bounds(points)
+    margin, spacing = 2.0, 0.02  # with_floor's defaults
+    size = hi[:2] - lo[:2] + 2 * margin
+    n = float(np.prod(np.ceil(size / spacing)))
+    if n > MAX_FLOOR_POINTS:
+        raise InputError(
+            f"a floor under the cloud ({size[0]:.0f} x {size[1]:.0f} m with 2 m around it, 2 cm apart) "
+            f"is {n:.3g} points, over the limit of {MAX_FLOOR_POINTS:.0e} for one upload: a smaller cloud"
+        )
+
+
+def _transform_file(folder: Path, spec: str) -> str:
+    """The file of a cloud's ``transform`` ("ux uy uz", or 16 numbers of ``T_world_sensor`` row by row).
+
+    Written into the scene's folder and read back by the CLI's reader, so that the CLI's checks
+    apply; a request never names a file of the server.
+    """
+    from baseplace.errors import brief
+    from baseplace.files import write_bytes
+    from baseplace.terrain.io import up_vector_transform
+
+    try:
+        numbers = [float(v) for v in spec.replace(",", " ").split()]
+    except ValueError:
+        numbers = []
+    if len(numbers) not in (3, 16) or not np.isfinite(numbers).all():
+        raise InputError(
+            f"transform {brief(spec)}: give the sensor-frame up vector 'ux uy uz' or the 16 numbers of "
+            "T_world_sensor row by row"
+        )
+    T = up_vector_transform(numbers) if len(numbers) == 3 else np.reshape(numbers, (4, 4))
+    path = folder / "transform.txt"
+    write_bytes(
+        path, "\n".join(" ".join(repr(float(v)) for v in row) for row in T).encode() + b"\n", "transform"
+    )
+    return str(path)
+
+
+def _save_npy(path: Path, points: np.ndarray) -> None:
+    """``points`` as an .npy file, written atomically."""
+    from baseplace.files import atomic_write
+
+    with atomic_write(path, "the scene's cloud") as tmp, open(tmp, "wb") as f:
+        np.save(f, points, allow_pickle=False)
