@@ -143,3 +143,21 @@ def test_every_experiment_names_a_protocol_file_that_exists(module):
     path = importlib.import_module(f"baseplace_experiments.{module}").PROTOCOL_FILE
     top = Path(__file__).resolve().parents[1]
     assert (top / path).is_file(), path
+
+
+def test_every_protocol_file_named_in_code_exists():
+    """Every ``docs/protocols/...`` string in the experiments and benchmarks names a file that exists."""
+    import ast
+
+    top = Path(__file__).resolve().parents[1]
+    named = {
+        node.value
+        for folder in ("src/baseplace_experiments", "bench")
+        for path in (top / folder).glob("*.py")
+        for node in ast.walk(ast.parse(path.read_text()))
+        if isinstance(node, ast.Constant)
+        and isinstance(node.value, str)
+        and node.value.startswith("docs/protocols/")
+    }
+    assert len(named) >= 9
+    assert sorted(p for p in named if not (top / p).is_file()) == []
