@@ -30,7 +30,10 @@ from baseplace.reachability.storage import load_map
 from baseplace.robots.fk import forward_kinematics
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Robot
+from baseplace_experiments.results import fixed_protocol
 from common import report
+
+PROTOCOL_FILE = "docs/protocols/map_accuracy.md"
 
 SPLITS = {"held-out": 12345, "dev": 777}
 
@@ -47,6 +50,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0, help="the build's seed (without --map)")
     parser.add_argument("--name", default="accuracy_tiago")
     args = parser.parse_args()
+    protocol_file = fixed_protocol(PROTOCOL_FILE, args.split)
     robot = Robot("tiago")
     arm = robot.arm()
     if args.map:
@@ -121,6 +125,7 @@ def main() -> None:
         },
         split=args.split,
         used_seeds=[SPLITS[args.split]],
+        protocol_file=protocol_file,
     )
 
 

@@ -14,6 +14,8 @@ from pathlib import Path
 
 from baseplace.viz.regions import plot_regions
 from baseplace_experiments.fusion_experiment import fusion_trial, run_fusion_experiment
+from baseplace_experiments.results import write_results
+from common import STARTED
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -25,7 +27,7 @@ def main() -> None:
     parser.add_argument("--figures", default=str(ROOT / "docs" / "img"))
     args = parser.parse_args()
     result = run_fusion_experiment(range(*args.seeds), progress=lambda _: print(".", end="", flush=True))
-    Path(args.out).write_text(json.dumps(result, indent=1) + "\n")
+    write_results(args.out, result, STARTED, used_seeds=list(range(*args.seeds)))
     print()
     print(json.dumps(result["overall"], indent=1))
     _, _, terrains = fusion_trial("small", args.seeds[0], True)

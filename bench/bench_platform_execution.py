@@ -40,6 +40,11 @@ Protocol (written here and in docs/placement.md before the held-out run; the tri
 * Reported: per method, successful draws / draws with a 95 % Wilson interval, outcome counts,
   queries with a placement, mean planning time; load averages at the start and end.
 
+Protocol v2 (issue 27): docs/protocols/platform_execution.md, committed before its held-out run.
+The robot solves the grasp's IK itself on its own model from its own starts (v1 handed its planner
+the oracle's solution, free on the true solids); held-out seeds 3103 and 3104; results file
+``execution_platform_heldout_v2.json`` (v1's file stays as it was).
+
 Usage: python bench/bench_platform_execution.py --split heldout
 """
 
@@ -59,11 +64,13 @@ from baseplace_experiments.platform_execution import (
     platform_scene_trials,
     summarise_platform,
 )
-from baseplace_experiments.results import SeedSplit
+from baseplace_experiments.results import SeedSplit, fixed_protocol
 from baseplace_experiments.table_grid import RobotShapes
 from common import report
 
-SEEDS = SeedSplit(dev=(3100,), held_out=(3101, 3102))
+SEEDS = SeedSplit(dev=(3100,), held_out=(3103, 3104))  # v1: held-out 3101, 3102
+PROTOCOL_FILE = "docs/protocols/platform_execution.md"
+VERSION = 2
 CLASSES = (SCENE_CLASSES.index(("medium", 4)), SCENE_CLASSES.index(("incline-only", 1)))
 SCENES = {"dev": 1, "heldout": 3}
 QUERIES = {"dev": 2, "heldout": 3}
@@ -80,6 +87,7 @@ def main() -> None:
     args = parser.parse_args()
     load_start = os.getloadavg()
     seeds = SEEDS.dev if args.split == "dev" else SEEDS.held_out
+    protocol_file = fixed_protocol(PROTOCOL_FILE, "dev" if args.split == "dev" else "held-out")
     robot = Robot("tiago")
     rmap = build_map(robot, None, BuildSettings(samples=10_000_000, seed=1))
     shapes = RobotShapes(robot, rmap.info.arm)
@@ -115,8 +123,9 @@ def main() -> None:
         "summary": summary,
         "trials": trials,
     }  # fmt: skip
-    report(f"execution_platform_{args.split}", result, seeds=SEEDS,
-           split="dev" if args.split == "dev" else "held-out", used_seeds=list(seeds))  # fmt: skip
+    report(f"execution_platform_{args.split}_v{VERSION}", result, seeds=SEEDS,
+           split="dev" if args.split == "dev" else "held-out", used_seeds=list(seeds),
+           protocol_file=protocol_file)  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -60,7 +60,10 @@ from baseplace.robots.collision import SelfCollision
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Robot
 from baseplace.robots.spec import ArmSpec, RobotSpec, _erd
+from baseplace_experiments.results import fixed_protocol
 from common import report
+
+PROTOCOL_FILE = "docs/protocols/rm4d_side_by_side.md"
 
 PANDA_URDF = Path("rm4d/robots/assets/franka_panda/panda166.urdf")
 TCP = "panda_grasptarget"
@@ -179,6 +182,7 @@ def main() -> None:
         options[key] = json.loads(value)
     resolutions = [float(x) for x in args.orientation_resolution.split(",")]
     seed_heldout, seed_random = (1234, 4321) if args.split == "held-out" else (5678, 8765)
+    protocol_file = fixed_protocol(PROTOCOL_FILE, args.split)
     robot = panda(args.rm4d.resolve())
     arm = robot.arm()
     exact = SelfCollision(robot, num_threads=1)
@@ -333,6 +337,7 @@ def main() -> None:
         used_seeds=[seed_heldout, seed_random, 42, 99],
         protocol=__doc__.split("Protocol (fixed before the first run):")[1].split("Usage:")[0].strip(),
         argv=argv,
+        protocol_file=protocol_file,
     )
 
 

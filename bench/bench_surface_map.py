@@ -47,6 +47,7 @@ from baseplace.reachability.build import BuildSettings
 from baseplace.robots.model import Robot
 from baseplace.terrain.polygons import footprint_in_world, footprint_outline
 from baseplace.viz.surface import plot_sampling_comparison, plot_surface_map, sample_spread
+from baseplace_experiments.results import fixed_protocol
 from baseplace_experiments.surface_truth import (
     SEEDS,
     PointMapCalibration,
@@ -57,6 +58,8 @@ from baseplace_experiments.surface_truth import (
     validate,
 )
 from common import median_time, report
+
+PROTOCOL_FILE = "docs/protocols/surface_map.md"
 
 TABLE = "0,0;1.4,0;1.4,0.65;0,0.65"
 HEIGHT = 0.74
@@ -102,6 +105,7 @@ def main() -> None:
     )
     parser.add_argument("--samples", type=int, default=None, help="samples per mode (default 500, quick 60)")
     args = parser.parse_args()
+    protocol_file = None if args.quick else fixed_protocol(PROTOCOL_FILE, "held-out")
     repeats = args.repeats or (3 if args.quick else 7)
     n_poses = args.poses or (6 if args.quick else 50)
     n_samples = args.samples or (60 if args.quick else 500)
@@ -272,7 +276,7 @@ def main() -> None:
         print(json.dumps({"benchmark": "surface_map (quick, not stored)", **result}, indent=2))
     else:
         report("surface_map", result, seeds=SEEDS, split="held-out", used_seeds=[*SEEDS.dev, *SEEDS.held_out],
-               protocol=(__doc__ or "").strip())  # fmt: skip
+               protocol=(__doc__ or "").strip(), protocol_file=protocol_file)  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -10,9 +11,21 @@ from typing import Any
 
 import numpy as np
 
+from baseplace.errors import InputError
 from baseplace_experiments.results import RunClock, write_results
 
 RESULTS = Path(__file__).parent / "results"
+
+
+def _one_line_input_errors(kind: type[BaseException], error: BaseException, tb: object) -> None:
+    """A benchmark refused for bad input (a protocol not committed ...) says so in one line, exit 2."""
+    if issubclass(kind, InputError):
+        sys.stderr.write(f"error: {error}\n")
+        sys.exit(2)
+    sys.__excepthook__(kind, error, tb)  # type: ignore[arg-type]
+
+
+sys.excepthook = _one_line_input_errors
 STARTED = RunClock()
 """Started when a benchmark imports this module, before its work: the run's wall time."""
 

@@ -31,6 +31,8 @@ from pathlib import Path
 import numpy as np
 
 from baseplace.reachability.storage import load_map
+from baseplace_experiments.results import write_results
+from common import STARTED
 
 MAX_LOST_S = 30.0
 
@@ -155,7 +157,7 @@ def main() -> int:
         "cpus": os.cpu_count(),
     }
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(result, indent=1) + "\n")
+    write_results(args.out, result, STARTED, used_seeds=[args.seed, args.rng])
     print(f"{result['passed']}/{len(trials)} passed; {len(killed)} killed ({result['killed_during_save']} during the "
           f"save); max work lost {result['max_lost_work_s']} s (wall {result['max_lost_s']} s); "
           f"reference {ref_s:.1f} s")  # fmt: skip

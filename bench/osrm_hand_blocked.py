@@ -6,7 +6,7 @@ obstacle voxels the placement uses (scene voxels less the grasped object's, supp
 Such a grasp fails from every base pose: the 25 mm voxels of a neighbour or the rim reach into
 the hand, although the grasp planner found the hand clear of the true shapes.
 
-Usage: python bench/osrm_hand_blocked.py [--seed 2026] [--scenes 5] [--grasps 10]
+Usage: python bench/osrm_hand_blocked.py [--seed 2026] [--scenes 5] [--grasps 10] [--results FILE]
 """
 
 from __future__ import annotations
@@ -30,6 +30,8 @@ from baseplace_experiments.osrm_experiment import (
     experiment_scene,
     grasp_candidates,
 )
+from baseplace_experiments.results import write_results
+from common import STARTED
 
 
 def main() -> None:
@@ -37,6 +39,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=2026)
     parser.add_argument("--scenes", type=int, default=5)
     parser.add_argument("--grasps", type=int, default=10)
+    parser.add_argument("--results", default=None, help="write the results (JSON with provenance) here")
     args = parser.parse_args()
     robot = Robot("tiago")
     rmap = cached_map(robot, BuildSettings())[0]
@@ -62,7 +65,10 @@ def main() -> None:
         out[_class_name(size_class, n_planes)] = {"grasps": total, "hand_blocked": blocked,
                                                   "share": round(100 * blocked / total, 1)}  # fmt: skip
         print(_class_name(size_class, n_planes), out[_class_name(size_class, n_planes)], flush=True)
-    print(json.dumps({"seed": args.seed, "scenes": args.scenes, "grasps": args.grasps, "classes": out}))
+    result = {"seed": args.seed, "scenes": args.scenes, "grasps": args.grasps, "classes": out}
+    if args.results is not None:
+        result = write_results(args.results, result, STARTED, used_seeds=[args.seed])
+    print(json.dumps(result))
 
 
 if __name__ == "__main__":

@@ -161,3 +161,61 @@ def test_the_bottle_is_cut_at_the_measured_table_top_when_the_estimate_is_high()
     kept = np.zeros(len(seen), dtype=bool)
     kept[_kept_rows(seen, estimate, s, z)] = True
     assert kept[far].all()  # the table away from the bottle stays an obstacle
+
+
+class _RecordingPlanner:
+    """The robot's motion planner (a real :class:`MotionChecker` on the robot's own voxels), recording its goals."""
+
+    def __init__(self, robot, voxels):  # type: ignore[no-untyped-def]
+        from baseplace.placement.motion import MotionChecker
+
+        self.checker = MotionChecker(robot, robot.arm(), Environment(robot, voxels))
+        self.goals: list[tuple[np.ndarray, np.ndarray]] = []
+
+    def __getattr__(self, name):  # type: ignore[no-untyped-def]
+        return getattr(self.checker, name)
+
+    def check(self, q_grasp, T_world_base, T_world_tcp, seed=0):  # type: ignore[no-untyped-def]
+        self.goals.append((np.asarray(q_grasp, dtype=float), np.asarray(T_world_tcp, dtype=float)))
+        return self.checker.check(q_grasp, T_world_base, T_world_tcp, seed)
+
+
+def _far_voxels():  # type: ignore[no-untyped-def]
+    return VoxelMap.from_points(np.array([[5.0, 5.0, 0.1]]), 0.025)  # nothing near the robot
+
+
+def test_the_robot_plans_to_its_own_ik_solution_not_the_oracles(tiago, shapes):
+    """The robot sees no obstacle at its elbow; the true scene has one. The robot must plan to the
+    IK solution it finds on its own model from its own first start (stowed), and the oracle must
+    then see the executed motion touch the true obstacle. Handing the planner the oracle's
+    solution (free on the true scene) would dodge the obstacle the robot never saw."""
+    from baseplace.robots.ik import DampedLeastSquaresIK
+
+    arm = tiago.arm()
+    oracle = ExecutionOracle(shapes, [], None, ExecutionSettings(ik_solutions=16))
+    q_own = DampedLeastSquaresIK(arm, restarts=0).solve_from(GRASP, oracle.q_stowed[None])
+    assert q_own is not None
+    data = tiago.model.createData()
+    pin.forwardKinematics(tiago.model, data, arm.to_pinocchio(q_own, tiago.q_reference))
+    elbow = data.oMi[tiago.model.getJointId(arm.joint_names[4])].translation
+    block = _box("block", elbow - 0.04, elbow + 0.04)
+    assert shapes.touching(q_own, np.eye(4), [block]) is not None
+    truth = ExecutionOracle(shapes, [block], None, ExecutionSettings(ik_solutions=16))
+    planner = _RecordingPlanner(tiago, _far_voxels())
+    outcome = truth.execute(np.eye(4), GRASP[None], planner, np.random.default_rng(0))
+    assert planner.goals, outcome
+    np.testing.assert_allclose(planner.goals[0][0], q_own, atol=1e-9)
+    assert outcome == "motion_collision"
+
+
+def test_every_method_tries_the_grasps_in_one_order_nearest_first(tiago, shapes):
+    """One grasp-selection rule: whatever order a method hands the grasps in, the robot tries the
+    one nearest its base first."""
+    near = pose_from_xyz_rpy([0.6, -0.15, 0.85, 0.0, 0.0, 0.0])  # 0.15 m nearer than GRASP
+    oracle = ExecutionOracle(shapes, [], None, ExecutionSettings(ik_solutions=8))
+    assert oracle.grasp_configurations(np.eye(4), near, np.random.default_rng(0), limit=1)  # both reachable
+    assert oracle.grasp_configurations(np.eye(4), GRASP, np.random.default_rng(0), limit=1)
+    for grasps in (np.stack([GRASP, near]), np.stack([near, GRASP])):
+        planner = _RecordingPlanner(tiago, _far_voxels())
+        assert oracle.execute(np.eye(4), grasps, planner, np.random.default_rng(0)) == "ok"
+        np.testing.assert_allclose(planner.goals[0][1], near)

@@ -17,14 +17,14 @@ from baseplace_experiments.segmentation_eval import noisy_height_map
 def test_results_file_holds_command_commit_seeds_and_time(tmp_path):
     path = tmp_path / "r.json"
     split = SeedSplit(dev=(0,), held_out=(1, 2))
-    written = write_results(path, {"rows": [1, 2]}, RunClock(), seeds=split, split="held-out", used_seeds=[1, 2],
+    written = write_results(path, {"rows": [1, 2]}, RunClock(), seeds=split, split="dev", used_seeds=[1, 2],
                             protocol="fixed first", argv=["/some/where/baseplace", "experiment", "x"])  # fmt: skip
     stored = json.loads(path.read_text())
     assert stored == written and stored["rows"] == [1, 2]
     prov = stored["provenance"]
     assert prov["command"] == "baseplace experiment x"
     assert prov["seeds"] == {"dev": [0], "held_out": [1, 2]} and prov["seeds_used"] == [1, 2]
-    assert prov["split"] == "held-out" and prov["protocol"] == ["fixed first"] and prov["wall_time_s"] >= 0
+    assert prov["split"] == "dev" and prov["protocol"] == ["fixed first"] and prov["wall_time_s"] >= 0
     head = subprocess.run(
         ["git", "rev-parse", "HEAD"], cwd=Path(__file__).parent, capture_output=True, text=True
     )

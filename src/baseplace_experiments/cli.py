@@ -74,7 +74,7 @@ def _write_results(
 def cmd_experiment_segmentation(args: argparse.Namespace) -> int:
     """Segmentation accuracy of both algorithms on generated scenes, per noise model."""
     from baseplace_experiments import segmentation_eval
-    from baseplace_experiments.results import RunClock
+    from baseplace_experiments.results import RunClock, fixed_protocol
     from baseplace_experiments.segmentation_eval import (
         NOISE_MODELS,
         PAPER,
@@ -92,6 +92,7 @@ def cmd_experiment_segmentation(args: argparse.Namespace) -> int:
     seed = args.seed if args.seed is not None else SEEDS.seeds(args.split)[0]
     split = args.split if args.seed is None or args.seed in SEEDS.seeds(args.split) else None
     results = _results_path(args.results)
+    protocol_file = fixed_protocol(segmentation_eval.PROTOCOL_FILE, split)
     with _bars(args) as bars:
         bar = bars.counter("segmentation experiment", args.scenes * 6 * len(noises), "scenes")
         runs = {n: run_segmentation_experiment(args.scenes, seed, progress=bar, noise=n) for n in noises}
@@ -112,7 +113,7 @@ def cmd_experiment_segmentation(args: argparse.Namespace) -> int:
     lines.append(f"Birr et al. VI: {100 * PAPER['cell_accuracy']:.1f}% cells, {PAPER['mean_normal_error_deg']}° "
                  "(noise on the height map)")  # fmt: skip
     result = _write_results(results, result, clock, lines, seeds=SEEDS, split=split, used_seeds=[seed],
-                            protocol=(segmentation_eval.__doc__ or "").strip())  # fmt: skip
+                            protocol=(segmentation_eval.__doc__ or "").strip(), protocol_file=protocol_file)  # fmt: skip
     _emit(args, result, "\n".join(lines))
     return 0
 
@@ -175,7 +176,7 @@ def cmd_experiment_table_grid(args: argparse.Namespace) -> int:
     from baseplace.reachability.storage import load_map
     from baseplace.robots.model import Robot
     from baseplace_experiments import table_grid
-    from baseplace_experiments.results import RunClock
+    from baseplace_experiments.results import RunClock, fixed_protocol
 
     clock = RunClock()
     if args.trials < 1:
@@ -188,6 +189,7 @@ def cmd_experiment_table_grid(args: argparse.Namespace) -> int:
     seeds = table_grid.SEEDS
     seed = args.seed if args.seed is not None else seeds.seeds(args.split)[0]
     split = args.split if args.seed is None or args.seed in seeds.seeds(args.split) else None
+    protocol_file = fixed_protocol(table_grid.PROTOCOL_FILE, split)
     robot = Robot(args.robot)
     rmap = load_map(args.map, robot) if args.map else _default_map(args, robot)
     settings = table_grid.TableGridSettings()
@@ -219,7 +221,7 @@ def cmd_experiment_table_grid(args: argparse.Namespace) -> int:
     lines.append("success rate: " + ", ".join(f"{m} {totals[m]['rate']:.1f}%" for m in ("radial", "irm", "baseline"))
                  + " (Saini et al. with an HSR: proposed 81.7%, baseline 40%)")  # fmt: skip
     result = _write_results(results, result, clock, lines, seeds=seeds, split=split, used_seeds=[seed],
-                            protocol=(table_grid.__doc__ or "").strip())  # fmt: skip
+                            protocol=(table_grid.__doc__ or "").strip(), protocol_file=protocol_file)  # fmt: skip
     _emit(args, result, "\n".join(lines))
     return 0
 
@@ -235,13 +237,15 @@ def cmd_experiment_osrm(args: argparse.Namespace) -> int:
         ExperimentSettings,
         run_osrm_experiment,
     )
-    from baseplace_experiments.results import RunClock
+    from baseplace_experiments.results import RunClock, fixed_protocol
 
     clock = RunClock()
     if args.scenes < 1 or args.grasps < 1:
         raise InputError(f"--scenes and --grasps must be >= 1, got {args.scenes} and {args.grasps}")
     out, results_path = out_path(args.out, "--out", PLOT_SUFFIXES), _results_path(args.results)
     seed = SEEDS.dev[0] if args.dev else args.seed
+    split = "held-out" if seed in SEEDS.held_out else "dev" if seed in SEEDS.dev else None
+    protocol_file = fixed_protocol(osrm_experiment.PROTOCOL_FILE, split)
     robot = Robot(args.robot)
     rmap = load_map(args.map, robot) if args.map else _default_map(args, robot)
     classes = SCENE_CLASSES if not args.flat_only else SCENE_CLASSES[:1]
@@ -276,9 +280,8 @@ def cmd_experiment_osrm(args: argparse.Namespace) -> int:
         lines.append(f"{r['scene']:<16} {r['strategy']:<8} {r['queries']:>7} {at[0]:>6} {at[1]:>6} {at[2]:>6} "
                      f"{at[3]:>6} {paper:>6} {incline:>7} {f(r['t_RM_ms']):>9} {f(r['t_a_ms']):>10} {f(r['t_s_ms']):>10}")  # fmt: skip
     lines.append(f"seed {seed} ({result['seed_role']}), {clock.seconds:.0f} s")
-    split = result["seed_role"] if result["seed_role"] in ("dev", "held-out") else None
     result = _write_results(results_path, result, clock, lines, seeds=SEEDS, split=split, used_seeds=[seed],
-                            protocol=(osrm_experiment.__doc__ or "").strip())  # fmt: skip
+                            protocol=(osrm_experiment.__doc__ or "").strip(), protocol_file=protocol_file)  # fmt: skip
     _emit(args, result, "\n".join(lines))
     return 0
 

@@ -14,11 +14,17 @@ method that chose the placement:
   model, no voxels, no octree): no self-collision, only the hand may touch the grasped object.
   The draw succeeds when any solution passes. The IK solver only proposes configurations; FK and
   coal decide, so an IK error could only make the oracle stricter.
-* **Reaching motion** (:meth:`ExecutionOracle.execute`): the robot plans its arm motion with its
-  own planner (:class:`~baseplace.placement.motion.MotionChecker` on its perceived voxels) to the
-  oracle's grasp configuration, and the executed path (transit and approach, every state at most
-  ``path_step`` apart in joint space) is checked against the true scene: nothing may be touched in
-  the transit, only the hand may touch the grasped object in the approach.
+* **Reaching motion** (:meth:`ExecutionOracle.execute`): the robot re-plans on its own, and the
+  oracle only judges. The robot tries the grasps nearest its base first (one rule for every method:
+  :func:`grasp_order`); for each it solves IK itself (:func:`own_grasp_configuration`: its own
+  kinematic model, from its stowed configuration, then from random starts of its own generator),
+  keeping the first solution its own collision model (the planner's perceived voxels; only the hand
+  on the grasped object) calls free, and plans the reaching motion to it with its own planner
+  (:class:`~baseplace.placement.motion.MotionChecker`). Nothing the oracle found on the true scene
+  is handed over. The executed path (transit and approach, every state at most ``path_step`` apart
+  in joint space) is then checked against the true scene: nothing may be touched in the transit,
+  only the hand may touch the grasped object in the approach, and the final state must put the TCP
+  on the grasp (pinocchio FK, the tolerances above).
 
 The table-grid scene of seed 004 (:mod:`baseplace_experiments.table_grid`) provides the true shapes.
 """
@@ -47,8 +53,8 @@ class ExecutionSettings:
     """How the oracle re-plans at the drawn base pose.
 
     Attributes:
-        ik_solutions: IK solutions per grasp and draw: one from the stowed configuration, the
-            others each from one uniform random start.
+        ik_solutions: IK starts per grasp and draw, the oracle's and the robot's alike: the stowed
+            configuration, then uniform random starts (each solved on its own).
         tol_position: FK must put the TCP within this of the grasp [m].
         tol_rotation: and within this angle of its orientation [rad].
         path_step: executed paths are checked at states at most this far apart [rad, joint space].
@@ -167,34 +173,72 @@ class ExecutionOracle:
                 rng: np.random.Generator) -> str:  # fmt: skip
         """Outcome of one grasp attempt from the base pose (4, 4) the robot reached.
 
-        Grasps (K, 4, 4), in the order the robot tries them (the method's chosen one first): for
-        each, a collision-free IK solution on the true scene; the robot's ``planner`` plans the
-        reaching motion to it on its own collision model; the executed path is checked on the
-        true scene. Returns "ok", "no_grasp" (no grasp has a collision-free IK solution), "no_motion"
-        (the planner found no motion to any solution tried) or "motion_collision" (every planned
-        motion tried touches the true scene).
+        The robot tries the grasps (K, 4, 4) in :func:`grasp_order` (whatever order they come in),
+        each with its own IK solution (:func:`own_grasp_configuration`, from ``rng``, the robot's
+        generator) and its ``planner``'s reaching motion; at most ``motion_tries`` grasps with a
+        solution are planned. The oracle checks the executed path on the true scene. Returns "ok",
+        "no_grasp" (the robot found no IK solution its own model calls free), "no_motion" (the
+        planner found no motion to any solution tried) or "motion_collision" (every planned motion
+        tried touches the true scene or ends off the grasp).
         """
         T = np.asarray(T_world_base, dtype=float)
+        G = np.asarray(grasps, dtype=float).reshape(-1, 4, 4)
         tries, planned = 0, False
-        any_grasp = False
-        for grasp in np.asarray(grasps, dtype=float).reshape(-1, 4, 4):
-            solutions = self.grasp_configurations(T, grasp, rng, limit=1)
-            if not solutions:
+        for k in grasp_order(T, G):
+            q = own_grasp_configuration(planner, T, G[k], rng, self.settings.ik_solutions)
+            if q is None:
                 continue
-            any_grasp = True
-            motion = planner.check(solutions[0], T, grasp, seed=int(rng.integers(2**31 - 1)))
+            motion = planner.check(q, T, G[k], seed=int(rng.integers(2**31 - 1)))
             tries += 1
             if motion is not None:
                 planned = True
-                if self.path_free(motion.path, T, hand_may_touch=False) and self.path_free(
-                    motion.approach, T, hand_may_touch=True
-                ):
+                T_base_tcp = invert_transforms(T) @ G[k]
+                if (self._reaches(motion.approach[-1], T_base_tcp)
+                        and self.path_free(motion.path, T, hand_may_touch=False)
+                        and self.path_free(motion.approach, T, hand_may_touch=True)):  # fmt: skip
                     return "ok"
             if tries >= self.settings.motion_tries:
                 break
-        if not any_grasp:
+        if tries == 0:
             return "no_grasp"
         return "motion_collision" if planned else "no_motion"
 
 
-__all__ = ["ExecutionOracle", "ExecutionSettings"]
+def grasp_order(T_world_base: ArrayLike, grasps: ArrayLike) -> list[int]:
+    """The order in which the robot tries grasps (K, 4, 4) from a base pose (4, 4): nearest TCP first.
+
+    Horizontal distance from the base to each grasp's TCP, ties in the given order. The one rule of
+    every method: no method's own grasp goes first.
+    """
+    T = np.asarray(T_world_base, dtype=float)
+    G = np.asarray(grasps, dtype=float).reshape(-1, 4, 4)
+    distance = np.hypot(G[:, 0, 3] - T[0, 3], G[:, 1, 3] - T[1, 3])
+    return [int(k) for k in np.argsort(distance, kind="stable")]
+
+
+def own_grasp_configuration(planner: MotionChecker, T_world_base: ArrayLike, grasp: ArrayLike,
+                            rng: np.random.Generator, starts: int) -> FloatArray | None:  # fmt: skip
+    """The robot's own IK solution (n,) of the world grasp (4, 4) from a base pose (4, 4), or None.
+
+    IK on the robot's kinematic model from its stowed configuration (its joint state when it
+    arrives), then from ``starts - 1`` uniform random starts drawn from ``rng``; the first solution
+    that is within the joint limits and that the robot's own collision model (the ``planner``'s
+    approach model: only the hand may touch the grasped object) calls free. No true shape is seen.
+    """
+    arm = planner.arm
+    T_base = np.asarray(T_world_base, dtype=float)
+    T_base_tcp = invert_transforms(T_base) @ np.asarray(grasp, dtype=float)
+    environment = (
+        planner.environment if planner.approach_environment is None else planner.approach_environment
+    )
+    ik = DampedLeastSquaresIK(arm, restarts=0)
+    q_stowed = stowed_configuration(planner.robot, arm)
+    for k in range(starts):
+        q0 = q_stowed if k == 0 else rng.uniform(arm.lower, arm.upper)
+        q = ik.solve_from(T_base_tcp, q0[None])
+        if q is not None and arm.within_limits(q) and not environment.colliding_arm(arm, q, T_base):
+            return q
+    return None
+
+
+__all__ = ["ExecutionOracle", "ExecutionSettings", "grasp_order", "own_grasp_configuration"]

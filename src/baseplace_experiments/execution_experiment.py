@@ -15,11 +15,18 @@ its estimate, the noisy cloud). Four ways to choose the base pose, all from what
 
 Execution: the robot drives to the chosen pose and stops off it by a draw of the default error
 model (sigma 3 cm, 2 deg), ``draws`` times per method and trial (the same draws for every method
-of a trial). From there it re-plans (:meth:`~baseplace_experiments.execution.ExecutionOracle.execute`):
-some grasp of the *true* bottle (the method's grasp first, when it has one) with a collision-free
-IK solution on the true table and bottle, a reaching motion planned on the robot's own voxels of
-the noisy cloud (transit: nothing touched; approach: only the hand on the bottle), and that path
-checked state by state on the true scene. A draw succeeds when all three hold.
+of a trial). From there it re-plans on its own (:meth:`~baseplace_experiments.execution.ExecutionOracle.execute`):
+it tries the grasps of the bottle nearest its base first (the same rule for every method; the
+method's own grasp gets no precedence), solves IK itself on its own model from its own starts,
+keeping a solution its own voxels of the noisy cloud call free, and plans the reaching motion on
+those voxels (transit: nothing touched; approach: only the hand on the bottle). The oracle checks
+the executed path state by state on the true table and bottle, and that it ends on the grasp. A draw
+succeeds when that holds. The grasps are those of the true bottle (the robot is taken to see the
+bottle where it stands, at arm's length); the estimate only chose the placement.
+
+Protocol: docs/protocols/execution_table_grid.md (v4 of ``bench/bench_execution.py``); v1-v3 handed
+the robot's planner the oracle's IK solution, found free on the true scene, and tried the default
+and robust methods' own grasp first.
 """
 
 from __future__ import annotations
@@ -59,10 +66,6 @@ from baseplace_experiments.table_grid import (
 )
 
 EXECUTION_METHODS = ("baseline", "radial", "default", "robust")
-
-
-def _grasp_order(first: int, k: int) -> list[int]:
-    return ([first] if first >= 0 else []) + [g for g in range(k) if g != first]
 
 
 def execution_trial(robot: Robot, rmap: ReachabilityMap, shapes: RobotShapes, seed: int, cell: tuple[int, int],
@@ -142,11 +145,11 @@ def execution_trial(robot: Robot, rmap: ReachabilityMap, shapes: RobotShapes, se
         if pose is None:
             entry.update(pose=None, outcomes=["no_placement"] * draws, success=0)
         else:
-            order = _grasp_order(grasp, len(true_grasps))
-            exec_rng = np.random.default_rng([40_000 + seed, *cell])
+            exec_rng = np.random.default_rng(
+                [40_000 + seed, *cell]
+            )  # the robot's: its IK starts, its planner's seeds
             outcomes = [
-                oracle.execute(T, true_grasps[order], planner, exec_rng)
-                for T in perturbed(pose.matrix(), offsets)
+                oracle.execute(T, true_grasps, planner, exec_rng) for T in perturbed(pose.matrix(), offsets)
             ]
             entry.update(pose=[round(pose.x, 3), round(pose.y, 3), round(pose.yaw, 3)], outcomes=outcomes,
                          success=sum(o == "ok" for o in outcomes))  # fmt: skip

@@ -67,6 +67,8 @@ HELD_OUT_SEEDS = (2026,)
 """Seeds the reported tables come from; disjoint from :data:`DEV_SEEDS`."""
 SEEDS = SeedSplit(DEV_SEEDS, HELD_OUT_SEEDS)
 """Both, as recorded in the results file's provenance."""
+PROTOCOL_FILE = "docs/protocols/osrm.md"
+"""The protocol, committed before a held-out run (:func:`~baseplace_experiments.results.fixed_protocol`)."""
 BUDGETS = (1, 3, 10, 100)
 """Candidate budgets N at which success is reported."""
 PAPER = {  # seed 000 Tables I and II: success rate [%]

@@ -3,9 +3,20 @@
 Every experiment and benchmark stores its result through :func:`write_results`: one JSON object
 holding the result and, under ``"provenance"``, what made it: the command line, the git commit of
 the source (and whether the work tree had uncommitted changes), the seeds (development and
-held-out, and which of them this run used), the protocol text fixed before the run, the wall time
+held-out, and which of them this run used), the protocol fixed before the run, the wall time
 and the UTC time it finished. The file is replaced atomically, so it is never half-written and
 never edited by hand; the docs' tables are read from these files.
+
+"Dirty" means the run's code differs from its commit: a tracked file changed anywhere but in
+``bench/results`` and ``docs``, or an untracked file under ``src`` or ``bench`` (a new module
+imports as well as a changed one); the paths are listed under ``dirty_paths``.
+
+Each experiment names its protocol file (``docs/protocols/<experiment>.md``: scenes, counts, seeds,
+success, what may touch what, the analysis). The rule for held-out seeds (:func:`fixed_protocol`):
+the protocol file must be committed and unchanged in the work tree when the run starts and when
+its results are written; the run records the last commit that changed the file, so the protocol
+provably predates the results. A held-out run that breaks the rule, or that names no protocol
+file, is refused with a one-line :class:`~baseplace.errors.InputError` before any work.
 """
 
 from __future__ import annotations
@@ -56,27 +67,108 @@ class SeedSplit:
         return self.dev if split == "dev" else self.held_out
 
 
+def _git(cwd: Path, *args: str) -> str:
+    return subprocess.run(["git", *args], cwd=cwd, capture_output=True, text=True, timeout=10,
+                          check=True).stdout  # fmt: skip
+
+
+def _source_dir() -> Path:
+    return Path(__file__).resolve().parent
+
+
 def git_commit(where: Path | None = None) -> dict[str, Any]:
     """The commit of the source tree ``where`` (default: this package's) and whether its code is dirty.
 
-    Returns ``{"commit": None, ...}`` outside a git work tree (an installed package).
+    Dirty (see the module docstring) counts untracked files under ``src`` and ``bench`` too.
+    Returns ``{"commit": None, "dirty": None}`` outside a git work tree (an installed package).
     """
-    cwd = where or Path(__file__).resolve().parent
-
-    def git(*args: str) -> str:
-        return subprocess.run(["git", *args], cwd=cwd, capture_output=True, text=True, timeout=10,
-                              check=True).stdout  # fmt: skip
-
+    cwd = where or _source_dir()
     try:
-        head = git("rev-parse", "HEAD").strip()
-        top = git("rev-parse", "--show-toplevel").strip()
-        # dirty: uncommitted changes to code; results files and docs being rewritten do not count
-        status = git(
-            "-C", top, "status", "--porcelain", "--untracked-files=no", "--", ".", ":!bench/results", ":!docs"
+        head = _git(cwd, "rev-parse", "HEAD").strip()
+        top = Path(_git(cwd, "rev-parse", "--show-toplevel").strip())
+        # results files and docs being rewritten do not count: they are outputs, not code
+        tracked = _git(
+            top, "status", "--porcelain", "--untracked-files=no", "--", ".", ":!bench/results", ":!docs"
+        )
+        untracked = _git(
+            top, "ls-files", "--others", "--exclude-standard", "--", "src", "bench", ":!bench/results"
         )
     except (OSError, subprocess.SubprocessError):
         return {"commit": None, "dirty": None}
-    return {"commit": head, "dirty": bool(status.strip())}
+    paths = [line[3:] for line in tracked.splitlines() if line.strip()] + untracked.split()
+    out: dict[str, Any] = {"commit": head, "dirty": bool(paths)}
+    if paths:
+        out["dirty_paths"] = sorted(paths)[:MAX_DIRTY_PATHS]
+    return out
+
+
+MAX_DIRTY_PATHS = 20
+"""At most this many dirty paths are listed in a results file (``dirty`` says whether there are any)."""
+
+
+@dataclass(frozen=True)
+class ProtocolRecord:
+    """The protocol file a run follows, as the run found it.
+
+    Attributes:
+        file: path relative to the repository's top (``docs/protocols/<experiment>.md``).
+        commit: the last commit that changed the file; None when it was never committed or there is no git.
+        clean: True when the work tree's file is the committed one (no staged or unstaged change).
+    """
+
+    file: str
+    commit: str | None
+    clean: bool
+    root: Path | None = field(default=None, repr=False)
+    """The repository's top on this machine: where the file is checked again, never stored."""
+
+    def as_dict(self) -> dict[str, Any]:
+        """The record as stored under ``provenance.protocol_file``."""
+        return {"file": self.file, "commit": self.commit, "clean": self.clean}
+
+
+def protocol_record(file: str, where: Path | None = None) -> ProtocolRecord:
+    """The state of protocol ``file`` (relative to the top of the repository holding ``where``)."""
+    cwd = where or _source_dir()
+    try:
+        top = Path(_git(cwd, "rev-parse", "--show-toplevel").strip())
+        if not (top / file).is_file():
+            return ProtocolRecord(file, None, False, top)
+        commit = _git(top, "log", "-1", "--format=%H", "--", file).strip() or None
+        changed = _git(top, "status", "--porcelain", "--untracked-files=all", "--", file).strip()
+    except (OSError, subprocess.SubprocessError):
+        return ProtocolRecord(file, None, False)
+    return ProtocolRecord(file, commit, commit is not None and not changed, top)
+
+
+def fixed_protocol(file: str | None, split: str | None, where: Path | None = None) -> ProtocolRecord | None:
+    """The protocol record of a run, checked before the run's work (the rule in the module docstring).
+
+    Args:
+        file: the experiment's protocol file, relative to the repository's top; None for none.
+        split: the run's seed set ("dev", "held-out", or None for a custom seed).
+        where: a folder inside the repository (default: this package's).
+
+    Raises:
+        InputError: a held-out run without a protocol file, or whose file is missing, uncommitted or changed.
+    """
+    if file is None:
+        if split == "held-out":
+            raise InputError(
+                "a held-out run needs its protocol file (docs/protocols/<experiment>.md); none was named"
+            )
+        return None
+    record = protocol_record(file, where)
+    if split == "held-out" and not record.clean:
+        state = (
+            "is not in a git work tree or not committed"
+            if record.commit is None
+            else "has uncommitted changes"
+        )
+        raise InputError(
+            f"protocol file {file} {state}: commit it before a held-out run, or run the dev split"
+        )
+    return record
 
 
 @dataclass
@@ -114,6 +206,7 @@ def provenance(
     split: str | None = None,
     used_seeds: Sequence[int] | None = None,
     protocol: str | Sequence[str] | None = None,
+    protocol_file: ProtocolRecord | None = None,
     argv: Sequence[str] | None = None,
 ) -> dict[str, Any]:
     """The provenance block of a results file (see the module docstring).
@@ -123,9 +216,16 @@ def provenance(
         seeds: the experiment's development and held-out seeds.
         split: which of them this run used ("dev", "held-out"), None for a custom seed.
         used_seeds: the seeds this run actually used.
-        protocol: the protocol, written down before the held-out run.
+        protocol: the protocol's text or settings, as the run used them.
+        protocol_file: the record :func:`fixed_protocol` returned when the run started; checked again
+            here, so a protocol changed during a held-out run is refused.
         argv: the command line (default ``sys.argv``).
     """
+    if split == "held-out":  # a held-out run's protocol: checked again now, as when it started
+        pf = protocol_file
+        now = fixed_protocol(None if pf is None else pf.file, split, None if pf is None else pf.root)
+        if pf is not None and now != pf:
+            raise InputError(f"protocol file {pf.file} changed during the run; the results are not written")
     args = list(sys.argv if argv is None else argv)
     args = [Path(args[0]).name, *(_without_folders(a) for a in args[1:])] if args else []
     out: dict[str, Any] = {
@@ -143,6 +243,8 @@ def provenance(
         out["seeds_used"] = [int(s) for s in used_seeds]
     if protocol is not None:
         out["protocol"] = [protocol] if isinstance(protocol, str) else list(protocol)
+    if protocol_file is not None:
+        out["protocol_file"] = protocol_file.as_dict()
     return out
 
 
@@ -174,4 +276,14 @@ def _finite(value: Any, nulled: list[int]) -> Any:
     return value
 
 
-__all__ = ["SPLITS", "RunClock", "SeedSplit", "git_commit", "provenance", "write_results"]
+__all__ = [
+    "SPLITS",
+    "ProtocolRecord",
+    "RunClock",
+    "SeedSplit",
+    "fixed_protocol",
+    "git_commit",
+    "protocol_record",
+    "provenance",
+    "write_results",
+]

@@ -41,6 +41,8 @@ NOISE_MODELS = ("heightmap", "cloud")
 """Where the noise goes: the height map (seed 000 VI) or the dense cloud's z."""
 SEEDS = SeedSplit(dev=(0,), held_out=(1,))
 """Development and held-out seeds of the segmentation experiment."""
+PROTOCOL_FILE = "docs/protocols/segmentation.md"
+"""The protocol, committed before a held-out run (:func:`~baseplace_experiments.results.fixed_protocol`)."""
 SIGMA = 0.025
 """Noise standard deviation [m] (seed 000 VI)."""
 PAPER = {"cell_accuracy": 0.978, "mean_normal_error_deg": 0.65}

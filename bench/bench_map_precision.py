@@ -1,0 +1,152 @@
+"""Map precision and recall on the poses ``place`` and ``candidates`` query, per pose distribution.
+
+Protocol: docs/protocols/map_precision.md (issue 27 item 4), committed before the first run: side
+grasps (``candidates``), tilted top-down grasps (``place``) 0.5-1.0 m high within 1.3 m of a floor
+base, and the uniform draw over the reached cells (``bench_accuracy.py``); precision and recall
+against damped least-squares IK (80 restarts) with 95 % Wilson intervals; recall on held-out FK
+poses too.
+
+Usage: python bench/bench_map_precision.py [--samples 1e7 | --map FILE] [--n 4000] [--split dev]
+       [--name map_precision_1e7]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+import numpy as np
+
+from baseplace.geometry.poses import FloatArray, pose_from_xyz_rpy, rotation_taking
+from baseplace.placement.robustness import wilson_interval
+from baseplace.reachability.build import BuildSettings, build_map
+from baseplace.reachability.certify import poses_in_cells
+from baseplace.reachability.rmap import ReachabilityMap
+from baseplace.reachability.storage import load_map
+from baseplace.robots.fk import forward_kinematics
+from baseplace.robots.ik import DampedLeastSquaresIK
+from baseplace.robots.model import Robot
+from baseplace_experiments.results import fixed_protocol
+from common import report
+
+PROTOCOL_FILE = "docs/protocols/map_precision.md"
+SPLITS = {"held-out": 4242, "dev": 2424}
+RADIUS = 1.3
+"""Grasp points lie within this horizontal distance of the base [m]."""
+HEIGHTS = (0.5, 1.0)
+"""Grasp points lie this high above the floor [m]."""
+SIDE_STANDOFF = 0.15
+"""``candidates``: the TCP stands this far back from the grasp point along the approach [m]."""
+TOP_STANDOFF = 0.151
+"""``place`` (``osrm_experiment.grasp_candidates``): the same for its top-down grasps [m]."""
+MAX_TILT = math.radians(20)
+
+
+def grasp_points(rng: np.random.Generator, n: int) -> FloatArray:
+    """(n, 3) points uniform in area in the disc of radius :data:`RADIUS`, uniform in :data:`HEIGHTS`."""
+    r = RADIUS * np.sqrt(rng.uniform(0.0, 1.0, n))
+    bearing = rng.uniform(-math.pi, math.pi, n)
+    return np.c_[r * np.cos(bearing), r * np.sin(bearing), rng.uniform(*HEIGHTS, n)]
+
+
+def side_grasps(rng: np.random.Generator, n: int, approach_axis: FloatArray) -> FloatArray:
+    """(n, 4, 4) side grasps as ``irm_candidates.grasp_poses``: approach horizontal, random yaw, roll 0."""
+    p = grasp_points(rng, n)
+    yaw = rng.uniform(-math.pi, math.pi, n)
+    T = pose_from_xyz_rpy(np.c_[p, np.zeros(n), np.zeros(n), yaw])
+    T[:, :3, 3] -= SIDE_STANDOFF * T[:, :3, 0]
+    T[:, :3, :3] = T[:, :3, :3] @ rotation_taking(approach_axis, (1.0, 0.0, 0.0))
+    return T
+
+
+def top_down_grasps(rng: np.random.Generator, n: int, approach_axis: FloatArray) -> FloatArray:
+    """(n, 4, 4) top-down grasps as ``osrm_experiment.grasp_candidates``: tilt <= 20 deg, random roll."""
+    p = grasp_points(rng, n)
+    tilt = rng.uniform(0.0, MAX_TILT, n)
+    roll, heading = rng.uniform(-math.pi, math.pi, (2, n))
+    T = pose_from_xyz_rpy(np.c_[np.zeros((n, 3)), roll, math.pi / 2 - tilt, heading])
+    T[:, :3, 3] = p - TOP_STANDOFF * T[:, :3, 0]
+    T[:, :3, :3] = T[:, :3, :3] @ rotation_taking(approach_axis, (1.0, 0.0, 0.0))
+    return T
+
+
+def uniform_kept(rmap: ReachabilityMap, rng: np.random.Generator, n: int) -> FloatArray:
+    """(n, 4, 4) poses uniform over the reached cells that the map keeps (``bench_accuracy.py``'s draw)."""
+    kept: list[FloatArray] = []
+    total = 0
+    while total < n:
+        T = poses_in_cells(rmap.grid, rmap.cells[rng.integers(len(rmap.cells), size=n)], rng)
+        T = T[rmap.reachability(T) > 0]
+        kept.append(T)
+        total += len(T)
+    return np.concatenate(kept)[:n]
+
+
+def _rate(k: int, n: int) -> dict[str, object]:
+    low, high = wilson_interval(k, n) if n else (math.nan, math.nan)
+    return {"value": round(k / n, 4) if n else None, "k": k, "n": n, "ci95": [round(low, 4), round(high, 4)]}
+
+
+def measure(rmap: ReachabilityMap, ik: DampedLeastSquaresIK, T: FloatArray, rng: np.random.Generator,
+            with_recall: bool) -> dict[str, object]:  # fmt: skip
+    """Precision (and recall) of the map's verdict on poses (N, 4, 4) against IK."""
+    called = rmap.reachability(T) > 0
+    _, solved = ik.solve_batch(T, rng)
+    solved = np.asarray(solved, dtype=bool)
+    out: dict[str, object] = {
+        "poses": len(T),
+        "called_reachable": round(float(called.mean()), 4),
+        "ik_solved": round(float(solved.mean()), 4),
+        "precision": _rate(int((called & solved).sum()), int(called.sum())),
+    }
+    if with_recall:
+        out["recall"] = _rate(int((called & solved).sum()), int(solved.sum()))
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--map", default=None, help="a map file (default: build one)")
+    parser.add_argument("--samples", type=float, default=1e7, help="samples of the map built (default 1e7)")
+    parser.add_argument("--seed", type=int, default=0, help="the build's seed")
+    parser.add_argument("--n", type=int, default=4000, help="poses per distribution")
+    parser.add_argument("--split", choices=sorted(SPLITS), default="dev")
+    parser.add_argument("--name", default=None, help="results file bench/results/NAME.json")
+    args = parser.parse_args()
+    protocol_file = fixed_protocol(PROTOCOL_FILE, args.split)
+    robot = Robot("tiago")
+    arm = robot.arm()
+    if args.map:
+        rmap = load_map(args.map, robot)
+    else:
+        rmap = build_map(robot, None, BuildSettings(samples=int(args.samples), seed=args.seed))
+    rng = np.random.default_rng(SPLITS[args.split])
+    ik = DampedLeastSquaresIK(arm)
+    axis = np.asarray(arm.approach_axis, dtype=float)
+    held_out = forward_kinematics(arm, arm.sample(rng, 10_000))
+    distributions = {
+        "side": measure(rmap, ik, side_grasps(rng, args.n, axis), rng, True),
+        "top-down": measure(rmap, ik, top_down_grasps(rng, args.n, axis), rng, True),
+        "uniform": measure(rmap, ik, uniform_kept(rmap, rng, args.n), rng, False),
+    }
+    called = int((rmap.reachability(held_out) > 0).sum())
+    result = {
+        "map": {
+            "samples": rmap.info.samples,
+            "seed": args.seed if not args.map else None,
+            "support": {"count": rmap.info.support_count, "threshold": rmap.info.support_threshold},
+            "cells_reached": rmap.n_reached,
+            "recorded_quality": rmap.info.quality or None,
+        },
+        "recall_held_out_fk": _rate(called, len(held_out)),
+        "distributions": distributions,
+        "target": "precision >= 96% at recall >= 98.5% per distribution (issue 27 item 4)",
+    }
+    name = args.name or f"map_precision_{rmap.info.samples:.0e}_{args.split}".replace("+0", "").replace(
+        "+", ""
+    )
+    report(name, result, split=args.split, used_seeds=[SPLITS[args.split]], protocol_file=protocol_file)
+
+
+if __name__ == "__main__":
+    main()
