@@ -1,0 +1,58 @@
+"""Selection by the index-finger line: image boxes, the border, and the 3-D ray beside it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from baseplace.perception.selection import border_distance, image_ray, missing_depth_share, world_ray
+
+
+def _finger(tip, direction, step=10.0, dim=2):
+    L = np.zeros((21, dim))
+    d = np.asarray(direction, float) / np.linalg.norm(direction)
+    for k, i in enumerate((8, 7, 6, 5)):
+        L[i] = np.asarray(tip, float) - k * step * d
+    return L
+
+
+def test_the_line_selects_the_first_box_it_enters_and_stops_there():
+    L = _finger([50, 100], [1, 0])
+    boxes = [[[200, 90], [220, 110]], [[100, 95], [120, 105]], [[60, 0], [80, 20]]]
+    ray = image_ray(L, boxes, 320, 240)
+    assert ray.hit == 1 and ray.length == pytest.approx(100 - 50 - 0.5)
+    assert ray.end == pytest.approx([99.5, 100])
+
+
+def test_a_box_behind_the_fingertip_or_beside_the_line_is_not_selected():
+    L = _finger([150, 100], [1, 0])
+    ray = image_ray(L, [[[100, 90], [120, 110]], [[200, 120], [220, 140]]], 320, 240)
+    assert ray.hit is None and ray.length == pytest.approx(319.5 - 150)  # to the border
+
+
+def test_the_border_distance_in_every_direction():
+    assert border_distance([10, 10], [-1, 0], 100, 50) == pytest.approx(10.5)
+    assert border_distance([10, 10], [0, 1], 100, 50) == pytest.approx(39.5)
+    d = np.array([1.0, 1.0]) / np.sqrt(2)
+    assert border_distance([10, 10], d, 100, 50) == pytest.approx(39.5 * np.sqrt(2))
+
+
+def test_the_3d_ray_from_the_finger_depth_meets_the_world_box_and_is_none_without_depth():
+    H, W = 60, 80
+    points = np.full((H, W, 3), np.nan)
+    L = _finger([40, 30], [1, 0], step=5)
+    for i in (5, 6, 7, 8):  # the finger's points: along +x at 1 m height, 2 cm apart
+        u, v = L[i]
+        points[int(v) - 2 : int(v) + 3, int(u) - 2 : int(u) + 3] = [0.5 + (u - 40) * 0.004, 0.0, 1.0]
+    ray = world_ray(L, points, [[[0.8, -0.1, 0.9], [0.9, 0.1, 1.1]], [[0.3, -0.1, 0.9], [0.4, 0.1, 1.1]]])
+    assert ray is not None and ray.hit == 0 and ray.length == pytest.approx(0.3, abs=1e-6)
+    assert ray.direction == pytest.approx([1, 0, 0], abs=1e-9)
+    points[..., :] = np.nan
+    assert world_ray(L, points, [[[0.8, -0.1, 0.9], [0.9, 0.1, 1.1]]]) is None
+
+
+def test_the_share_of_the_line_without_depth():
+    depth = np.ones((10, 100))
+    depth[:, 60:] = np.nan
+    ray = image_ray(_finger([10, 5], [1, 0]), np.zeros((0, 2, 2)), 100, 10)
+    assert missing_depth_share(ray, depth) == pytest.approx(40 / 89.5, abs=0.02)
