@@ -24,7 +24,7 @@ def _hand_px(scene):
 @pytest.mark.parametrize("seed", [2, 11])
 def test_every_object_on_the_table_is_found_where_it_stands(seed):
     scene = generate_pointing_scene(seed)
-    found = detect_objects(_world(scene), hand_px=_hand_px(scene))
+    found = detect_objects(_world(scene), hand_px=_hand_px(scene)).objects
     assert len(found) == len(scene.objects)
     for truth in scene.objects:
         errors = [np.linalg.norm(o.position - truth.centre) for o in found]
@@ -38,9 +38,11 @@ def test_every_object_on_the_table_is_found_where_it_stands(seed):
 def test_the_hand_is_an_object_unless_its_landmarks_are_given():
     scene = generate_pointing_scene(2)
     points = _world(scene)
-    with_hand = detect_objects(points)
+    with_hand = detect_objects(points).objects
     assert len(with_hand) > len(scene.objects)  # the hand, maybe in parts
-    assert len(detect_objects(points, hand_px=_hand_px(scene))) == len(scene.objects)
+    found = detect_objects(points, hand_px=_hand_px(scene))
+    assert len(found.objects) == len(scene.objects)
+    assert found.hand[np.rint(_hand_px(scene)[8, 1]).astype(int), np.rint(_hand_px(scene)[8, 0]).astype(int)]
 
 
 def test_a_frame_without_a_level_plane_has_no_support():

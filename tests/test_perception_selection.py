@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from baseplace.perception.selection import border_distance, image_ray, missing_depth_share, world_ray
+from baseplace.perception.selection import border_distance, depth_hole, image_ray, world_ray
 
 
 def _finger(tip, direction, step=10.0, dim=2):
@@ -51,8 +51,11 @@ def test_the_3d_ray_from_the_finger_depth_meets_the_world_box_and_is_none_withou
     assert world_ray(L, points, [[[0.8, -0.1, 0.9], [0.9, 0.1, 1.1]]]) is None
 
 
-def test_the_share_of_the_line_without_depth():
+def test_the_longest_run_of_the_line_without_depth():
     depth = np.ones((10, 100))
-    depth[:, 60:] = np.nan
+    depth[:, 30:35] = np.nan
+    depth[:, 60:80] = np.nan
     ray = image_ray(_finger([10, 5], [1, 0]), np.zeros((0, 2, 2)), 100, 10)
-    assert missing_depth_share(ray, depth) == pytest.approx(40 / 89.5, abs=0.02)
+    n, at = depth_hole(ray, depth)
+    assert n == 20 and at == pytest.approx([60, 5])
+    assert depth_hole(ray, np.ones((10, 100))) == (0, None)

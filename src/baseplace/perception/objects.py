@@ -15,8 +15,8 @@ Here, without a learned detector:
 4. each cluster gets its world box (its bottom extended down to the support plane: the camera sees
    the top and one side of an object, never its bottom) and its image box (the pixels of its points).
 
-A cluster that holds at least three of the hand's landmark pixels is the operator's hand and
-is left out (:func:`detect_objects`, ``hand_px``).
+The operator's hand is left out (:func:`detect_objects`, ``hand_px``): the clusters under its
+landmarks, and those within ``hand_reach`` of them that reach into the landmarks' image box.
 """
 
 from __future__ import annotations
@@ -45,7 +45,10 @@ class ObjectSettings:
         link: voxel edge [m] of the clustering: points in touching voxels are one object.
         min_points: smaller clusters are noise.
         max_size: clusters with a horizontal side longer than this [m] are not graspable objects.
-        hand_landmarks: a cluster holding at least this many hand landmark pixels is the hand.
+        hand_landmarks: a cluster under at least this many hand landmarks is the hand (its fingers
+            may fall apart into clusters of their own).
+        hand_reach: clusters closer than this [m] to the hand, in the landmarks' image box, are
+            parts of it (a finger hidden behind the others: no landmark pixel shows it).
     """
 
     resolution: float = 0.02
@@ -56,7 +59,8 @@ class ObjectSettings:
     link: float = 0.012
     min_points: int = 20
     max_size: float = 0.5
-    hand_landmarks: int = 3
+    hand_landmarks: int = 1
+    hand_reach: float = 0.08
 
     def __post_init__(self) -> None:
         lengths = (
@@ -127,6 +131,20 @@ class DetectedObject:
         return {"position": np.round(self.position, 4).tolist(), "size": np.round(self.size, 4).tolist(),
                 "box_world": np.round(self.box_world, 4).tolist(), "image_box": self.image_box.tolist(),
                 "n_points": self.n_points, "support_height": round(self.support_height, 4)}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Detections:
+    """What :func:`detect_objects` found.
+
+    Attributes:
+        objects: the objects, largest image box first.
+        hand: (H, W) True on the pixels of the hand's clusters (the operator leaves; a planner
+            should not treat the hand as an obstacle).
+    """
+
+    objects: list[DetectedObject]
+    hand: NDArray[np.bool_]
 
 
 class NoSupportPlaneError(NothingFoundError):
@@ -203,8 +221,8 @@ def _heights_above_support(
 
 def detect_objects(
     points_world: ArrayLike, settings: ObjectSettings | None = None, hand_px: ArrayLike | None = None
-) -> list[DetectedObject]:
-    """The objects standing on the support planes of an organised world cloud.
+) -> Detections:
+    """The objects standing on the support planes of an organised world cloud, and the hand's pixels.
 
     Args:
         points_world: (H, W, 3) the frame's points in the world frame (z up) [m], NaN without depth.
@@ -212,7 +230,7 @@ def detect_objects(
         hand_px: (21, 2) the hand's landmark pixels (u, v); the cluster holding them is left out.
 
     Returns:
-        The objects, largest image box first.
+        The objects (largest image box first) and the hand's pixels.
 
     Raises:
         NoSupportPlaneError: no level region of ``min_support_area`` in the frame.
@@ -238,7 +256,7 @@ def detect_objects(
     pix = np.argwhere(valid)[on]  # (n, 2) row, col
     xyz, support = flat[on], which[on]
     if len(xyz) == 0:
-        return []
+        return Detections([], np.zeros((height, width), dtype=bool))
     keys = np.floor(xyz / s.link).astype(np.int64)
     lo = keys.min(axis=0)
     shape = keys.max(axis=0) - lo + 1
@@ -252,6 +270,7 @@ def detect_objects(
     label_image = np.full((height, width), -1, dtype=np.int64)
     label_image[pix[:, 0], pix[:, 1]] = point_label
     hand = _hand_labels(label_image, hand_px, s.hand_landmarks)
+    hand |= _near(xyz, pix, point_label, hand, hand_px, s.hand_reach)
     objects = []
     for k in range(n):
         mine = point_label == k
@@ -271,21 +290,54 @@ def detect_objects(
         )
         objects.append(DetectedObject(np.stack([lo_w, hi_w]), image_box, int(mine.sum()), ground))
     objects.sort(key=lambda o: -float(np.prod(o.image_box[1] - o.image_box[0] + 1)))
-    return objects
+    return Detections(objects, np.isin(label_image, sorted(hand)))
+
+
+def _near(xyz: NDArray[np.float64], pix: NDArray[np.int64], point_label: NDArray[np.int64], hand: set[int],
+          hand_px: ArrayLike | None, reach: float) -> set[int]:  # fmt: skip
+    """Clusters within ``reach`` [m] of the hand's whose pixels meet the landmarks' bounding box.
+
+    The box is grown by 5 px. These are parts of the hand that no landmark lands on, such as a
+    pointing finger hidden behind the curled ones; repeated for parts of parts.
+    """
+    from scipy.spatial import cKDTree
+
+    if not hand or hand_px is None:
+        return set()
+    px = np.asarray(hand_px, dtype=float).reshape(-1, 2)
+    lo, hi = np.nanmin(px, axis=0) - 5, np.nanmax(px, axis=0) + 5
+    uv = pix[:, ::-1]
+    in_box = np.all((uv >= lo) & (uv <= hi), axis=1)
+    candidates = set(np.unique(point_label[in_box]).tolist()) - hand
+    found, todo = set(hand), set(hand)
+    while todo and candidates - found:
+        tree = cKDTree(xyz[np.isin(point_label, sorted(todo))])
+        others = np.isin(point_label, sorted(candidates - found))
+        distance, _ = tree.query(xyz[others], distance_upper_bound=reach)
+        todo = set(np.unique(point_label[others][np.isfinite(distance)]).tolist())
+        found |= todo
+    return found - hand
 
 
 def _hand_labels(label_image: NDArray[np.int64], hand_px: ArrayLike | None, needed: int) -> set[int]:
-    """Clusters holding at least ``needed`` landmark pixels (each looked up within 2 px)."""
+    """Clusters under at least ``needed`` landmarks.
+
+    Each landmark counts for the cluster at its pixel, else the most common one within 1 px: a
+    landmark lies on the hand, so the depth there is the hand's.
+    """
     if hand_px is None:
         return set()
-    _H, _W = label_image.shape
     counts: dict[int, int] = {}
     for u, v in np.asarray(hand_px, dtype=float).reshape(-1, 2):
         if not (np.isfinite(u) and np.isfinite(v)):
             continue
         r, c = round(v), round(u)
-        window = label_image[max(r - 2, 0) : max(r + 3, 0), max(c - 2, 0) : max(c + 3, 0)]
-        for k in set(window[window >= 0].tolist()):
+        window = label_image[max(r - 1, 0) : max(r + 2, 0), max(c - 1, 0) : max(c + 2, 0)]
+        inside = 0 <= r < label_image.shape[0] and 0 <= c < label_image.shape[1]
+        k = int(label_image[r, c]) if inside else -1
+        if k < 0 and (window >= 0).any():
+            k = int(np.bincount(window[window >= 0]).argmax())
+        if k >= 0:
             counts[k] = counts.get(k, 0) + 1
     return {k for k, c in counts.items() if c >= needed}
 

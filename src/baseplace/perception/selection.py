@@ -137,19 +137,28 @@ def world_ray(
     return Ray(origin, direction, None, float("inf"))
 
 
-def missing_depth_share(ray: Ray, depth: NDArray[np.floating[Any]], start: float = 0.0) -> float:
-    """Share of the pixels along a 2-D ray, from ``start`` px past the fingertip to its end, without depth."""
+def depth_hole(
+    ray: Ray, depth: NDArray[np.floating[Any]], start: float = 0.0
+) -> tuple[int, FloatArray | None]:
+    """The longest run of pixels without depth along a 2-D ray, from ``start`` px past the fingertip.
+
+    Returns:
+        (its length [px], its first pixel (u, v) or None when the ray has depth everywhere).
+    """
     n = int(ray.length - start)
     if n <= 0:
-        return 0.0
+        return 0, None
     t = start + np.arange(n) + 0.5
     uv = np.rint(ray.origin + t[:, None] * ray.direction).astype(int)
     H, W = depth.shape
-    keep = (uv[:, 0] >= 0) & (uv[:, 0] < W) & (uv[:, 1] >= 0) & (uv[:, 1] < H)
-    uv = uv[keep]
-    if len(uv) == 0:
-        return 0.0
-    return float(np.mean(~np.isfinite(depth[uv[:, 1], uv[:, 0]])))
+    uv = uv[(uv[:, 0] >= 0) & (uv[:, 0] < W) & (uv[:, 1] >= 0) & (uv[:, 1] < H)]
+    missing = ~np.isfinite(depth[uv[:, 1], uv[:, 0]])
+    best, best_start, run = 0, -1, 0
+    for k, m in enumerate(missing):
+        run = run + 1 if m else 0
+        if run > best:
+            best, best_start = run, k - run + 1
+    return best, None if best == 0 else uv[best_start].astype(float)
 
 
-__all__ = ["Ray", "border_distance", "finger_points", "image_ray", "missing_depth_share", "world_ray"]
+__all__ = ["Ray", "border_distance", "depth_hole", "finger_points", "image_ray", "world_ray"]

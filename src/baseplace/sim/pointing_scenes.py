@@ -16,8 +16,10 @@ cylinders, hand spheres); nothing here is used by the library.
 from __future__ import annotations
 
 import itertools
+import json
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -27,6 +29,10 @@ from baseplace.perception.rgbd import Intrinsics
 from baseplace.sim.camera import look_at
 
 FloatArray = NDArray[np.float64]
+
+
+PALETTE = {-1: (0, 0, 0), 0: (120, 120, 120), 1: (150, 110, 70), 1000: (225, 180, 150)}
+"""RGB of what is not an object: nothing, the floor, the table, the hand (objects get random colours)."""
 
 
 @dataclass(frozen=True)
@@ -275,7 +281,7 @@ def generate_pointing_scene(seed: int, settings: PointingSceneSettings | None = 
         depth[finite] += rng.normal(size=int(finite.sum())) * (0.0012 + 0.0019 * (depth[finite] - 0.4) ** 2)
     depth_img = depth.reshape(s.height, s.width).astype(np.float32)
     depth_img[~np.isfinite(depth_img)] = np.nan
-    palette = {-1: (0, 0, 0), 0: (120, 120, 120), 1: (150, 110, 70), 1000: (225, 180, 150)}
+    palette = PALETTE
     colours = rng.integers(30, 255, size=(len(objects), 3))
     rgb = np.zeros((len(what), 3), dtype=np.uint8)
     for label in np.unique(what):
@@ -288,4 +294,35 @@ def generate_pointing_scene(seed: int, settings: PointingSceneSettings | None = 
     return PointingScene(rgb.reshape(s.height, s.width, 3), depth_img, K, T, objects, target, landmarks, L)
 
 
-__all__ = ["PointingScene", "PointingSceneSettings", "TrueObject", "generate_pointing_scene"]
+def save_pointing_scene(scene: PointingScene, folder: str | Path) -> dict[str, str]:
+    """Write a frame as the ``point`` command reads it; returns the files and the intrinsics text.
+
+    ``rgb.png``, ``depth.png`` (16-bit millimetres, 0 without return), ``landmarks.json``
+    (MediaPipe's ``[{"x", "y", "z"}]``), ``T_world_camera.txt`` (4x4) and ``truth.json``.
+    """
+    import cv2
+
+    out = Path(folder)
+    out.mkdir(parents=True, exist_ok=True)
+    files = {k: str(out / name) for k, name in (("rgb", "rgb.png"), ("depth", "depth.png"), ("landmarks", "landmarks.json"),
+                                                 ("transform", "T_world_camera.txt"), ("truth", "truth.json"))}  # fmt: skip
+    cv2.imwrite(files["rgb"], scene.rgb[..., ::-1])
+    mm = np.where(np.isfinite(scene.depth), np.rint(scene.depth * 1000), 0).clip(0, 65535).astype(np.uint16)
+    cv2.imwrite(files["depth"], mm)
+    Path(files["landmarks"]).write_text(json.dumps(scene.landmarks_json()))
+    np.savetxt(files["transform"], scene.T_world_camera)
+    truth = {"target": scene.target, "objects": [o.to_json() for o in scene.objects]}
+    Path(files["truth"]).write_text(json.dumps(truth))
+    K = scene.intrinsics
+    files["intrinsics"] = f"{K.fx!r} {K.fy!r} {K.cx!r} {K.cy!r}"
+    return files
+
+
+__all__ = [
+    "PALETTE",
+    "PointingScene",
+    "PointingSceneSettings",
+    "TrueObject",
+    "generate_pointing_scene",
+    "save_pointing_scene",
+]
