@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from baseplace.perception.selection import border_distance, depth_hole, image_ray, world_ray
+from baseplace.perception.selection import border_distance, depth_hole, image_ray, nearest_box, world_ray
 
 
 def _finger(tip, direction, step=10.0, dim=2):
@@ -59,3 +59,15 @@ def test_the_longest_run_of_the_line_without_depth():
     n, at = depth_hole(ray, depth)
     assert n == 20 and at == pytest.approx([60, 5])
     assert depth_hole(ray, np.ones((10, 100))) == (0, None)
+
+
+def test_the_nearest_rule_takes_the_box_centre_closest_in_angle_within_the_limit():
+    L = _finger([50, 100], [1, 0])
+    ray = image_ray(L, np.zeros((0, 2, 2)), 320, 240)
+    grazed = [[100, 100.5], [104, 140]]  # its corner touches the line: the seed's rule takes it
+    aimed = [[200, 92], [220, 112]]  # its centre lies 0.5 deg off the line
+    assert image_ray(L, [grazed, aimed], 320, 240).hit == 0
+    chosen = nearest_box(ray, [grazed, aimed])
+    assert chosen.hit == 1 and chosen.length == pytest.approx(160, abs=0.1)
+    assert nearest_box(ray, [[[100, 150], [110, 160]]]).hit is None  # 44 deg off: nothing
+    assert nearest_box(ray, [[[100, 150], [110, 160]]], max_angle_deg=50).hit == 0

@@ -97,10 +97,10 @@ def test_no_depth_along_the_line_is_exit_3_depth_missing(frame, tmp_path):
     hit = scene.T_world_camera
     p_cam = (truth.centre - hit[:3, 3]) @ hit[:3, :3]
     u, v = scene.intrinsics.project(p_cam[None])[0]
-    depth[int(v) - 20 : int(v) + 20, int(u) - 20 : int(u) + 20] = 0  # a black, shiny object: no returns
+    depth[int(v) - 45 : int(v) + 45, int(u) - 45 : int(u) + 45] = 0  # a black, shiny object: no returns
     cv2.imwrite(str(tmp_path / "depth.png"), depth)
-    tip = np.array([json.loads(open(files["landmarks"]).read())[8][a] for a in "xy"]) * [320, 240]
-    if np.all(np.abs(tip - [u, v]) < 20):
+    tip = np.array([json.loads(open(files["landmarks"]).read())[8][a] for a in "xy"]) * [640, 480]
+    if np.all(np.abs(tip - [u, v]) < 45):
         pytest.fail("the hand lies in the blanked window; choose another scene")
     proc, obj = _point(files, depth=tmp_path / "depth.png")
     assert proc.returncode == 3 and obj["error"].startswith("depth is missing on"), obj["error"]
@@ -108,7 +108,7 @@ def test_no_depth_along_the_line_is_exit_3_depth_missing(frame, tmp_path):
 
 @pytest.mark.parametrize(
     "change, fragment",
-    [({"intrinsics": "250 250 159.5"}, "neither 4 numbers"), ({"intrinsics": "250 250 900 119.5"}, "outside the 320x240"),
+    [({"intrinsics": "250 250 159.5"}, "neither 4 numbers"), ({"intrinsics": "250 250 900 119.5"}, "outside the 640x480"),
      ({"transform": None}, "give --transform"), ({"depth": "SMALL"}, "the depth image 16x8"),
      ({"rgb": "JUNK"}, "corrupt"), ({"landmarks": "SHORT"}, "21 landmarks, got 3")],
 )  # fmt: skip
@@ -152,3 +152,10 @@ def test_with_a_grid_the_candidates_to_pick_the_object_up(tmp_path):
         d = np.hypot(c["x"] - truth.centre[0], c["y"] - truth.centre[1])
         assert 0.4 < d < 1.0 and not (0.5 <= c["x"] <= 1.0 and abs(c["y"]) <= 0.5)
     assert obj["path"] is not None
+
+
+def test_the_nearest_rule_selects_the_same_object_on_a_clear_scene(frame):
+    files, _ = frame
+    first, nearest = _point(files)[1], _point(files, "--selection", "nearest")[1]
+    assert nearest["exit_code"] == 0 and nearest["inputs"]["selection"] == "nearest"
+    assert nearest["object"] == first["object"]

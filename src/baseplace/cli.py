@@ -151,7 +151,7 @@ def _candidates(a: argparse.Namespace, progress: Progress) -> Any:
 
 def _point(a: argparse.Namespace, progress: Progress) -> Any:
     job = point.PointJob(a.rgb, a.depth, a.intrinsics, a.transform, a.landmarks, a.occupancy, a.robot, a.arm, a.map,
-                         a.robot_pose, a.seed)  # fmt: skip
+                         a.robot_pose, a.seed, selection=a.selection)  # fmt: skip
     if a.occupancy is not None:
         job.motion, job.robustness = motion_and_robustness(vars(a))
     return point.point_job(job, progress)
@@ -387,6 +387,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help='world_T_camera file (4x4, optical frame), or the camera-frame up vector "ux uy uz"')  # fmt: skip
     p.add_argument("--landmarks", default=None,
                    help="JSON of 21 MediaPipe hand landmarks (normalised x, y; relative z) instead of the hand model")  # fmt: skip
+    p.add_argument("--selection", default="first", choices=["first", "nearest"],
+                   help="first: the seed's, the first object box the finger's line enters; nearest: the object "
+                        "whose centre lies at the smallest angle from the line (within 12 deg) (default first)")  # fmt: skip
     p.add_argument("--occupancy", default=None, help="occupancy grid (map_server YAML): also where to stand")
     p.add_argument("--robot-pose", default=None, help='robot pose "x y yaw": rank by motion cost, plan a path')  # fmt: skip
     p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")

@@ -52,6 +52,8 @@ class PointJob:
         occupancy: occupancy grid (map_server YAML or loaded): also the candidates to pick the object up.
         robot, arm, map, robot_pose, seed, motion, robustness: as the candidates job's.
         objects: how objects are cut out of the frame (None: defaults).
+        selection: "first" (the seed's: the first image box the line enters) or "nearest" (the
+            object whose centre lies at the smallest angle from the line, within 12 deg).
     """
 
     rgb: str
@@ -68,6 +70,7 @@ class PointJob:
     motion: MotionSettings | None = None
     robustness: RobustnessSettings | None = None
     objects: ObjectSettings | None = None
+    selection: str = "first"
 
     def echo(self) -> dict[str, Any]:
         """The inputs as given."""
@@ -75,7 +78,7 @@ class PointJob:
                 "landmarks": self.landmarks,
                 "occupancy": self.occupancy if isinstance(self.occupancy, str | None) else "grid",
                 "robot": self.robot, "arm": self.arm, "map": self.map, "robot_pose": self.robot_pose,
-                "seed": self.seed}  # fmt: skip
+                "seed": self.seed, "selection": self.selection}  # fmt: skip
 
 
 @dataclass
@@ -175,10 +178,12 @@ def point_job(job: PointJob, progress: Progress | None = None) -> PointReport:
     from baseplace.perception.gestures import classify
     from baseplace.perception.objects import NoSupportPlaneError, detect_objects
     from baseplace.perception.rgbd import load_frame
-    from baseplace.perception.selection import depth_hole, image_ray, world_ray
+    from baseplace.perception.selection import SELECTION_RULES, depth_hole, image_ray, nearest_box, world_ray
     from baseplace.terrain.io import load_transform
 
     t0 = time.perf_counter()
+    if job.selection not in SELECTION_RULES:
+        raise InputError(f"unknown selection rule {job.selection!r}; valid: {', '.join(SELECTION_RULES)}")
     if job.transform is None:
         raise InputError(
             'give --transform: the camera\'s world_T_camera (a 4x4 file) or its up vector (e.g. "0 -1 0")'
@@ -209,9 +214,10 @@ def point_job(job: PointJob, progress: Progress | None = None) -> PointReport:
     )
     if gesture.name != "Point":
         raise NoResultError(f"the gesture is {gesture.name}, not Point: nothing is selected", report)
-    ray = image_ray(
-        hand[:, :2], np.array([o.image_box for o in objects]).reshape(-1, 2, 2), frame.width, frame.height
-    )
+    boxes = np.array([o.image_box for o in objects]).reshape(-1, 2, 2)
+    ray = image_ray(hand[:, :2], boxes, frame.width, frame.height)
+    if job.selection == "nearest":
+        ray = nearest_box(ray, boxes)
     ray3 = world_ray(hand[:, :2], points, np.array([o.box_world for o in objects]).reshape(-1, 2, 3))
     report.ray_2d, report.ray_3d = ray.to_json(), None if ray3 is None else ray3.to_json()
     t_select = time.perf_counter()

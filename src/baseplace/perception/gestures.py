@@ -46,8 +46,11 @@ SHAPES = {
 STRETCHED_RATIO = 1.15
 """A finger is stretched when |tip - wrist| exceeds |PIP - wrist| by this factor (a straight finger's
 ratio is about 1.4-1.6, a half-bent one's about 1.1) ..."""
-STRETCHED_COS = 0.7
-"""... and its PIP->DIP->TIP segments bend less than acos(0.7) = 46 deg against MCP->PIP."""
+STRETCHED_COS = 0.4
+"""... and PIP->TIP bends less than acos(0.4) = 66 deg against MCP->PIP. Chosen on the pointing
+experiment's development scenes (docs/protocols/pointing.md): with 1.5 px landmark noise on hands
+80 px long, a straight index finger measured down to 0.51 there (the segments are 5-15 px); the
+first rule, 0.7 on each of PIP->DIP and DIP->TIP, called 11 of 100 pointing hands unclear."""
 CURLED_RATIO = 1.0
 """A finger is curled when its tip lies no farther from the wrist than its PIP joint."""
 
@@ -77,7 +80,7 @@ def finger_state(landmarks: ArrayLike, finger: str) -> str:
         finger: index, middle, ring or little.
     """
     L = np.asarray(landmarks, dtype=float)
-    mcp, pip, dip, tip = (L[i] for i in FINGERS[finger])
+    mcp, pip, _, tip = (L[i] for i in FINGERS[finger])
     wrist = L[WRIST]
     d_tip, d_pip = float(np.linalg.norm(tip - wrist)), float(np.linalg.norm(pip - wrist))
     if d_pip <= 0:
@@ -85,13 +88,10 @@ def finger_state(landmarks: ArrayLike, finger: str) -> str:
     ratio = d_tip / d_pip
     if ratio <= CURLED_RATIO:
         return "curled"
-    base = pip - mcp
-    cosines = []
-    for a, b in ((pip, dip), (dip, tip)):
-        seg = b - a
-        denom = float(np.linalg.norm(base) * np.linalg.norm(seg))
-        cosines.append(float(base @ seg) / denom if denom > 0 else -1.0)
-    if ratio >= STRETCHED_RATIO and min(cosines) >= STRETCHED_COS:
+    base, rest = pip - mcp, tip - pip
+    denom = float(np.linalg.norm(base) * np.linalg.norm(rest))
+    straightness = float(base @ rest) / denom if denom > 0 else -1.0
+    if ratio >= STRETCHED_RATIO and straightness >= STRETCHED_COS:
         return "stretched"
     return "unclear"
 

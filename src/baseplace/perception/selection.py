@@ -84,6 +84,42 @@ def image_ray(landmarks_px: ArrayLike, image_boxes: ArrayLike, width: int, heigh
     return Ray(origin, direction, None, border)
 
 
+SELECTION_RULES = ("first", "nearest")
+"""``first``: the seed's rule, the first image box the line enters. ``nearest``: the object whose
+image-box centre lies at the smallest angle from the line, seen from the fingertip, within
+:data:`NEAREST_MAX_ANGLE_DEG` (robust to a line grazing the corner of a nearer box, or passing just beside a
+small target)."""
+NEAREST_MAX_ANGLE_DEG = 12.0
+"""The ``nearest`` rule's widest angle [deg] between the line and an object's centre, chosen on the
+pointing experiment's development scenes (docs/protocols/pointing.md; 640x480): of 100, 61 selected at
+4 deg, 75 at 6, 81 at 8, 85 at 10, 88 at 12, 15 and 20 (``first``: 83); 12 deg is the smallest angle
+of the plateau."""
+
+
+def nearest_box(ray: Ray, image_boxes: ArrayLike, max_angle_deg: float = NEAREST_MAX_ANGLE_DEG) -> Ray:
+    """The ``nearest`` rule: the box whose centre, seen from the fingertip, lies closest in angle to the line.
+
+    Args:
+        ray: the image line from :func:`image_ray` (its origin, direction and the border).
+        image_boxes: (M, 2, 2) objects' pixel boxes (min corner, max corner).
+        max_angle_deg: boxes whose centre lies farther from the line than this [deg] are not chosen.
+
+    Returns:
+        The line ending at the chosen box's centre, or ``ray`` unchanged (hit None) when none is within the angle.
+    """
+    boxes = np.asarray(image_boxes, dtype=float).reshape(-1, 2, 2)
+    if len(boxes) == 0:
+        return Ray(ray.origin, ray.direction, None, ray.length)
+    to_centre = boxes.mean(axis=1) - ray.origin
+    distance = np.linalg.norm(to_centre, axis=1)
+    cos = (to_centre @ ray.direction) / np.maximum(distance, 1e-9)
+    angle = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    best = int(np.argmin(angle))
+    if angle[best] > max_angle_deg:
+        return Ray(ray.origin, ray.direction, None, ray.length)
+    return Ray(ray.origin, ray.direction, best, float(distance[best] * cos[best]))
+
+
 def finger_points(landmarks_px: ArrayLike, points: NDArray[np.float64], window: int = 2) -> FloatArray | None:
     """The index finger's 3-D points (4, 3) from an organised cloud (H, W, 3), or None.
 
@@ -161,4 +197,14 @@ def depth_hole(
     return best, None if best == 0 else uv[best_start].astype(float)
 
 
-__all__ = ["Ray", "border_distance", "depth_hole", "finger_points", "image_ray", "world_ray"]
+__all__ = [
+    "NEAREST_MAX_ANGLE_DEG",
+    "SELECTION_RULES",
+    "Ray",
+    "border_distance",
+    "depth_hole",
+    "finger_points",
+    "image_ray",
+    "nearest_box",
+    "world_ray",
+]

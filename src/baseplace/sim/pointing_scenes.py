@@ -55,8 +55,8 @@ class PointingSceneSettings:
         depth_noise: apply the axial noise model.
     """
 
-    width: int = 320
-    height: int = 240
+    width: int = 640
+    height: int = 480
     fov_deg: float = 65.0
     camera_height: float = 1.35
     table_size: tuple[float, float] = (0.8, 1.2)
@@ -68,7 +68,7 @@ class PointingSceneSettings:
     gap: float = 0.06
     hand_distance: tuple[float, float] = (0.2, 0.35)
     hand_height: tuple[float, float] = (0.12, 0.25)
-    landmark_sigma_px: float = 1.5
+    landmark_sigma_px: float = 2.0
     depth_noise: bool = True
 
 
