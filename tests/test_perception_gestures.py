@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -48,3 +50,22 @@ def test_a_half_bent_finger_is_unclear_and_makes_no_gesture():
 def test_landmarks_of_the_wrong_shape_are_refused():
     with pytest.raises(InputError, match="21 finite landmarks"):
         classify(np.zeros((20, 3)))
+
+
+def test_the_rule_on_real_hands_recorded_with_mediapipe():
+    """Real landmarks (tests/data/gestures/README.md: Kazuhito00's training data, Apache-2.0), 2-D.
+
+    On all 4450 rows of the source file the rule gives Stop for 94.7 % of Open hands, none for
+    97.3 % of fists and Point for 76.0 % of Pointer hands; most misses there are index fingers
+    pointing at the camera, which 2-D landmarks show folded. On the 60 + 60 + 60 rows shipped:
+    58, 59 and 45.
+    """
+    data = np.loadtxt(
+        Path(__file__).parent / "data" / "gestures" / "kazuhito00_keypoints_sample.csv", delimiter=","
+    )
+    expected = {0: "Stop", 1: "none", 2: "Point"}
+    hits = {
+        c: sum(classify(row[1:].reshape(21, 2)).name == expected[c] for row in data[data[:, 0] == c])
+        for c in expected
+    }
+    assert hits == {0: 58, 1: 59, 2: 45}

@@ -118,3 +118,32 @@ def test_a_ros_camera_info_yaml_is_read_both_ways(tmp_path):
         parse_intrinsics(str(bad))
     with pytest.raises(InputError, match="the CameraInfo is for 640x480 images"):
         K.check_image(320, 240)
+
+
+@pytest.mark.parametrize("which", ["rgb", "depth", "npy"])
+def test_a_small_file_declaring_a_huge_frame_is_refused_by_the_cli_within_a_small_peak(tmp_path, which):
+    """A 100-byte PNG declaring 15000 x 15000 pixels, or a .npy header declaring 15000 x 15000 floats."""
+    from peak_memory import CAP_MB, cli_peak
+
+    cv2.imwrite(str(tmp_path / "c.png"), np.zeros((4, 6, 3), np.uint8))
+    cv2.imwrite(str(tmp_path / "d.png"), np.ones((4, 6), np.uint16))
+    files = {"rgb": tmp_path / "c.png", "depth": tmp_path / "d.png"}
+    if which == "npy":
+        header = {"descr": "<f4", "fortran_order": False, "shape": (15000, 15000)}
+        with open(tmp_path / "big.npy", "wb") as f:
+            np.lib.format.write_array_header_1_0(f, header)
+            f.write(b"\0" * 64)
+        files["depth"] = tmp_path / "big.npy"
+    else:
+        files[which] = _png_header_only(
+            tmp_path / "big.png", 15000, 15000, *((16, 0) if which == "depth" else ())
+        )
+    (tmp_path / "hand.json").write_text("[]")
+    code, err, seconds, peak_mb = cli_peak(
+        "point", "--rgb", str(files["rgb"]), "--depth", str(files["depth"]), "--intrinsics", "500 500 2 1",
+        "--transform", "0 -1 0", "--landmarks", str(tmp_path / "hand.json"), cwd=tmp_path,
+    )  # fmt: skip
+    assert code == 2 and len(err.strip().splitlines()) == 1, err
+    assert "declares" in err or "more than" in err, err
+    print(f"{which}: peak {peak_mb:.0f} MB under a {CAP_MB} MB cap, {seconds:.2f} s")
+    assert peak_mb < 250 and seconds < 30, (peak_mb, CAP_MB)

@@ -159,3 +159,15 @@ def test_the_nearest_rule_selects_the_same_object_on_a_clear_scene(frame):
     first, nearest = _point(files)[1], _point(files, "--selection", "nearest")[1]
     assert nearest["exit_code"] == 0 and nearest["inputs"]["selection"] == "nearest"
     assert nearest["object"] == first["object"]
+
+
+def test_without_landmarks_and_without_mediapipe_the_error_names_what_to_do(frame, monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "mediapipe", None)  # as on an install without MediaPipe
+    files, _ = frame
+    proc, obj = _point(files, landmarks=None)
+    assert (
+        proc.returncode == 2 and "needs MediaPipe 0.10.21" in obj["error"] and "--landmarks" in obj["error"]
+    )
+    assert len(proc.stderr.strip().splitlines()) == 1

@@ -34,8 +34,6 @@ if TYPE_CHECKING:
 MAX_LANDMARKS_BYTES = 1 << 20
 MIN_DEPTH_HOLE_PX = 10
 """A line that meets no object but crosses this many pixels in a row without depth: "depth missing"."""
-HAND_EXTRA = "hands"
-"""The pyproject extra that installs MediaPipe's hand landmarker."""
 
 
 @dataclass
