@@ -29,6 +29,8 @@ if TYPE_CHECKING:
     from baseplace.perception.objects import ObjectSettings
     from baseplace.placement.motion import MotionSettings
     from baseplace.placement.robustness import RobustnessSettings
+    from baseplace.reachability.rmap import ReachabilityMap
+    from baseplace.robots.model import Robot
     from baseplace.world.occupancy import OccupancyGrid
 
 MAX_LANDMARKS_BYTES = 1 << 20
@@ -60,9 +62,9 @@ class PointJob:
     transform: str | None = None
     landmarks: str | None = None
     occupancy: OccupancyGrid | str | None = None
-    robot: str = "tiago"
+    robot: Robot | str = "tiago"
     arm: str | None = None
-    map: str | None = None
+    map: ReachabilityMap | str | None = None
     robot_pose: str | None = None
     seed: int = 0
     motion: MotionSettings | None = None
@@ -75,7 +77,8 @@ class PointJob:
         return {"rgb": self.rgb, "depth": self.depth, "intrinsics": self.intrinsics, "transform": self.transform,
                 "landmarks": self.landmarks,
                 "occupancy": self.occupancy if isinstance(self.occupancy, str | None) else "grid",
-                "robot": self.robot, "arm": self.arm, "map": self.map, "robot_pose": self.robot_pose,
+                "robot": self.robot if isinstance(self.robot, str) else self.robot.name, "arm": self.arm,
+                "map": self.map if isinstance(self.map, str | None) else "loaded", "robot_pose": self.robot_pose,
                 "seed": self.seed, "selection": self.selection}  # fmt: skip
 
 
