@@ -152,6 +152,21 @@ def test_with_a_grid_the_candidates_to_pick_the_object_up(tmp_path):
         d = np.hypot(c["x"] - truth.centre[0], c["y"] - truth.centre[1])
         assert 0.4 < d < 1.0 and not (0.5 <= c["x"] <= 1.0 and abs(c["y"]) <= 0.5)
     assert obj["path"] is not None
+    proc, obj = _point(files, "--occupancy", str(tmp_path / "grid.yaml"), "--map", str(tmp_path / "t.rmap"),
+                       "--robustness-samples", "0", "--no-motion-check", "--png", str(tmp_path / "point.png"))  # fmt: skip
+    picture = cv2.imread(obj["outputs"]["png"])
+    assert proc.returncode == 0 and picture.shape[1] > picture.shape[0] * 2  # the image and the top view
+
+
+def test_a_picture_on_exit_3_and_none_on_bad_input(frame, tmp_path):
+    files, _ = frame
+    (tmp_path / "none.json").write_text("[]")
+    proc, obj = _point(files, "--png", str(tmp_path / "a.png"), landmarks=tmp_path / "none.json")
+    assert proc.returncode == 3 and cv2.imread(obj["outputs"]["png"]) is not None
+    proc, _ = _point(files, "--png", str(tmp_path / "b.png"), intrinsics="1 2 3")
+    assert proc.returncode == 2 and not (tmp_path / "b.png").exists()
+    proc, obj = _point(files, "--png", str(tmp_path / "c.txt"))
+    assert proc.returncode == 2 and "--png" in obj["error"] and not (tmp_path / "c.txt").exists()
 
 
 def test_the_nearest_rule_selects_the_same_object_on_a_clear_scene(frame):

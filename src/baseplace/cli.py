@@ -151,7 +151,7 @@ def _candidates(a: argparse.Namespace, progress: Progress) -> Any:
 
 def _point(a: argparse.Namespace, progress: Progress) -> Any:
     job = point.PointJob(a.rgb, a.depth, a.intrinsics, a.transform, a.landmarks, a.occupancy, a.robot, a.arm, a.map,
-                         a.robot_pose, a.seed, selection=a.selection)  # fmt: skip
+                         a.robot_pose, a.seed, selection=a.selection, png=a.png)  # fmt: skip
     if a.occupancy is not None:
         job.motion, job.robustness = motion_and_robustness(vars(a))
     return point.point_job(job, progress)
@@ -396,6 +396,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--arm", default=None, help="arm (default: the robot's default arm)")
     p.add_argument("--map", default=None, help="reachability map (default: the cached default map)")
     p.add_argument("--seed", type=nonneg_int, default=0, help="random seed (default 0)")
+    p.add_argument(
+        "--png", default=None, help="picture: the image with hand, line and boxes; candidates from above"
+    )
     _add_motion_and_robustness_arguments(p)
     _add_degrees_argument(p)
 

@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 from baseplace.errors import InputError, brief
-from baseplace.jobs.inputs import CloudInput, Progress
+from baseplace.jobs.inputs import CloudInput, Progress, out_path
 from baseplace.jobs.report import NoResultError, Report, RobotRef
 
 if TYPE_CHECKING:
@@ -54,6 +54,8 @@ class PointJob:
         objects: how objects are cut out of the frame (None: defaults).
         selection: "first" (the seed's: the first image box the line enters) or "nearest" (the
             object whose centre lies at the smallest angle from the line, within 12 deg).
+        png: also write a picture here: the image with the hand, the line and the boxes; with a
+            grid, the candidates from above (also on exit 3, what was found).
     """
 
     rgb: str
@@ -71,6 +73,7 @@ class PointJob:
     robustness: RobustnessSettings | None = None
     objects: ObjectSettings | None = None
     selection: str = "first"
+    png: str | None = None
 
     def echo(self) -> dict[str, Any]:
         """The inputs as given."""
@@ -79,7 +82,7 @@ class PointJob:
                 "occupancy": self.occupancy if isinstance(self.occupancy, str | None) else "grid",
                 "robot": self.robot if isinstance(self.robot, str) else self.robot.name, "arm": self.arm,
                 "map": self.map if isinstance(self.map, str | None) else "loaded", "robot_pose": self.robot_pose,
-                "seed": self.seed, "selection": self.selection}  # fmt: skip
+                "seed": self.seed, "selection": self.selection, "png": self.png}  # fmt: skip
 
 
 @dataclass
@@ -176,13 +179,12 @@ def point_job(job: PointJob, progress: Progress | None = None) -> PointReport:
         InputError: bad files, images of different sizes, bad intrinsics or transform.
         NoResultError: no hand, not pointing, the line meets no object, or no depth along it (exit 3).
     """
-    from baseplace.perception.gestures import classify
-    from baseplace.perception.objects import NoSupportPlaneError, detect_objects
     from baseplace.perception.rgbd import load_frame
-    from baseplace.perception.selection import SELECTION_RULES, depth_hole, image_ray, nearest_box, world_ray
+    from baseplace.perception.selection import SELECTION_RULES
     from baseplace.terrain.io import load_transform
 
     t0 = time.perf_counter()
+    png = out_path(job.png, "--png", (".png",))  # before any work
     if job.selection not in SELECTION_RULES:
         raise InputError(f"unknown selection rule {job.selection!r}; valid: {', '.join(SELECTION_RULES)}")
     if job.transform is None:
@@ -192,6 +194,30 @@ def point_job(job: PointJob, progress: Progress | None = None) -> PointReport:
     T_world_camera = load_transform(job.transform)
     frame = load_frame(job.rgb, job.depth, job.intrinsics)
     report = PointReport(inputs=job.echo(), image_size=[frame.width, frame.height])
+    try:
+        _find(job, frame, T_world_camera, report, t0, progress)
+    except NoResultError:  # what was found is worth a picture too; bad input writes nothing
+        _picture(png, frame.rgb, report)
+        raise
+    _picture(png, frame.rgb, report)
+    return report
+
+
+def _picture(png: Path | None, rgb: np.ndarray, report: PointReport) -> None:
+    if png is not None:
+        from baseplace.viz.pointing import plot_point
+
+        plot_point(rgb, report.to_json(), png)
+        report.outputs["png"] = str(png)
+
+
+def _find(job: PointJob, frame: Any, T_world_camera: np.ndarray, report: PointReport, t0: float,
+          progress: Progress | None) -> None:  # fmt: skip
+    """The hand, the gesture, the objects, the selection and the candidates, into ``report``."""
+    from baseplace.perception.gestures import classify
+    from baseplace.perception.objects import NoSupportPlaneError, detect_objects
+    from baseplace.perception.selection import depth_hole, image_ray, nearest_box, world_ray
+
     t_load = time.perf_counter()
     hand = _hand_landmarks(job, frame.rgb)
     t_hand = time.perf_counter()
@@ -243,7 +269,6 @@ def point_job(job: PointJob, progress: Progress | None = None) -> PointReport:
     if job.occupancy is not None:
         _candidates(job, report, points[~detections.hand], target.position, progress)
     report.timings_ms["total"] = (time.perf_counter() - t0) * 1e3
-    return report
 
 
 def _candidates(job: PointJob, report: PointReport, points: np.ndarray, position: np.ndarray,
