@@ -94,6 +94,8 @@ BAD_INPUTS = {
     "segment": (["segment", "nowhere.ply"], "does not exist"),
     "scene generate": (["scene", "generate", "--out", "scene.txt"], "suffix"),
     "demo": (["demo", "--out", "demo.json/x"], "not a directory"),
+    "point": (["point", "--rgb", "nowhere.png", "--depth", "d.png", "--intrinsics", "1 1 0 0", "--transform", "0 0 1"],
+              "not found"),
 }  # fmt: skip
 
 

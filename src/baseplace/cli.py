@@ -22,14 +22,14 @@ from typing import Any, NoReturn
 from baseplace import __version__
 from baseplace.argtypes import count, finite_float, in_radians, nonneg_int
 from baseplace.errors import BaseplaceError
-from baseplace.jobs import candidates, demo, explain, navigate, place, reach, surface, world
+from baseplace.jobs import candidates, demo, explain, navigate, place, point, reach, surface, world
 from baseplace.jobs.inputs import DEFAULT_MAP_SAMPLES, Progress, motion_and_robustness
 
 DEFAULT_CHECKPOINT_EVERY = 50_000_000  # baseplace.reachability.build's, without importing numba for --help
 KINDS = {"robots": "robots", "robot": "robot_check", "build-map": "build_map", "reach": "reach", "place": "place",
          "candidates": "candidates", "navigate": "navigate", "surface-map": "surface_map",
          "surface-sample": "surface_samples", "occupancy": "occupancy", "segment": "segment", "scene": "scene",
-         "demo": "demo", "explain": "explain"}  # fmt: skip
+         "demo": "demo", "explain": "explain", "point": "point"}  # fmt: skip
 """Command -> the kind of report it prints."""
 
 
@@ -149,6 +149,14 @@ def _candidates(a: argparse.Namespace, progress: Progress) -> Any:
     return candidates.candidates_job(job, progress)
 
 
+def _point(a: argparse.Namespace, progress: Progress) -> Any:
+    job = point.PointJob(a.rgb, a.depth, a.intrinsics, a.transform, a.landmarks, a.occupancy, a.robot, a.arm, a.map,
+                         a.robot_pose, a.seed, selection=a.selection, png=a.png)  # fmt: skip
+    if a.occupancy is not None:
+        job.motion, job.robustness = motion_and_robustness(vars(a))
+    return point.point_job(job, progress)
+
+
 def _demo(a: argparse.Namespace, progress: Progress) -> Any:
     from baseplace.guards import check_path_length
 
@@ -166,6 +174,7 @@ JOBS: dict[str, Callable[[argparse.Namespace, Progress], Any]] = {
     "place": _place,
     "explain": _explain,
     "candidates": _candidates,
+    "point": _point,
     "navigate": lambda a, _: navigate.navigate_job(navigate.NavigateJob(
         a.start, a.goal, _cloud(a), a.robot, a.planner, a.time_limit, a.resolution, a.seed, a.out, a.mcap)),
     "surface-map": lambda a, progress: surface.surface_map_job(surface.SurfaceMapJob(
@@ -366,6 +375,30 @@ def build_parser() -> argparse.ArgumentParser:
     _add_bag_args(p)
     p.add_argument("--object-shape", default="auto",
                    help=OBJECT_HELP.replace("first target's grasp point", "--object position"))  # fmt: skip
+    _add_motion_and_robustness_arguments(p)
+    _add_degrees_argument(p)
+
+    p = command("point", "the object a person points at in an RGB-D frame, and where to stand to pick it up")
+    p.add_argument("--rgb", required=True, help="RGB image (PNG or JPEG)")
+    p.add_argument("--depth", required=True,
+                   help="aligned depth image: 16-bit PNG in millimetres (0: none) or float32 .npy in metres")  # fmt: skip
+    p.add_argument("--intrinsics", required=True, help='"fx fy cx cy" [px] or a ROS CameraInfo YAML')
+    p.add_argument("--transform", default=None,
+                   help='world_T_camera file (4x4, optical frame), or the camera-frame up vector "ux uy uz"')  # fmt: skip
+    p.add_argument("--landmarks", default=None,
+                   help="JSON of 21 MediaPipe hand landmarks (normalised x, y; relative z) instead of the hand model")  # fmt: skip
+    p.add_argument("--selection", default="first", choices=["first", "nearest"],
+                   help="first: the seed's, the first object box the finger's line enters; nearest: the object "
+                        "whose centre lies at the smallest angle from the line (within 12 deg) (default first)")  # fmt: skip
+    p.add_argument("--occupancy", default=None, help="occupancy grid (map_server YAML): also where to stand")
+    p.add_argument("--robot-pose", default=None, help='robot pose "x y yaw": rank by motion cost, plan a path')  # fmt: skip
+    p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
+    p.add_argument("--arm", default=None, help="arm (default: the robot's default arm)")
+    p.add_argument("--map", default=None, help="reachability map (default: the cached default map)")
+    p.add_argument("--seed", type=nonneg_int, default=0, help="random seed (default 0)")
+    p.add_argument(
+        "--png", default=None, help="picture: the image with hand, line and boxes; candidates from above"
+    )
     _add_motion_and_robustness_arguments(p)
     _add_degrees_argument(p)
 

@@ -36,7 +36,7 @@ SCHEMA_VERSION = "baseplace.result/1"
 
 KINDS = (
     "place", "candidates", "surface_map", "surface_samples", "navigate", "reach", "segment", "demo",
-    "build_map", "robots", "robot_check", "occupancy", "scene", "explain",
+    "build_map", "robots", "robot_check", "occupancy", "scene", "explain", "point",
 )  # fmt: skip
 """Every kind of report."""
 

@@ -220,11 +220,22 @@ def _explain(o: dict[str, Any]) -> list[str]:
     return lines + _map_built(o)
 
 
+def _point(o: dict[str, Any]) -> list[str]:
+    target = o["object"]
+    lines = [f"gesture {o['gesture']['name']}; {len(o['objects'])} object(s); selected object {o['selected']} at "
+             f"x={target['position'][0]:.3f} y={target['position'][1]:.3f} z={target['position'][2]:.3f}, "
+             f"size {' x '.join(f'{v:.3f}' for v in target['size'])} m"]  # fmt: skip
+    if o["candidates"] is not None:
+        lines.append(f"{len(o['candidates'])} verified candidate(s) to pick it up, best first:")
+        lines += [f"  x={r['x']:.3f} y={r['y']:.3f} yaw={r['yaw']:.3f}" for r in o["candidates"]]
+    return lines
+
+
 RENDERERS: dict[str, Callable[[dict[str, Any]], list[str]]] = {
     "place": _place, "candidates": _candidates, "surface_map": _surface_map, "surface_samples": _surface_samples,
     "navigate": _navigate, "segment": _segment, "demo": _demo, "build_map": _build_map, "robots": _robots,
     "robot_check": _robot_check, "occupancy": _occupancy, "scene": _scene, "reach": _reach,
-    "explain": _explain,
+    "explain": _explain, "point": _point,
 }  # fmt: skip
 
 

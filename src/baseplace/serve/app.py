@@ -172,6 +172,28 @@ class CandidatesRequest(RobustnessFields):
         return self
 
 
+class PointRequest(RobustnessFields):
+    """``baseplace point`` on one RGB-D frame sent in the body (base64); with ``scene_id``, its grid's candidates."""
+
+    rgb: str = Field(..., description="RGB image file (PNG or JPEG), base64")
+    rgb_format: Literal["png", "jpg"] = "png"
+    depth: str = Field(..., description="depth image file (16-bit PNG [mm] or float32 .npy [m]), base64")
+    depth_format: Literal["png", "npy"] = "png"
+    intrinsics: str = Field(..., max_length=200, description='"fx fy cx cy" [px]')
+    transform: str = Field(
+        ..., max_length=2000, description='T_world_camera: 16 numbers row by row, or "ux uy uz"'
+    )
+    landmarks: list[list[float]] = Field(
+        ..., max_length=21, description="21 MediaPipe landmarks [x, y, z]; [] no hand"
+    )
+    selection: Literal["first", "nearest"] = "first"
+    scene_id: str | None = Field(None, max_length=64, description="a scene with a grid: also the candidates")
+    robot_pose: str | None = Field(None, max_length=100, description='robot pose "x y yaw"')
+    robot: str = Field("tiago", max_length=64)
+    arm: str | None = Field(None, max_length=64)
+    seed: int = SEED
+
+
 class ReachRequest(_Model):
     """``baseplace reach`` on the robot's default map: targets and bases paired row by row."""
 
@@ -499,6 +521,13 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
         scene = st.scene(req.scene_id)
         return await answer(jobs.candidates, st, scene, req.model_dump())
 
+    @app.post(
+        "/point", summary="baseplace point --json: the object pointed at in an RGB-D frame, where to stand"
+    )
+    async def point(req: PointRequest) -> Response:
+        scene = None if req.scene_id is None else st.scene(req.scene_id)
+        return await answer(jobs.point, st, scene, req.model_dump())
+
     @app.post("/navigate", summary="baseplace navigate --json across the scene's planar regions")
     async def navigate(req: NavigateRequest) -> Response:
         scene = st.scene(req.scene_id)
@@ -529,11 +558,12 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
     return app
 
 
-COMMAND_LANE = (jobs.candidates, jobs.navigate, jobs.surface_map, jobs.surface_samples)
+COMMAND_LANE = (jobs.candidates, jobs.navigate, jobs.surface_map, jobs.surface_samples, jobs.point)
 """Jobs run on the command thread, on robots of their own, beside the placements."""
 
 KINDS = {"/place": "place", "/candidates": "candidates", "/navigate": "navigate", "/reach": "reach",
-         "/explain": "explain", "/surface-map": "surface_map", "/surface-samples": "surface_samples"}  # fmt: skip
+         "/explain": "explain", "/surface-map": "surface_map", "/surface-samples": "surface_samples",
+         "/point": "point"}  # fmt: skip
 """A job's endpoint -> the kind of its report."""
 
 

@@ -175,6 +175,52 @@ def candidates(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[s
     return _with_scene(run_job("candidates", req, job, str(state.folder)), scene)
 
 
+def point(state: ServiceState, scene: Scene | None, req: dict[str, Any]) -> dict[str, Any]:
+    """``baseplace point --json`` on a frame sent as base64 files; with a scene, its grid's candidates."""
+    import base64
+    import binascii
+    import tempfile
+    from pathlib import Path
+
+    from baseplace.jobs.inputs import motion_and_robustness
+    from baseplace.jobs.point import PointJob, point_job
+
+    def job() -> Report:
+        with tempfile.TemporaryDirectory(dir=state.folder) as folder:
+            files = {
+                "rgb": Path(folder) / f"rgb.{req['rgb_format']}",
+                "depth": Path(folder) / f"depth.{req['depth_format']}",
+            }
+            for key, path in files.items():
+                try:
+                    path.write_bytes(base64.b64decode(req[key], validate=True))
+                except (binascii.Error, ValueError):
+                    raise InputError(f"{key} is not base64") from None
+            numbers = req["transform"].replace(",", " ").split()
+            transform = req["transform"]
+            if len(numbers) == 16:  # a matrix: the file the CLI reads
+                (Path(folder) / "T_world_camera.txt").write_text(" ".join(numbers))
+                transform = str(Path(folder) / "T_world_camera.txt")
+            (Path(folder) / "landmarks.json").write_text(json.dumps(req["landmarks"]))
+            robot: Any = req["robot"]
+            rmap = None
+            if scene is not None:
+                robot = state.robot(req["robot"], lane="commands")
+                rmap = state.reach_map(robot, req["arm"])
+            motion, robustness = motion_and_robustness(req)
+            return point_job(PointJob(str(files["rgb"]), str(files["depth"]), req["intrinsics"], transform,
+                                      str(Path(folder) / "landmarks.json"), None if scene is None else scene.grid,
+                                      robot, req["arm"], rmap, req["robot_pose"], req["seed"], motion, robustness,
+                                      selection=req["selection"]))  # fmt: skip
+
+    inputs = {k: v for k, v in req.items() if k not in ("rgb", "depth")}
+    report = run_job("point", inputs, job, str(state.folder))
+    report["inputs"] = {
+        k: v for k, v in report["inputs"].items() if k not in ("rgb", "depth", "landmarks", "transform")
+    }
+    return report if scene is None else _with_scene(report, scene)
+
+
 def navigate(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[str, Any]:
     """``baseplace navigate --json`` across the scene's planar regions (its segmentation, kept)."""
     from baseplace.jobs.inputs import CloudInput

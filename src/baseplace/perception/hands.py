@@ -1,0 +1,49 @@
+"""Hand landmarks from an RGB image with MediaPipe's hand landmarker, when MediaPipe is installed.
+
+The seed detects hands with MediaPipe (seed 004, section 3.1). MediaPipe's legacy ``solutions.hands``
+runs the palm detector and the hand landmark model that its wheel ships under ``mediapipe/modules``
+(``palm_detection_full.tflite``, ``hand_landmark_full.tflite``): nothing is downloaded at run time.
+The last release whose wheel ships them for Python 3.11 is 0.10.21 (0.10.32 and later, and 1.x,
+ship none). It is not an extra of baseplace: it requires ``numpy<2`` and ``opencv-contrib-python``,
+and pip would downgrade numpy and install a second OpenCV over baseplace's. Without it,
+:func:`detect_hand` is a one-line error; ``--landmarks`` needs none of this.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from baseplace.errors import InputError
+
+MIN_DETECTION_CONFIDENCE = 0.5
+"""MediaPipe's own default."""
+
+
+def detect_hand(rgb: NDArray[np.uint8]) -> NDArray[np.float64] | None:
+    """The landmarks (21, 3) [px] (x, y; z scaled by the width) of the most confident hand, or None.
+
+    Args:
+        rgb: (H, W, 3) uint8 RGB image.
+
+    Raises:
+        InputError: MediaPipe is not installed (the ``hands`` extra).
+    """
+    try:
+        from mediapipe.python.solutions import hands as mp_hands
+    except ImportError:
+        raise InputError(
+            "the hand landmarker needs MediaPipe 0.10.21 (not installed; see docs/pointing.md), "
+            "or give --landmarks FILE with 21 MediaPipe landmarks"
+        ) from None
+    height, width = rgb.shape[:2]
+    with mp_hands.Hands(static_image_mode=True, max_num_hands=1, model_complexity=1,
+                        min_detection_confidence=MIN_DETECTION_CONFIDENCE) as model:  # fmt: skip
+        result = model.process(np.ascontiguousarray(rgb))
+    if not result.multi_hand_landmarks:
+        return None
+    marks = result.multi_hand_landmarks[0].landmark
+    return np.array([[m.x * width - 0.5, m.y * height - 0.5, m.z * width] for m in marks], dtype=float)
+
+
+__all__ = ["detect_hand"]

@@ -1,0 +1,93 @@
+"""``POST /point``: the CLI's ``point`` over HTTP, the frame in the body (base64)."""
+
+from __future__ import annotations
+
+import base64
+import json
+from pathlib import Path
+
+import jsonschema
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from baseplace.jobs import result_schema
+from baseplace.sim.pointing_scenes import generate_pointing_scene, save_pointing_scene
+from conftest import run_cli
+from test_serve import make_app
+
+
+@pytest.fixture(scope="module")
+def client(tiago, tiago_map):
+    with TestClient(make_app(tiago, tiago_map, max_request_bytes=8 * 1024 * 1024)) as c:
+        yield c
+
+
+@pytest.fixture(scope="module")
+def frame(tmp_path_factory):
+    files = save_pointing_scene(generate_pointing_scene(2), tmp_path_factory.mktemp("frame"))
+    body = {"rgb": base64.b64encode(Path(files["rgb"]).read_bytes()).decode(),
+            "depth": base64.b64encode(Path(files["depth"]).read_bytes()).decode(),
+            "intrinsics": files["intrinsics"], "transform": " ".join(Path(files["transform"]).read_text().split()),
+            "landmarks": [[m["x"], m["y"], m["z"]] for m in json.loads(Path(files["landmarks"]).read_text())]}  # fmt: skip
+    return files, body
+
+
+def test_point_answers_what_the_cli_prints(client, frame):
+    files, body = frame
+    r = client.post("/point", json=body)
+    assert r.status_code == 200, r.text
+    served = r.json()
+    jsonschema.validate(served, result_schema())
+    cli = json.loads(run_cli("point", "--json", *(x for k in ("rgb", "depth", "intrinsics", "transform", "landmarks")
+                                                   for x in (f"--{k}", files[k]))).stdout)  # fmt: skip
+    assert served["object"] == cli["object"] and served["selected"] == cli["selected"]
+    assert served["objects"] == cli["objects"] and served["gesture"] == cli["gesture"]
+
+
+def test_no_hand_is_found_false_and_bad_base64_is_400_with_one_line(client, frame):
+    _, body = frame
+    r = client.post("/point", json={**body, "landmarks": []})
+    assert r.status_code == 200 and r.json()["found"] is False and r.json()["error"] == "no hand in the image"
+    r = client.post("/point", json={**body, "depth": "not base64!"})
+    assert r.status_code == 400 and r.json()["error"] == "depth is not base64" and r.json()["kind"] == "point"
+    r = client.post("/point", json={**body, "intrinsics": "1 2 3"})
+    assert r.status_code == 400 and "neither 4 numbers" in r.json()["error"]
+    assert client.get("/health").status_code == 200  # still answering
+
+
+def test_with_a_scenes_grid_the_candidates_to_pick_the_object_up(client, tmp_path):
+    import cv2
+
+    from test_point_cli import REACHABLE
+
+    scene = generate_pointing_scene(2, REACHABLE)
+    files = save_pointing_scene(scene, tmp_path)
+    points = np.c_[np.mgrid[-1:3:0.05, -2:2:0.05].reshape(2, -1).T, np.zeros(80 * 80)]  # a floor: the scene
+    buf = tmp_path / "floor.npy"
+    np.save(buf, points)
+    up = {"content-type": "application/octet-stream"}
+    r = client.post("/scenes", params={"format": "npy"}, content=buf.read_bytes(), headers=up)
+    assert r.status_code == 200, r.text
+    scene_id = r.json()["scene_id"]
+    x = -1 + (np.arange(80) + 0.5) * 0.05
+    y = -2 + (np.arange(80)[::-1] + 0.5) * 0.05
+    X, Y = np.meshgrid(x, y)
+    _, pgm = cv2.imencode(
+        ".pgm", np.where((X >= 0.5) & (X <= 1.0) & (np.abs(Y) <= 0.5), 0, 254).astype(np.uint8)
+    )
+    r = client.post(f"/scenes/{scene_id}/grid", params={"resolution": 0.05, "origin_x": -1.0, "origin_y": -2.0},
+                    content=pgm.tobytes(), headers=up)  # fmt: skip
+    assert r.status_code == 200, r.text
+    body = {"rgb": base64.b64encode(Path(files["rgb"]).read_bytes()).decode(),
+            "depth": base64.b64encode(Path(files["depth"]).read_bytes()).decode(),
+            "intrinsics": files["intrinsics"], "transform": " ".join(Path(files["transform"]).read_text().split()),
+            "landmarks": [[m["x"], m["y"], m["z"]] for m in json.loads(Path(files["landmarks"]).read_text())],
+            "scene_id": scene_id, "robustness_samples": 0, "no_motion_check": True, "robot_pose": "-0.5 0 0"}  # fmt: skip
+    r = client.post("/point", json=body)
+    assert r.status_code == 200, r.text
+    out = r.json()
+    jsonschema.validate(out, result_schema())
+    truth = scene.objects[scene.target]
+    assert np.linalg.norm(np.array(out["object"]["position"]) - truth.centre) < 0.02
+    assert out["candidates"] and out["scene_id"] == scene_id and out["robot"]["urdf"] == "tiago.urdf"
