@@ -188,15 +188,15 @@ def test_without_landmarks_and_without_mediapipe_the_error_names_what_to_do(fram
     assert len(proc.stderr.strip().splitlines()) == 1
 
 
+@pytest.mark.mediapipe
 @pytest.mark.parametrize("photo, thumb_tip", [("two_thumbs_up.jpg", (216, 88)), ("thumb_up.jpg", (233, 73))])
 def test_mediapipe_finds_the_hand_marked_thumb_tip_in_real_photographs(photo, thumb_tip):
     """Real photographs (tests/data/hands/README.md: source, licence, the hand marking).
 
-    MediaPipe 0.10.21 is no dependency of baseplace (docs/pointing.md): this runs where it is
-    installed. Measured there (0.10.21 with numpy 2.4): 28 px and 7 px from the marks, within 5 % of
+    MediaPipe 0.10.21 is no dependency of baseplace (docs/pointing.md): ``pytest -m mediapipe`` runs
+    this where it is installed (and fails where it is not). Measured there (0.10.21 with numpy 2.4): 28 px and 7 px from the marks, within 5 % of
     the width (32 px).
     """
-    pytest.importorskip("mediapipe", reason="MediaPipe 0.10.21 is not installed (docs/pointing.md)")
     from pathlib import Path
 
     from baseplace.perception.hands import detect_hand
