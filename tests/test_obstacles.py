@@ -300,3 +300,32 @@ def test_the_service_takes_obstacles_and_refuses_the_same_placement(tiago, tiago
         _check_blocked(out.json(), baseline, "box#0", tiago, coal.Box(0.2, 0.2, 0.4), _yawed(x, y, 0.3))
         mesh = client.post("/place", json={**body, "obstacles": ["/etc/passwd.stl"]})
         assert mesh.status_code in (400, 422) and "obstacles" in mesh.text
+
+
+@pytest.mark.parametrize("method", ["radial", "irm"])
+def test_candidates_avoid_a_box_where_the_best_candidate_stood(tiago, tiago_map, method):
+    from baseplace.jobs.candidates import CandidatesJob, candidates_job
+    from baseplace.world.occupancy import OccupancyGrid
+
+    x0, x1, y0, y1, top = 1.6, 2.4, 1.1, 2.9, 0.74  # test_candidates' table: 0.8 m x 1.8 m
+    centres = (np.arange(80) + 0.5) * 0.05
+    X, Y = np.meshgrid(centres, centres)  # row j = y, column i = x
+    grid = OccupancyGrid(
+        np.where((X >= x0) & (X <= x1) & (Y >= y0) & (Y <= y1), 100, 0).astype(np.int8), 0.05
+    )
+    p_o = f"2.2 2.5 {top + 0.1!r}"
+
+    def run(obstacles=()):
+        given = {"obstacles": list(obstacles)} if obstacles else {}
+        return candidates_job(
+            CandidatesJob(p_o, grid, method=method, robot=tiago, map=tiago_map, **given)
+        ).to_json()
+
+    best = run()["candidates"][0]
+    x, y = best["x"], best["y"]
+    out = run([f"box {x!r} {y!r} 0.3 0.2 0.2 0.4"])
+    assert out["candidates"] and not any(_same_pose(c, best) for c in out["candidates"])
+    for c in out["candidates"]:
+        assert (
+            _clearance(tiago, {**c, "joints": [c["joints"]]}, coal.Box(0.2, 0.2, 0.4), _yawed(x, y, 0.3)) > 0
+        )
