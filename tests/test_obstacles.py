@@ -329,3 +329,52 @@ def test_candidates_avoid_a_box_where_the_best_candidate_stood(tiago, tiago_map,
         assert (
             _clearance(tiago, {**c, "joints": [c["joints"]]}, coal.Box(0.2, 0.2, 0.4), _yawed(x, y, 0.3)) > 0
         )
+
+
+def _base_parts(robot) -> list[tuple[coal.CollisionGeometry, np.ndarray]]:
+    """The URDF's collision meshes that no joint moves, with their poses (4, 4) in the base frame."""
+    model = robot.model
+    geom = pin.buildGeomFromUrdf(model, str(robot.spec.urdf), pin.COLLISION,
+                                 package_dirs=[str(p) for p in robot.spec.package_dirs])  # fmt: skip
+    data, gdata = model.createData(), pin.GeometryData(geom)
+    pin.framesForwardKinematics(model, data, robot.q_reference)
+    pin.updateGeometryPlacements(model, data, geom, gdata, robot.q_reference)
+    T_base_root = data.oMf[model.getFrameId(robot.spec.base_frame)].inverse().homogeneous
+    return [(g.geometry, T_base_root @ gdata.oMg[k].homogeneous)
+            for k, g in enumerate(geom.geometryObjects) if g.parentJoint == 0]  # fmt: skip
+
+
+def _base_distance(parts, T_world_base: np.ndarray, shape, T_world_shape: np.ndarray) -> float:
+    return min(float(coal.distance(g, _pose(T_world_base @ T), shape, _pose(T_world_shape), coal.DistanceRequest(),
+                                   coal.DistanceResult())) for g, T in parts)  # fmt: skip
+
+
+def test_robustness_fails_every_draw_whose_base_touches_the_obstacle(tiago, baseline):
+    from baseplace.placement.robustness import RobustnessEstimator, perturbed
+    from baseplace.world.environment import Environment
+    from baseplace.world.obstacles import parse_obstacles  # the module this issue adds
+
+    arm = tiago.arm()
+    T_nominal = np.array(baseline["base_pose"])
+    q = np.array([baseline["joints"][0][n] for n in arm.joint_names])
+    target = np.asarray(pin.XYZQUATToSE3(np.r_[0.5, 0.3, 0.75, 0.0, 0.7071067811865476, 0.0, 0.7071067811865476])
+                        .homogeneous)  # TARGET: pitch pi/2 about y  # fmt: skip
+    parts, low_box = _base_parts(tiago), coal.Box(0.1, 0.4, 0.1)
+    # a low box beside the base, 1.5 cm clear of it at the nominal pose (measured here by coal)
+    x, y = float(T_nominal[0, 3]), float(T_nominal[1, 3])
+    far = _yawed(x + 0.6, y, 0.05)
+    gap = _base_distance(parts, T_nominal, low_box, far)
+    cx = float(x + 0.6 - (gap - 0.015))
+    T_box = _yawed(cx, y, 0.05)
+    assert _base_distance(parts, T_nominal, low_box, T_box) == pytest.approx(0.015, abs=2e-3)
+    settings = RobustnessSettings(samples=64)
+    env = Environment(tiago, {}, shapes=parse_obstacles([f"box {cx!r} {y!r} 0.05 0.1 0.4 0.1"]))
+    estimator = RobustnessEstimator(arm, env, target[None], settings)
+    ok = estimator.successes(T_nominal, [q])
+    touching = np.array(
+        [_base_distance(parts, T, low_box, T_box) < 0 for T in perturbed(T_nominal, estimator.offsets)]
+    )
+    assert touching.sum() >= 5, touching.sum()  # 3 cm sigma: many draws put the base into the box
+    assert not ok[touching].any()
+    clear = RobustnessEstimator(arm, Environment(tiago, {}), target[None], settings).successes(T_nominal, [q])
+    assert clear[touching].sum() > 0  # without the box those draws reach the target: the box is the reason
