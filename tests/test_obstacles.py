@@ -300,6 +300,10 @@ def test_the_service_takes_obstacles_and_refuses_the_same_placement(tiago, tiago
         _check_blocked(out.json(), baseline, "box#0", tiago, coal.Box(0.2, 0.2, 0.4), _yawed(x, y, 0.3))
         mesh = client.post("/place", json={**body, "obstacles": ["/etc/passwd.stl"]})
         assert mesh.status_code in (400, 422) and "obstacles" in mesh.text
+        why = client.post("/explain", json={"scene_id": body["scene_id"], "base": f"{x!r} {y!r} {baseline['yaw']!r}",
+                                            "target": TARGET, "no_motion_check": True, "obstacles": [box]})  # fmt: skip
+        assert why.status_code == 200, why.text
+        assert {c["touched"] for c in why.json()["collisions"]} == {"obstacle box#0"}
 
 
 @pytest.mark.parametrize("method", ["radial", "irm"])
