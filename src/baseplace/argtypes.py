@@ -40,14 +40,20 @@ def nonneg_int(text: str) -> int:
 
 
 ANGLE_OPTIONS: dict[str, tuple[tuple[str, int, int], ...]] = {
-    "place": (("target", 6, 3), ("grasp_point", 6, 3), ("start", 3, 1), ("object", 8, 1)),
+    "place": (("target", 6, 3), ("grasp_point", 6, 3), ("start", 3, 1), ("object", 8, 1), ("obstacle", 8, 1)),
     "reach": (("target", 6, 3), ("targets", 6, 3), ("base", 3, 1), ("bases", 3, 1)),
-    "candidates": (("robot_pose", 3, 1), ("object_shape", 8, 1)),
+    "candidates": (("robot_pose", 3, 1), ("object_shape", 8, 1), ("obstacle", 8, 1)),
     "navigate": (("start", 3, 1), ("goal", 3, 1)),
-    "explain": (("target", 6, 3), ("grasp_point", 6, 3), ("base", 3, 1), ("object", 8, 1)),
+    "explain": (
+        ("target", 6, 3),
+        ("grasp_point", 6, 3),
+        ("base", 3, 1),
+        ("object", 8, 1),
+        ("obstacle", 8, 1),
+    ),
 }
 """Command -> (option's dest, words of a value, angles among its last words) of the angles
-``--degrees`` converts; an object spec counts as "box" and 7 numbers, its yaw last."""
+``--degrees`` converts; an object or obstacle spec counts as "box" and 7 numbers, its yaw last."""
 
 
 def _words_in_radians(text: str, width: int, angles: int) -> str:

@@ -65,6 +65,13 @@ OBJECT_HELP = (
     '"cylinder CX CY CZ RADIUS HEIGHT" [m, rad] or "points FILE" (the object\'s cloud), world frame'
 )
 
+OBSTACLE_HELP = (
+    'a collision object beside the cloud, world frame: "box X Y Z SX SY SZ [YAW]" (centre, full sizes), '
+    '"cylinder X Y Z RADIUS HEIGHT" (centre, axis vertical) [m, rad] or a mesh file PATH.stl|.obj|.ply '
+    "in world coordinates [m]; repeat for several; contacts name it (obstacle box#0: kind and place among "
+    "the --obstacle options, from 0)"
+)
+
 
 def _emit_error(kind: str | None, message: str, code: int, inputs: dict[str, Any]) -> None:
     """The failure report of a command that could not start (bad arguments) on stdout."""
@@ -117,7 +124,8 @@ def _build_map(args: argparse.Namespace, progress: Progress) -> Any:
 
 def _place(a: argparse.Namespace, progress: Progress) -> Any:
     job = place.PlaceJob(a.target or [], a.robot, a.arm, _cloud(a), a.occupancy, a.map, None, a.seed, a.start,
-                         a.planner, a.object, a.floor, a.out, a.mcap, grasp_points=a.grasp_point or [])  # fmt: skip
+                         a.planner, a.object, a.floor, a.out, a.mcap, grasp_points=a.grasp_point or [],
+                         obstacles=a.obstacle or [])  # fmt: skip
     job.check_outputs()  # before the settings' imports (seconds)
     from baseplace.placement.pipeline import PlaceSettings
 
@@ -136,14 +144,26 @@ def _explain(a: argparse.Namespace, progress: Progress) -> Any:
     if a.no_motion_check:
         settings = replace(settings, motion=None)
     job = explain.ExplainJob(
-        a.base, a.target, a.map, a.robot, a.arm, _cloud(a), a.object, a.floor, settings, a.seed, a.grasp_point
+        a.base,
+        a.target,
+        a.map,
+        a.robot,
+        a.arm,
+        _cloud(a),
+        a.object,
+        a.floor,
+        settings,
+        a.seed,
+        a.grasp_point,
+        obstacles=a.obstacle or [],
     )
     return explain.explain_job(job, progress)
 
 
 def _candidates(a: argparse.Namespace, progress: Progress) -> Any:
     job = candidates.CandidatesJob(a.object, a.occupancy, _cloud(a), a.robot_pose, a.method, a.robot, a.arm, a.map,
-                                   a.standoff, a.seed, a.object_shape, None, None, a.png, a.mcap)  # fmt: skip
+                                   a.standoff, a.seed, a.object_shape, None, None, a.png, a.mcap,
+                                   obstacles=a.obstacle or [])  # fmt: skip
     job.check_outputs()  # before the settings' imports (seconds)
     job.motion, job.robustness = motion_and_robustness(vars(a))
     return candidates.candidates_job(job, progress)
@@ -323,6 +343,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--resolution", type=finite_float, default=None,
                    help="height-map cell [m] (default: from the cloud's extent and point spacing, 0.02-0.05)")  # fmt: skip
     p.add_argument("--object", default="auto", help=OBJECT_HELP)
+    p.add_argument("--obstacle", action="append", default=None, help=OBSTACLE_HELP)
     p.add_argument("--floor", type=finite_float, default=None,
                    help="add a floor plane at this height [m] (z up) under and around a cloud that shows none")  # fmt: skip
     _add_motion_and_robustness_arguments(p)
@@ -344,6 +365,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help='world_T_sensor file, or the sensor-frame up vector "ux uy uz"; one per --cloud')  # fmt: skip
     _add_bag_args(p, grid=False)
     p.add_argument("--object", default="auto", help=OBJECT_HELP)
+    p.add_argument("--obstacle", action="append", default=None, help=OBSTACLE_HELP)
     p.add_argument("--floor", type=finite_float, default=None,
                    help="add a floor plane at this height [m] (z up) under and around a cloud that shows none")  # fmt: skip
     p.add_argument("--resolution", type=finite_float, default=None,
@@ -375,6 +397,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_bag_args(p)
     p.add_argument("--object-shape", default="auto",
                    help=OBJECT_HELP.replace("first target's grasp point", "--object position"))  # fmt: skip
+    p.add_argument("--obstacle", action="append", default=None, help=OBSTACLE_HELP)
     _add_motion_and_robustness_arguments(p)
     _add_degrees_argument(p)
 

@@ -68,6 +68,7 @@ class CandidatesJob:
         motion: the reaching-motion check (None: off).
         robustness: the robustness score and ranking (None: defaults).
         png, mcap: also write a plot / an MCAP recording here.
+        obstacles: collision objects given by hand, as ``place``'s (box, cylinder or mesh file).
         cache: a :class:`~baseplace.placement.scene_cache.SceneCache` of ``cloud.points``: the
             cloud's voxels and, per grasped object, the collision environments kept between
             queries (the service).
@@ -89,6 +90,7 @@ class CandidatesJob:
     png: str | None = None
     mcap: str | None = None
     cache: SceneCache | None = field(default=None, repr=False, compare=False)
+    obstacles: Sequence[str] = ()
 
     def echo(self) -> dict[str, Any]:
         """The inputs as given."""
@@ -101,6 +103,7 @@ class CandidatesJob:
             "standoff": self.standoff, "seed": self.seed, "object_shape": self.object_shape,
             "motion_check": self.motion is not None,
             "rank": "reachability" if self.robustness is None else self.robustness.rank,
+            "obstacles": list(self.obstacles),
         }  # fmt: skip
 
     def check_outputs(self) -> tuple[Path | None, Path | None]:
@@ -157,6 +160,7 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
     from baseplace.terrain.voxels import VoxelMap
     from baseplace.world.environment import Environment, contact_groups
     from baseplace.world.grasped_object import GraspedObject, find_grasped_object, parse_grasped_object
+    from baseplace.world.obstacles import check_clear_of, obstacles_key, parse_obstacles
 
     t0 = time.perf_counter()
     robust = job.robustness or RobustnessSettings()
@@ -164,6 +168,8 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
     robot_pose = None if job.robot_pose is None else base_xyyaw(job.robot_pose, "--robot-pose")
     check_object_yaw(job.object_shape, "--object-shape")
     shape = parse_grasped_object(job.object_shape, "--object-shape")
+    obstacles = parse_obstacles(job.obstacles)
+    check_clear_of(obstacles, p_o, ["--object"])
     grid = occupancy_grid(job.occupancy, job.cloud.bag, job.cloud)
     if grid is None:
         raise InputError("give --occupancy MAP.yaml or --bag FILE --map-topic TOPIC")
@@ -200,19 +206,20 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
             voxels = VoxelMap.from_points(points) if cache is None else cache.shared(
                 ("voxels", 0.025), lambda: VoxelMap.from_points(points))  # fmt: skip
         groups, object_voxels = contact_groups(voxels, voxels, held, points)
-        return Environment(robot, groups, grasped=object_voxels, hand_arm=job.arm), groups, object_voxels
+        environment = Environment(robot, groups, grasped=object_voxels, hand_arm=job.arm, shapes=obstacles)
+        return environment, groups, object_voxels
 
     if cache is None:
         environment, groups, object_voxels = environments()
     else:  # per robot, arm and grasped object, kept for the scene's next queries
         environment, groups, object_voxels = cache.per_object(
-            ("candidates", robot, job.arm, object_key(held)), environments
+            ("candidates", robot, job.arm, object_key(held), obstacles_key(obstacles)), environments
         )
     motion = None
     if job.motion is not None:  # the way to the pre-grasp must avoid the object too
         from baseplace.placement.motion import MotionChecker, transit_environment
 
-        transit = transit_environment(robot, groups, object_voxels)
+        transit = transit_environment(robot, groups, object_voxels, obstacles)
         if transit is None:
             motion = MotionChecker(robot, arm, environment, None, job.motion)
         else:

@@ -39,6 +39,7 @@ if TYPE_CHECKING:
     from baseplace.reachability.rmap import ReachabilityMap
     from baseplace.robots.model import Robot
     from baseplace.terrain.pipeline import Terrain
+    from baseplace.world.obstacles import Obstacle
 
 
 @dataclass
@@ -57,6 +58,7 @@ class ExplainJob:
         cloud: the scene cloud, as ``place`` takes it; none given: IK and self-collision only.
         object: the grasped object spec, as ``place``'s (auto, none, box ..., cylinder ..., points FILE).
         floor: add a floor plane at this height [m] under a cloud that shows none.
+        obstacles: collision objects given by hand, as ``place``'s (box, cylinder or mesh file).
         settings: ``place``'s settings (the height-map resolution, the motion check); None: defaults.
         seed: random seed of IK's restarts and the motion planner.
         cache: a :class:`~baseplace.placement.scene_cache.SceneCache` of ``cloud.points``: the
@@ -75,6 +77,7 @@ class ExplainJob:
     seed: int = 0
     grasp_point: str | Sequence[float] | None = None
     cache: SceneCache | None = field(default=None, repr=False, compare=False)
+    obstacles: Sequence[str] = ()
 
     def echo(self) -> dict[str, Any]:
         """The inputs as given."""
@@ -84,6 +87,7 @@ class ExplainJob:
             "robot": self.robot if isinstance(self.robot, str) else self.robot.name, "arm": self.arm,
             **self.cloud.echo(), "object": self.object, "floor": self.floor, "seed": self.seed,
             "motion_check": self.settings is None or self.settings.motion is not None,
+            "obstacles": list(self.obstacles),
         }  # fmt: skip
 
 
@@ -137,6 +141,7 @@ def explain_job(job: ExplainJob, progress: Progress | None = None) -> ExplainRep
     from baseplace.reachability.cache import resolve_map
     from baseplace.robots.ik import DampedLeastSquaresIK
     from baseplace.world.grasped_object import parse_grasped_object
+    from baseplace.world.obstacles import check_clear_of, parse_obstacles
 
     t0 = time.perf_counter()
     if job.base is None:
@@ -156,10 +161,12 @@ def explain_job(job: ExplainJob, progress: Progress | None = None) -> ExplainRep
     x, y, yaw = base_xyyaw(job.base, "--base")
     T_target = _target(given, option)
     grasped = parse_grasped_object(job.object)
+    obstacles = parse_obstacles(job.obstacles)
     settings = job.settings or PlaceSettings()
     robot = load_robot(job.robot)
     if job.grasp_point is not None:  # T_world_tcp = T_world_grasp T_grasp_tcp
         T_target = T_target @ np.linalg.inv(robot.T_tcp_grasp(job.arm))
+    check_clear_of(obstacles, (T_target @ robot.T_tcp_grasp(job.arm))[:3, 3], [option])
     points = None
     if job.cloud.given:
         points = world_cloud(job.cloud).points
@@ -176,13 +183,14 @@ def explain_job(job: ExplainJob, progress: Progress | None = None) -> ExplainRep
     if points is not None:
         terrain = _terrain(points, settings) if job.cache is None else job.cache.terrain(settings.resolution)
         T_base, region = base_on_terrain(terrain, x, y, yaw)
-        checks = scene_checks(robot, arm.name, points, terrain, T_target[None], settings, grasped, job.cache)
+        checks = scene_checks(robot, arm.name, points, terrain, T_target[None], settings, grasped, job.cache,
+                              obstacles=obstacles)  # fmt: skip
         verifier = checks.verifier
         object_json["found"] = checks.grasped_note
         object_json["allowed"] = None if checks.grasped is None else checks.grasped.to_json()
     else:
         T_base, region = PoseRecord.from_xyyaw(x, y, yaw).T_world_base, -1
-        verifier = _self_collision_only(robot, arm.name, T_target)
+        verifier = _self_collision_only(robot, arm.name, T_target, obstacles)
     t_setup = time.perf_counter()
     value = _map_value(rmap, T_base, T_target)
     candidate = Candidate(T_base, region, value["value"])
@@ -208,7 +216,9 @@ def explain_job(job: ExplainJob, progress: Progress | None = None) -> ExplainRep
                   "waypoints": None if found is None else len(found.waypoints),
                   "contacts": [{"link": link, "touched": what} for link, what in verifier.motion.last_contacts]}  # fmt: skip
     t_checks = time.perf_counter()
-    verdict = _verdict(value, footprint, ik_json, collisions, motion, points is not None, settings)
+    verdict = _verdict(
+        value, footprint, ik_json, collisions, motion, points is not None or bool(obstacles), settings
+    )
     return ExplainReport(
         robot=RobotRef.of(robot, arm.name), inputs=job.echo(), outputs=map_output(chosen),
         failures={verdict["failed_check"]: 1} if verdict["failed_check"] else {},
@@ -263,8 +273,10 @@ def base_on_terrain(terrain: Terrain, x: float, y: float, yaw: float) -> tuple[n
     return plane_base_poses(np.array([x]), np.array([y]), np.array([gamma]), plane.normal, plane.d)[0], region
 
 
-def _self_collision_only(robot: Robot, arm_name: str, T_target: np.ndarray) -> Verifier:
-    """The verification without a scene: IK and self-collision (no obstacles, no motion, no footprint)."""
+def _self_collision_only(
+    robot: Robot, arm_name: str, T_target: np.ndarray, obstacles: Sequence[Obstacle]
+) -> Verifier:
+    """The verification without a scene: IK, self-collision and the obstacles given (no motion, no footprint)."""
     from baseplace.placement.verify import Verifier
     from baseplace.robots.ik import DampedLeastSquaresIK
     from baseplace.terrain.polygons import footprint_outline
@@ -272,7 +284,8 @@ def _self_collision_only(robot: Robot, arm_name: str, T_target: np.ndarray) -> V
 
     arm = robot.arm(arm_name)
     outline = footprint_outline(robot.spec.footprint_radius, robot.spec.footprint_polygon)
-    return Verifier(arm, DampedLeastSquaresIK(arm), Environment(robot, {}), T_target[None], {}, outline)
+    return Verifier(arm, DampedLeastSquaresIK(arm), Environment(robot, {}, shapes=obstacles), T_target[None], {},
+                    outline)  # fmt: skip
 
 
 def _map_value(rmap: ReachabilityMap, T_world_base: np.ndarray, T_world_target: np.ndarray) -> dict[str, Any]:

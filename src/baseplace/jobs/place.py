@@ -69,6 +69,8 @@ class PlaceJob:
         planner: path planner with ``start``: rrt (OMPL RRTConnect) or regions.
         object: the grasped object spec (auto, none, box ..., cylinder ..., points FILE).
         floor: add a floor plane at this height [m] under a cloud that shows none.
+        obstacles: collision objects given by hand, beside the cloud: "box X Y Z SX SY SZ [YAW]",
+            "cylinder X Y Z RADIUS HEIGHT" [m, rad] or a mesh file (:mod:`baseplace.world.obstacles`).
         png: also plot the OSRM with the placements here.
         mcap: also write the result as an MCAP recording.
         cache: a :class:`~baseplace.placement.scene_cache.SceneCache` of ``cloud.points``: the
@@ -95,6 +97,7 @@ class PlaceJob:
     cache: SceneCache | None = field(default=None, repr=False, compare=False)
     segmentation_cache: bool = field(default=True, compare=False)
     grasp_points: Sequence[str | Sequence[float]] = ()
+    obstacles: Sequence[str] = ()
 
     def echo(self) -> dict[str, Any]:
         """The inputs as given."""
@@ -108,6 +111,7 @@ class PlaceJob:
             "tries": None if s is None else s.tries, "start": self.start, "planner": self.planner,
             "object": self.object, "floor": self.floor,
             "grasp_points": [t if isinstance(t, str) else [float(v) for v in t] for t in self.grasp_points],
+            "obstacles": list(self.obstacles),
         }  # fmt: skip
 
     def check_outputs(self) -> tuple[Path | None, Path | None]:
@@ -218,6 +222,7 @@ def place_job(job: PlaceJob, progress: Progress | None = None) -> PlaceReport:
     from baseplace.placement.verify import contact_summary, most_frequent_contact
     from baseplace.reachability.cache import resolve_map
     from baseplace.world.grasped_object import parse_grasped_object
+    from baseplace.world.obstacles import check_clear_of, parse_obstacles
 
     t0 = time.perf_counter()
     if job.targets and job.grasp_points:
@@ -233,11 +238,15 @@ def place_job(job: PlaceJob, progress: Progress | None = None) -> PlaceReport:
     )
     check_object_yaw(job.object, "--object")
     grasped = parse_grasped_object(job.object)
+    obstacles = parse_obstacles(job.obstacles)
     settings = job.settings or PlaceSettings()
     start = None if job.start is None else base_xyyaw(job.start, "--start")
     robot = load_robot(job.robot)
     if job.grasp_points:  # T_world_tcp = T_world_grasp T_grasp_tcp
         targets = targets @ np.linalg.inv(robot.T_tcp_grasp(job.arm))
+    if obstacles:  # an obstacle at a grasp point blocks it from every base pose: say so now
+        grasp_points = (targets @ robot.T_tcp_grasp(job.arm))[:, :3, 3]
+        check_clear_of(obstacles, grasp_points, [f"target {k}" for k in range(len(targets))])
     cloud = world_cloud(job.cloud) if job.cloud.given else None
     grid = occupancy_grid(job.occupancy, job.cloud.bag, job.cloud)
     if cloud is None and grid is None:
@@ -280,11 +289,11 @@ def place_job(job: PlaceJob, progress: Progress | None = None) -> PlaceReport:
         from baseplace.placement.in_map import place_in_map
 
         result = place_in_map(robot, rmap, [] if points is None else [points], grid, targets, settings, rng,
-                              grasped=grasped)  # fmt: skip
+                              grasped=grasped, obstacles=obstacles)  # fmt: skip
     else:
         assert points is not None
         result = place(robot, rmap, points, targets, settings, rng, terrain=terrain, grasped=grasped,
-                       cache=job.cache)  # fmt: skip
+                       cache=job.cache, obstacles=obstacles)  # fmt: skip
     t_nav = time.perf_counter()
     if grid is not None and start is not None:  # on the navigation map, around what the cameras see
         from baseplace.placement.in_map import grid_routes

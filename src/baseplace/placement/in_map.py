@@ -23,6 +23,7 @@ from baseplace.robots.model import Robot
 from baseplace.terrain.diagnose import auto_resolution
 from baseplace.world.grasped_object import GraspedObject
 from baseplace.world.grid_scene import GridSceneSettings, grid_points, target_window, with_cloud_obstacles
+from baseplace.world.obstacles import Obstacle
 from baseplace.world.occupancy import OccupancyGrid
 
 
@@ -88,6 +89,7 @@ def place_in_map(
     rng: np.random.Generator | None = None,
     grid_settings: GridSceneSettings | None = None,
     grasped: GraspedObject | str | None = None,
+    obstacles: Sequence[Obstacle] = (),
 ) -> PlacementResult:
     """Verified base placements from camera clouds and an occupancy grid in one world frame.
 
@@ -103,6 +105,7 @@ def place_in_map(
         rng: randomness.
         grid_settings: how the grid becomes floor and obstacles.
         grasped: the object only the hand may touch, as in :func:`~baseplace.placement.pipeline.place`.
+        obstacles: collision objects given by hand, as in :func:`~baseplace.placement.pipeline.place`.
     """
     s = settings or PlaceSettings()
     T = np.asarray(targets, dtype=float).reshape(-1, 4, 4)
@@ -114,4 +117,5 @@ def place_in_map(
     if not np.all(np.isfinite(T)):
         raise InputError("target pose contains NaN or infinity")
     points = scene_points_with_grid(cams, grid, T[:, :2, 3], rmap.horizontal_reach, resolution, grid_settings)
-    return place(robot, rmap, points, T, dataclasses.replace(s, resolution=resolution), rng, grasped=grasped)
+    return place(robot, rmap, points, T, dataclasses.replace(s, resolution=resolution), rng, grasped=grasped,
+                 obstacles=obstacles)  # fmt: skip

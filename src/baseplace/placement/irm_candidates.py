@@ -78,11 +78,11 @@ def hand_feasible(
     (:class:`~baseplace.world.environment.HandFilter`); skipping it saves a verifier call per
     base pose and loses nothing.
     """
-    trees = environment.obstacle_trees
-    if not trees:
+    obstacles = environment.obstacle_geometries  # the voxels and the obstacles given by hand
+    if not obstacles:
         return np.ones(len(grasps), dtype=bool)
     hand = HandFilter(robot, arm_name, environment.geom)  # the environment's own meshes, not a second load
-    return np.array([hand.clear(g, trees) for g in grasps], dtype=bool)
+    return np.array([hand.clear(g, obstacles) for g in grasps], dtype=bool)
 
 
 @dataclass(frozen=True)

@@ -26,7 +26,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -39,6 +39,7 @@ from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Arm, Robot
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import GRASPED, Environment
+from baseplace.world.obstacles import Obstacle
 
 # Stowed ("home"/"tucked") arm configurations of the built-in robots, in the arm's joint order
 # (torso first): PAL's TIAGo home motion and the PR2's pr2_tuck_arms values.
@@ -72,18 +73,18 @@ def approach_axis(arm: Arm) -> FloatArray:
 
 
 def transit_environment(
-    robot: Robot, groups: Mapping[str, VoxelMap], grasped: VoxelMap | None
+    robot: Robot, groups: Mapping[str, VoxelMap], grasped: VoxelMap | None, shapes: Sequence[Obstacle] = ()
 ) -> Environment | None:
     """The collision model of the transit to the pre-grasp, where nothing may be touched.
 
     ``groups`` and ``grasped`` are what the verification's :class:`Environment` was built from
-    (:func:`~baseplace.world.environment.contact_groups`); here the grasped object is one more
-    obstacle group, checked against every link, the hand's included. None when there is no
+    (:func:`~baseplace.world.environment.contact_groups`) and its obstacles given by hand
+    (``shapes``); here the grasped object is one more obstacle group, checked against every link, the hand's included. None when there is no
     grasped object: the verification's environment already allows no contact.
     """
     if grasped is None or len(grasped) == 0:
         return None
-    return Environment(robot, {**groups, GRASPED: grasped})
+    return Environment(robot, {**groups, GRASPED: grasped}, shapes=shapes)
 
 
 @dataclass(frozen=True)

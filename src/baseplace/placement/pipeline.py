@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 import time
 from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -39,6 +40,7 @@ from baseplace.terrain.segmentation import Segmentation
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import SUPPORT_DIST, Environment, contact_groups, obstacle_voxels
 from baseplace.world.grasped_object import GraspedObject, find_grasped_object
+from baseplace.world.obstacles import Obstacle, obstacles_key
 
 POSE_ONLY_CHECKS: dict[str, Any] = {"motion": None, "robustness": RobustnessSettings(samples=0)}
 """PlaceSettings overrides that check the placement's pose alone (IK + collision at the exact pose,
@@ -124,6 +126,7 @@ def place(
     environments: dict[str, Environment] | None = None,
     grasped: GraspedObject | str | None = None,
     cache: SceneCache | None = None,
+    obstacles: Sequence[Obstacle] = (),
 ) -> PlacementResult:
     """Find verified base placements from which the map's arm reaches every target.
 
@@ -145,6 +148,8 @@ def place(
         cache: what earlier queries in this scene built (segmentation, obstacle voxels, collision
             environments, per grasped object too), reused and filled (:class:`SceneCache`);
             ``points`` must be its cloud. Takes the place of ``terrain`` and ``environments``.
+        obstacles: collision objects given by hand (:mod:`baseplace.world.obstacles`), checked
+            beside the cloud's voxels by every check (collision, reaching motion, robustness).
     """
     s = settings or PlaceSettings()
     rng = rng or np.random.default_rng(0)
@@ -172,7 +177,8 @@ def place(
             f"(bounding radius {size:.2f} m)"
         )
     t2 = time.perf_counter()
-    checks = scene_checks(robot, rmap.info.arm, points, terrain, T_targets, s, grasped, cache, environments)
+    checks = scene_checks(robot, rmap.info.arm, points, terrain, T_targets, s, grasped, cache, environments,
+                          obstacles)  # fmt: skip
     verifier, motion, obj, note = checks.verifier, checks.verifier.motion, checks.grasped, checks.grasped_note
     env, arm = verifier.environment, verifier.arm
     rs = s.robustness
@@ -242,12 +248,13 @@ def scene_checks(
     grasped: GraspedObject | str | None,
     cache: SceneCache | None = None,
     environments: dict[str, Environment] | None = None,
+    obstacles: Sequence[Obstacle] = (),
 ) -> SceneChecks:
     """The verification of :func:`place` for one scene (cloud (N, 3), its terrain) and targets (K, 4, 4).
 
     The one assembly of the collision model (support, obstacles, grasped object), IK and reaching
     motion: :func:`place` checks its candidates with it, ``explain`` one given base pose.
-    ``grasped``, ``cache`` and ``environments`` as in :func:`place`.
+    ``grasped``, ``cache``, ``environments`` and ``obstacles`` as in :func:`place`.
     """
     s = settings
     seg = terrain.segmentation
@@ -256,28 +263,30 @@ def scene_checks(
     key = "floor" if s.strategy == "orm" else "regions"
     if cache is None:
         cache = SceneCache(points, terrain, s.resolution)  # this query only
-    obstacles = cache.shared(("obstacles", key, s.resolution, s.support_dist, outline.tobytes()),
-                             lambda: _obstacles(terrain, seg, s, outline))  # fmt: skip
+    voxels = cache.shared(("obstacles", key, s.resolution, s.support_dist, outline.tobytes()),
+                          lambda: _obstacles(terrain, seg, s, outline))  # fmt: skip
     transit = None
     if obj is not None:  # the allowed contact: per grasped object, kept for the scene's next queries
 
         def environments_for_object() -> tuple[Environment, Environment | None]:
             # the surface under it: a slab fitted to the cloud where it is planar, else voxels
-            groups, object_voxels = contact_groups(terrain.voxels, obstacles, obj, cache.points)
-            hand = Environment(robot, groups, grasped=object_voxels, hand_arm=arm_name)
+            groups, object_voxels = contact_groups(terrain.voxels, voxels, obj, cache.points)
+            hand = Environment(robot, groups, grasped=object_voxels, hand_arm=arm_name, shapes=obstacles)
             # on the way to the pre-grasp the hand may not touch it either
-            return hand, transit_environment(robot, groups, object_voxels)
+            return hand, transit_environment(robot, groups, object_voxels, obstacles)
 
         env, transit = cache.per_object(
-            ("environment", robot, arm_name, key, s.resolution, s.support_dist, object_key(obj)),
+            ("environment", robot, arm_name, key, s.resolution, s.support_dist, object_key(obj),
+             obstacles_key(obstacles)),
             environments_for_object,
-        )
+        )  # fmt: skip
     elif environments is not None:
-        if key not in environments:
-            environments[key] = Environment(robot, obstacles)
-        env = environments[key]
+        env_key = key + obstacles_key(obstacles)
+        if env_key not in environments:
+            environments[env_key] = Environment(robot, voxels, shapes=obstacles)
+        env = environments[env_key]
     else:
-        env = scene_environment(robot, cache, s)
+        env = scene_environment(robot, cache, s, obstacles)
     arm = robot.arm(arm_name)
     motion = None
     if s.motion is not None:  # only the final approach may touch the grasped object, with the hand
@@ -291,8 +300,10 @@ def scene_checks(
     return SceneChecks(verifier, obj, note)
 
 
-def scene_environment(robot: Robot, cache: SceneCache, settings: PlaceSettings | None = None) -> Environment:
-    """The collision environment of a scene without a grasped object, made once per cache.
+def scene_environment(
+    robot: Robot, cache: SceneCache, settings: PlaceSettings | None = None, obstacles: Sequence[Obstacle] = ()
+) -> Environment:
+    """The collision environment of a scene without a grasped object, made once per cache (and obstacles).
 
     What :func:`place` uses when nothing may be touched; call it when a scene arrives so that
     its first query finds the obstacle OcTree built.
@@ -301,10 +312,15 @@ def scene_environment(robot: Robot, cache: SceneCache, settings: PlaceSettings |
     terrain = cache.terrain(s.resolution)
     outline = footprint_outline(robot.spec.footprint_radius, robot.spec.footprint_polygon)
     key = "floor" if s.strategy == "orm" else "regions"
-    obstacles = cache.shared(("obstacles", key, s.resolution, s.support_dist, outline.tobytes()),
-                             lambda: _obstacles(terrain, terrain.segmentation, s, outline))  # fmt: skip
-    return cache.shared(("environment", robot, key, s.resolution, s.support_dist, outline.tobytes()),
-                        lambda: Environment(robot, obstacles))  # fmt: skip
+    voxels = cache.shared(("obstacles", key, s.resolution, s.support_dist, outline.tobytes()),
+                          lambda: _obstacles(terrain, terrain.segmentation, s, outline))  # fmt: skip
+    env_key = ("environment", robot, key, s.resolution, s.support_dist, outline.tobytes())
+    if not obstacles:
+        return cache.shared(env_key, lambda: Environment(robot, voxels))
+    # per query's obstacles, like a grasped object: only the last few are kept (a service's scene lives long)
+    return cache.per_object(
+        (*env_key, obstacles_key(obstacles)), lambda: Environment(robot, voxels, shapes=obstacles)
+    )
 
 
 def with_floor(points: ArrayLike, z: float, margin: float = 2.0, spacing: float = 0.02) -> FloatArray:

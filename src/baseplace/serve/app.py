@@ -41,6 +41,8 @@ class _Model(BaseModel):
 
 
 Pose = Annotated[str, StringConstraints(max_length=200)]
+Obstacle = Annotated[str, StringConstraints(max_length=200, pattern=r"^\s*(?i:box|cylinder)\s")]
+"""A box or cylinder obstacle: a mesh file would name a path on the server."""
 """A pose as text ("x y z roll pitch yaw", "x y yaw"): short, so that no answer echoes much."""
 
 SEED = Field(0, ge=0, le=2**32 - 1, description="random seed")
@@ -115,6 +117,9 @@ class PlaceRequest(RobustnessFields):
     use_grid: bool = Field(True, description="the scene's occupancy grid, if it has one (a recording's map topic "
                            "or POST /scenes/{id}/grid), as the CLI's --occupancy: its free cells are floor")  # fmt: skip
     degrees: bool = DEGREES
+    obstacles: list[Obstacle] = Field(default_factory=list, max_length=16,
+                                      description='collision objects beside the cloud, world frame: "box X Y Z SX SY '
+                                                  'SZ [YAW]" or "cylinder X Y Z RADIUS HEIGHT" [m, rad]; no mesh files')  # fmt: skip
 
     @model_validator(mode="after")
     def _work(self) -> PlaceRequest:
@@ -149,6 +154,8 @@ class ExplainRequest(_Model):
     no_motion_check: bool = Field(False, description="skip the reaching-motion check, as place's")
     seed: int = SEED
     degrees: bool = DEGREES
+    obstacles: list[Obstacle] = Field(default_factory=list, max_length=16,
+                                      description="collision objects beside the cloud, as place's")  # fmt: skip
 
 
 class CandidatesRequest(RobustnessFields):

@@ -91,7 +91,7 @@ def _cut(value: Any, folder: str | None) -> Any:
     return value
 
 
-CLI_NAMES = {"targets": "target", "grasp_points": "grasp_point"}
+CLI_NAMES = {"targets": "target", "grasp_points": "grasp_point", "obstacles": "obstacle"}
 """Request fields named otherwise than the CLI's options (``--target``, repeated, is ``targets``)."""
 
 
@@ -128,7 +128,7 @@ def place(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[str, A
         return place_job(PlaceJob(r["targets"], robot, r["arm"], CloudInput(points=scene.cloud), grid,
                                   map=rmap, settings=settings, seed=r["seed"], start=r["start"],
                                   planner=r["planner"], object=r["object"], cache=scene.cache,
-                                  grasp_points=r["grasp_points"]))  # fmt: skip
+                                  grasp_points=r["grasp_points"], obstacles=r.get("obstacles") or []))  # fmt: skip
 
     return _with_scene(run_job("place", req, job, str(state.folder)), scene)
 
@@ -151,7 +151,8 @@ def explain(state: ServiceState, scene: Scene | None, req: dict[str, Any]) -> di
         cloud = CloudInput() if scene is None else CloudInput(points=scene.cloud)
         return explain_job(ExplainJob(r["base"], r["target"], rmap, robot, r["arm"], cloud, r["object"], None,
                                       settings, r["seed"], r["grasp_point"],
-                                      cache=None if scene is None else scene.cache))  # fmt: skip
+                                      cache=None if scene is None else scene.cache,
+                                      obstacles=r.get("obstacles") or []))  # fmt: skip
 
     report = run_job("explain", req, job, str(state.folder))
     return report if scene is None else _with_scene(report, scene)

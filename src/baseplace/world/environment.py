@@ -10,11 +10,14 @@ its voxels are checked against every other link, and the surface under it stays 
 (:func:`contact_groups`); collisions are reported per robot link and per thing touched. Given the
 cloud, the voxels of the planar part of that surface are cut down to a thin slab around the
 fitted plane (:mod:`baseplace.world.support_plane`): no longer up to 25 mm above the surface.
+
+Obstacles given by hand (boxes, cylinders, meshes: :mod:`baseplace.world.obstacles`) are coal
+shapes at their world poses beside the voxels, checked against every link and reported by name.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 
 import coal
 import numpy as np
@@ -22,11 +25,13 @@ import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError
+from baseplace.geometry.poses import FloatArray
 from baseplace.robots.collision import SelfCollision, load_collision_model
 from baseplace.robots.model import Arm, Robot
 from baseplace.terrain.segmentation import Segmentation
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.grasped_object import GraspedObject, rows_in
+from baseplace.world.obstacles import Obstacle
 from baseplace.world.support_plane import fit_support_slab, with_support_slab
 
 SUPPORT_DIST = 0.1
@@ -129,6 +134,8 @@ class Environment:
         self_collision: also check self-collision (default True).
         grasped: voxels of the grasped object (world frame), or None.
         hand_arm: the arm whose hand holds the object (default: the robot's first arm).
+        shapes: obstacles given by hand (world frame), each checked against every link and
+            reported as its :attr:`~baseplace.world.obstacles.Obstacle.label` (``obstacle box#0``).
     """
 
     def __init__(
@@ -138,6 +145,7 @@ class Environment:
         self_collision: bool = True,
         grasped: VoxelMap | None = None,
         hand_arm: str | None = None,
+        shapes: Sequence[Obstacle] = (),
     ) -> None:
         self.robot = robot
         self.model = robot.model
@@ -160,7 +168,16 @@ class Environment:
             for k in range(n_robot):
                 if name != GRASPED or k not in self.hand_ids:
                     self.geom.addCollisionPair(pin.CollisionPair(k, gid))
-        self.obstacle_names = [n for n, v in groups.items() if len(v)]
+        self.shapes = tuple(shapes)
+        self._T_world_env: dict[int, pin.SE3] = {}  # the shapes' poses; voxels are in the world frame
+        for shape in self.shapes:
+            obj = pin.GeometryObject(shape.label, 0, pin.SE3.Identity(), shape.geometry)
+            gid = self.geom.addGeometryObject(obj)
+            self.env_ids.append(gid)
+            self._T_world_env[gid] = pin.SE3(np.asarray(shape.T_world_obstacle, dtype=float))
+            for k in range(n_robot):
+                self.geom.addCollisionPair(pin.CollisionPair(k, gid))
+        self.obstacle_names = [n for n, v in groups.items() if len(v)] + [o.label for o in self.shapes]
         self.data = self.model.createData()
         self.geom_data = pin.GeometryData(self.geom)
         if self._self is not None:  # build the arm-pruned pair tables now, not in the first query
@@ -181,8 +198,18 @@ class Environment:
         return [
             self.geom.geometryObjects[g].geometry
             for g in self.env_ids
-            if self.geom.geometryObjects[g].name != GRASPED
+            if self.geom.geometryObjects[g].name != GRASPED and g not in self._T_world_env
         ]
+
+    @property
+    def obstacle_geometries(self) -> list[tuple[coal.CollisionGeometry, FloatArray]]:
+        """Every obstacle (voxel groups and shapes, not the grasped object) with its world pose (4, 4)."""
+        out = []
+        for g in self.env_ids:
+            obj = self.geom.geometryObjects[g]
+            if obj.name != GRASPED:
+                out.append((obj.geometry, self._T_world_env.get(g, pin.SE3.Identity()).homogeneous))
+        return out
 
     @property
     def obstacle_tree(self) -> coal.OcTree | None:
@@ -208,7 +235,9 @@ class Environment:
             raise InputError("base pose must be a finite (4, 4) matrix")
         T_root_world = self._T_root_base * pin.SE3(T).inverse()
         for gid in self.env_ids:
-            self.geom.geometryObjects[gid].placement = T_root_world
+            T_world_env = self._T_world_env.get(gid)
+            placement = T_root_world if T_world_env is None else T_root_world * T_world_env
+            self.geom.geometryObjects[gid].placement = placement
 
     def _touches_obstacles(self, q: NDArray[np.float64], T_world_base: ArrayLike) -> bool:
         if not self.env_ids:
@@ -284,17 +313,28 @@ class HandFilter:
             for k in hand_geometry_ids(robot, geom, arm_name)
         ]
 
-    def clear(self, T_world_tcp: ArrayLike, obstacles: coal.OcTree | list[coal.OcTree]) -> bool:
-        """True if no hand geometry at ``T_world_tcp`` (4, 4) touches ``obstacles`` (world frame)."""
+    def clear(
+        self,
+        T_world_tcp: ArrayLike,
+        obstacles: coal.CollisionGeometry
+        | list[coal.CollisionGeometry | tuple[coal.CollisionGeometry, FloatArray]],
+    ) -> bool:
+        """True if no hand geometry at ``T_world_tcp`` (4, 4) touches ``obstacles``.
+
+        Each obstacle is a geometry in the world frame (an OcTree) or (geometry, its world pose (4, 4)),
+        as :attr:`Environment.obstacle_geometries` lists them.
+        """
         T_tcp = np.asarray(T_world_tcp, dtype=float)
-        request, identity = coal.CollisionRequest(), coal.Transform3s()
-        trees = obstacles if isinstance(obstacles, list) else [obstacles]
+        request = coal.CollisionRequest()
+        items = obstacles if isinstance(obstacles, list) else [obstacles]
+        placed = []
+        for item in items:
+            geometry, T_world = item if isinstance(item, tuple) else (item, np.eye(4))
+            placed.append((geometry, coal.Transform3s(T_world[:3, :3], T_world[:3, 3])))
         for geometry, T_tcp_geom in self.parts:
             T = T_tcp @ T_tcp_geom
-            for tree in trees:
+            for other, at in placed:
                 result = coal.CollisionResult()
-                if coal.collide(
-                    geometry, coal.Transform3s(T[:3, :3], T[:3, 3]), tree, identity, request, result
-                ):
+                if coal.collide(geometry, coal.Transform3s(T[:3, :3], T[:3, 3]), other, at, request, result):
                     return False
         return True
