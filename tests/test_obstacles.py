@@ -382,3 +382,34 @@ def test_robustness_fails_every_draw_whose_base_touches_the_obstacle(tiago, base
     assert not ok[touching].any()
     clear = RobustnessEstimator(arm, Environment(tiago, {}), target[None], settings).successes(T_nominal, [q])
     assert clear[touching].sum() > 0  # without the box those draws reach the target: the box is the reason
+
+
+def test_obstacles_given_with_the_scene_are_checked_by_every_request_on_it(
+    tiago, tiago_map, floor_points, baseline
+):
+    pytest.importorskip("fastapi")
+    from fastapi.testclient import TestClient
+
+    from test_serve import UP, make_app, npy_bytes
+
+    x, y = baseline["x"], baseline["y"]
+    box = f"box {x!r} {y!r} 0.3 0.2 0.2 0.4"
+    with TestClient(make_app(tiago, tiago_map, max_request_bytes=8 * 1024 * 1024)) as client:
+        bad = client.post("/scenes", params={"format": "npy", "obstacle": ["box 1 2"]},
+                          content=npy_bytes(floor_points), headers=UP)  # fmt: skip
+        assert bad.status_code == 400 and "obstacle" in bad.json()["error"], bad.text
+        mesh = client.post("/scenes", params={"format": "npy", "obstacle": ["/etc/passwd.stl"]},
+                           content=npy_bytes(floor_points), headers=UP)  # fmt: skip
+        assert mesh.status_code == 422, mesh.text
+        r = client.post("/scenes", params={"format": "npy", "obstacle": [box]}, content=npy_bytes(floor_points),
+                        headers=UP)  # fmt: skip
+        assert r.status_code == 200 and r.json()["obstacles"] == [box], r.text
+        body = {"scene_id": r.json()["scene_id"], "targets": [TARGET], "tries": 60, "placements": 2,
+                "robustness_samples": 8}  # fmt: skip
+        out = client.post("/place", json=body)  # the request names no obstacle: the scene's is checked
+        assert out.status_code == 200, out.text
+        _check_blocked(out.json(), baseline, "box#0", tiago, coal.Box(0.2, 0.2, 0.4), _yawed(x, y, 0.3))
+        why = client.post("/explain", json={"scene_id": body["scene_id"], "base": f"{x!r} {y!r} {baseline['yaw']!r}",
+                                            "target": TARGET, "no_motion_check": True})  # fmt: skip
+        assert why.status_code == 200, why.text
+        assert {c["touched"] for c in why.json()["collisions"]} == {"obstacle box#0"}

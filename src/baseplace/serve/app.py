@@ -451,6 +451,15 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
             allow_inf_nan=False,
             description="the CLI's --fuse-miss: occupancy probability of a ray passing a voxel",
         ),
+        obstacle: Annotated[
+            list[Obstacle] | None,
+            Query(
+                description='the CLI\'s --obstacle, part of the scene: "box X Y Z SX SY SZ [YAW]" or "cylinder X Y '
+                'Z RADIUS HEIGHT" [m, rad], world frame; checked by every /place, /explain and /candidates on '
+                "it, before a request's own obstacles (box#k counts through both)",
+                max_length=16,
+            ),
+        ] = None,
     ) -> dict[str, Any]:
         data = await request.body()
         bag = {
@@ -459,8 +468,15 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
             "world_frame": world_frame,
             "clouds": bag_clouds,
         }
-        scene = await run(st.add_scene, data, format, bag, transform, floor, fuse_miss if fuse else None)
-        out = {"scene_id": scene.id, "points": scene.points, "grid": scene.grid_yaml is not None}
+        scene = await run(
+            st.add_scene, data, format, bag, transform, floor, fuse_miss if fuse else None, obstacle
+        )
+        out = {
+            "scene_id": scene.id,
+            "points": scene.points,
+            "grid": scene.grid_yaml is not None,
+            "obstacles": list(scene.obstacles),
+        }
         if (
             scene.segmentation_error is not None
         ):  # a recording's grid, and a cloud of no region: place on the grid

@@ -107,6 +107,11 @@ def in_radians(command: str, req: dict[str, Any]) -> dict[str, Any]:
     return {request_names.get(k, k): v for k, v in vars(cli_in_radians(args)).items() if k != "command"}
 
 
+def _obstacles(scene: Scene | None, req: dict[str, Any]) -> list[str]:
+    """The scene's obstacles (given on upload), then the request's: ``box#k`` counts through both."""
+    return [*(scene.obstacles if scene is not None else ()), *(req.get("obstacles") or [])]
+
+
 def place(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[str, Any]:
     """``baseplace place --json`` on an uploaded scene, with the scene's cache and warm robots and maps.
 
@@ -128,7 +133,7 @@ def place(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[str, A
         return place_job(PlaceJob(r["targets"], robot, r["arm"], CloudInput(points=scene.cloud), grid,
                                   map=rmap, settings=settings, seed=r["seed"], start=r["start"],
                                   planner=r["planner"], object=r["object"], cache=scene.cache,
-                                  grasp_points=r["grasp_points"], obstacles=r.get("obstacles") or []))  # fmt: skip
+                                  grasp_points=r["grasp_points"], obstacles=_obstacles(scene, r)))  # fmt: skip
 
     return _with_scene(run_job("place", req, job, str(state.folder)), scene)
 
@@ -152,7 +157,7 @@ def explain(state: ServiceState, scene: Scene | None, req: dict[str, Any]) -> di
         return explain_job(ExplainJob(r["base"], r["target"], rmap, robot, r["arm"], cloud, r["object"], None,
                                       settings, r["seed"], r["grasp_point"],
                                       cache=None if scene is None else scene.cache,
-                                      obstacles=r.get("obstacles") or []))  # fmt: skip
+                                      obstacles=_obstacles(scene, r)))  # fmt: skip
 
     report = run_job("explain", req, job, str(state.folder))
     return report if scene is None else _with_scene(report, scene)
@@ -171,7 +176,8 @@ def candidates(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[s
         return candidates_job(CandidatesJob(r["object"], scene.grid, cloud, r["robot_pose"], r["method"],
                                             robot, r["arm"], rmap, r["standoff"], r["seed"],
                                             r["object_shape"], *motion_and_robustness(r),
-                                            cache=scene.cache if r["use_cloud"] else None))  # fmt: skip
+                                            cache=scene.cache if r["use_cloud"] else None,
+                                            obstacles=_obstacles(scene, r)))  # fmt: skip
 
     return _with_scene(run_job("candidates", req, job, str(state.folder)), scene)
 

@@ -17,6 +17,7 @@ import threading
 import time
 import uuid
 from collections import OrderedDict
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -141,6 +142,7 @@ class Scene:
     grid_yaml: Path | None = None
     grid: Any = None  # the OccupancyGrid read from grid_yaml
     segmentation_error: str | None = None  # why the cloud has no regions (a scene with a grid only)
+    obstacles: tuple[str, ...] = ()  # boxes and cylinders given on upload, checked in every job on the scene
     _cloud: Any = field(default=None, repr=False)
 
     @property
@@ -255,6 +257,7 @@ class ServiceState:
         transform: str | None = None,
         floor: float | None = None,
         fuse: float | None = None,
+        obstacles: Sequence[str] | None = None,
     ) -> Scene:
         """A scene from an uploaded cloud or recording (worker thread): checked, saved, segmented.
 
@@ -271,6 +274,8 @@ class ServiceState:
             floor: ``--floor``: a floor plane at this height [m] under and around the cloud.
             fuse: ``--fuse --fuse-miss P``: fuse the clouds into an OctoMap by ray casting from each
                 sensor origin, a ray passing a voxel with occupancy probability P (None: no fusion).
+            obstacles: ``--obstacle`` boxes and cylinders [m, rad] that belong to the scene: every
+                ``/place``, ``/explain`` and ``/candidates`` on it checks them, before its own.
         """
         from baseplace.files import write_bytes
         from baseplace.jobs.inputs import BagInput, CloudInput, occupancy_grid, world_cloud
@@ -282,6 +287,10 @@ class ServiceState:
             raise InputError("the upload is empty: send the cloud or recording file as the request body")
         if transform is not None and fmt in BAG_FORMATS:
             raise InputError("transform is for a cloud file: a recording's clouds are posed by its /tf")
+        if obstacles:
+            from baseplace.world.obstacles import parse_obstacles
+
+            parse_obstacles(obstacles, "obstacle")  # checked before the upload is read
         scene_id = uuid.uuid4().hex[:16]
         folder = self.folder / scene_id
         folder.mkdir(mode=0o700)
@@ -315,7 +324,9 @@ class ServiceState:
             upload.unlink()
             _save_npy(folder / "cloud.npy", points)
             cache = SceneCache(points)
-            scene = Scene(scene_id, folder, cache, len(points), f"upload.{fmt}")
+            scene = Scene(
+                scene_id, folder, cache, len(points), f"upload.{fmt}", obstacles=tuple(obstacles or ())
+            )
             try:
                 cache.terrain()  # the segmentation, once per scene
             except InputError as exc:
