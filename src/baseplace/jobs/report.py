@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 from baseplace.errors import NothingFoundError
+from baseplace.geometry.poses import yaw_of
 
 if TYPE_CHECKING:
     from baseplace.robots.model import Robot
@@ -121,7 +122,7 @@ class PoseRecord:
     @property
     def yaw(self) -> float:
         """Heading [rad] in (-pi, pi]: the angle of the base's x axis in the world xy plane."""
-        return wrap_angle(math.atan2(self.T_world_base[1, 0], self.T_world_base[0, 0]))
+        return float(yaw_of(self.T_world_base))
 
     def to_json(self) -> dict[str, Any]:
         """``{"base_pose": 4x4, "x", "y", "z" [m], "yaw" [rad, (-pi, pi]]}``."""
