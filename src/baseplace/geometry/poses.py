@@ -115,7 +115,10 @@ def rotation_taking(a: ArrayLike, b: ArrayLike) -> FloatArray:
 def wrap_angle(angle: ArrayLike) -> FloatArray:
     """Angles [rad], scalar or any shape, wrapped to (-pi, pi]: the one range headings have."""
     a = np.asarray(angle, dtype=float)
-    return a - (2.0 * np.pi) * np.ceil((a - np.pi) / (2.0 * np.pi))
+    wrapped = a - (2.0 * np.pi) * np.ceil((a - np.pi) / (2.0 * np.pi))
+    # Near odd multiples of pi the division rounds across the boundary and lands a few ulp out.
+    wrapped = np.where(wrapped > np.pi, wrapped - 2.0 * np.pi, wrapped)
+    return np.where(wrapped <= -np.pi, wrapped + 2.0 * np.pi, wrapped)
 
 
 def yaw_of(T_world_base: ArrayLike) -> FloatArray:

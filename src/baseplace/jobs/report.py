@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 from baseplace.errors import NothingFoundError
-from baseplace.geometry.poses import yaw_of
+from baseplace.geometry.poses import wrap_angle, yaw_of
 
 if TYPE_CHECKING:
     from baseplace.robots.model import Robot
@@ -40,12 +40,6 @@ KINDS = (
     "build_map", "robots", "robot_check", "occupancy", "scene", "explain", "point",
 )  # fmt: skip
 """Every kind of report."""
-
-
-def wrap_angle(angle: float) -> float:
-    """An angle [rad] wrapped to (-pi, pi]."""
-    wrapped = math.remainder(float(angle), 2 * math.pi)  # in [-pi, pi]
-    return math.pi if wrapped <= -math.pi else wrapped
 
 
 def _json(value: Any) -> Any:
@@ -134,7 +128,7 @@ class PoseRecord:
 def path_json(poses: Any) -> list[list[float]]:
     """A base path as (K, 3) rows x, y [m], yaw [rad, (-pi, pi]]."""
     rows = np.asarray(poses, dtype=float).reshape(len(poses), -1)
-    return [[round(float(r[0]), 4), round(float(r[1]), 4), round(wrap_angle(r[2]), 4)] for r in rows]
+    return [[round(float(r[0]), 4), round(float(r[1]), 4), round(float(wrap_angle(r[2])), 4)] for r in rows]
 
 
 @dataclass
