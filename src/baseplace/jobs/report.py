@@ -20,14 +20,13 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
 from baseplace.errors import NothingFoundError
-from baseplace.geometry.poses import wrap_angle, yaw_of
+from baseplace.geometry.poses import BasePose, wrap_angle, yaw_of
 
 if TYPE_CHECKING:
     from baseplace.robots.model import Robot
@@ -107,10 +106,8 @@ class PoseRecord:
     @classmethod
     def from_xyyaw(cls, x: float, y: float, yaw: float, z: float = 0.0) -> PoseRecord:
         """A planar base pose: position [m], heading [rad, any range] about world z."""
-        c, s = math.cos(yaw), math.sin(yaw)
-        T = np.eye(4)
-        T[:2, :2] = [[c, -s], [s, c]]
-        T[:3, 3] = [x, y, z]
+        T = BasePose.batch_matrix([x, y, yaw])[0]
+        T[2, 3] = z
         return cls(T)
 
     @property

@@ -14,7 +14,6 @@ Every error is one line naming the file, the command that wrote it and what is m
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -264,8 +263,9 @@ class _Reader:
 
 
 def _planar(x: float, y: float, z: float, yaw: float) -> FloatArray:
-    c, s = math.cos(yaw), math.sin(yaw)
-    return np.array([[c, -s, 0.0, x], [s, c, 0.0, y], [0.0, 0.0, 1.0, z], [0.0, 0.0, 0.0, 1.0]])
+    T = BasePose.batch_matrix([x, y, yaw])[0]
+    T[2, 3] = z
+    return T
 
 
 def _kind(obj: dict[str, Any], path: Path) -> str:
