@@ -33,6 +33,26 @@ def test_wrap_angle_lands_in_the_half_open_range():
     assert float(wrap_angle(math.pi)) == math.pi and float(wrap_angle(-math.pi)) == math.pi
 
 
+def test_wrap_angle_stays_in_range_next_to_odd_multiples_of_pi():
+    # The division inside wrap_angle rounds across the boundary for these (found by a scan of k pi).
+    k = np.arange(-41, 42)
+    angles = np.r_[-122.52211349000193, -78.53981633974483, np.pi * k, np.nextafter(np.pi * k, np.inf)]
+    wrapped = wrap_angle(angles)
+    assert np.all(wrapped > -math.pi) and np.all(wrapped <= math.pi), angles[
+        (wrapped <= -math.pi) | (wrapped > math.pi)
+    ]
+    np.testing.assert_allclose(np.cos(wrapped), np.cos(angles), atol=1e-12)
+    np.testing.assert_allclose(np.sin(wrapped), np.sin(angles), atol=1e-12)
+
+
+def test_wrap_angle_keeps_the_deviations_of_the_old_half_open_wrap():
+    # The OSRM strategies took |wrap| of [-pi, pi) (the old (a + pi) % 2 pi - pi): -pi and pi count alike.
+    differences = np.r_[np.linspace(-2 * math.pi, 2 * math.pi, 4001), [math.pi, -math.pi, 2 * math.pi, 0.0]]
+    old = (differences + math.pi) % TWO_PI - math.pi
+    assert old[-4] == -math.pi and float(wrap_angle(math.pi)) == math.pi  # the two ranges differ at pi ...
+    np.testing.assert_allclose(np.abs(wrap_angle(differences)), np.abs(old), atol=1e-12)  # ... not in |.|
+
+
 @pytest.mark.parametrize("heading", [5.328, -0.955, 6.2, -6.2, TWO_PI, math.pi, -math.pi])
 def test_parse_base_pose_wraps_the_heading_and_keeps_the_pose(heading):
     pose = parse_base_pose(f"1.5 -2 {heading!r}")

@@ -8,7 +8,8 @@ import jsonschema
 import numpy as np
 import pytest
 
-from baseplace.jobs import PoseRecord, result_schema, wrap_angle
+from baseplace.geometry.poses import wrap_angle
+from baseplace.jobs import PoseRecord, result_schema
 from baseplace.jobs import report as rep
 
 REPORTS = [

@@ -15,6 +15,7 @@ from baseplace.geometry.poses import (
     parse_pose6,
     pose_from_xyz_rpy,
     rpy_to_matrix,
+    yaw_of,
 )
 from baseplace.geometry.surface_poses import plane_base_poses, plane_frame
 
@@ -58,6 +59,35 @@ def test_base_pose_batch_and_roundtrip():
         np.testing.assert_allclose(Ti, BasePose(*row).matrix(), atol=1e-12)
         back = BasePose.from_matrix(Ti)
         np.testing.assert_allclose([back.x, back.y, back.yaw], row, atol=1e-12)
+
+
+@pytest.mark.parametrize("shape", [(), (1,), (7,), (3, 5)])
+def test_yaw_of_and_from_matrix_agree_with_scipy(shape):
+    # Oracle: scipy's intrinsic ZYX Euler angles, whose first angle is the heading of the x axis.
+    rng = np.random.default_rng(len(shape) * 10 + sum(shape))
+    n = int(np.prod(shape))
+    rotations = Rotation.random(n, random_state=rng)
+    T = np.tile(np.eye(4), (n, 1, 1))
+    T[:, :3, :3] = rotations.as_matrix()
+    T[:, :3, 3] = rng.uniform(-5, 5, (n, 3))
+    expected = rotations.as_euler("ZYX")[:, 0]
+    yaw = yaw_of(T.reshape(*shape, 4, 4))
+    assert yaw.shape == shape
+    assert np.all((-np.pi < yaw) & (yaw <= np.pi))
+    np.testing.assert_allclose(np.angle(np.exp(1j * (yaw.reshape(n) - expected))), 0.0, atol=1e-9)
+    np.testing.assert_array_equal(yaw_of(T[:, :3, :3]).reshape(shape), yaw)  # rotations alike
+    rows = BasePose.batch_from_matrix(T)
+    for Ti, row, yaw_i in zip(T, rows, yaw.reshape(n), strict=True):
+        pose = BasePose.from_matrix(Ti)
+        assert (pose.x, pose.y, pose.yaw) == (Ti[0, 3], Ti[1, 3], yaw_i) == tuple(row)
+    planar = Rotation.from_euler("z", rows[:, 2:]).as_matrix()  # the floor pose back, again by scipy
+    np.testing.assert_allclose(BasePose.batch_matrix(rows)[:, :3, :3], planar, atol=1e-12)
+
+
+def test_yaw_of_gives_pi_for_a_heading_of_minus_pi():
+    T = BasePose(0.0, 0.0, np.pi).matrix()
+    T[1, 0] = -0.0  # atan2(-0.0, -1) is -pi: the heading must still come back as pi
+    assert float(yaw_of(T)) == np.pi and BasePose.from_matrix(T).yaw == np.pi
 
 
 def test_plane_poses_on_flat_floor_are_yaw_poses():

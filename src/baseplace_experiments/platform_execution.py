@@ -44,7 +44,7 @@ from numpy.typing import ArrayLike
 from shapely.geometry import Polygon
 
 from baseplace.errors import BaseplaceError
-from baseplace.geometry.poses import FloatArray, planar_offsets
+from baseplace.geometry.poses import BasePose, FloatArray
 from baseplace.placement.motion import MotionChecker, MotionSettings, transit_environment
 from baseplace.placement.pipeline import POSE_ONLY_CHECKS, PlaceSettings, place, place_obstacles
 from baseplace.placement.robustness import BaseErrorModel, RobustnessSettings
@@ -80,7 +80,7 @@ def drawn_on_plane(T_world_base: ArrayLike, offsets: ArrayLike) -> FloatArray:
     xy, so drawing in the base frame instead of the world frame changes no distribution on a
     level floor.
     """
-    return np.asarray(T_world_base, dtype=float) @ planar_offsets(offsets)
+    return np.asarray(T_world_base, dtype=float) @ BasePose.batch_matrix(offsets)
 
 
 def seated(T_world_base: ArrayLike, plane: Plane) -> FloatArray:

@@ -9,6 +9,7 @@ from baseplace.geometry.poses import (
     pose_from_xyz_rpy,
     rpy_to_matrix,
     wrap_angle,
+    yaw_of,
 )
 from baseplace.geometry.surface_poses import plane_base_poses, plane_frame
 
@@ -23,4 +24,5 @@ __all__ = [
     "pose_from_xyz_rpy",
     "rpy_to_matrix",
     "wrap_angle",
+    "yaw_of",
 ]

@@ -86,17 +86,6 @@ def invert_transforms(T: ArrayLike) -> FloatArray:
     return out
 
 
-def planar_offsets(offsets: ArrayLike) -> FloatArray:
-    """(S, 4, 4) transforms ``Trans(dx, dy, 0) @ Rz(dyaw)`` of (S, 3) offsets (dx, dy, dyaw)."""
-    d = np.asarray(offsets, dtype=float).reshape(-1, 3)
-    c, s = np.cos(d[:, 2]), np.sin(d[:, 2])
-    M = np.zeros((len(d), 4, 4))
-    M[:, 0, 0], M[:, 0, 1], M[:, 1, 0], M[:, 1, 1] = c, -s, s, c
-    M[:, 2, 2] = M[:, 3, 3] = 1.0
-    M[:, 0, 3], M[:, 1, 3] = d[:, 0], d[:, 1]
-    return M
-
-
 def _unit_vector(v: ArrayLike, what: str) -> FloatArray:
     a = np.asarray(v, dtype=float)
     norm = float(np.linalg.norm(a)) if a.shape == (3,) else 0.0
@@ -126,7 +115,23 @@ def rotation_taking(a: ArrayLike, b: ArrayLike) -> FloatArray:
 def wrap_angle(angle: ArrayLike) -> FloatArray:
     """Angles [rad], scalar or any shape, wrapped to (-pi, pi]: the one range headings have."""
     a = np.asarray(angle, dtype=float)
-    return a - (2.0 * np.pi) * np.ceil((a - np.pi) / (2.0 * np.pi))
+    wrapped = a - (2.0 * np.pi) * np.ceil((a - np.pi) / (2.0 * np.pi))
+    # Near odd multiples of pi the division rounds across the boundary and lands a few ulp out.
+    wrapped = np.where(wrapped > np.pi, wrapped - 2.0 * np.pi, wrapped)
+    return np.where(wrapped <= -np.pi, wrapped + 2.0 * np.pi, wrapped)
+
+
+def yaw_of(T_world_base: ArrayLike) -> FloatArray:
+    """Heading [rad] in (-pi, pi] of poses' x axes in the world xy plane: the one yaw extraction.
+
+    Args:
+        T_world_base: (..., 4, 4) or (..., 3, 3), any batch shape.
+
+    Returns:
+        Shape (...): a 0-d array for one pose.
+    """
+    T = np.asarray(T_world_base, dtype=float)
+    return wrap_angle(np.arctan2(T[..., 1, 0], T[..., 0, 0]))
 
 
 def _parse_numbers(text: str, count: int, what: str) -> FloatArray:
@@ -204,13 +209,22 @@ class BasePose:
 
     @classmethod
     def from_matrix(cls, T_world_base: ArrayLike) -> BasePose:
-        """Project a (4, 4) pose onto the floor: keep x, y and the heading of the x axis."""
+        """Project a (4, 4) pose onto the floor: keep x, y and the heading (:func:`yaw_of`)."""
         T = np.asarray(T_world_base, dtype=float)
-        return cls(float(T[0, 3]), float(T[1, 3]), float(np.arctan2(T[1, 0], T[0, 0])))
+        return cls(float(T[0, 3]), float(T[1, 3]), float(yaw_of(T)))
+
+    @staticmethod
+    def batch_from_matrix(T_world_base: ArrayLike) -> FloatArray:
+        """(N, 3) rows ``(x, y, yaw)`` of (N, 4, 4) poses projected onto the floor, as :meth:`from_matrix`."""
+        T = np.asarray(T_world_base, dtype=float).reshape(-1, 4, 4)
+        return np.c_[T[:, 0, 3], T[:, 1, 3], yaw_of(T)]
 
     @staticmethod
     def batch_matrix(xy_yaw: ArrayLike) -> FloatArray:
-        """``T_world_base`` for an (N, 3) array of ``(x, y, yaw)``; returns (N, 4, 4)."""
+        """``T_world_base`` for an (N, 3) array of ``(x, y, yaw)``; returns (N, 4, 4).
+
+        Also the planar offsets ``Trans(dx, dy, 0) @ Rz(dyaw)`` of rows ``(dx, dy, dyaw)``.
+        """
         v = np.asarray(xy_yaw, dtype=float).reshape(-1, 3)
         T = np.zeros((len(v), 4, 4))
         c, s = np.cos(v[:, 2]), np.sin(v[:, 2])

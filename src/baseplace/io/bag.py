@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from baseplace.errors import InputError, brief
+from baseplace.geometry.poses import yaw_of
 from baseplace.io.bag_limits import (
     bound_mcap_decompression,
     bound_rosbag2_decompression,
@@ -293,5 +294,5 @@ def _grid_in_world(grid: OccupancyGrid, T_world_map: FloatArray, frame: str, wor
         )
     x, y, yaw = grid.origin
     p = T_world_map @ np.array([x, y, 0.0, 1.0])
-    yaw_w = yaw + math.atan2(R[1, 0], R[0, 0])
+    yaw_w = yaw + float(yaw_of(R))
     return OccupancyGrid(grid.data, grid.resolution, (float(p[0]), float(p[1]), yaw_w), grid.source)

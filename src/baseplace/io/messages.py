@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
 from baseplace.errors import InputError
+from baseplace.geometry.poses import yaw_of
 from baseplace.guards import check_alloc
 from baseplace.world.occupancy import OccupancyGrid
 
@@ -121,7 +122,7 @@ def grid_from_msg(msg: Any, where: str) -> OccupancyGrid:
     R = Rotation.from_quat(q).as_matrix()
     if R[2, 2] < math.cos(math.radians(1.0)):
         raise InputError(f"{where}: the grid's origin is tilted; only level maps are supported")
-    yaw = math.atan2(R[1, 0], R[0, 0])
+    yaw = float(yaw_of(R))
     return OccupancyGrid(
         data.reshape(h, w), float(info.resolution), (float(o.position.x), float(o.position.y), yaw)
     )

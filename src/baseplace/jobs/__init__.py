@@ -14,7 +14,7 @@ from importlib import resources
 from typing import Any
 
 from baseplace.jobs.explain import ExplainJob, ExplainReport, explain_job
-from baseplace.jobs.report import SCHEMA_VERSION, NoResultError, PoseRecord, Report, RobotRef, wrap_angle
+from baseplace.jobs.report import SCHEMA_VERSION, NoResultError, PoseRecord, Report, RobotRef
 
 
 @cache
@@ -35,5 +35,4 @@ __all__ = [
     "RobotRef",
     "explain_job",
     "result_schema",
-    "wrap_angle",
 ]

@@ -20,13 +20,13 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
 from baseplace.errors import NothingFoundError
+from baseplace.geometry.poses import BasePose, wrap_angle, yaw_of
 
 if TYPE_CHECKING:
     from baseplace.robots.model import Robot
@@ -39,12 +39,6 @@ KINDS = (
     "build_map", "robots", "robot_check", "occupancy", "scene", "explain", "point",
 )  # fmt: skip
 """Every kind of report."""
-
-
-def wrap_angle(angle: float) -> float:
-    """An angle [rad] wrapped to (-pi, pi]."""
-    wrapped = math.remainder(float(angle), 2 * math.pi)  # in [-pi, pi]
-    return math.pi if wrapped <= -math.pi else wrapped
 
 
 def _json(value: Any) -> Any:
@@ -112,16 +106,14 @@ class PoseRecord:
     @classmethod
     def from_xyyaw(cls, x: float, y: float, yaw: float, z: float = 0.0) -> PoseRecord:
         """A planar base pose: position [m], heading [rad, any range] about world z."""
-        c, s = math.cos(yaw), math.sin(yaw)
-        T = np.eye(4)
-        T[:2, :2] = [[c, -s], [s, c]]
-        T[:3, 3] = [x, y, z]
+        T = BasePose.batch_matrix([x, y, yaw])[0]
+        T[2, 3] = z
         return cls(T)
 
     @property
     def yaw(self) -> float:
         """Heading [rad] in (-pi, pi]: the angle of the base's x axis in the world xy plane."""
-        return wrap_angle(math.atan2(self.T_world_base[1, 0], self.T_world_base[0, 0]))
+        return float(yaw_of(self.T_world_base))
 
     def to_json(self) -> dict[str, Any]:
         """``{"base_pose": 4x4, "x", "y", "z" [m], "yaw" [rad, (-pi, pi]]}``."""
@@ -133,7 +125,7 @@ class PoseRecord:
 def path_json(poses: Any) -> list[list[float]]:
     """A base path as (K, 3) rows x, y [m], yaw [rad, (-pi, pi]]."""
     rows = np.asarray(poses, dtype=float).reshape(len(poses), -1)
-    return [[round(float(r[0]), 4), round(float(r[1]), 4), round(wrap_angle(r[2]), 4)] for r in rows]
+    return [[round(float(r[0]), 4), round(float(r[1]), 4), round(float(wrap_angle(r[2])), 4)] for r in rows]
 
 
 @dataclass

@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError, unknown
-from baseplace.geometry.poses import FloatArray, invert_transforms, planar_offsets
+from baseplace.geometry.poses import BasePose, FloatArray, invert_transforms, yaw_of
 from baseplace.placement import deadline
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Arm
@@ -95,7 +95,7 @@ def perturbed(T_world_base: ArrayLike, offsets: ArrayLike) -> FloatArray:
     """(S, 4, 4) base poses: ``T_world_base`` (4, 4) moved by (S, 3) world offsets (dx, dy, dyaw)."""
     T = np.asarray(T_world_base, dtype=float)
     d = np.asarray(offsets, dtype=float).reshape(-1, 3)
-    out = T @ planar_offsets(d * (0.0, 0.0, 1.0))  # heading error about the base's own z axis
+    out = T @ BasePose.batch_matrix(d * (0.0, 0.0, 1.0))  # heading error about the base's own z axis
     out[:, 0, 3] += d[:, 0]
     out[:, 1, 3] += d[:, 1]
     return out
@@ -219,7 +219,7 @@ class RobustnessEstimator:
         self._cache: dict[tuple[int, int, int], bool] = {}
 
     def _key(self, T: FloatArray) -> tuple[int, int, int]:
-        yaw = math.atan2(T[1, 0], T[0, 0])
+        yaw = float(yaw_of(T))
         return (
             round(T[0, 3] / self._resolution),
             round(T[1, 3] / self._resolution),

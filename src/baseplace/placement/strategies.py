@@ -16,6 +16,7 @@ from typing import Protocol
 import numpy as np
 
 from baseplace.errors import unknown
+from baseplace.geometry.poses import wrap_angle
 from baseplace.geometry.surface_poses import plane_base_poses
 from baseplace.placement.osrm import OSRM
 from baseplace.placement.verify import Candidate
@@ -39,10 +40,6 @@ class Strategy(Protocol):
         ...
 
 
-def _wrap(a: np.ndarray) -> np.ndarray:
-    return (a + math.pi) % (2 * math.pi) - math.pi
-
-
 def _box(osrm: OSRM) -> tuple[int, int, np.ndarray]:
     """The OSRM's values inside the bounding box of the cells within reach (the only ones not 0).
 
@@ -63,7 +60,7 @@ def _deviation(osrm: OSRM, box: tuple[int, int, np.ndarray] | None = None) -> np
     dev = np.full(values.shape, np.inf)
     if len(rows):
         g_to = osrm.gamma_to_target(rows + r0, cols + c0)
-        dev[rows, cols] = np.abs(_wrap(osrm.gammas[None, :] - g_to[:, None]))
+        dev[rows, cols] = np.abs(wrap_angle(osrm.gammas[None, :] - g_to[:, None]))
     return dev
 
 

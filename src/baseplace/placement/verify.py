@@ -16,7 +16,7 @@ from typing import Literal
 import numpy as np
 from shapely.geometry import MultiPolygon, Polygon
 
-from baseplace.geometry.poses import BasePose, FloatArray, invert_transforms
+from baseplace.geometry.poses import BasePose, FloatArray, invert_transforms, yaw_of
 from baseplace.placement.motion import MotionChecker, ReachingMotion
 from baseplace.placement.robustness import Robustness
 from baseplace.robots.ik import IKSolver
@@ -67,8 +67,8 @@ class Placement:
 
     @property
     def yaw(self) -> float:
-        """Heading of the base x axis projected on the xy plane [rad]."""
-        return float(np.arctan2(self.T_world_base[1, 0], self.T_world_base[0, 0]))
+        """Heading of the base x axis projected on the xy plane [rad], in (-pi, pi]."""
+        return float(yaw_of(self.T_world_base))
 
     @property
     def pose(self) -> BasePose:

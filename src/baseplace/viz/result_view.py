@@ -14,7 +14,6 @@ Every error is one line naming the file, the command that wrote it and what is m
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,6 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from baseplace.errors import InputError
+from baseplace.geometry.poses import BasePose
 
 FloatArray = NDArray[np.float64]
 
@@ -210,7 +210,7 @@ class _Reader:
         for i, p in enumerate(value):
             if isinstance(p, dict):
                 T = self.pose(p, f"{what} pose {i}")
-                rows.append([T[0, 3], T[1, 3], math.atan2(T[1, 0], T[0, 0])])
+                rows.append(BasePose.batch_from_matrix(T)[0])
             else:
                 row = self.array(p, (-1,), f"{what} pose {i}")
                 if len(row) not in (2, 3):
@@ -263,8 +263,9 @@ class _Reader:
 
 
 def _planar(x: float, y: float, z: float, yaw: float) -> FloatArray:
-    c, s = math.cos(yaw), math.sin(yaw)
-    return np.array([[c, -s, 0.0, x], [s, c, 0.0, y], [0.0, 0.0, 1.0, z], [0.0, 0.0, 0.0, 1.0]])
+    T = BasePose.batch_matrix([x, y, yaw])[0]
+    T[2, 3] = z
+    return T
 
 
 def _kind(obj: dict[str, Any], path: Path) -> str:
@@ -518,9 +519,7 @@ def read_result(
             raise r.fail("candidates must be a list of objects")
         robots += [_robot_pose(c, r, f"candidate {i + 1}", arm_joints) for i, c in enumerate(rows)]
         poses = [r.pose(c, f"candidate {i + 1}") for i, c in enumerate(rows)]
-        candidates = np.array([[T[0, 3], T[1, 3], math.atan2(T[1, 0], T[0, 0])] for T in poses]).reshape(
-            -1, 3
-        )
+        candidates = BasePose.batch_from_matrix(poses)
         rej = obj.get("rejected", [])
         if isinstance(rej, list) and rej:
             rejected = np.array(
@@ -561,9 +560,7 @@ def read_result(
             if not isinstance(rows, list) or not all(isinstance(c, dict) for c in rows):
                 raise r.fail("poses must be a list of objects")
             poses = [r.pose(c, f"sample {i + 1}") for i, c in enumerate(rows)]
-            candidates = np.array([[T[0, 3], T[1, 3], math.atan2(T[1, 0], T[0, 0])] for T in poses]).reshape(
-                -1, 3
-            )
+            candidates = BasePose.batch_from_matrix(poses)
             if poses:
                 best = int(np.argmax([float(c.get("score", 0.0)) for c in rows]))
                 robots.append(RobotPose(poses[best], {}, None, f"sample {best + 1}"))

@@ -51,6 +51,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError
 from baseplace.files import atomic_write
+from baseplace.geometry.poses import yaw_of
 
 if TYPE_CHECKING:
     import viser
@@ -473,7 +474,7 @@ def _gui(server: viser.ViserServer, layers: dict[str, Any], view: ResultView, ro
     text = f"**{markdown_text(view.command)}**: {markdown_text(view.summary)}"
     T = layers.get("robot_pose")
     if T is not None:
-        yaw = math.degrees(math.atan2(T[1, 0], T[0, 0]))
+        yaw = math.degrees(yaw_of(T))
         text += (
             f"; **{markdown_text(str(robot))}** at x = {T[0, 3]:.2f} m, y = {T[1, 3]:.2f} m, "
             f"z = {T[2, 3]:.2f} m, yaw = {yaw:.0f}°"
