@@ -68,6 +68,18 @@ def test_the_bag_selects_the_object_its_files_select(frame, fmt, rgb_encoding, d
     assert np.linalg.norm(np.array(by_bag["object"]["position"]) - truth.centre) < 0.02
     np.testing.assert_allclose(by_bag["object"]["position"], by_files["object"]["position"], atol=2e-3)
     assert by_bag["inputs"]["bag"]["rgb_topic"] == "/head/rgb"
+    # the viewer reads the frame back from the recording: the image and the camera's pose it was given
+    from baseplace.viz.viewer import open_view
+
+    (d / f"{fmt}.json").write_text(json.dumps(by_bag))
+    view, inputs, _ = open_view(d / f"{fmt}.json")
+    assert (
+        view.pointing is not None
+        and view.pointing.bag == bag
+        and view.pointing.selected == by_bag["selected"]
+    )
+    assert np.array_equal(inputs.image, scene.rgb)
+    np.testing.assert_allclose(inputs.T_world_camera, scene.T_world_camera, atol=1e-9)
 
 
 def test_bad_bags_and_options_are_one_line_errors(frame):

@@ -107,7 +107,7 @@ class Pointing:
     """A ``point`` result's frame: the hand, the finger's line and the objects, in the image and the world.
 
     Attributes:
-        image: the RGB image the command read (``--rgb``).
+        image: the RGB image the command read (``--rgb``), or None when it read a recording (``bag``).
         intrinsics: "fx fy cx cy" [px] or the CameraInfo YAML, as the command got them.
         transform: world_T_camera file or the camera-frame up vector, as the command got it.
         gesture: Scan, Point, Stop, none, or "no hand".
@@ -117,10 +117,13 @@ class Pointing:
         image_boxes: (K, 2, 2) each object's image box ``[[u0, v0], [u1, v1]]`` [px].
         world_boxes: (K, 2, 3) each object's box ``[min, max]`` [m, world].
         selected: index of the object pointed at, or None.
+        bag: the recording the command read the frame from (``--bag``), else None.
+        bag_topics: its colour, depth and CameraInfo topics, world frame and frame selection
+            (``read_rgbd``'s arguments after the path).
     """
 
-    image: Path
-    intrinsics: str
+    image: Path | None
+    intrinsics: str | None
     transform: str | None
     gesture: str
     landmarks: FloatArray | None
@@ -129,6 +132,8 @@ class Pointing:
     image_boxes: FloatArray
     world_boxes: FloatArray
     selected: int | None
+    bag: Path | None = None
+    bag_topics: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -408,7 +413,7 @@ def _resolve_inputs(obj: dict[str, Any], source: Path, kind: str, given_here: di
     resolve = _Resolver(source, kind, [p for v in given_here.values() for p in _paths_of(v)])
     clouds_named = _paths_of(given.get("clouds", given.get("cloud")))
     recordings = [c for c in [*clouds_named, *_paths_of(given.get("bag"))] if _is_recording(c)]
-    if recordings:
+    if recordings and kind != "point":  # point's frame is read back from its recording (_pointing)
         raise InputError(
             f"{source} was written by `{COMMANDS[kind]}` from the ROS recording {recordings[0]} (--bag); the "
             f"viewer reads clouds and grids from files: export them (.pcd, map_server .yaml) and rerun with --cloud"
@@ -631,14 +636,22 @@ def _pointing(obj: dict[str, Any], r: _Reader, source: Path) -> Pointing:
     """A ``point`` result's frame: its image (found as written or next to the JSON) and what was found in it."""
     echoed: dict[str, Any] = obj["inputs"] if isinstance(obj.get("inputs"), dict) else {}
     rgb, intrinsics = echoed.get("rgb"), echoed.get("intrinsics")
-    if not isinstance(rgb, str) or not isinstance(intrinsics, str):
+    bag, topics = None, ()
+    recording = echoed.get("bag")
+    if isinstance(recording, dict) and isinstance(recording.get("path"), str):
+        keys = ("rgb_topic", "depth_topic", "camera_info_topic", "world_frame", "frame")
+        if not all(isinstance(recording.get(k), str) for k in keys):
+            raise r.fail(f"inputs.bag must name its {', '.join(keys)}")
+        bag = _Resolver(source, "point")(recording["path"], "recording", "--bag")
+        topics = tuple(recording[k] for k in keys)
+    elif not isinstance(rgb, str) or not isinstance(intrinsics, str):
         raise r.fail(
             "names no image and intrinsics (inputs.rgb, inputs.intrinsics); rerun it with this version"
         )
     transform = echoed.get("transform")
     if isinstance(transform, str) and not _is_vector(transform):
         transform = str(_Resolver(source, "point")(transform, "transform", "--transform"))
-    if not _is_vector(intrinsics, 4):
+    if isinstance(intrinsics, str) and not _is_vector(intrinsics, 4):
         intrinsics = str(_Resolver(source, "point")(intrinsics, "intrinsics", "--intrinsics"))
     objects = obj.get("objects") or []
     if not isinstance(objects, list) or not all(isinstance(o, dict) for o in objects):
@@ -658,8 +671,8 @@ def _pointing(obj: dict[str, Any], r: _Reader, source: Path) -> Pointing:
 
     landmarks = obj.get("landmarks")
     return Pointing(
-        image=_Resolver(source, "point")(rgb, "image", "--rgb"),
-        intrinsics=intrinsics,
+        image=_Resolver(source, "point")(rgb, "image", "--rgb") if bag is None and isinstance(rgb, str) else None,
+        intrinsics=intrinsics if bag is None and isinstance(intrinsics, str) else None,
         transform=transform if isinstance(transform, str) else None,
         gesture=str(gesture.get("name")) if isinstance(gesture, dict) else "no hand",
         landmarks=None if landmarks is None else r.array(landmarks, (21, 2), "landmarks"),
@@ -670,6 +683,8 @@ def _pointing(obj: dict[str, Any], r: _Reader, source: Path) -> Pointing:
         world_boxes=r.array([o.get("box_world") for o in objects], (len(objects), 2, 3), "objects' box_world")
         if objects else np.zeros((0, 2, 3)),
         selected=selected,
+        bag=bag,
+        bag_topics=topics,
     )  # fmt: skip
 
 

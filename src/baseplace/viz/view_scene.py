@@ -140,9 +140,17 @@ def load_inputs(view: ResultView, robot_name: str, segment: bool) -> SceneInputs
     from baseplace.perception.rgbd import load_rgb, parse_intrinsics
 
     p = view.pointing
-    image = load_rgb(p.image)  # the command's size and decompression limits
-    K = parse_intrinsics(p.intrinsics)
-    T_world_camera = load_transform(p.transform) if p.transform is not None else np.eye(4)
+    if p.bag is not None:  # the frame the command read, from its recording (the same limits)
+        from baseplace.io.bag import read_rgbd
+
+        rgb_topic, depth_topic, info_topic, world_frame, which = p.bag_topics
+        got = read_rgbd(p.bag, rgb_topic, depth_topic, info_topic, world_frame, which)
+        image, K, T_world_camera = got.rgb, got.intrinsics, got.T_world_camera
+    else:
+        assert p.image is not None and p.intrinsics is not None
+        image = load_rgb(p.image)  # the command's size and decompression limits
+        K = parse_intrinsics(p.intrinsics)
+        T_world_camera = load_transform(p.transform) if p.transform is not None else np.eye(4)
     return SceneInputs(
         data, points, grid, surface, image, T_world_camera, 2 * math.atan2(image.shape[0] / 2, K.fy)
     )
