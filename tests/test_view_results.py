@@ -86,7 +86,32 @@ def results(tmp_path_factory) -> dict[str, Path]:
     out["surface_samples"] = _cli_json(
         d / "samples.json", "surface-sample", "--map", str(smap), "--n", "4", "--candidates", "5", env=env
     )
+    out["point"] = _point_result(d)
     return out
+
+
+def _point_result(d: Path) -> Path:
+    """``point`` on a generated frame (seed 2, objects TIAGo can reach) with a grid around its table."""
+    import cv2
+
+    from baseplace.sim.pointing_scenes import generate_pointing_scene, save_pointing_scene
+    from test_point_cli import REACHABLE
+
+    files = save_pointing_scene(generate_pointing_scene(2, REACHABLE), d / "frame")
+    res, side = 0.05, 80  # a 4 m grid around the table (x 0.5-1.0, y -0.5-0.5), table cells occupied
+    X, Y = np.meshgrid(-1 + (np.arange(side) + 0.5) * res, -2 + (np.arange(side)[::-1] + 0.5) * res)
+    cv2.imwrite(
+        str(d / "table.pgm"), np.where((X >= 0.5) & (X <= 1.0) & (np.abs(Y) <= 0.5), 0, 254).astype(np.uint8)
+    )
+    (d / "table.yaml").write_text("image: table.pgm\nresolution: 0.05\norigin: [-1.0, -2.0, 0.0]\nnegate: 0\n"
+                                  "occupied_thresh: 0.65\nfree_thresh: 0.196\n")  # fmt: skip
+    return _cli_json(
+        d / "point.json", "point", *(x for k in ("rgb", "depth", "intrinsics", "transform", "landmarks")
+                                     for x in (f"--{k}", files[k])),
+        "--occupancy", str(d / "table.yaml"), "--map", str(d / "tiago.rmap"), "--robustness-samples", "0",
+        "--no-motion-check",
+        "--robot-pose", "-0.5 0 0",
+    )  # fmt: skip
 
 
 def test_every_kind_is_read_with_its_inputs(results):
@@ -114,6 +139,13 @@ def test_every_kind_is_read_with_its_inputs(results):
     assert turned.inputs.floor == -0.5 and turned.inputs.clouds[0][1] == "0 -1 0"
     floor = np.abs(inputs_up.points[:, 2] + 0.5) < 1e-6
     assert floor.any() and np.ptp(inputs_up.points[~floor][:, 1]) < 0.3  # the flat scene now stands upright
+    point, inputs, _ = open_view(results["point"])
+    obj = json.loads(results["point"].read_text())
+    assert point.pointing is not None and point.pointing.selected == obj["selected"] is not None
+    assert len(point.pointing.world_boxes) == len(obj["objects"]) and point.pointing.landmarks is not None
+    assert inputs.image is not None and inputs.image.shape[:2] == tuple(obj["image_size"][::-1])
+    assert len(point.candidates) == len(obj["candidates"]) > 0 and inputs.grid is not None
+    np.testing.assert_allclose(point.object_xyz, obj["object"]["position"])
     seg, _, _ = open_view(results["segment"])
     assert len(seg.regions) == len(json.loads(results["segment"].read_text())["regions"]) >= 2
     assert len(seg.traversable) >= 1
@@ -167,13 +199,13 @@ def _hue_shares(png: Path) -> tuple[float, dict[str, float]]:
     covered = 1.0 - float((np.abs(area - 255).max(axis=2) <= 6).mean())
     hsv = np.asarray(rgb.convert("HSV")).astype(np.int16)[170:, :930]
     hue, coloured = hsv[..., 0] * (360 / 255), hsv[..., 1] >= 60
-    families = {"red": (-1, 10), "orange": (15, 45), "green": (90, 150), "blue": (190, 240), "violet": (250, 285),
+    families = {"red": (-1, 10), "orange": (15, 45), "yellow": (45, 60), "green": (90, 150), "blue": (190, 240), "violet": (250, 285),
                 "magenta": (290, 330)}  # fmt: skip
     return covered, {k: float((coloured & (hue > a) & (hue < b)).mean()) for k, (a, b) in families.items()}
 
 
 # What each kind's screenshot must show, as the least share of the 3D area of a hue family:
-# path orange, candidates and traversable borders green, rejected red, the TCP's path magenta,
+# path orange, candidates and traversable borders green, rejected red, the TCP's path magenta, pointed-at object yellow,
 # working surface violet, regions (tab20, first blue) and the heat map (viridis) blue.
 EXPECTED = {
     "place": {"orange": 0.001, "magenta": 0.0005, "blue": 0.05},
@@ -186,13 +218,17 @@ EXPECTED = {
     "segment": {"green": 0.0005, "blue": 0.05},
     "surface_map": {"violet": 0.01},
     "surface_samples": {"violet": 0.01, "green": 0.0005},
+    # the pointed-at object gold, the other objects and the candidates green, the finger's ray blue
+    "point": {"yellow": 0.0005, "green": 0.001, "blue": 0.0005},
 }
 
 
 # Without a cloud (surface maps) most of the view is background.
 LEAST_COVERED = {"surface_map": 0.05, "surface_samples": 0.05}
-# place and candidates (the issue's must-show) run by default, the other kinds with the slow tests.
-KINDS = [k if k in ("place", "candidates") else pytest.param(k, marks=pytest.mark.slow) for k in EXPECTED]
+# place, candidates and point (the issues' must-show) run by default, the other kinds with the slow tests.
+KINDS = [
+    k if k in ("place", "candidates", "point") else pytest.param(k, marks=pytest.mark.slow) for k in EXPECTED
+]
 
 
 @pytest.mark.parametrize("kind", KINDS)

@@ -171,7 +171,9 @@ def _candidates(a: argparse.Namespace, progress: Progress) -> Any:
 
 def _point(a: argparse.Namespace, progress: Progress) -> Any:
     job = point.PointJob(a.rgb, a.depth, a.intrinsics, a.transform, a.landmarks, a.occupancy, a.robot, a.arm, a.map,
-                         a.robot_pose, a.seed, selection=a.selection, png=a.png)  # fmt: skip
+                         a.robot_pose, a.seed, selection=a.selection, png=a.png, bag=a.bag, rgb_topic=a.rgb_topic,
+                         depth_topic=a.depth_topic, camera_info_topic=a.camera_info_topic,
+                         world_frame=a.world_frame, bag_frame=a.bag_frame)  # fmt: skip
     if a.occupancy is not None:
         job.motion, job.robustness = motion_and_robustness(vars(a))
     return point.point_job(job, progress)
@@ -402,10 +404,10 @@ def build_parser() -> argparse.ArgumentParser:
     _add_degrees_argument(p)
 
     p = command("point", "the object a person points at in an RGB-D frame, and where to stand to pick it up")
-    p.add_argument("--rgb", required=True, help="RGB image (PNG or JPEG)")
-    p.add_argument("--depth", required=True,
+    p.add_argument("--rgb", default=None, help="RGB image (PNG or JPEG)")
+    p.add_argument("--depth", default=None,
                    help="aligned depth image: 16-bit PNG in millimetres (0: none) or float32 .npy in metres")  # fmt: skip
-    p.add_argument("--intrinsics", required=True, help='"fx fy cx cy" [px] or a ROS CameraInfo YAML')
+    p.add_argument("--intrinsics", default=None, help='"fx fy cx cy" [px] or a ROS CameraInfo YAML')
     p.add_argument("--transform", default=None,
                    help='world_T_camera file (4x4, optical frame), or the camera-frame up vector "ux uy uz"')  # fmt: skip
     p.add_argument("--landmarks", default=None,
@@ -422,6 +424,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--png", default=None, help="picture: the image with hand, line and boxes; candidates from above"
     )
+    g = p.add_argument_group(
+        "ROS recording (rosbag2 directory, .db3, .mcap, or ROS 1 .bag) instead of the files"
+    )
+    g.add_argument(
+        "--bag", default=None, help="read the frame from this recording: image, depth, CameraInfo, tf"
+    )
+    g.add_argument("--rgb-topic", default=None, help="sensor_msgs/Image colour topic (rgb8, bgr8, rgba8, bgra8, mono8)")  # fmt: skip
+    g.add_argument("--depth-topic", default=None,
+                   help="sensor_msgs/Image aligned depth topic (16UC1 [mm] or 32FC1 [m]); the message closest in stamp")  # fmt: skip
+    g.add_argument("--camera-info-topic", default=None, help="sensor_msgs/CameraInfo topic; the message closest in stamp")  # fmt: skip
+    g.add_argument("--bag-frame", default="last", choices=["last", "first"],
+                   help="which colour message (default last); the camera is posed by /tf and /tf_static at its stamp")  # fmt: skip
+    g.add_argument("--world-frame", default="map", help="frame of the results (default map)")
     _add_motion_and_robustness_arguments(p)
     _add_degrees_argument(p)
 

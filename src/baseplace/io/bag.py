@@ -296,3 +296,97 @@ def _grid_in_world(grid: OccupancyGrid, T_world_map: FloatArray, frame: str, wor
     p = T_world_map @ np.array([x, y, 0.0, 1.0])
     yaw_w = yaw + float(yaw_of(R))
     return OccupancyGrid(grid.data, grid.resolution, (float(p[0]), float(p[1]), yaw_w), grid.source)
+
+
+@dataclass(frozen=True)
+class BagRgbd:
+    """An aligned RGB-D frame from a recording, with its camera's pose.
+
+    Attributes:
+        source: the bag's path.
+        rgb: (H, W, 3) uint8 RGB of the colour topic's message.
+        depth: (H, W) float32 depth [m] of the depth topic's message, NaN where there is no return.
+        intrinsics: the CameraInfo topic's camera, for H x W images.
+        camera_frame: the colour image's frame_id (an optical frame: x right, y down, z forward).
+        stamp_ns: the colour image's stamp [ns].
+        T_world_camera: (4, 4) pose of ``camera_frame`` in the world frame at ``stamp_ns``.
+    """
+
+    source: str
+    rgb: NDArray[np.uint8]
+    depth: NDArray[np.float32]
+    intrinsics: Any
+    camera_frame: str
+    stamp_ns: int
+    T_world_camera: FloatArray
+
+
+def read_rgbd(
+    path: str | Path,
+    rgb_topic: str,
+    depth_topic: str,
+    info_topic: str,
+    world_frame: str = "map",
+    which: str = "last",
+    tf_tolerance: float = 0.1,
+) -> BagRgbd:
+    """Read one RGB-D frame (image, aligned depth, CameraInfo) and the camera's pose from a recording.
+
+    The colour message is the ``which`` ("first" or "last") of its topic; the depth and CameraInfo
+    messages are those of their topics closest in stamp to it. The camera's pose is looked up in
+    tf at the colour image's stamp, from its frame_id.
+
+    Raises:
+        InputError: a missing or unreadable bag or topic, a topic of another message type, an
+            image encoding not read, images or CameraInfo of different sizes, or a pose tf cannot give.
+    """
+    from baseplace.io.image_messages import (
+        CAMERA_INFO,
+        IMAGE,
+        depth_from_msg,
+        intrinsics_from_msg,
+        rgb_from_msg,
+    )
+
+    path = Path(path)
+    if which not in ("first", "last"):
+        raise InputError(f"unknown frame selection {which!r}; valid: first, last")
+    reader = _open(path)
+    try:
+        rgb_conns = _connections(reader, rgb_topic, IMAGE, path, "--rgb-topic")
+        depth_conns = _connections(reader, depth_topic, IMAGE, path, "--depth-topic")
+        info_conns = _connections(reader, info_topic, CAMERA_INFO, path, "--camera-info-topic")
+        colour = next(iter(_chosen(reader, rgb_conns, path, which)), None)
+        if colour is None:
+            raise InputError(f"bag {path}: topic {rgb_topic!r} has no messages")
+        ns, frame = stamp_ns(colour.header), colour.header.frame_id.lstrip("/")
+        rgb = rgb_from_msg(colour, f"{rgb_topic} in {path}")
+        del colour
+        depth = depth_from_msg(
+            _closest(reader, depth_conns, path, depth_topic, ns), f"{depth_topic} in {path}"
+        )
+        K = intrinsics_from_msg(_closest(reader, info_conns, path, info_topic, ns), f"{info_topic} in {path}")
+        if rgb.shape[:2] != depth.shape:
+            raise InputError(
+                f"bag {path}: the image on {rgb_topic} is {rgb.shape[1]}x{rgb.shape[0]} and the depth on "
+                f"{depth_topic} {depth.shape[1]}x{depth.shape[0]}; they must be aligned (the same size)"
+            )
+        K.check_image(rgb.shape[1], rgb.shape[0])
+        T = _read_tf(reader, path, int(tf_tolerance * 1e9)).lookup(world_frame, frame, ns)
+    finally:
+        reader.close()
+    return BagRgbd(str(path), rgb, depth, K, frame, ns, T)
+
+
+def _closest(reader: Any, conns: list[Any], path: Path, topic: str, ns: int) -> Any:
+    """The message of ``conns`` whose header stamp is closest to ``ns`` (one decoded message held at a time)."""
+    best: tuple[int, Any, bytes] | None = None
+    for conn, raw in _raw_messages(reader, conns, path):
+        msg = _decode(reader, conn, raw, path)
+        gap = abs(stamp_ns(msg.header) - ns)
+        del msg
+        if best is None or gap < best[0]:
+            best = (gap, conn, raw)
+    if best is None:
+        raise InputError(f"bag {path}: topic {topic!r} has no messages")
+    return _decode(reader, best[1], best[2], path)

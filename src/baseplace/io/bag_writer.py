@@ -1,4 +1,4 @@
-"""Write recordings of clouds, grids and tf (ROS 2 sqlite3 or MCAP, ROS 1), without ROS.
+"""Write recordings of clouds, grids, images, camera infos and tf (ROS 2 sqlite3 or MCAP, ROS 1), without ROS.
 
 For converting files into the recordings robots make, and for tests of :func:`~baseplace.io.bag.read_bag`.
 """
@@ -54,12 +54,40 @@ class GridRecord:
     grid: OccupancyGrid
 
 
+@dataclass(frozen=True)
+class ImageRecord:
+    """A sensor_msgs/Image to write: ``image`` in ``encoding``, in ``frame`` at ``stamp_ns``.
+
+    ``image`` is (H, W, 3) uint8 for rgb8 and bgr8, (H, W) depth for 16UC1 [mm] and 32FC1 [m].
+    """
+
+    topic: str
+    frame: str
+    stamp_ns: int
+    image: ArrayLike
+    encoding: str
+
+
+@dataclass(frozen=True)
+class CameraInfoRecord:
+    """A sensor_msgs/CameraInfo to write: ``intrinsics`` for ``width`` x ``height`` images, no distortion."""
+
+    topic: str
+    frame: str
+    stamp_ns: int
+    intrinsics: Any
+    width: int
+    height: int
+
+
 def write_input_bag(
     path: str | Path,
     fmt: str,
     clouds: Sequence[CloudRecord] = (),
     tf: Sequence[TfRecord] = (),
     grids: Sequence[GridRecord] = (),
+    images: Sequence[ImageRecord] = (),
+    camera_infos: Sequence[CameraInfoRecord] = (),
 ) -> None:
     """Write a recording: ``fmt`` "mcap" or "sqlite3" (a rosbag2 directory at ``path``) or "ros1" (a ``.bag``)."""
     from rosbags.typesys import Stores, get_typestore
@@ -79,6 +107,21 @@ def write_input_bag(
         )
     for g in grids:
         messages.append((g.topic, OCCUPANCY_GRID, g.stamp_ns, grid_msg(ts, g.grid, g.frame, g.stamp_ns)))
+    if images or camera_infos:
+        from baseplace.io.image_messages import CAMERA_INFO, IMAGE, camera_info_msg, image_msg
+
+        for im in images:
+            messages.append(
+                (
+                    im.topic,
+                    IMAGE,
+                    im.stamp_ns,
+                    image_msg(ts, np.asarray(im.image), im.encoding, im.frame, im.stamp_ns),
+                )
+            )
+        for ci in camera_infos:
+            msg = camera_info_msg(ts, ci.intrinsics, ci.width, ci.height, ci.frame, ci.stamp_ns)
+            messages.append((ci.topic, CAMERA_INFO, ci.stamp_ns, msg))
     for t in tf:
         topic = "/tf_static" if t.static else "/tf"
         messages.append(

@@ -43,10 +43,11 @@ class PointJob:
     """The inputs of :func:`point_job`.
 
     Attributes:
-        rgb: RGB image (PNG or JPEG).
-        depth: aligned depth image (16-bit PNG [mm] or float32 .npy [m]).
-        intrinsics: "fx fy cx cy" [px] or a ROS CameraInfo YAML.
-        transform: world_T_camera (a 4x4 file) or the camera-frame up vector "ux uy uz".
+        rgb: RGB image (PNG or JPEG), or None with ``bag``.
+        depth: aligned depth image (16-bit PNG [mm] or float32 .npy [m]), or None with ``bag``.
+        intrinsics: "fx fy cx cy" [px] or a ROS CameraInfo YAML, or None with ``bag``.
+        transform: world_T_camera (a 4x4 file) or the camera-frame up vector "ux uy uz"; None with
+            ``bag`` (tf gives the camera's pose).
         landmarks: JSON file of 21 MediaPipe landmarks (normalised x, y; relative z) instead of the
             hand model; an empty list means no hand.
         occupancy: occupancy grid (map_server YAML or loaded): also the candidates to pick the object up.
@@ -56,11 +57,16 @@ class PointJob:
             object whose centre lies at the smallest angle from the line, within 12 deg).
         png: also write a picture here: the image with the hand, the line and the boxes; with a
             grid, the candidates from above (also on exit 3, what was found).
+        bag: a ROS recording to read the frame from instead of image files: the colour image
+            (``rgb_topic``), the aligned depth (``depth_topic``, 16UC1 [mm] or 32FC1 [m]) and the
+            CameraInfo (``camera_info_topic``) closest in stamp to it, and the camera's pose in
+            ``world_frame`` from /tf and /tf_static at the colour image's stamp.
+        bag_frame: which colour message: "last" or "first".
     """
 
-    rgb: str
-    depth: str
-    intrinsics: str
+    rgb: str | None
+    depth: str | None
+    intrinsics: str | None
     transform: str | None = None
     landmarks: str | None = None
     occupancy: OccupancyGrid | str | None = None
@@ -74,6 +80,12 @@ class PointJob:
     objects: ObjectSettings | None = None
     selection: str = "first"
     png: str | None = None
+    bag: str | None = None
+    rgb_topic: str | None = None
+    depth_topic: str | None = None
+    camera_info_topic: str | None = None
+    world_frame: str = "map"
+    bag_frame: str = "last"
 
     def echo(self) -> dict[str, Any]:
         """The inputs as given."""
@@ -82,7 +94,11 @@ class PointJob:
                 "occupancy": self.occupancy if isinstance(self.occupancy, str | None) else "grid",
                 "robot": self.robot if isinstance(self.robot, str) else self.robot.name, "arm": self.arm,
                 "map": self.map if isinstance(self.map, str | None) else "loaded", "robot_pose": self.robot_pose,
-                "seed": self.seed, "selection": self.selection, "png": self.png}  # fmt: skip
+                "seed": self.seed, "selection": self.selection, "png": self.png,
+                "bag": None if self.bag is None else {
+                    "path": self.bag, "rgb_topic": self.rgb_topic, "depth_topic": self.depth_topic,
+                    "camera_info_topic": self.camera_info_topic, "world_frame": self.world_frame,
+                    "frame": self.bag_frame}}  # fmt: skip
 
 
 @dataclass
@@ -187,12 +203,18 @@ def point_job(job: PointJob, progress: Progress | None = None) -> PointReport:
     png = out_path(job.png, "--png", (".png",))  # before any work
     if job.selection not in SELECTION_RULES:
         raise InputError(f"unknown selection rule {job.selection!r}; valid: {', '.join(SELECTION_RULES)}")
-    if job.transform is None:
-        raise InputError(
-            'give --transform: the camera\'s world_T_camera (a 4x4 file) or its up vector (e.g. "0 -1 0")'
-        )
-    T_world_camera = load_transform(job.transform)
-    frame = load_frame(job.rgb, job.depth, job.intrinsics)
+    if job.bag is not None:
+        frame, T_world_camera = _bag_frame(job)
+    else:
+        if job.rgb is None or job.depth is None or job.intrinsics is None:
+            raise InputError("give --rgb, --depth and --intrinsics, or --bag with --rgb-topic, --depth-topic and "
+                             "--camera-info-topic")  # fmt: skip
+        if job.transform is None:
+            raise InputError(
+                'give --transform: the camera\'s world_T_camera (a 4x4 file) or its up vector (e.g. "0 -1 0")'
+            )
+        T_world_camera = load_transform(job.transform)
+        frame = load_frame(job.rgb, job.depth, job.intrinsics)
     report = PointReport(inputs=job.echo(), image_size=[frame.width, frame.height])
     try:
         _find(job, frame, T_world_camera, report, t0, progress)
@@ -201,6 +223,26 @@ def point_job(job: PointJob, progress: Progress | None = None) -> PointReport:
         raise
     _picture(png, frame.rgb, report)
     return report
+
+
+def _bag_frame(job: PointJob) -> tuple[Any, np.ndarray]:
+    """The frame and world_T_camera from ``job.bag``'s image, depth, CameraInfo and tf topics."""
+    from baseplace.io.bag import read_rgbd
+    from baseplace.perception.rgbd import RgbdFrame
+
+    given = [o for o, v in (("--rgb", job.rgb), ("--depth", job.depth), ("--intrinsics", job.intrinsics),
+                            ("--transform", job.transform)) if v is not None]  # fmt: skip
+    if given:
+        raise InputError(f"--bag gives the frame and tf the camera's pose: drop {', '.join(given)}")
+    missing = [o for o, v in (("--rgb-topic", job.rgb_topic), ("--depth-topic", job.depth_topic),
+                              ("--camera-info-topic", job.camera_info_topic)) if v is None]  # fmt: skip
+    if missing:
+        raise InputError(f"with --bag, give {', '.join(missing)} (sensor_msgs/Image, sensor_msgs/CameraInfo)")
+    assert job.bag and job.rgb_topic and job.depth_topic and job.camera_info_topic
+    got = read_rgbd(
+        job.bag, job.rgb_topic, job.depth_topic, job.camera_info_topic, job.world_frame, job.bag_frame
+    )
+    return RgbdFrame(got.rgb, got.depth, got.intrinsics), got.T_world_camera
 
 
 def _picture(png: Path | None, rgb: np.ndarray, report: PointReport) -> None:

@@ -16,7 +16,7 @@ def add_view_command(sub: Any) -> None:
     p.set_defaults(func=cmd_view)
     p.add_argument(
         "result", nargs="?", default=None,
-        help="the --json of place, candidates, surface-map, surface-sample, navigate, segment or demo, "
+        help="the --json of place, candidates, surface-map, surface-sample, navigate, segment, point or demo, "
         "with the inputs it names (default: out/demo.json), or a reachability map (.rmap, .h5, .hdf5)",
     )  # fmt: skip
     p.add_argument(

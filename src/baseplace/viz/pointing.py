@@ -19,6 +19,49 @@ BONES = ((0, 1), (1, 2), (2, 3), (3, 4), (0, 5), (5, 6), (6, 7), (7, 8), (5, 9),
 """MediaPipe's hand connections."""
 
 
+OBJECT_RGB = (60, 220, 60)
+SELECTED_RGB = (255, 200, 0)
+RAY_RGB = (0, 160, 255)
+HAND_RGB = (255, 40, 40)
+
+
+def annotated_image(
+    rgb: NDArray[np.uint8],
+    landmarks: NDArray[np.float64] | None,
+    ray_2d: NDArray[np.float64] | None,
+    image_boxes: NDArray[np.float64],
+    selected: int | None,
+) -> NDArray[np.uint8]:
+    """A copy of the frame with the objects' image boxes (the selected one thick, gold), the hand and the line.
+
+    Args:
+        rgb: (H, W, 3) the frame's image.
+        landmarks: (21, 2) hand landmarks [px], or None.
+        ray_2d: (2, 2) the finger's line from the fingertip to where it stops [px], or None.
+        image_boxes: (K, 2, 2) ``[[u0, v0], [u1, v1]]`` [px], inclusive.
+        selected: index of the chosen box, or None.
+    """
+    import cv2
+
+    out = np.ascontiguousarray(rgb.copy())
+    thin = max(1, round(max(out.shape[:2]) / 400))
+    for k, ((u0, v0), (u1, v1)) in enumerate(np.rint(image_boxes).astype(int)):
+        chosen = k == selected
+        cv2.rectangle(
+            out, (u0, v0), (u1, v1), SELECTED_RGB if chosen else OBJECT_RGB, 3 * thin if chosen else thin
+        )
+    if landmarks is not None:
+        L = np.rint(landmarks).astype(int)
+        for a, b in BONES:
+            cv2.line(out, tuple(L[a]), tuple(L[b]), (255, 255, 255), thin, cv2.LINE_AA)
+        for p in L:
+            cv2.circle(out, tuple(p), 2 * thin, HAND_RGB, -1, cv2.LINE_AA)
+    if ray_2d is not None:
+        a, b = np.rint(ray_2d).astype(int)
+        cv2.line(out, tuple(a), tuple(b), RAY_RGB, 2 * thin, cv2.LINE_AA)
+    return out
+
+
 def plot_point(rgb: NDArray[np.uint8], report: dict[str, Any], out: Path) -> None:
     """Write a PNG of a ``point`` report over its RGB image (and, with candidates, a top view).
 
@@ -79,4 +122,4 @@ def plot_point(rgb: NDArray[np.uint8], report: dict[str, Any], out: Path) -> Non
     plt.close(fig)
 
 
-__all__ = ["plot_point"]
+__all__ = ["annotated_image", "plot_point"]

@@ -1,9 +1,9 @@
 """What the 3D viewer draws, read from any result JSON of baseplace.
 
 :func:`read_result` turns the ``--json`` object of ``place``, ``candidates``, ``surface-map``,
-``surface-sample``, ``navigate``, ``segment`` or ``demo`` into a :class:`ResultView`: the robot
+``surface-sample``, ``navigate``, ``segment``, ``point`` or ``demo`` into a :class:`ResultView`: the robot
 poses to draw (with their joint values and reaching motions), candidates and rejected positions,
-base paths, targets, regions, and the input files the result names (cloud, occupancy grid,
+base paths, targets, regions, a ``point`` result's frame (hand, line, objects), and the input files the result names (cloud, occupancy grid,
 surface map, view data). It reads the one result schema (``"schema"`` and ``"kind"``, poses as
 4x4 plus x, y, z, yaw, inputs echoed under ``"inputs"``) and the per-command objects written
 before it; nothing here draws or imports the viewer's libraries.
@@ -27,7 +27,7 @@ from baseplace.geometry.poses import BasePose
 
 FloatArray = NDArray[np.float64]
 
-KINDS = ("place", "candidates", "surface_map", "surface_samples", "navigate", "segment", "demo")
+KINDS = ("place", "candidates", "surface_map", "surface_samples", "navigate", "segment", "point", "demo")
 """The result kinds the viewer draws."""
 COMMANDS = {
     "place": "baseplace place",
@@ -36,6 +36,7 @@ COMMANDS = {
     "surface_samples": "baseplace surface-sample",
     "navigate": "baseplace navigate",
     "segment": "baseplace segment",
+    "point": "baseplace point",
     "demo": "baseplace demo",
 }
 """The command that writes each kind."""
@@ -47,6 +48,7 @@ _ALIASES = {
     "path": "navigate",
     "segmentation": "segment",
     "placement": "place",
+    "pointing": "point",
 }
 _NOT_SHOWN = ("reach", "build_map", "robots", "robot_check", "occupancy", "scene", "experiment")
 
@@ -101,6 +103,40 @@ class Region:
 
 
 @dataclass(frozen=True)
+class Pointing:
+    """A ``point`` result's frame: the hand, the finger's line and the objects, in the image and the world.
+
+    Attributes:
+        image: the RGB image the command read (``--rgb``), or None when it read a recording (``bag``).
+        intrinsics: "fx fy cx cy" [px] or the CameraInfo YAML, as the command got them.
+        transform: world_T_camera file or the camera-frame up vector, as the command got it.
+        gesture: Scan, Point, Stop, none, or "no hand".
+        landmarks: (21, 2) hand landmarks [px], or None without a hand.
+        ray_2d: (2, 2) the finger's line from the fingertip to where it stops [px], or None.
+        ray_3d: (2, 3) the same from the finger's depth [m, world], or None.
+        image_boxes: (K, 2, 2) each object's image box ``[[u0, v0], [u1, v1]]`` [px].
+        world_boxes: (K, 2, 3) each object's box ``[min, max]`` [m, world].
+        selected: index of the object pointed at, or None.
+        bag: the recording the command read the frame from (``--bag``), else None.
+        bag_topics: its colour, depth and CameraInfo topics, world frame and frame selection
+            (``read_rgbd``'s arguments after the path).
+    """
+
+    image: Path | None
+    intrinsics: str | None
+    transform: str | None
+    gesture: str
+    landmarks: FloatArray | None
+    ray_2d: FloatArray | None
+    ray_3d: FloatArray | None
+    image_boxes: FloatArray
+    world_boxes: FloatArray
+    selected: int | None
+    bag: Path | None = None
+    bag_topics: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
 class Inputs:
     """The input files a result names, resolved to paths that exist.
 
@@ -138,6 +174,7 @@ class ResultView:
         object_xyz: (3,) the object's position [m] (candidates), if any.
         regions: planar regions (segment).
         traversable: (E, 2, 3) region borders the base can cross, and ``blocked`` those it cannot.
+        pointing: a ``point`` result's frame, else None.
         summary: one line about the result for the viewer's panel.
     """
 
@@ -155,6 +192,7 @@ class ResultView:
     regions: list[Region] = field(default_factory=list)
     traversable: FloatArray = field(default_factory=lambda: np.zeros((0, 2, 3)))
     blocked: FloatArray = field(default_factory=lambda: np.zeros((0, 2, 3)))
+    pointing: Pointing | None = None
     summary: str = ""
 
     @property
@@ -353,10 +391,10 @@ class _Resolver:
         )
 
 
-def _is_vector(text: str) -> bool:
-    """An up vector "ux uy uz" rather than a transform file's name."""
+def _is_vector(text: str, n: int = 3) -> bool:
+    """``n`` numbers (an up vector "ux uy uz", intrinsics "fx fy cx cy") rather than a file's name."""
     try:
-        return len([float(v) for v in text.replace(",", " ").split()]) == 3
+        return len([float(v) for v in text.replace(",", " ").split()]) == n
     except ValueError:
         return False
 
@@ -376,7 +414,7 @@ def _resolve_inputs(obj: dict[str, Any], source: Path, kind: str, given_here: di
     resolve = _Resolver(source, kind, [p for v in given_here.values() for p in _paths_of(v)])
     clouds_named = _paths_of(given.get("clouds", given.get("cloud")))
     recordings = [c for c in [*clouds_named, *_paths_of(given.get("bag"))] if _is_recording(c)]
-    if recordings:
+    if recordings and kind != "point":  # point's frame is read back from its recording (_pointing)
         raise InputError(
             f"{source} was written by `{COMMANDS[kind]}` from the ROS recording {recordings[0]} (--bag); the "
             f"viewer reads clouds and grids from files: export them (.pcd, map_server .yaml) and rerun with --cloud"
@@ -495,6 +533,7 @@ def read_result(
     object_xyz = None
     regions: list[Region] = []
     traversable = blocked = np.zeros((0, 2, 3))
+    pointing = None
 
     if kind in ("place", "demo"):
         placements = obj.get(
@@ -513,8 +552,8 @@ def read_result(
                 "names no cloud or occupancy grid; give the cloud with --cloud FILE (and --transform, --floor as the command got them)"
             )
         note = note or f"{len(robots)} placement(s)"
-    elif kind == "candidates":
-        rows = obj.get("candidates", [])
+    elif kind in ("candidates", "point"):
+        rows = obj.get("candidates") or []
         if not isinstance(rows, list) or not all(isinstance(c, dict) for c in rows):
             raise r.fail("candidates must be a list of objects")
         robots += [_robot_pose(c, r, f"candidate {i + 1}", arm_joints) for i, c in enumerate(rows)]
@@ -538,9 +577,20 @@ def read_result(
             s = r.xyyaw([start], "robot_pose")[0]
             if not paths:
                 paths.append(s[None])
-        if inputs.occupancy is None:
+        if inputs.occupancy is None and (kind == "candidates" or rows):
             raise r.fail("names no occupancy grid; give it with --occupancy MAP.yaml")
         note = note or f"{len(rows)} candidate(s), {len(rejected)} rejected"
+        if kind == "point":
+            pointing = _pointing(obj, r, path)
+            note = (
+                f"gesture {pointing.gesture}, {len(pointing.world_boxes)} object(s), "
+                + (
+                    "none selected"
+                    if pointing.selected is None
+                    else f"object {pointing.selected + 1} selected"
+                )
+                + (f"; {note}" if rows or error else "")
+            )
     elif kind == "navigate":
         paths.append(r.xyyaw(obj.get("poses", obj.get("path")), "path"))
         if len(paths[0]):
@@ -575,7 +625,63 @@ def read_result(
     return ResultView(
         kind=kind, source=path, robot=robot, arm=arm, inputs=inputs, robots=robots, candidates=candidates,
         rejected=rejected, paths=paths, targets=targets, object_xyz=object_xyz, regions=regions,
-        traversable=traversable, blocked=blocked, summary=note,
+        traversable=traversable, blocked=blocked, pointing=pointing, summary=note,
+    )  # fmt: skip
+
+
+def _pointing(obj: dict[str, Any], r: _Reader, source: Path) -> Pointing:
+    """A ``point`` result's frame: its image (found as written or next to the JSON) and what was found in it."""
+    echoed: dict[str, Any] = obj["inputs"] if isinstance(obj.get("inputs"), dict) else {}
+    rgb, intrinsics = echoed.get("rgb"), echoed.get("intrinsics")
+    bag, topics = None, ()
+    recording = echoed.get("bag")
+    if isinstance(recording, dict) and isinstance(recording.get("path"), str):
+        keys = ("rgb_topic", "depth_topic", "camera_info_topic", "world_frame", "frame")
+        if not all(isinstance(recording.get(k), str) for k in keys):
+            raise r.fail(f"inputs.bag must name its {', '.join(keys)}")
+        bag = _Resolver(source, "point")(recording["path"], "recording", "--bag")
+        topics = tuple(recording[k] for k in keys)
+    elif not isinstance(rgb, str) or not isinstance(intrinsics, str):
+        raise r.fail(
+            "names no image and intrinsics (inputs.rgb, inputs.intrinsics); rerun it with this version"
+        )
+    transform = echoed.get("transform")
+    if isinstance(transform, str) and not _is_vector(transform):
+        transform = str(_Resolver(source, "point")(transform, "transform", "--transform"))
+    if isinstance(intrinsics, str) and not _is_vector(intrinsics, 4):
+        intrinsics = str(_Resolver(source, "point")(intrinsics, "intrinsics", "--intrinsics"))
+    objects = obj.get("objects") or []
+    if not isinstance(objects, list) or not all(isinstance(o, dict) for o in objects):
+        raise r.fail("objects must be a list of objects")
+    gesture = obj.get("gesture")
+    selected = obj.get("selected")
+    if selected is not None and not (isinstance(selected, int) and 0 <= selected < len(objects)):
+        raise r.fail(f"selected must be an index into the {len(objects)} objects, got {selected!r}")
+
+    def ray(value: Any, dim: int, what: str) -> FloatArray | None:
+        if not isinstance(value, dict):
+            return None
+        ends = r.array([value.get("origin"), value.get("end")], (2, dim), what)
+        if value.get("length") is None and value.get("direction") is not None:  # met no box: 1 m of it
+            ends[1] = ends[0] + r.array(value["direction"], (dim,), f"{what} direction")
+        return ends
+
+    landmarks = obj.get("landmarks")
+    return Pointing(
+        image=_Resolver(source, "point")(rgb, "image", "--rgb") if bag is None and isinstance(rgb, str) else None,
+        intrinsics=intrinsics if bag is None and isinstance(intrinsics, str) else None,
+        transform=transform if isinstance(transform, str) else None,
+        gesture=str(gesture.get("name")) if isinstance(gesture, dict) else "no hand",
+        landmarks=None if landmarks is None else r.array(landmarks, (21, 2), "landmarks"),
+        ray_2d=ray(obj.get("ray_2d"), 2, "ray_2d"),
+        ray_3d=ray(obj.get("ray_3d"), 3, "ray_3d"),
+        image_boxes=r.array([o.get("image_box") for o in objects], (len(objects), 2, 2), "objects' image_box")
+        if objects else np.zeros((0, 2, 2)),
+        world_boxes=r.array([o.get("box_world") for o in objects], (len(objects), 2, 3), "objects' box_world")
+        if objects else np.zeros((0, 2, 3)),
+        selected=selected,
+        bag=bag,
+        bag_topics=topics,
     )  # fmt: skip
 
 

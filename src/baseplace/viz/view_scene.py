@@ -6,10 +6,13 @@ floor), the surface map's R_S heat map and working surface, then the result's ow
 with its URDF meshes at the first base pose and joint values, its reaching motion (the TCP's path,
 translucent copies of the robot at the start and pre-grasp configurations, and a slider and Play
 button that move the robot along the joint waypoints), other placements or candidates as arrows,
-rejected positions, base paths, targets and the object.
+rejected positions, base paths, targets and the object. A ``point`` result adds its frame: the
+image with the hand, the finger's line and the objects' image boxes on the camera's frustum (and in
+the panel), the objects' 3D boxes (the selected one gold) and the finger's 3D ray.
 
 Colours (the Chromium tests look for their hues): path orange, candidates green, rejected red,
-the TCP's path magenta, motion copies sky blue, object cyan, working surface violet.
+the TCP's path magenta, motion copies sky blue, object cyan, working surface violet, pointed-at
+object gold, the finger's ray blue.
 """
 
 from __future__ import annotations
@@ -75,12 +78,18 @@ class SceneInputs:
         points: (N, 3) float32 world cloud [m], subsampled; empty without a cloud.
         grid: the occupancy grid, if named.
         surface: the surface map, if named.
+        image: (H, W, 3) a ``point`` result's RGB image, else None.
+        T_world_camera: (4, 4) its camera's pose (OpenCV optical frame) [m], else None.
+        fov_y: its camera's vertical field of view [rad], else None.
     """
 
     data: ViewData | None
     points: NDArray[np.float32]
     grid: OccupancyGrid | None
     surface: SurfaceMap | None
+    image: NDArray[np.uint8] | None = None
+    T_world_camera: FloatArray | None = None
+    fov_y: float | None = None
 
 
 def load_inputs(view: ResultView, robot_name: str, segment: bool) -> SceneInputs:
@@ -126,7 +135,25 @@ def load_inputs(view: ResultView, robot_name: str, segment: bool) -> SceneInputs
         from baseplace.placement.surface_storage import load_surface_map
 
         surface = load_surface_map(view.inputs.surface_map)
-    return SceneInputs(data, points, grid, surface)
+    if view.pointing is None:
+        return SceneInputs(data, points, grid, surface)
+    from baseplace.perception.rgbd import load_rgb, parse_intrinsics
+
+    p = view.pointing
+    if p.bag is not None:  # the frame the command read, from its recording (the same limits)
+        from baseplace.io.bag import read_rgbd
+
+        rgb_topic, depth_topic, info_topic, world_frame, which = p.bag_topics
+        got = read_rgbd(p.bag, rgb_topic, depth_topic, info_topic, world_frame, which)
+        image, K, T_world_camera = got.rgb, got.intrinsics, got.T_world_camera
+    else:
+        assert p.image is not None and p.intrinsics is not None
+        image = load_rgb(p.image)  # the command's size and decompression limits
+        K = parse_intrinsics(p.intrinsics)
+        T_world_camera = load_transform(p.transform) if p.transform is not None else np.eye(4)
+    return SceneInputs(
+        data, points, grid, surface, image, T_world_camera, 2 * math.atan2(image.shape[0] / 2, K.fy)
+    )
 
 
 def _wxyz(T: FloatArray) -> NDArray[np.float64]:
@@ -431,6 +458,9 @@ def build_scene(
             "/object", radius=0.05, color=OBJECT_RGB, position=tuple(view.object_xyz)
         )
 
+    if view.pointing is not None and inputs.image is not None:
+        layers.update(_add_pointing(server, view, inputs))
+
     paths: list[Any] = []
     for i, poses in enumerate(view.paths):
         xy = densify(poses)
@@ -444,7 +474,7 @@ def build_scene(
         )
     layers["paths"] = paths
 
-    planar = view.kind in ("candidates", "surface_samples", "navigate")  # poses on the ground, no z
+    planar = view.kind in ("candidates", "point", "surface_samples", "navigate")  # poses on the ground, no z
     if len(view.candidates):
         z = (
             ground(inputs, view.candidates[:, :2]) + MARKER_LIFT
@@ -480,6 +510,36 @@ def build_scene(
     if view.robots and robot is not None:
         layers["robot_layer"] = RobotLayer(server, view, robot_poses, load_robot_model(robot), layers)
     return layers
+
+
+def _add_pointing(server: viser.ViserServer, view: ResultView, inputs: SceneInputs) -> dict[str, Any]:
+    """A ``point`` frame: the annotated image on the camera's frustum and in the panel, the objects, the ray."""
+    from baseplace.viz.pointing import OBJECT_RGB as BOX_RGB
+    from baseplace.viz.pointing import RAY_RGB, SELECTED_RGB, annotated_image
+
+    p = view.pointing
+    assert p is not None and inputs.image is not None and inputs.T_world_camera is not None and inputs.fov_y
+    api = server.scene
+    image = annotated_image(inputs.image, p.landmarks, p.ray_2d, p.image_boxes, p.selected)
+    h, w = image.shape[:2]
+    T = inputs.T_world_camera
+    out: dict[str, Any] = {
+        "camera": api.add_camera_frustum("/camera", fov=inputs.fov_y, aspect=w / h, scale=0.2,
+                                         image=image, format="jpeg", wxyz=_wxyz(T), position=T[:3, 3]),
+        "camera_image": server.gui.add_image(image, label="the frame", format="jpeg"),
+    }  # fmt: skip
+    boxes = []
+    for k, (lo, hi) in enumerate(p.world_boxes):
+        chosen = k == p.selected
+        boxes.append(
+            api.add_box(f"/objects/object_{k}", SELECTED_RGB if chosen else BOX_RGB, tuple(hi - lo),
+                        opacity=None if chosen else 0.45, position=tuple((lo + hi) / 2))
+        )  # fmt: skip
+    out["objects"] = boxes
+    if p.ray_3d is not None:
+        out["ray"] = api.add_line_segments("/ray", p.ray_3d[None].astype(np.float32), colors=RAY_RGB,
+                                           thickness=5.0, thickness_units="screen")  # fmt: skip
+    return out
 
 
 def _on_ground(T: FloatArray, inputs: SceneInputs) -> FloatArray:

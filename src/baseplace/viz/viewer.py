@@ -14,7 +14,10 @@ occupancy grid, surface map, robot), and draws them (:mod:`baseplace.viz.view_sc
 * surface-map / surface-sample: the surface map's R_S heat map, the working surface, the samples
   (arrows) and the robot at the best one;
 * navigate: the cloud, its regions, the path and the robot at the goal;
-* segment: the cloud and the regions and borders of the JSON.
+* segment: the cloud and the regions and borders of the JSON;
+* point: the image with the hand's landmarks, the finger's line and the objects' image boxes (on the
+  camera's frustum in the scene and in the panel), the objects' 3D boxes (the pointed-at one gold),
+  the finger's 3D ray and, with a grid, the candidates to pick the object up as for candidates.
 
 The demo's result also names a *view data* file (key ``"view_data"``, relative to the JSON's
 directory or absolute): an ``.npz`` written by :func:`save_view_data` with the segmented scene and
@@ -389,6 +392,10 @@ def _camera(server: viser.ViserServer, view: ResultView, inputs: SceneInputs, la
     extent += [np.c_[view.candidates[:, :2], np.zeros(len(view.candidates))]] if len(view.candidates) else []
     extent += [T[None, :3, 3] for T in [rp.T_world_base for rp in view.robots[1:]]]
     extent += [T[None, :3, 3] for T in view.targets]
+    if view.pointing is not None:
+        extent += [view.pointing.world_boxes.reshape(-1, 3)]
+        if inputs.T_world_camera is not None:
+            extent.append(inputs.T_world_camera[None, :3, 3])
     if view.object_xyz is not None:
         extent.append(view.object_xyz[None])
     if inputs.surface is not None:
@@ -422,6 +429,12 @@ def _camera(server: viser.ViserServer, view: ResultView, inputs: SceneInputs, la
             side = np.array([-d[1], d[0]])
             horiz = 0.75 * d + 0.55 * side
             direction = np.array([horiz[0], horiz[1], 0.75])
+    if view.pointing is not None and inputs.T_world_camera is not None and len(view.pointing.world_boxes):
+        # from the side of the line camera -> objects: the frame, the objects and the robot side by side
+        d = view.pointing.world_boxes.mean(axis=(0, 1))[:2] - inputs.T_world_camera[:2, 3]
+        d = d / max(float(np.hypot(*d)), 1e-6)
+        horiz = -0.35 * d + 0.9 * np.array([-d[1], d[0]])
+        direction = np.array([horiz[0], horiz[1], 0.8])
     direction /= np.linalg.norm(direction)
     server.initial_camera.look_at = np.asarray(look, dtype=np.float64)
     server.initial_camera.position = np.asarray(look + direction * 1.05 * size, dtype=np.float64)
@@ -459,6 +472,8 @@ def _gui(server: viser.ViserServer, layers: dict[str, Any], view: ResultView, ro
         "Candidates": layers.get("candidates", []),
         "Rejected": [layers.get("rejected")],
         "Path": layers.get("paths", []),
+        "Camera image": [layers.get("camera")],
+        "Objects": [*layers.get("objects", []), layers.get("ray")],
     }
     for label, handles in groups.items():
         handles = [h for h in handles if h is not None]
