@@ -3,6 +3,7 @@ from __future__ import annotations
 import contextlib
 import io
 import os
+import socket
 import subprocess
 from pathlib import Path
 
@@ -47,6 +48,13 @@ def tiago_map(tiago: Robot):
 @pytest.fixture()
 def rng() -> np.random.Generator:
     return np.random.default_rng(2024)
+
+
+def free_port() -> int:
+    """A TCP port on the loopback interface that nothing listens on now."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
 
 
 def run_cli(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -21,16 +20,11 @@ import pytest
 
 from baseplace.reachability.build import CHUNK, BuildSettings, MapAccumulator, build_map
 from baseplace.reachability.checkpoint import load_checkpoint
+from conftest import free_port
 from test_scaleout import assert_same_map
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
 DASK = str(Path(sys.executable).with_name("dask"))
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @pytest.mark.slow
@@ -39,7 +33,7 @@ def test_all_workers_killed_gives_one_line_and_a_resumable_checkpoint(victim, ti
     settings = BuildSettings(samples=16 * CHUNK, seed=4)
     env = {**os.environ, "PYTHONPATH": SRC, "BASEPLACE_CACHE": os.environ.get("BASEPLACE_CACHE", "")}
     env = {k: v for k, v in env.items() if v}
-    address = f"tcp://127.0.0.1:{_free_port()}"
+    address = f"tcp://127.0.0.1:{free_port()}"
     quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL, "env": env}
     scheduler = subprocess.Popen([DASK, "scheduler", "--host", "127.0.0.1", "--port", address.rsplit(":", 1)[1],
                                   "--no-dashboard"], **quiet)  # type: ignore[call-overload]  # fmt: skip

@@ -30,7 +30,7 @@ from baseplace.reachability.storage import save_map
 from baseplace.serve.client import Client
 from baseplace.serve.server import create_app
 from baseplace.serve.state import ServeSettings, ServiceState
-from conftest import run_cli
+from conftest import free_port, run_cli
 from test_grasped_object import THROUGH_B, A, B, cloud, tray_scene
 from test_placement import pinocchio_tcp
 
@@ -185,17 +185,11 @@ def test_health_openapi_and_docs(client):
     assert client.get("/docs").status_code == 200
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 @pytest.fixture(scope="module")
 def server(tiago, tiago_map):
     import uvicorn
 
-    port = _free_port()
+    port = free_port()
     app = make_app(tiago, tiago_map, timeout_s=20.0)
     srv = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning", lifespan="on"))
     thread = threading.Thread(target=srv.run, daemon=True)

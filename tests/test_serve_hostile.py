@@ -20,6 +20,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from conftest import free_port
+
 pytest.importorskip("fastapi")
 pytest.importorskip("uvicorn")
 
@@ -188,7 +190,7 @@ def test_serving_off_loopback_without_a_token_refuses_to_start():
     env = {k: v for k, v in os.environ.items() if k != "BASEPLACE_TOKEN"}
     try:
         p = subprocess.run([sys.executable, "-m", "baseplace.cli", "serve", "--host", "0.0.0.0", "--port",
-                            str(_free_port()), "--no-warm-up"], capture_output=True, text=True, timeout=60,
+                            str(free_port()), "--no-warm-up"], capture_output=True, text=True, timeout=60,
                            env=env)  # fmt: skip
     except subprocess.TimeoutExpired:
         pytest.fail("serve --host 0.0.0.0 without a token started serving")
@@ -282,12 +284,6 @@ def test_work_limits_in_the_schema(app_client, scene):
 # ---- a real server: slow headers, stalled bodies, SIGTERM (defects 11 and 3) ----
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 def _rss_mb(pid: int) -> float:
     with open(f"/proc/{pid}/status") as f:
         for line in f:
@@ -324,7 +320,7 @@ def serve_cache(tmp_path_factory, tiago, tiago_map):
 
 class RealServer:
     def __init__(self, cache: Path, timeout_s: float, tray: np.ndarray) -> None:
-        self.port = _free_port()
+        self.port = free_port()
         self.url = f"http://127.0.0.1:{self.port}"
         env = {**os.environ, "BASEPLACE_CACHE": str(cache)}
         env.pop("BASEPLACE_TOKEN", None)

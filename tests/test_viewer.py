@@ -29,6 +29,7 @@ from baseplace.viz.viewer import (
     serve,
     view_data_from,
 )
+from conftest import free_port
 
 ROOT = Path(__file__).resolve().parents[1]
 SCREENSHOT_COPY = ROOT / "docs" / "img" / "viewer.png"
@@ -59,12 +60,6 @@ def chromium() -> str:
         "headless Chromium is needed to render the viewer; install the Debian `chromium` package "
         "(sudo apt-get install chromium)"
     )
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def write_result(directory: Path, data: ViewData, **extra) -> Path:
