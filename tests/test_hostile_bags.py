@@ -399,3 +399,14 @@ def test_rosbag2_file_compression_bounded_by_the_temporary_folder(tmp_path, monk
 def test_honest_rosbag2_compressed_bags_read_through_the_bounded_decompressors(tmp_path, mode):
     path = _zstd_rosbag2(tmp_path / "rec", mode, 1000)
     assert read_bag(path, ["/points"]).clouds[0].points.shape == (1000, 3)
+
+
+def test_a_zstd_message_of_several_frames_inflates_whole():
+    # rosbags inflates a message with zstd.decompress, which reads every frame; so must the bounded one
+    from baseplace.io.bag_limits import _BoundedZstd, _zstd_module
+
+    zstd = _zstd_module()
+    c = zstd.ZstdCompressor()
+    undeclared = c.compress(b"ef" * 700) + c.flush()
+    data = zstd.compress(b"ab" * 1000) + zstd.compress(b"cd" * 500) + undeclared
+    assert _BoundedZstd.decompress(data) == zstd.decompress(data) == b"ab" * 1000 + b"cd" * 500 + b"ef" * 700

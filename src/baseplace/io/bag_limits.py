@@ -40,13 +40,23 @@ def _codec(name: str) -> Callable[[], Any] | None:
     return None
 
 
-def inflate(data: bytes, codec: str, size: int) -> bytes:
+def inflate(data: bytes, codec: str, size: int, what: str = "chunk", declared: bool = True) -> bytes:
     """``data`` decompressed by ``codec`` (bz2, lz4 or zstd frames), refused past ``size`` bytes.
+
+    Args:
+        data: the compressed bytes: one frame or stream after another.
+        codec: ``bz2``, ``lz4`` or ``zstd``.
+        size: the most bytes it may inflate to.
+        what: what is inflated, for the messages ("chunk", "message").
+        declared: ``size`` is what the recording declares (beyond it the file is corrupt); else the
+            memory cap, for data that declares no size.
 
     Raises:
         InputError: ``size`` is over the memory cap, or the data inflates beyond ``size``.
     """
-    check_alloc(size, "a decompressed chunk", "the recording")
+    check_alloc(
+        size, f"a decompressed {codec} {what}" if what != "chunk" else "a decompressed chunk", "the recording"
+    )
     make = _codec(codec)
     if make is None:
         raise InputError(f"the recording: unknown chunk compression {codec!r}; valid: bz2, lz4, zstd")
@@ -59,8 +69,11 @@ def inflate(data: bytes, codec: str, size: int) -> bytes:
         parts.append(part)
         if total > size:
             raise InputError(
-                f"the recording: a {codec} chunk inflates beyond the {size} bytes its header declares; "
+                f"the recording: a {codec} {what} inflates beyond the {size} bytes its header declares; "
                 "the file is corrupt"
+                if declared
+                else f"a {codec} {what} of the recording inflates over the limit of {size / 1e6:.0f} MB "
+                "(raise BASEPLACE_MAX_MEMORY_MB to allow it)"
             )
         if not d.eof:
             break  # truncated: the reader's own checks name it
@@ -121,6 +134,7 @@ class _BoundedZstd:
 
     @staticmethod
     def decompress(data: bytes) -> bytes:
+        """Inflated as :func:`inflate` does: at the size the first frame declares, else up to the cap."""
         zstd = _zstd_module()
         try:
             declared = zstd.get_frame_info(data).decompressed_size
@@ -128,16 +142,9 @@ class _BoundedZstd:
             raise InputError(
                 "a zstd message of the recording is not a zstd frame; the file is corrupt"
             ) from None
-        if declared is not None:  # the frame says how large it is: checked before anything is inflated
-            check_alloc(declared, "a zstd message", "the recording")
-        cap = memory_cap_bytes()
-        out: bytes = zstd.ZstdDecompressor().decompress(data, max_length=cap + 1)
-        if len(out) > cap:
-            raise InputError(
-                f"a zstd message of the recording inflates over the limit of {cap / 1e6:.0f} MB "
-                "(raise BASEPLACE_MAX_MEMORY_MB to allow it)"
-            )
-        return out
+        if declared is not None and len(data) == zstd.get_frame_size(data):  # one frame that says its size
+            return inflate(data, "zstd", declared, "message")
+        return inflate(data, "zstd", memory_cap_bytes(), "message", declared=False)
 
     @staticmethod
     def open(file: Any, mode: str = "rb") -> _BoundedZstdStream:
