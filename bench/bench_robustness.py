@@ -49,7 +49,7 @@ from baseplace.geometry.poses import pose_from_xyz_rpy
 from baseplace.placement.irm_candidates import IrmSettings, irm_candidates
 from baseplace.placement.motion import MotionChecker
 from baseplace.placement.pipeline import PlaceSettings, place
-from baseplace.placement.robustness import BaseErrorModel, RobustnessSettings, score_candidates
+from baseplace.placement.robustness import BaseErrorModel, RobustnessScorer, RobustnessSettings
 from baseplace.reachability.build import BuildSettings, build_map
 from baseplace.robots.model import Robot
 from baseplace.sim.scenes import SceneSettings, generate_scene
@@ -137,7 +137,8 @@ def table_trial(robot, rmap, shapes, seed: int, cell: tuple[int, int], variants)
         if (samples, solutions) not in scores:
             t0 = time.perf_counter()
             settings = RobustnessSettings(samples=samples, ik_solutions=solutions, seed=seed)
-            scored = score_candidates(arm, env, grasps, pool, settings)
+            scorer = RobustnessScorer(arm, env, settings)
+            scored = [scorer.scored(c) for c in pool]
             scores[(samples, solutions)] = [c.robustness for c in scored]
             out[f"score_s_S{samples}_ik{solutions}"] = round(time.perf_counter() - t0, 3)
         r = scores[(samples, solutions)][:pool_size]

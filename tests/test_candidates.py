@@ -517,9 +517,10 @@ def test_irm_candidates_pass_an_independent_ik_check(tiago, tiago_map, table_sce
     model, data = tiago.model, tiago.model.createData()
     obstacles = _occupied_squares(grid)
     for c in found:
-        assert c.method == "irm" and c.joints is not None and c.reachability > 0
-        assert np.all(c.joints >= arm.lower - 1e-9) and np.all(c.joints <= arm.upper + 1e-9)
-        pin.framesForwardKinematics(model, data, arm.to_pinocchio(c.joints, tiago.q_reference))
+        q = c.joints[0]
+        assert c.approach is not None and c.approach.method == "irm" and c.reachability > 0
+        assert np.all(q >= arm.lower - 1e-9) and np.all(q <= arm.upper + 1e-9)
+        pin.framesForwardKinematics(model, data, arm.to_pinocchio(q, tiago.q_reference))
         T_base_tcp = (
             data.oMf[model.getFrameId(arm.base_frame)].inverse() * data.oMf[model.getFrameId(arm.tcp_frame)]
         ).homogeneous

@@ -38,10 +38,11 @@ import numpy as np
 
 from baseplace.geometry.poses import BasePose
 from baseplace.navigation.gridnav import GridNavigator
-from baseplace.placement.candidates import RadialCandidate, pickup, radial_search
+from baseplace.placement.candidates import pickup, radial_search
 from baseplace.placement.irm_candidates import IrmSettings, irm_candidates
 from baseplace.placement.motion import MotionChecker, MotionSettings
-from baseplace.placement.robustness import BaseErrorModel, RobustnessSettings, perturbed, score_candidates
+from baseplace.placement.robustness import BaseErrorModel, RobustnessScorer, RobustnessSettings, perturbed
+from baseplace.placement.verified import Placement
 from baseplace.reachability.rmap import ReachabilityMap
 from baseplace.robots.model import Robot
 from baseplace.terrain.voxels import VoxelMap
@@ -117,14 +118,19 @@ def execution_trial(robot: Robot, rmap: ReachabilityMap, shapes: RobotShapes, se
     pool = irm_candidates(robot, rmap, p_est, method_grasps, verify_env, occupancy, IrmSettings(),
                           np.random.default_rng([seed, *cell, 1]), planner)  # fmt: skip
     t_pool = time.perf_counter() - t0
-    found = pickup(pool, p_est, start, navigate).chosen
-    chosen["default"] = (None if found is None else found.pose, -1 if found is None else found.grasp, t_pool)
+    placed = pickup(pool, p_est, start, navigate).chosen
+    chosen["default"] = (
+        None if placed is None else placed.pose,
+        -1 if placed is None else placed.grasp,
+        t_pool,
+    )
     t0 = time.perf_counter()
-    ranked: list[RadialCandidate] = []
+    ranked: list[Placement] = []
     if pool:
-        scored = score_candidates(arm, verify_env, method_grasps, pool[: robust.pool], robust)
+        scorer = RobustnessScorer(arm, verify_env, robust)
+        scored = [scorer.scored(c) for c in pool[: robust.pool]]
 
-        def key(c: RadialCandidate) -> tuple[float, float, float]:
+        def key(c: Placement) -> tuple[float, float, float]:
             r = c.robustness
             assert r is not None
             return (-(r.low if rank_key == "low" else r.rate), -r.low, -c.reachability)

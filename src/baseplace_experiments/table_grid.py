@@ -60,7 +60,7 @@ from baseplace.errors import InputError
 from baseplace.geometry.poses import BasePose, FloatArray, invert_transforms
 from baseplace.navigation.gridnav import GridNavigator
 from baseplace.placement.candidates import (
-    RadialCandidate,
+    Posed,
     RadialSettings,
     occupancy_risk,
     pickup,
@@ -480,7 +480,7 @@ def _trial(robot: Robot, rmap: ReachabilityMap, cell: tuple[int, int], rng: np.r
     methods: dict[str, Any] = {}
     for method in METHODS:
         t0 = time.perf_counter()
-        candidates: list[RadialCandidate] = []
+        candidates: Sequence[Posed] = []
         if method == "baseline":
             goal = s.baseline_pose(robot)
             path = navigate(start, goal)

@@ -37,8 +37,14 @@ from baseplace.jobs.inputs import (
     world_cloud,
     write_mcap,
 )
-from baseplace.jobs.place import motion_and_robustness_json
-from baseplace.jobs.report import CandidatesReport, NoResultError, PoseRecord, RobotRef, path_json
+from baseplace.jobs.report import (
+    CandidatesReport,
+    NoResultError,
+    PoseRecord,
+    RobotRef,
+    path_json,
+    placement_row,
+)
 
 if TYPE_CHECKING:
     from pathlib import Path
@@ -144,23 +150,14 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
     if job.method not in ("radial", "irm"):
         raise InputError(f"unknown method {job.method!r}; valid: irm, radial")
     png, mcap = job.check_outputs()  # outputs first: before the imports and any work
-    from baseplace.geometry.poses import BasePose
-    from baseplace.navigation.gridnav import GridNavigator
-    from baseplace.placement.candidates import RadialSettings, motion_costs, pickup, radial_search
-    from baseplace.placement.irm_candidates import (
-        IrmSettings,
-        grasp_poses,
-        grasp_standoff,
-        irm_candidates,
-        verify_candidates,
-    )
+    from baseplace.placement.candidates import RadialSettings
+    from baseplace.placement.irm_candidates import grasp_poses, grasp_standoff
+    from baseplace.placement.object_search import search_around_object
+    from baseplace.placement.pipeline import object_checks
     from baseplace.placement.robustness import RobustnessSettings
-    from baseplace.placement.scene_cache import object_key
     from baseplace.reachability.cache import resolve_map
-    from baseplace.terrain.voxels import VoxelMap
-    from baseplace.world.environment import Environment, contact_groups
     from baseplace.world.grasped_object import GraspedObject, find_grasped_object, parse_grasped_object
-    from baseplace.world.obstacles import check_clear_of, obstacles_key, parse_obstacles
+    from baseplace.world.obstacles import check_clear_of, parse_obstacles
 
     t0 = time.perf_counter()
     robust = job.robustness or RobustnessSettings()
@@ -198,92 +195,20 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
     if shape == "auto" and points is not None:
         grasped = find_grasped_object(points, p_o) if cache is None else cache.grasped_object(p_o)
     held = grasped if isinstance(grasped, GraspedObject) else None
-
-    def environments() -> tuple[Any, Any, Any]:
-        """The verification's environment, and the groups and object voxels it was built from."""
-        voxels = VoxelMap(0.025, np.zeros((0, 3), np.int64))
-        if points is not None:
-            voxels = VoxelMap.from_points(points) if cache is None else cache.shared(
-                ("voxels", 0.025), lambda: VoxelMap.from_points(points))  # fmt: skip
-        groups, object_voxels = contact_groups(voxels, voxels, held, points)
-        environment = Environment(robot, groups, grasped=object_voxels, hand_arm=job.arm, shapes=obstacles)
-        return environment, groups, object_voxels
-
-    if cache is None:
-        environment, groups, object_voxels = environments()
-    else:  # per robot, arm and grasped object, kept for the scene's next queries
-        environment, groups, object_voxels = cache.per_object(
-            ("candidates", robot, job.arm, object_key(held), obstacles_key(obstacles)), environments
-        )
-    motion = None
-    if job.motion is not None:  # the way to the pre-grasp must avoid the object too
-        from baseplace.placement.motion import MotionChecker, transit_environment
-
-        transit = transit_environment(robot, groups, object_voxels, obstacles)
-        if transit is None:
-            motion = MotionChecker(robot, arm, environment, None, job.motion)
-        else:
-            motion = MotionChecker(robot, arm, transit, environment, job.motion)
+    checks = object_checks(robot, rmap.info.arm, job.arm, points, held, job.motion, cache, obstacles)
     grasps = grasp_poses(p_o, n=16, top_down=True, standoff=standoff, approach_axis=arm.approach_axis)
-    rng = np.random.default_rng(job.seed)
-    rejected: list[tuple[tuple[float, float], str]] = []
     t_search = time.perf_counter()
-    if job.method == "radial":
-        search = radial_search(p_o, settings, points, grid)
-        rejected += [(r.xy, str(r.reason)) for r in search.rejected]
-        verified, failed = verify_candidates(
-            robot, rmap.info.arm, search.candidates, grasps, environment, rng, motion
-        )
-        rejected += [((c.pose.x, c.pose.y), why) for c, why in failed]
-    else:
-        verified = irm_candidates(robot, rmap, p_o, grasps, environment, grid, IrmSettings(), rng, motion)
-    t_verify = time.perf_counter()
-    if robust.samples > 0:
-        from baseplace.placement.robustness import score_candidates
-
-        verified = score_candidates(arm, environment, grasps, verified, robust)
-        too_low = [c for c in verified if c.robustness is not None and c.robustness.rate < robust.minimum]
-        rejected += [((c.pose.x, c.pose.y), "robustness") for c in too_low]
-        verified = [c for c in verified if c not in too_low]
-    start = robot_pose if robot_pose is not None else np.r_[p_o[:2], 0.0]
-    costs = motion_costs(verified, p_o, BasePose(*start)) if verified else np.zeros(0)
-    order = np.argsort(costs, kind="stable")
-    if robust.rank == "robustness":  # most robust first, motion cost breaks ties
-        rates = np.array([-(c.robustness.rate if c.robustness else 0.0) for c in verified])
-        order = np.lexsort((costs, rates))
-    ranked = [verified[i] for i in order]
-    t_rank = time.perf_counter()
-    route = chosen = None
-    if robot_pose is not None and ranked:
-        navigator = GridNavigator(grid, settings.r_r)
-        if robust.rank == "robustness":  # in the robustness order: the first the planner reaches
-            for c in ranked:
-                result = pickup([c], p_o, BasePose(*robot_pose), navigator)
-                if result.succeeded:
-                    route, chosen = result.path, c
-                    break
-        else:  # seed 004 Algorithm 2: by motion cost from the robot, the first the planner reaches
-            result = pickup(ranked, p_o, BasePose(*robot_pose), navigator)
-            route, chosen = result.path, result.chosen
-    rows = [
-        {**PoseRecord.from_xyyaw(c.pose.x, c.pose.y, c.pose.yaw).to_json(),
-         "distance": round(c.distance, 4), "motion_cost": round(float(costs[i]), 4), "method": c.method,
-         "reachability": round(c.reachability, 5), "grasp": grasps[c.grasp].round(5).tolist(),
-         "joints": {} if c.joints is None else dict(zip(c.joint_names, np.round(c.joints, 6).tolist(), strict=True)),
-         **motion_and_robustness_json(None if c.motion is None else [c.motion], c.robustness)}
-        for i, c in zip(order, ranked, strict=True)
-    ]  # fmt: skip
-    failures: dict[str, int] = {}
-    for _, why in rejected:
-        failures[why] = failures.get(why, 0) + 1
-    if robot_pose is not None and ranked and route is None:
-        failures["no_path"] = len(ranked)
+    found = search_around_object(robot, rmap, p_o, grasps, "irm" if job.method == "irm" else "radial", checks,
+                                 grid, points, settings, robust, np.random.default_rng(job.seed), robot_pose)  # fmt: skip
+    t_nav = time.perf_counter()
+    ranked, rejected, route = found.placements, found.rejected, found.path
+    rows = [placement_row(p, cost) for p, cost in zip(ranked, found.motion_costs, strict=True)]
     report = CandidatesReport(
-        robot=RobotRef.of(robot, rmap.info.arm), inputs=job.echo(), failures=failures, method=job.method,
+        robot=RobotRef.of(robot, rmap.info.arm), inputs=job.echo(), failures=found.failures(), method=job.method,
         object=[float(v) for v in p_o],
         robot_pose=None if robot_pose is None else PoseRecord.from_xyyaw(*robot_pose), candidates=rows,
         rejected=[{"x": round(xy[0], 4), "y": round(xy[1], 4), "reason": why} for xy, why in rejected],
-        path=None if route is None or chosen is None else path_json(route.poses),
+        path=None if route is None or found.chosen is None else path_json(route.poses),
         object_shape={"requested": job.object_shape,
                       "allowed": grasped.to_json() if isinstance(grasped, GraspedObject) else None},
         settings={"r_r": settings.r_r, "d_min": settings.d_min, "d_max": round(settings.d_max, 4),
@@ -296,7 +221,7 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
                         f"{job.method} candidates for {robot.name}: {len(ranked)} verified, {len(rejected)} rejected")  # fmt: skip
         report.outputs["png"] = str(png)
     if mcap is not None:
-        T_c = [PoseRecord.from_xyyaw(c.pose.x, c.pose.y, c.pose.yaw).T_world_base for c in ranked]
+        T_c = [p.T_world_base for p in ranked]
         world = job.cloud.bag.world_frame if job.cloud.bag is not None else "map"
         write_mcap(mcap, world, bag_stamp(job.cloud), candidates=T_c, placements=T_c[:1],
                    paths=[] if route is None else [route.poses])  # fmt: skip
@@ -304,8 +229,7 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
     now = time.perf_counter()
     report.outputs.update(map_output(map_choice))
     report.timings_ms = {"load": (t_load - t0 - map_s) * 1e3, **map_timing(map_choice, map_s), "cloud": (t_search - t_load) * 1e3,
-                         "search": (t_verify - t_search) * 1e3, "robustness": (t_rank - t_verify) * 1e3,
-                         "navigation": (now - t_rank) * 1e3, "total": (now - t0) * 1e3}  # fmt: skip
+                         **found.timings_ms, "navigation": (now - t_nav) * 1e3, "total": (now - t0) * 1e3}  # fmt: skip
     if not ranked:
         raise NoResultError(
             f"no verified candidate ({job.method}); {len(rejected)} positions rejected "

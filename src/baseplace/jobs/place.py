@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from baseplace.errors import BaseplaceError, InputError
+from baseplace.errors import InputError
 from baseplace.jobs.inputs import (
     CHECK_MARGIN,
     PLOT_SUFFIXES,
@@ -37,11 +37,12 @@ from baseplace.jobs.inputs import (
     world_cloud,
     write_mcap,
 )
-from baseplace.jobs.report import NoResultError, PlaceReport, RobotRef
+from baseplace.jobs.report import NoResultError, PlaceReport, RobotRef, placement_row
 
 if TYPE_CHECKING:
-    from pathlib import Path
+    from pathlib import Path as FilePath
 
+    from baseplace.navigation.path import Path
     from baseplace.placement.pipeline import PlaceSettings
     from baseplace.placement.scene_cache import SceneCache
     from baseplace.reachability.rmap import ReachabilityMap
@@ -114,7 +115,7 @@ class PlaceJob:
             "obstacles": list(self.obstacles),
         }  # fmt: skip
 
-    def check_outputs(self) -> tuple[Path | None, Path | None]:
+    def check_outputs(self) -> tuple[FilePath | None, FilePath | None]:
         """The PNG and MCAP outputs (and the fused cloud's), checked before any work.
 
         Front ends call it before they build the settings, whose imports take seconds.
@@ -158,53 +159,6 @@ def _check_scene(
     check_in_reach(targets[:, :3, 3], labels, bounds, scene, ReachBound.of_robot(robot, arm), robot.name)
     if start is not None:
         check_on_scene(start, "--start", bounds, scene, CHECK_MARGIN + max(resolution or 0.0, 0.05))
-
-
-def drivable(
-    placements: list[Any], navmap: Any, start: np.ndarray, planner: str, seed: int, failures: Any
-) -> tuple[list[Any], list[Any]]:
-    """The placements the base can drive to from ``start`` on ``navmap``, with their paths.
-
-    Each placement the planner finds no path to counts once in ``failures["no_path"]``.
-    """
-    from baseplace.navigation.planners import plan_path
-
-    kept, routes = [], []
-    for p in placements:
-        T = p.T_world_base
-        try:
-            route = plan_path(navmap, start, np.array([T[0, 3], T[1, 3], p.yaw]), planner, seed=seed)
-        except BaseplaceError:
-            failures["no_path"] += 1
-            continue
-        kept.append(p)
-        routes.append(route)
-    return kept, routes
-
-
-def motion_and_robustness_json(motions: Any, robustness: Any) -> dict[str, Any]:
-    """The joint waypoints of each target's reaching motion and the robustness score, if any."""
-    out: dict[str, Any] = {}
-    if motions is not None:
-        out["motion"] = [{"path": np.round(m.path, 5).tolist(), "approach": np.round(m.approach, 5).tolist(),
-                          "planned": m.planned} for m in motions]  # fmt: skip
-    if robustness is not None:
-        out["robustness"] = robustness.as_dict()
-    return out
-
-
-def placement_json(p: Any) -> dict[str, Any]:
-    """One verified placement: the pose fields, roll_pitch_yaw, region, reachability, joints per target."""
-    from baseplace.geometry.poses import matrix_to_rpy
-    from baseplace.jobs.report import PoseRecord
-
-    T = p.T_world_base
-    return {
-        **PoseRecord(T).to_json(), "roll_pitch_yaw": [round(float(v), 5) for v in matrix_to_rpy(T[:3, :3])],
-        "region": p.region, "reachability": round(p.reachability, 5),
-        "joints": [dict(zip(p.joint_names, np.round(q, 6).tolist(), strict=True)) for q in p.joints],
-        **motion_and_robustness_json(p.motions, p.robustness),
-    }  # fmt: skip
 
 
 def place_job(job: PlaceJob, progress: Progress | None = None) -> PlaceReport:
@@ -295,27 +249,22 @@ def place_job(job: PlaceJob, progress: Progress | None = None) -> PlaceReport:
         result = place(robot, rmap, points, targets, settings, rng, terrain=terrain, grasped=grasped,
                        cache=job.cache, obstacles=obstacles)  # fmt: skip
     t_nav = time.perf_counter()
-    if grid is not None and start is not None:  # on the navigation map, around what the cameras see
-        from baseplace.placement.in_map import grid_routes
+    reached = None
+    if start is not None:  # on the navigation map, around what the cameras see; or on the scene's
+        from baseplace.placement.drivable import drivable, grid_route, map_route
 
-        goals = [(p.T_world_base[0, 3], p.T_world_base[1, 3], p.yaw) for p in result.placements]
-        paths = grid_routes(grid, [] if cloud is None else [cloud.points], start, goals,
-                            robot.spec.footprint_bounding_radius)  # fmt: skip
-        result.failures["no_path"] += sum(r is None for r in paths)
-        kept = [p for p, r in zip(result.placements, paths, strict=True) if r is not None]
-        routes: list[Any] = [r for r in paths if r is not None]
-    elif navmap is not None and start is not None:
-        kept, routes = drivable(result.placements, navmap, start, job.planner, job.seed, result.failures)
-    else:
-        kept, routes = result.placements, [None] * len(result.placements)
-    rows = []
-    for p, route in zip(kept, routes, strict=True):
-        rows.append(placement_json(p))
-        if route is not None:
-            from baseplace.jobs.report import path_json
-
-            rows[-1]["path"] = {"poses": path_json(route.poses), "length": round(route.length, 3),
-                                "planner": route.planner, "time_ms": round(route.time_ms, 1)}  # fmt: skip
+        if grid is not None:
+            route = grid_route(grid, [] if cloud is None else [cloud.points], start,
+                               robot.spec.footprint_bounding_radius)  # fmt: skip
+        else:
+            assert navmap is not None  # built above for a start on a cloud
+            route = map_route(navmap, start, job.planner, job.seed)
+        reached = drivable(result.placements, route)
+        if grid is not None or reached.unreachable:  # as before: the grid's count shows even when 0
+            result.failures["no_path"] += reached.unreachable
+    kept = result.placements if reached is None else reached.placements
+    routes: list[Path | None] = [None] * len(kept) if reached is None else list(reached.paths)
+    rows = [placement_row(p, path=route) for p, route in zip(kept, routes, strict=True)]
     timings = {"load": (t_load - t0) * 1e3, **map_timing(chosen, t_map - t_load), **result.timings_ms}
     timings.pop("total", None)
     if terrain is not None:  # computed here (read from the cache, or segmented and stored): its time here

@@ -26,9 +26,11 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 from baseplace.errors import NothingFoundError
-from baseplace.geometry.poses import BasePose, wrap_angle, yaw_of
+from baseplace.geometry.poses import BasePose, matrix_to_rpy, wrap_angle, yaw_of
 
 if TYPE_CHECKING:
+    from baseplace.navigation.path import Path
+    from baseplace.placement.verified import Placement
     from baseplace.robots.model import Robot
 
 SCHEMA_VERSION = "baseplace.result/1"
@@ -120,6 +122,42 @@ class PoseRecord:
         T = np.asarray(self.T_world_base, dtype=float)
         return {"base_pose": np.round(T, 6).tolist(), "x": round(float(T[0, 3]), 4),
                 "y": round(float(T[1, 3]), 4), "z": round(float(T[2, 3]), 4), "yaw": round(self.yaw, 4)}  # fmt: skip
+
+
+def placement_row(p: Placement, motion_cost: float | None = None, path: Path | None = None) -> dict[str, Any]:
+    """One verified placement, from any method, as a result row: the pose fields plus its checks.
+
+    A ``place`` placement (no ``approach``): ``roll_pitch_yaw``, ``region``, ``reachability``,
+    ``joints`` (one name -> value map per target). A seed-004 one: ``distance``, ``motion_cost``,
+    ``method``, ``reachability``, ``grasp`` (its 4x4 TCP target) and ``joints`` (one map). Then
+    ``motion`` and ``robustness`` where computed, and ``path`` (the base path to it) when given.
+    """
+    T = p.T_world_base
+    a = p.approach
+    if a is None:
+        row = {
+            **PoseRecord(T).to_json(), "roll_pitch_yaw": [round(float(v), 5) for v in matrix_to_rpy(T[:3, :3])],
+            "region": p.region, "reachability": round(p.reachability, 5),
+            "joints": [dict(zip(p.joint_names, np.round(q, 6).tolist(), strict=True)) for q in p.joints],
+        }  # fmt: skip
+    else:
+        assert p.targets is not None and motion_cost is not None, (
+            "a seed-004 row needs its grasp and motion cost"
+        )
+        row = {
+            **PoseRecord(T).to_json(), "distance": round(a.distance, 4), "motion_cost": round(float(motion_cost), 4),
+            "method": a.method, "reachability": round(p.reachability, 5), "grasp": p.targets[0].round(5).tolist(),
+            "joints": dict(zip(p.joint_names, np.round(p.joints[0], 6).tolist(), strict=True)),
+        }  # fmt: skip
+    if p.motions is not None:
+        row["motion"] = [{"path": np.round(m.path, 5).tolist(), "approach": np.round(m.approach, 5).tolist(),
+                          "planned": m.planned} for m in p.motions]  # fmt: skip
+    if p.robustness is not None:
+        row["robustness"] = p.robustness.as_dict()
+    if path is not None:
+        row["path"] = {"poses": path_json(path.poses), "length": round(path.length, 3), "planner": path.planner,
+                       "time_ms": round(path.time_ms, 1)}  # fmt: skip
+    return row
 
 
 def path_json(poses: Any) -> list[list[float]]:

@@ -29,8 +29,8 @@ Where the seed leaves details open, this module decides (each documented at its 
   object's position").
 
 The seed names reachability maps as future work; :mod:`baseplace.placement.irm_candidates` ranks
-base poses with a reachability map instead, verifies them with the shared verifier and returns the
-same :class:`RadialCandidate` type, so both methods feed :func:`pickup` and can be compared.
+base poses with a reachability map instead and verifies them with the shared verifier; both
+methods return :class:`~baseplace.placement.verified.Placement`, feed :func:`pickup` and can be compared.
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any, Generic, Literal, Protocol, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -47,8 +47,6 @@ from baseplace.errors import InputError
 from baseplace.geometry.poses import BasePose, FloatArray
 from baseplace.navigation.gridnav import OBSTACLE, GridNavigator, blocked_by_inflation
 from baseplace.navigation.path import Path
-from baseplace.placement.motion import ReachingMotion
-from baseplace.placement.robustness import Robustness
 from baseplace.reachability.rmap import ReachabilityMap
 from baseplace.robots.model import Robot
 from baseplace.world.occupancy import UNKNOWN, OccupancyGrid
@@ -150,31 +148,20 @@ class RadialSettings:
 
 @dataclass(frozen=True, eq=False)
 class RadialCandidate:
-    """A base placement candidate facing the object (seed 004's ``q_r``), from either method.
+    """A base pose Algorithm 1 proposes, facing the object (seed 004's ``q_r``), not yet verified.
+
+    :func:`~baseplace.placement.irm_candidates.verify_candidates` turns the ones that pass into
+    :class:`~baseplace.placement.verified.Placement` values.
 
     Attributes:
         pose: base pose in the map frame (x, y [m], yaw [rad]).
         distance: horizontal distance from the object [m].
-        ray: index of the radial unit vector it lies on; -1 for IRM candidates.
-        method: "radial" (Algorithm 1) or "irm" (reachability map, verified).
-        reachability: the map's value at the pose (0 for radial candidates).
-        grasp: index of the grasp pose the joints reach (IRM only), else -1.
-        joints: (n,) arm joint values that reach that grasp, verified (IRM only), else None.
-        joint_names: names of those joints.
-        motion: the checked reaching motion to that grasp, when the motion check ran.
-        robustness: the score under base error, when computed.
+        ray: index of the radial unit vector it lies on.
     """
 
     pose: BasePose
     distance: float
     ray: int = -1
-    method: Literal["radial", "irm"] = "radial"
-    reachability: float = 0.0
-    grasp: int = -1
-    joints: FloatArray | None = None
-    joint_names: tuple[str, ...] = ()
-    motion: ReachingMotion | None = None
-    robustness: Robustness | None = None
 
     @property
     def xy(self) -> FloatArray:
@@ -185,6 +172,18 @@ class RadialCandidate:
     def T_world_base(self) -> FloatArray:
         """(4, 4) base pose."""
         return self.pose.matrix()
+
+
+class Posed(Protocol):
+    """Anything with a planar base pose: a proposed :class:`RadialCandidate` or a verified placement."""
+
+    @property
+    def pose(self) -> BasePose:
+        """The base pose (x, y [m], yaw [rad])."""
+        ...
+
+
+P = TypeVar("P", bound=Posed)
 
 
 @dataclass(frozen=True)
@@ -417,9 +416,7 @@ def radial_candidates(
     return radial_search(p_o, settings, points, occupancy).candidates
 
 
-def motion_cost(
-    candidate: RadialCandidate, p_o: ArrayLike, robot_pose: BasePose, travel: float | None = None
-) -> float:
+def motion_cost(candidate: Posed, p_o: ArrayLike, robot_pose: BasePose, travel: float | None = None) -> float:
     """Seed 004's ``MotionCost`` (section 3.3): robot -> candidate plus candidate -> object distance [m].
 
     Args:
@@ -437,12 +434,12 @@ def motion_cost(
 
 
 def motion_costs(
-    candidates: Sequence[RadialCandidate], p_o: ArrayLike, robot_pose: BasePose, travel: Travel | None = None
+    candidates: Sequence[Posed], p_o: ArrayLike, robot_pose: BasePose, travel: Travel | None = None
 ) -> FloatArray:
     """(N,) :func:`motion_cost` of each candidate; ``travel`` estimates robot -> candidate distances (inf: unreachable)."""
     if not candidates:
         return np.zeros(0)
-    xy = np.array([c.xy for c in candidates])
+    xy = np.array([[c.pose.x, c.pose.y] for c in candidates])
     dist = None if travel is None else np.asarray(travel(robot_pose, xy), dtype=float)
     return np.array(
         [
@@ -453,7 +450,7 @@ def motion_costs(
 
 
 @dataclass(frozen=True)
-class PickupResult:
+class PickupResult(Generic[P]):
     """The outcome of Algorithm 2 up to the grasp itself.
 
     Attributes:
@@ -463,10 +460,10 @@ class PickupResult:
         failures: (candidate, why) for each failed attempt, in order.
     """
 
-    chosen: RadialCandidate | None
+    chosen: P | None
     path: Path | None
     tries: int
-    failures: list[tuple[RadialCandidate, str]] = field(default_factory=list)
+    failures: list[tuple[P, str]] = field(default_factory=list)
 
     @property
     def succeeded(self) -> bool:
@@ -475,7 +472,7 @@ class PickupResult:
 
 
 def pickup(
-    candidates: Sequence[RadialCandidate],
+    candidates: Sequence[P],
     p_o: ArrayLike,
     start_pose: BasePose,
     navigate: Navigate | None = None,
@@ -484,7 +481,8 @@ def pickup(
     settings: RadialSettings | None = None,
     travel: Travel | None = None,
     locate: Callable[[], BasePose] | None = None,
-) -> PickupResult:
+    rerank: bool = True,
+) -> PickupResult[P]:
     """Seed 004's Algorithm 2 up to ``Pickup``: navigate to the best candidate, re-ranking after failures.
 
     Each round ranks the remaining candidates by :func:`motion_cost` from the robot's current pose,
@@ -503,6 +501,8 @@ def pickup(
             e.g. ``GridNavigator(...).travel`` for path lengths.
         locate: reads the robot's pose after a failed attempt (Algorithm 2, line 2). Default: the
             pose is unchanged, true of planners that fail before the robot moves, as this one does.
+        rerank: rank by motion cost (the seed's loop); False: try the candidates in their order
+            (ranked otherwise, e.g. by robustness).
 
     Returns:
         The reached candidate and its path, or ``chosen=None`` when S ran out.
@@ -517,9 +517,9 @@ def pickup(
         navigate = GridNavigator(occupancy, s.r_r, allow_unknown=not s.unknown_is_risk)
     remaining = list(candidates)
     current = start_pose
-    failures: list[tuple[RadialCandidate, str]] = []
+    failures: list[tuple[P, str]] = []
     while remaining:
-        best = int(np.argmin(motion_costs(remaining, p_o, current, travel)))
+        best = int(np.argmin(motion_costs(remaining, p_o, current, travel))) if rerank else 0
         goal = remaining.pop(best)
         try:
             path = navigate(current, goal.pose)
@@ -537,6 +537,7 @@ def pickup(
 __all__ = [
     "Navigate",
     "PickupResult",
+    "Posed",
     "RadialCandidate",
     "RadialSearch",
     "RadialSettings",

@@ -16,13 +16,12 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from baseplace.errors import InputError
-from baseplace.navigation.planners import Path
 from baseplace.placement.pipeline import PlacementResult, PlaceSettings, place
 from baseplace.reachability.rmap import ReachabilityMap
 from baseplace.robots.model import Robot
 from baseplace.terrain.diagnose import auto_resolution
 from baseplace.world.grasped_object import GraspedObject
-from baseplace.world.grid_scene import GridSceneSettings, grid_points, target_window, with_cloud_obstacles
+from baseplace.world.grid_scene import GridSceneSettings, grid_points, target_window
 from baseplace.world.obstacles import Obstacle
 from baseplace.world.occupancy import OccupancyGrid
 
@@ -42,41 +41,6 @@ def scene_points_with_grid(
     window = target_window(grid, targets_xy, reach, s.margin)
     spacing = min(0.025, resolution)
     return np.vstack([seen, grid_points(grid, window, spacing, s, seen)])
-
-
-def grid_routes(
-    grid: OccupancyGrid,
-    clouds: Sequence[ArrayLike],
-    start: ArrayLike,
-    goals: Sequence[ArrayLike],
-    radius: float,
-) -> list[Path | None]:
-    """Base paths on the navigation map from ``start`` (x, y, yaw) to each goal (x, y, yaw); None where none.
-
-    The grid planner of seed 004 (:class:`~baseplace.navigation.gridnav.GridNavigator`, 8-connected,
-    obstacles inflated by ``radius`` [m]) on the grid with the cameras' obstacles marked (points
-    between 5 cm and 2 m above the floor). Poses along a path head in the direction of travel; the
-    first takes the start's yaw, the last the goal's.
-
-    Raises:
-        InputError: a start the robot cannot stand on (outside the map, unknown, too near an obstacle).
-    """
-    from baseplace.geometry.poses import BasePose
-    from baseplace.navigation.gridnav import GridNavigator
-
-    cams = [np.asarray(c, dtype=float).reshape(-1, 3) for c in clouds]
-    navigator = GridNavigator(
-        with_cloud_obstacles(grid, np.vstack(cams) if cams else np.zeros((0, 3))), radius
-    )
-    s = np.asarray(start, dtype=float)
-    navigator.plan(s[:2], s[:2])  # a start the robot cannot stand on: the planner's one-line error
-    out: list[Path | None] = []
-    for goal in goals:
-        try:
-            out.append(navigator(BasePose(*s), BasePose(*np.asarray(goal, dtype=float))))
-        except InputError:
-            out.append(None)
-    return out
 
 
 def place_in_map(

@@ -3,14 +3,15 @@
 Base poses around the object are ranked by a reachability map (the inverse reachability of a set
 of grasp poses) and verified, best first, with the shared IK + collision
 :class:`~baseplace.placement.verify.Verifier`; they come back as the same
-:class:`~baseplace.placement.candidates.RadialCandidate` type as the radial method, so both feed
-:func:`~baseplace.placement.candidates.pickup` and can be compared.
+:class:`~baseplace.placement.verified.Placement` type as the radial method's (and every other
+method's), so both feed :func:`~baseplace.placement.candidates.pickup` and can be compared.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,7 +21,8 @@ from baseplace.errors import InputError
 from baseplace.geometry.poses import BasePose, FloatArray, pose_from_xyz_rpy, rotation_taking
 from baseplace.placement.candidates import RadialCandidate, _object, occupancy_risk
 from baseplace.placement.motion import MotionChecker
-from baseplace.placement.verify import Candidate, Verifier
+from baseplace.placement.verified import Candidate, ObjectApproach, Placement
+from baseplace.placement.verify import Verifier
 from baseplace.reachability.rmap import ReachabilityMap
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Robot
@@ -123,7 +125,7 @@ def irm_candidates(
     settings: IrmSettings | None = None,
     rng: np.random.Generator | None = None,
     motion: MotionChecker | None = None,
-) -> list[RadialCandidate]:
+) -> list[Placement]:
     """Base placements ranked by inverse reachability and verified by IK + collision.
 
     Base poses on an xy grid (``resolution``) within the map's horizontal reach of the object,
@@ -147,8 +149,8 @@ def irm_candidates(
         motion: also check the reaching motion (:mod:`baseplace.placement.motion`), or None.
 
     Returns:
-        Verified candidates, best reachability first (possibly empty); each carries the grasp
-        index and the joint values the verifier found.
+        Verified placements, best reachability first (possibly empty); each carries its grasp
+        index (``approach``), target and the joint values the verifier found.
     """
     s = settings or IrmSettings()
     rng = rng if rng is not None else np.random.default_rng(0)
@@ -182,7 +184,7 @@ def irm_candidates(
     ik = DampedLeastSquaresIK(arm)
     outline = footprint_outline(robot.spec.footprint_radius, robot.spec.footprint_polygon)
     verifiers = [Verifier(arm, ik, env, g[None], {}, outline, motion=motion) for g in G]
-    found: list[RadialCandidate] = []
+    found: list[Placement] = []
     checks = 0
     for i in np.argsort(-best, kind="stable"):
         if best[i] <= 0 or checks >= s.max_checks or len(found) >= s.count:
@@ -195,11 +197,8 @@ def irm_candidates(
             checks += 1
             placement = verifiers[k].check(Candidate(T[i], -1, float(values[k, i])), rng)
             if placement is not None:
-                pose = BasePose(float(poses[i, 0]), float(poses[i, 1]), float(poses[i, 2]))
-                found.append(RadialCandidate(pose, float(math.dist(poses[i, :2], p[:2])), -1, "irm",
-                                             float(values[k, i]), int(k), placement.joints[0],
-                                             placement.joint_names,
-                                             placement.motions[0] if placement.motions else None))  # fmt: skip
+                approach = ObjectApproach("irm", float(math.dist(poses[i, :2], p[:2])), -1, int(k))
+                found.append(dataclasses.replace(placement, approach=approach))
                 break
     return found
 
@@ -218,19 +217,19 @@ def grasp_standoff(robot: Robot, arm_name: str | None = None) -> float:
 def verify_candidates(
     robot: Robot,
     arm_name: str | None,
-    candidates: list[RadialCandidate],
+    candidates: Sequence[RadialCandidate | Placement],
     grasps: ArrayLike,
     environment: Environment,
     rng: np.random.Generator,
     motion: MotionChecker | None = None,
-) -> tuple[list[RadialCandidate], list[tuple[RadialCandidate, str]]]:
+) -> tuple[list[Placement], list[tuple[RadialCandidate | Placement, str]]]:
     """Run the shared verification on candidates of any method: IK for one of the grasps + collision.
 
     With ``motion``, the reaching motion to the grasp is checked too.
 
     Returns:
-        (verified candidates carrying their grasp index, joints and motion, rejected ones with the
-        verifier's reason for the grasp that got furthest: "motion", "collision" or "no_ik").
+        (verified placements carrying their grasp index, joints and motion, rejected candidates with
+        the verifier's reason for the grasp that got furthest: "motion", "collision" or "no_ik").
     """
     G = np.asarray(grasps, dtype=float).reshape(-1, 4, 4)
     arm = robot.arm(arm_name)
@@ -238,20 +237,30 @@ def verify_candidates(
     outline = footprint_outline(robot.spec.footprint_radius, robot.spec.footprint_polygon)
     verifiers = [Verifier(arm, ik, environment, g[None], {}, outline, motion=motion) for g in G]
     usable = np.flatnonzero(hand_feasible(robot, arm_name, G, environment))
-    verified: list[RadialCandidate] = []
-    rejected: list[tuple[RadialCandidate, str]] = []
+    verified: list[Placement] = []
+    rejected: list[tuple[RadialCandidate | Placement, str]] = []
     for c in candidates:
         reasons: list[str] = [] if len(usable) else ["collision"]  # no grasp leaves the hand clear
         for k in usable:
             verifier = verifiers[k]
-            placement = verifier.check(Candidate(c.T_world_base, -1, c.reachability), rng)
+            placement = verifier.check(Candidate(c.T_world_base, -1, _reachability(c)), rng)
             if placement is not None:
-                verified.append(dataclasses.replace(c, grasp=int(k), joints=placement.joints[0],
-                                                    joint_names=placement.joint_names,
-                                                    motion=placement.motions[0] if placement.motions else None))  # fmt: skip
+                verified.append(dataclasses.replace(placement, approach=_approach(c, int(k))))
                 break
             reasons.extend(verifier.failures.elements())
             verifier.failures.clear()
         else:
             rejected.append((c, next((r for r in ("motion", "collision") if r in reasons), "no_ik")))
     return verified, rejected
+
+
+def _reachability(c: RadialCandidate | Placement) -> float:
+    return c.reachability if isinstance(c, Placement) else 0.0
+
+
+def _approach(c: RadialCandidate | Placement, grasp: int) -> ObjectApproach:
+    """Where ``c`` stands, now reaching grasp ``grasp``."""
+    if isinstance(c, Placement):
+        assert c.approach is not None, "only seed-004 placements are verified again for other grasps"
+        return dataclasses.replace(c.approach, grasp=grasp)
+    return ObjectApproach("radial", c.distance, c.ray, grasp)

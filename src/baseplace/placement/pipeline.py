@@ -27,7 +27,7 @@ from baseplace.geometry.poses import FloatArray
 from baseplace.placement import deadline
 from baseplace.placement.motion import MotionChecker, MotionSettings, transit_environment
 from baseplace.placement.osrm import OSRM, build_osrm, footprint_kernels
-from baseplace.placement.robustness import RobustnessEstimator, RobustnessSettings, rank_by_robustness
+from baseplace.placement.robustness import RobustnessScorer, RobustnessSettings, rank_by_robustness
 from baseplace.placement.scene_cache import SceneCache, object_key
 from baseplace.placement.strategies import make_strategy
 from baseplace.placement.verify import Placement, Verifier
@@ -180,9 +180,8 @@ def place(
     checks = scene_checks(robot, rmap.info.arm, points, terrain, T_targets, s, grasped, cache, environments,
                           obstacles)  # fmt: skip
     verifier, motion, obj, note = checks.verifier, checks.verifier.motion, checks.grasped, checks.grasped_note
-    env, arm = verifier.environment, verifier.arm
     rs = s.robustness
-    estimator = RobustnessEstimator(arm, env, T_targets, rs) if rs.samples > 0 else None
+    scorer = RobustnessScorer(verifier.arm, verifier.environment, rs) if rs.samples > 0 else None
     t3 = time.perf_counter()
     placements: list[Placement] = []
     tries = 0
@@ -197,11 +196,11 @@ def place(
             break
         tries += 1
         placement = verifier.check(candidate, rng)
-        if placement is not None and estimator is not None:
+        if placement is not None and scorer is not None:
             t = time.perf_counter()
-            placement = estimator.scored(placement)
+            placement = scorer.scored(placement)
             robustness_s += time.perf_counter() - t
-            if placement.robustness is not None and placement.robustness.rate < rs.minimum:
+            if scorer.too_low(placement):
                 verifier.failures["robustness"] += 1
                 placement = None
         if placement is not None:
@@ -298,6 +297,68 @@ def scene_checks(
                         {r.id: terrain.polygons[r.id] for r in seg.regions}, outline,
                         motion=motion)  # fmt: skip
     return SceneChecks(verifier, obj, note)
+
+
+@dataclass
+class ObjectChecks:
+    """The checks of the seed-004 methods for one object, assembled once (see :func:`object_checks`).
+
+    Attributes:
+        environment: the whole robot against the cloud's voxels and the obstacles; only the hand
+            may touch the grasped object.
+        motion: the reaching-motion check, or None.
+    """
+
+    environment: Environment
+    motion: MotionChecker | None
+
+
+def object_checks(
+    robot: Robot,
+    arm_name: str,
+    hand_arm: str | None,
+    points: FloatArray | None,
+    grasped: GraspedObject | None,
+    motion: MotionSettings | None,
+    cache: SceneCache | None = None,
+    obstacles: Sequence[Obstacle] = (),
+) -> ObjectChecks:
+    """The collision model and reaching-motion check around an object, for the seed-004 methods.
+
+    Args:
+        robot: the robot.
+        arm_name: the arm that reaches (the map's).
+        hand_arm: the arm whose hand may touch ``grasped`` (None: the robot's default).
+        points: (N, 3) the scene cloud [m], or None (an occupancy grid alone: self-collision only).
+        grasped: the object only the hand may touch, or None.
+        motion: the reaching-motion check's settings, or None to skip it.
+        cache: the scene's cache of ``points``: the voxels and, per grasped object, the
+            environments are kept for its next queries.
+        obstacles: collision objects given by hand.
+    """
+
+    def environments() -> tuple[Environment, dict[str, VoxelMap], VoxelMap | None]:
+        voxels = VoxelMap(0.025, np.zeros((0, 3), np.int64))
+        if points is not None:
+            voxels = VoxelMap.from_points(points) if cache is None else cache.shared(
+                ("voxels", 0.025), lambda: VoxelMap.from_points(points))  # fmt: skip
+        groups, object_voxels = contact_groups(voxels, voxels, grasped, points)
+        environment = Environment(robot, groups, grasped=object_voxels, hand_arm=hand_arm, shapes=obstacles)
+        return environment, groups, object_voxels
+
+    if cache is None:
+        environment, groups, object_voxels = environments()
+    else:  # per robot, arm and grasped object, kept for the scene's next queries
+        environment, groups, object_voxels = cache.per_object(
+            ("candidates", robot, hand_arm, object_key(grasped), obstacles_key(obstacles)), environments
+        )
+    checker = None
+    if motion is not None:  # the way to the pre-grasp must avoid the object too
+        arm = robot.arm(arm_name)
+        transit = transit_environment(robot, groups, object_voxels, obstacles)
+        checker = MotionChecker(robot, arm, environment if transit is None else transit,
+                                None if transit is None else environment, motion)  # fmt: skip
+    return ObjectChecks(environment, checker)
 
 
 def scene_environment(

@@ -19,8 +19,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Literal
+from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -28,13 +29,10 @@ from numpy.typing import ArrayLike, NDArray
 from baseplace.errors import InputError, unknown
 from baseplace.geometry.poses import BasePose, FloatArray, invert_transforms, yaw_of
 from baseplace.placement import deadline
+from baseplace.placement.verified import Placement, Robustness, wilson_interval
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Arm
 from baseplace.world.environment import Environment
-
-if TYPE_CHECKING:
-    from baseplace.placement.candidates import RadialCandidate
-    from baseplace.placement.verify import Placement
 
 ERROR_DISTRIBUTIONS = ("gaussian", "box")
 
@@ -99,44 +97,6 @@ def perturbed(T_world_base: ArrayLike, offsets: ArrayLike) -> FloatArray:
     out[:, 0, 3] += d[:, 0]
     out[:, 1, 3] += d[:, 1]
     return out
-
-
-def wilson_interval(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
-    """Wilson score interval (low, high) of a binomial proportion; z = 1.96: 95 %."""
-    if n <= 0:
-        return 0.0, 1.0
-    p = successes / n
-    denom = 1.0 + z * z / n
-    centre = (p + z * z / (2 * n)) / denom
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
-    return max(0.0, centre - half), min(1.0, centre + half)
-
-
-@dataclass(frozen=True)
-class Robustness:
-    """A placement's success rate under base error.
-
-    Attributes:
-        successes: error draws from which every target was reached without collision.
-        samples: error draws.
-        low: lower end of the Wilson interval of the rate.
-        high: upper end.
-    """
-
-    successes: int
-    samples: int
-    low: float
-    high: float
-
-    @property
-    def rate(self) -> float:
-        """The success rate: successes / samples (0 when there are no samples)."""
-        return self.successes / self.samples if self.samples else 0.0
-
-    def as_dict(self) -> dict[str, Any]:
-        """JSON form."""
-        return {"rate": round(self.rate, 4), "ci95": [round(self.low, 4), round(self.high, 4)],
-                "successes": self.successes, "samples": self.samples}  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -282,42 +242,59 @@ class RobustnessEstimator:
         return dataclasses.replace(placement, robustness=self.score(placement.T_world_base, placement.joints))
 
 
-def score_candidates(
-    arm: Arm,
-    environment: Environment,
-    grasps: ArrayLike,
-    candidates: list[RadialCandidate],
-    settings: RobustnessSettings | None = None,
-) -> list[RadialCandidate]:
-    """Verified seed-004 candidates (each with its grasp index and joints) with their robustness.
+class RobustnessScorer:
+    """The one robustness score of verified placements, from any method.
+
+    Placements that reach the same targets share one :class:`RobustnessEstimator`, hence one set
+    of error draws (common random numbers): all of a ``place`` query's, and a seed-004 query's per
+    grasp pose.
 
     Args:
         arm: the arm.
-        environment: the verification's collision model.
-        grasps: (K, 4, 4) the world grasp poses the candidates' ``grasp`` indices refer to.
-        candidates: verified candidates.
-        settings: robustness settings (one estimator, hence one set of error draws, per grasp).
+        environment: the verification's whole-robot collision model.
+        settings: samples, error model, IK restarts, seed, the minimum rate.
     """
-    G = np.asarray(grasps, dtype=float).reshape(-1, 4, 4)
-    estimators: dict[int, RobustnessEstimator] = {}
-    out = []
-    for c in candidates:
-        if c.grasp < 0 or c.joints is None:
-            raise InputError("robustness needs verified candidates (with a grasp index and joints)")
-        if c.grasp not in estimators:
-            estimators[c.grasp] = RobustnessEstimator(arm, environment, G[c.grasp], settings)
-        out.append(dataclasses.replace(c, robustness=estimators[c.grasp].score(c.T_world_base, [c.joints])))
-    return out
+
+    def __init__(
+        self, arm: Arm, environment: Environment, settings: RobustnessSettings | None = None
+    ) -> None:
+        self.arm = arm
+        self.environment = environment
+        self.settings = settings or RobustnessSettings()
+        self._estimators: dict[bytes, RobustnessEstimator] = {}
+
+    def scored(self, placement: Placement) -> Placement:
+        """The placement with its robustness filled in (it must carry its targets, as verified ones do)."""
+        if placement.targets is None:
+            raise InputError("robustness needs verified placements (with the targets their joints reach)")
+        key = placement.targets.tobytes()
+        if key not in self._estimators:
+            self._estimators[key] = RobustnessEstimator(
+                self.arm, self.environment, placement.targets, self.settings
+            )
+        return self._estimators[key].scored(placement)
+
+    def too_low(self, placement: Placement) -> bool:
+        """Whether its score is below the settings' minimum rate."""
+        return placement.robustness is not None and placement.robustness.rate < self.settings.minimum
 
 
-def rank_by_robustness(placements: list[Placement]) -> list[Placement]:
-    """Placements by robustness rate, then the lower confidence bound, then reachability; best first."""
+def rank_by_robustness(placements: list[Placement], then: Sequence[float] | None = None) -> list[Placement]:
+    """Placements by robustness rate, best first; ties broken by ``then`` (N,) ascending if given.
 
-    def key(p: Placement) -> tuple[float, float, float]:
-        r = p.robustness
-        return (-(r.rate if r else 0.0), -(r.low if r else 0.0), -p.reachability)
+    Without ``then``, ties go to the higher lower confidence bound, then to the higher reachability.
+    The sort is stable: placements that tie on everything keep their order.
+    """
 
-    return sorted(placements, key=key)
+    def rate(p: Placement) -> float:
+        return -(p.robustness.rate if p.robustness else 0.0)
+
+    if then is not None:
+        order = sorted(range(len(placements)), key=lambda i: (rate(placements[i]), then[i]))
+        return [placements[i] for i in order]
+    return sorted(
+        placements, key=lambda p: (rate(p), -(p.robustness.low if p.robustness else 0.0), -p.reachability)
+    )
 
 
 __all__ = [
@@ -325,9 +302,9 @@ __all__ = [
     "BaseErrorModel",
     "Robustness",
     "RobustnessEstimator",
+    "RobustnessScorer",
     "RobustnessSettings",
     "perturbed",
     "rank_by_robustness",
-    "score_candidates",
     "wilson_interval",
 ]

@@ -16,64 +16,15 @@ from typing import Literal
 import numpy as np
 from shapely.geometry import MultiPolygon, Polygon
 
-from baseplace.geometry.poses import BasePose, FloatArray, invert_transforms, yaw_of
-from baseplace.placement.motion import MotionChecker, ReachingMotion
-from baseplace.placement.robustness import Robustness
+from baseplace.geometry.poses import FloatArray, invert_transforms
+from baseplace.placement.motion import MotionChecker
+from baseplace.placement.verified import Candidate, Placement
 from baseplace.robots.ik import IKSolver
 from baseplace.robots.model import Arm
 from baseplace.terrain.polygons import footprint_inside
 from baseplace.world.environment import Environment
 
 Failure = Literal["footprint", "no_ik", "collision", "motion", "exhausted"]
-
-
-@dataclass(frozen=True)
-class Candidate:
-    """A base pose proposed by a strategy, not yet verified.
-
-    Attributes:
-        T_world_base: (4, 4) pose.
-        region: planar region id it stands on, or -1 (flat floor baselines).
-        reachability: the map's value for it (0 when the strategy does not use the map).
-    """
-
-    T_world_base: FloatArray
-    region: int
-    reachability: float
-
-
-@dataclass(frozen=True)
-class Placement:
-    """A verified placement.
-
-    Attributes:
-        T_world_base: (4, 4) base pose.
-        region: planar region id, or -1.
-        reachability: the map's value at the pose.
-        joints: per target, the arm joint values (n,) that reach it.
-        joint_names: names of those joints.
-        motions: per target, the checked reaching motion (None when the check was off).
-        robustness: the score under base-pose error, if computed
-            (:mod:`baseplace.placement.robustness`).
-    """
-
-    T_world_base: FloatArray
-    region: int
-    reachability: float
-    joints: list[FloatArray]
-    joint_names: tuple[str, ...]
-    motions: list[ReachingMotion] | None = None
-    robustness: Robustness | None = None
-
-    @property
-    def yaw(self) -> float:
-        """Heading of the base x axis projected on the xy plane [rad], in (-pi, pi]."""
-        return float(yaw_of(self.T_world_base))
-
-    @property
-    def pose(self) -> BasePose:
-        """The pose projected on the floor (x, y, yaw), the type every base pose converts to."""
-        return BasePose.from_matrix(self.T_world_base)
 
 
 @dataclass
@@ -139,7 +90,7 @@ class Verifier:
                 motions.append(motion)
                 joints[k] = motion.approach[-1]  # the motion may end in another checked grasp configuration
         return Placement(T.copy(), candidate.region, candidate.reachability, joints, self.arm.joint_names,
-                         motions)  # fmt: skip
+                         motions, targets=self.targets)  # fmt: skip
 
     def footprint_fits(self, candidate: Candidate) -> bool:
         """Check (1): the footprint lies inside its region's polygon (always True off the regions)."""

@@ -12,14 +12,14 @@ import numpy as np
 
 from baseplace.files import atomic_write
 from baseplace.geometry.poses import FloatArray
-from baseplace.placement.candidates import RadialCandidate
+from baseplace.placement.verified import Placement
 from baseplace.world.occupancy import OccupancyGrid
 
 
 def plot_candidates(
     grid: OccupancyGrid,
     p_o: FloatArray,
-    verified: list[RadialCandidate],
+    verified: list[Placement],
     rejected: list[tuple[tuple[float, float], str]],
     out: Path,
     robot_pose: FloatArray | None = None,
