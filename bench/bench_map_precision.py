@@ -6,8 +6,13 @@ base, and the uniform draw over the reached cells (``bench_accuracy.py``); preci
 against damped least-squares IK (80 restarts) with 95 % Wilson intervals; recall on held-out FK
 poses too.
 
+Protocol 2 (docs/protocols/map_precision_v2.md, ``--protocol 2``): the same, with each map of
+>= 1e7 samples read with the support settings its build chose on its own recall (the ladder of
+``reachability/support.py``, hole fill included) and a new held-out seed; ``--protocol 1`` (the
+default) reads every map with the build's fixed threshold and no fill, as v1's results were measured.
+
 Usage: python bench/bench_map_precision.py [--samples 1e7 | --map FILE] [--n 4000] [--split dev]
-       [--name map_precision_1e7]
+       [--protocol 2] [--name map_precision_1e7]
 """
 
 from __future__ import annotations
@@ -23,14 +28,15 @@ from baseplace.reachability.build import BuildSettings, build_map
 from baseplace.reachability.certify import poses_in_cells
 from baseplace.reachability.rmap import ReachabilityMap
 from baseplace.reachability.storage import load_map
+from baseplace.reachability.support import LADDER_FROM, choose_support
 from baseplace.robots.fk import forward_kinematics
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Robot
 from baseplace_experiments.results import fixed_protocol
 from common import report
 
-PROTOCOL_FILE = "docs/protocols/map_precision.md"
-SPLITS = {"held-out": 4242, "dev": 2424}
+PROTOCOL_FILES = {1: "docs/protocols/map_precision.md", 2: "docs/protocols/map_precision_v2.md"}
+SPLITS = {1: {"held-out": 4242, "dev": 2424}, 2: {"held-out": 4343, "dev": 2424}}
 RADIUS = 1.3
 """Grasp points lie within this horizontal distance of the base [m]."""
 HEIGHTS = (0.5, 1.0)
@@ -104,23 +110,41 @@ def measure(rmap: ReachabilityMap, ik: DampedLeastSquaresIK, T: FloatArray, rng:
     return out
 
 
+def as_protocol(rmap: ReachabilityMap, robot: Robot, protocol: int, threshold: float) -> ReachabilityMap:
+    """The map read as the protocol says: v1 with ``threshold`` and no fill, v2 with the ladder's choice."""
+    info = rmap.info
+    if not info.supported:
+        return rmap
+    if protocol == 1:
+        return rmap.with_support(info.support_count, threshold)
+    if info.samples >= LADDER_FROM and not (info.quality and "ladder" in info.quality):
+        return choose_support(rmap, robot, info.support_count, info.support_threshold)
+    return rmap
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--map", default=None, help="a map file (default: build one)")
     parser.add_argument("--samples", type=float, default=1e7, help="samples of the map built (default 1e7)")
     parser.add_argument("--seed", type=int, default=0, help="the build's seed")
     parser.add_argument("--n", type=int, default=4000, help="poses per distribution")
-    parser.add_argument("--split", choices=sorted(SPLITS), default="dev")
+    parser.add_argument("--split", choices=sorted(SPLITS[1]), default="dev")
+    parser.add_argument("--protocol", type=int, choices=sorted(PROTOCOL_FILES), default=1)
     parser.add_argument("--name", default=None, help="results file bench/results/NAME.json")
     args = parser.parse_args()
-    protocol_file = fixed_protocol(PROTOCOL_FILE, args.split)
+    protocol_file = fixed_protocol(PROTOCOL_FILES[args.protocol], args.split)
+    seed = SPLITS[args.protocol][args.split]
     robot = Robot("tiago")
     arm = robot.arm()
     if args.map:
         rmap = load_map(args.map, robot)
+        threshold = rmap.info.support_threshold
     else:
-        rmap = build_map(robot, None, BuildSettings(samples=int(args.samples), seed=args.seed))
-    rng = np.random.default_rng(SPLITS[args.split])
+        settings = BuildSettings(samples=int(args.samples), seed=args.seed)
+        rmap = build_map(robot, None, settings)
+        threshold = settings.support_threshold
+    rmap = as_protocol(rmap, robot, args.protocol, threshold)
+    rng = np.random.default_rng(seed)
     ik = DampedLeastSquaresIK(arm)
     axis = np.asarray(arm.approach_axis, dtype=float)
     held_out = forward_kinematics(arm, arm.sample(rng, 10_000))
@@ -134,7 +158,11 @@ def main() -> None:
         "map": {
             "samples": rmap.info.samples,
             "seed": args.seed if not args.map else None,
-            "support": {"count": rmap.info.support_count, "threshold": rmap.info.support_threshold},
+            "support": {
+                "count": rmap.info.support_count,
+                "threshold": rmap.info.support_threshold,
+                "fill": rmap.info.fill_threshold,
+            },
             "cells_reached": rmap.n_reached,
             "recorded_quality": rmap.info.quality or None,
         },
@@ -142,10 +170,11 @@ def main() -> None:
         "distributions": distributions,
         "target": "precision >= 96% at recall >= 98.5% per distribution (issue 27 item 4)",
     }
-    name = args.name or f"map_precision_{rmap.info.samples:.0e}_{args.split}".replace("+0", "").replace(
-        "+", ""
-    )
-    report(name, result, split=args.split, used_seeds=[SPLITS[args.split]], protocol_file=protocol_file)
+    version = "" if args.protocol == 1 else f"_v{args.protocol}"
+    name = args.name or f"map_precision{version}_{rmap.info.samples:.0e}_{args.split}".replace(
+        "+0", ""
+    ).replace("+", "")
+    report(name, result, split=args.split, used_seeds=[seed], protocol_file=protocol_file)
 
 
 if __name__ == "__main__":

@@ -364,6 +364,7 @@ def build_map_job(job: BuildMapJob, progress: Progress | None = None) -> BuildMa
         timings_ms={"build": info.build_time_s * 1e3}, samples=info.samples, seed=info.seed,
         cells_reached=rmap.n_reached, build_time_s=round(info.build_time_s, 3), samples_per_s=round(rate),
         file_bytes=out.stat().st_size, dropped_self_collision=info.dropped_self_collision,
-        support={"count": info.support_count, "threshold": info.support_threshold} if info.supported else None,
+        support={"count": info.support_count, "threshold": info.support_threshold, "fill": info.fill_threshold}
+        if info.supported else None,
         quality=json.loads(info.quality) if info.quality else None, cached_at=cached_at, reused=reused,
     )  # fmt: skip

@@ -122,7 +122,17 @@ def _build_map(o: dict[str, Any]) -> list[str]:
     if o.get("cached_at") and not o.get("reused"):
         lines.append(f"also cached at {o['cached_at']} (place, reach and explain use it without --map)")
     if o.get("support"):
-        lines.append(f"support test: count {o['support']['count']}, threshold {o['support']['threshold']}")
+        sup, q = o["support"], o.get("quality") or {}
+        fill = f", fill {sup['fill']}" if sup.get("fill") else ", no fill"
+        line = f"support test: count {sup['count']}, threshold {sup['threshold']}{fill}"
+        if q.get("ladder"):
+            tried = "; ".join(f"{r['threshold']}/{r['fill']}: {r['recall']:.2%}" for r in q["ladder"])
+            target = f"{q['target_recall']:.1%}"
+            kept = (
+                f"kept the first at >= {target}" if q["met"] else f"none reached {target}: kept the loosest"
+            )
+            line += f" (chosen on the map's own FK recall, threshold/fill {tried}; {kept})"
+        lines.append(line)
     if o.get("quality"):
         q = o["quality"]
         lines.append(f"measured: recall {q['recall']:.2%} on {q['n_recall']} FK poses, precision "

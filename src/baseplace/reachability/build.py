@@ -10,7 +10,6 @@ checkpoint stores (``checkpoint.py``).
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 import os
@@ -275,10 +274,11 @@ class MapAccumulator:
 
             rmap = certify_map(rmap, self.robot, CertifySettings(below=s.certify), self.chunk_samples)
         count = support_count(rmap.counts, arm.n_joints) if s.support_threshold > 0 else 0
-        if count:
-            info = dataclasses.replace(rmap.info, support_count=count, support_threshold=s.support_threshold)
-            rmap = dataclasses.replace(rmap, info=info)
-        if s.certify > 0 or count:
+        if count:  # the settings kept on the map's measured recall, and its quality recorded
+            from baseplace.reachability.support import choose_support
+
+            return choose_support(rmap, self.robot, count, s.support_threshold)
+        if s.certify > 0:
             from baseplace.reachability.certify import record_quality
 
             rmap = record_quality(rmap, self.robot)
@@ -378,6 +378,7 @@ def _stat(path: str | Path | None) -> tuple[int, int] | None:
 def _reuse(path: str | Path, acc: MapAccumulator) -> ReachabilityMap | None:
     """The map at ``path`` if it is of exactly the build ``acc`` would do, else None."""
     from baseplace.reachability.storage import load_map
+    from baseplace.reachability.support import built_threshold
 
     try:
         rmap = load_map(path, acc.robot, acc.arm.name)
@@ -390,7 +391,7 @@ def _reuse(path: str | Path, acc: MapAccumulator) -> ReachabilityMap | None:
         and bool(info.certification) == (s.certify > 0)
         and (not info.certification or json.loads(info.certification)["below"] == s.certify)
         and (rmap.manipulability is not None) == s.manipulability
-        and (rmap.info.support_threshold if rmap.info.supported else 0.0)
+        and (built_threshold(rmap.info) if rmap.info.supported else 0.0)
         == (s.support_threshold if support_count(rmap.counts, acc.arm.n_joints) else 0.0)
     )
     return rmap if same else None

@@ -18,6 +18,17 @@ near where the reachable set ends instead of keeping the whole cell (in one dime
 threshold at half the interior density finds the boundary to a tenth of a cell). At a cell's centre
 the support is the cell's own ``min(count / support_count, 1)``, which is what consumers that read
 whole cells use (:attr:`ReachabilityMap.cell_floor`).
+
+The hole fill. The support test never answers a pose whose own cell sampling missed, and a sparse
+map misses reachable cells by chance (a 1e7-sample TIAGo map, 4 samples per reached cell: 7 % of
+reachable poses fall in unreached cells). A map with a fill threshold (``MapInfo.fill_threshold`` >
+0, only with the support test) answers a pose in an unreached cell (or unreached voxel) if its
+support, the same interpolation over the 64 cell centres around it, reaches the fill threshold.
+Such a pose gets half the index of a one-sample cell (``0.5 / max count``), below every reached
+cell's, so consumers that rank poses by index rank it last; consumers that read whole cells from
+the tables never see it. The support of a pose in an unreached cell is 0 at the cell's centre and
+rises towards reached neighbours, so the fill answers the parts of a hole next to reached cells.
+With the fill threshold 0 (the default, and maps written before it) the lookup is unchanged.
 """
 
 from __future__ import annotations
@@ -60,6 +71,9 @@ class MapInfo:
         support_count: samples at which a cell gives full support (see the module docstring);
             0: no support test, every pose in a reached cell gets the cell's index.
         support_threshold: the support a pose needs, in [0, 1]; 0: no support test.
+        fill_threshold: the support a pose in an unreached cell needs to be answered (the hole
+            fill, module docstring), in [0, 1]; 0 (maps written before it): off. Only with the
+            support test.
     """
 
     robot: str
@@ -78,13 +92,16 @@ class MapInfo:
     quality: str = ""
     support_count: int = 0
     support_threshold: float = 0.0
+    fill_threshold: float = 0.0
 
     def __post_init__(self) -> None:
-        count, threshold = self.support_count, self.support_threshold
+        count = self.support_count
         if type(count) is not int or not 0 <= count <= 2**32:
             raise InputError(f"support_count must be an integer in [0, 2^32], got {count!r}")
-        if type(threshold) not in (int, float) or not 0.0 <= threshold <= 1.0:
-            raise InputError(f"support_threshold must be a number in [0, 1], got {threshold!r}")
+        for name in ("support_threshold", "fill_threshold"):
+            threshold = getattr(self, name)
+            if type(threshold) not in (int, float) or not 0.0 <= threshold <= 1.0:
+                raise InputError(f"{name} must be a number in [0, 1], got {threshold!r}")
 
     @property
     def supported(self) -> bool:
@@ -167,20 +184,29 @@ class ReachabilityMap:
         return offset, blocks
 
     @cached_property
-    def support(self) -> tuple[float, float]:
-        """``(full, threshold)`` for the lookup kernels; ``(1, 0)`` without a support test.
+    def support(self) -> tuple[float, float, float, float]:
+        """``(full, threshold, fill, filled)`` for the lookup kernels; ``(1, 0, 0, 0)`` without a support test.
 
         ``full`` is the table value (``count / max``) of full support, ``threshold`` the support a
-        pose needs.
+        pose in a reached cell needs, ``fill`` the support a pose in an unreached cell needs (0:
+        no hole fill) and ``filled`` the value such a pose gets: half a one-sample cell's, below
+        every reached cell's.
         """
         info = self.info
         if not info.supported or len(self.counts) == 0:
-            return 1.0, 0.0
-        return info.support_count / float(self.counts.max()), float(info.support_threshold)
+            return 1.0, 0.0, 0.0, 0.0
+        top = float(self.counts.max())
+        fill = float(info.fill_threshold)
+        filled = float(np.float32(0.5 / top)) if fill > 0 else 0.0  # as the batch kernels store it
+        return info.support_count / top, float(info.support_threshold), fill, filled
 
-    def with_support(self, count: int, threshold: float) -> ReachabilityMap:
-        """The same cells read with another support test (count or threshold 0: cells read whole)."""
-        return replace(self, info=replace(self.info, support_count=count, support_threshold=threshold))
+    def with_support(self, count: int, threshold: float, fill: float = 0.0) -> ReachabilityMap:
+        """The same cells read with another support test (count or threshold 0: cells read whole).
+
+        ``fill``: the hole fill's threshold (0: off).
+        """
+        info = replace(self.info, support_count=count, support_threshold=threshold, fill_threshold=fill)
+        return replace(self, info=info)
 
     @property
     def cell_floor(self) -> float:
@@ -189,7 +215,7 @@ class ReachabilityMap:
         The smallest positive value without one. For consumers that read whole cells from
         :attr:`tables`.
         """
-        full, threshold = self.support
+        full, threshold, _, _ = self.support
         return max(full * threshold, float(np.finfo(np.float32).tiny))
 
     @cached_property
@@ -360,7 +386,7 @@ def _poses(T: ArrayLike, name: str) -> FloatArray:
 
 @nb.njit(cache=True, inline="always")
 def _plane_row(i, T_wt, xy, gamma, R0, n, d, origin, voxel_size, shape, nside, n_twist, pixel_phi,
-               offset, blocks, full, threshold, out):  # fmt: skip
+               offset, blocks, full, threshold, fill, filled, out):  # fmt: skip
     c, s = math.cos(gamma[i]), math.sin(gamma[i])
     B = np.empty((3, 4))
     for a in range(3):  # R = R0 Rz(gamma): x' = c x0 + s y0, y' = -s x0 + c y0, z' = n
@@ -371,30 +397,30 @@ def _plane_row(i, T_wt, xy, gamma, R0, n, d, origin, voxel_size, shape, nside, n
     B[1, 3] = xy[i, 1]
     B[2, 3] = -(d + n[0] * xy[i, 0] + n[1] * xy[i, 1]) / n[2]
     out[i] = _lookup_inverse(T_wt, B, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset, blocks,
-                             full, threshold)  # fmt: skip
+                             full, threshold, fill, filled)  # fmt: skip
 
 
 # The serial and the parallel kernels are separate functions: numba's on-disk cache is keyed by
 # function, not by the parallel flag, so one function compiled both ways would share one entry.
 @nb.njit(cache=True, parallel=True)
 def _lookup_plane(T_wt, xy, gamma, R0, n, d, origin, voxel_size, shape, nside, n_twist, pixel_phi,
-                  offset, blocks, full, threshold, out):  # fmt: skip
+                  offset, blocks, full, threshold, fill, filled, out):  # fmt: skip
     for i in nb.prange(xy.shape[0]):
         _plane_row(i, T_wt, xy, gamma, R0, n, d, origin, voxel_size, shape, nside, n_twist,
-                   pixel_phi, offset, blocks, full, threshold, out)  # fmt: skip
+                   pixel_phi, offset, blocks, full, threshold, fill, filled, out)  # fmt: skip
 
 
 @nb.njit(cache=True)
 def _lookup_plane_serial(T_wt, xy, gamma, R0, n, d, origin, voxel_size, shape, nside, n_twist,
-                         pixel_phi, offset, blocks, full, threshold, out):  # fmt: skip
+                         pixel_phi, offset, blocks, full, threshold, fill, filled, out):  # fmt: skip
     for i in range(xy.shape[0]):
         _plane_row(i, T_wt, xy, gamma, R0, n, d, origin, voxel_size, shape, nside, n_twist,
-                   pixel_phi, offset, blocks, full, threshold, out)  # fmt: skip
+                   pixel_phi, offset, blocks, full, threshold, fill, filled, out)  # fmt: skip
 
 
 @nb.njit(cache=True, inline="always")
 def _lookup_inverse(T_wt, B, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset, blocks, full,
-                    threshold):  # fmt: skip
+                    threshold, fill, filled):  # fmt: skip
     """Value of ``inv(B) @ T_wt`` for a base pose B (rows 0-2 of a 4x4)."""
     R = np.empty((3, 3))
     dx, dy, dz = T_wt[0, 3] - B[0, 3], T_wt[1, 3] - B[1, 3], T_wt[2, 3] - B[2, 3]
@@ -405,25 +431,29 @@ def _lookup_inverse(T_wt, B, origin, voxel_size, shape, nside, n_twist, pixel_ph
         for b in range(3):
             R[a, b] = B[0, a] * T_wt[0, b] + B[1, a] * T_wt[1, b] + B[2, a] * T_wt[2, b]
     return _table_value(R, px, py, pz, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset, blocks,
-                        full, threshold)  # fmt: skip
+                        full, threshold, fill, filled)  # fmt: skip
 
 
 @nb.njit(cache=True, inline="always")
 def _table_value(R, px, py, pz, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset, blocks,
-                 full, threshold):  # fmt: skip
+                 full, threshold, fill, filled):  # fmt: skip
     """Reachability index of the pose (R, p) from the dense lookup tables.
 
-    0 where not reached or where the pose's support is below ``threshold`` (> 0; module docstring).
+    A reached cell's value where the pose's support reaches ``threshold`` (> 0; module docstring);
+    ``filled`` in an unreached cell whose pose's support reaches ``fill`` (> 0: the hole fill);
+    else 0.
     """
     c = cell_of(R, px, py, pz, origin, voxel_size, shape, nside, n_twist, pixel_phi)
     if c < 0:
         return 0.0
     n_orient = blocks.shape[1]
     row = offset[c // n_orient]
-    if row < 0:
-        return 0.0
-    value = blocks[row, c % n_orient]
-    if value == 0.0 or threshold <= 0.0:
+    value = blocks[row, c % n_orient] if row >= 0 else 0.0
+    if value == 0.0:  # unreached: answered only by the hole fill
+        if fill <= 0.0:
+            return 0.0
+        value, threshold = filled, fill
+    elif threshold <= 0.0:
         return value
     supported = _supported(R, px, py, pz, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset,
                            blocks, full, threshold)  # fmt: skip
@@ -479,32 +509,32 @@ def _supported(R, px, py, pz, origin, voxel_size, shape, nside, n_twist, pixel_p
 
 @nb.njit(cache=True, inline="always")
 def _batch_row(i, T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist, pixel_phi,
-               offset, blocks, full, threshold, out):  # fmt: skip
+               offset, blocks, full, threshold, fill, filled, out):  # fmt: skip
     B = T_wb[i]
     if invert:  # T_base_tcp = B^-1 T_wt
         out[i] = _lookup_inverse(T_wt, B, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset,
-                                 blocks, full, threshold)  # fmt: skip
+                                 blocks, full, threshold, fill, filled)  # fmt: skip
     else:
         out[i] = _table_value(
             B[:3, :3], B[0, 3], B[1, 3], B[2, 3], origin, voxel_size, shape, nside, n_twist, pixel_phi,
-            offset, blocks, full, threshold,
+            offset, blocks, full, threshold, fill, filled,
         )  # fmt: skip
 
 
 @nb.njit(cache=True, parallel=True)
 def _lookup_batch(T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist, pixel_phi,
-                  offset, blocks, full, threshold, out):  # fmt: skip
+                  offset, blocks, full, threshold, fill, filled, out):  # fmt: skip
     for i in nb.prange(T_wb.shape[0]):
         _batch_row(i, T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist, pixel_phi,
-                   offset, blocks, full, threshold, out)  # fmt: skip
+                   offset, blocks, full, threshold, fill, filled, out)  # fmt: skip
 
 
 @nb.njit(cache=True)
 def _lookup_batch_serial(T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist, pixel_phi,
-                         offset, blocks, full, threshold, out):  # fmt: skip
+                         offset, blocks, full, threshold, fill, filled, out):  # fmt: skip
     for i in range(T_wb.shape[0]):
         _batch_row(i, T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist, pixel_phi,
-                   offset, blocks, full, threshold, out)  # fmt: skip
+                   offset, blocks, full, threshold, fill, filled, out)  # fmt: skip
 
 
 @nb.njit(cache=True)
@@ -514,8 +544,9 @@ def _value_one(T, grid_f, grid_i, pixel_phi, offset, blocks):
         for b in range(4):
             if not math.isfinite(T[a, b]):
                 return -1.0
-    return _table_value(T[:3, :3], T[0, 3], T[1, 3], T[2, 3], grid_f[:3], grid_f[3], grid_i[:3],
-                        grid_i[3], grid_i[4], pixel_phi, offset, blocks, grid_f[4], grid_f[5])  # fmt: skip
+    return _table_value(T[:3, :3], T[0, 3], T[1, 3], T[2, 3], grid_f[:3], grid_f[3], grid_i[:3], grid_i[3],
+                        grid_i[4], pixel_phi, offset, blocks, grid_f[4], grid_f[5], grid_f[6],
+                        grid_f[7])  # fmt: skip
 
 
 SERIAL_BELOW = 2048
