@@ -25,6 +25,7 @@ JSON naming the limit and its option.
 from __future__ import annotations
 
 import asyncio
+import contextvars
 import hmac
 import json
 import math
@@ -41,6 +42,11 @@ OPEN_PATHS = ("/health", "/docs", "/docs/oauth2-redirect", "/openapi.json")
 """Paths answered without the token: liveness and the API's description, no data."""
 
 LOOPBACK_NAMES = ("127.0.0.1", "localhost", "[::1]")
+
+CLIENT: contextvars.ContextVar[str] = contextvars.ContextVar("baseplace_client", default="unknown")
+"""The client of the request being answered: the peer's address (its port changes with each
+connection). The service's queues are shared out by it. Forwarded-for headers are not trusted:
+behind a reverse proxy every client is the proxy."""
 
 
 def excerpt(text: str, limit: int = 80) -> str:
@@ -100,6 +106,8 @@ class Guard:
             await self.app(scope, receive, send)
             return
         self.state.requests += 1
+        peer = scope.get("client")
+        CLIENT.set(str(peer[0]) if peer else "unknown")
         t0 = time.perf_counter()
         headers = {k.lower(): v for k, v in scope.get("headers", [])}
         reserved = 0

@@ -112,11 +112,11 @@ def _obstacles(scene: Scene | None, req: dict[str, Any]) -> list[str]:
     return [*(scene.obstacles if scene is not None else ()), *(req.get("obstacles") or [])]
 
 
-def place(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[str, Any]:
+def place(state: ServiceState, scene: Scene, req: dict[str, Any], lane: str = "jobs") -> dict[str, Any]:
     """``baseplace place --json`` on an uploaded scene, with the scene's cache and warm robots and maps.
 
     The scene's grid (a recording's map topic, or POST /scenes/{id}/grid) is the CLI's
-    ``--occupancy`` unless ``use_grid`` is off.
+    ``--occupancy`` unless ``use_grid`` is off. ``lane``: whose robots (the thread it runs on).
     """
     from baseplace.jobs.inputs import CloudInput, motion_and_robustness
     from baseplace.jobs.place import PlaceJob, place_job
@@ -127,7 +127,7 @@ def place(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[str, A
         motion, robustness = motion_and_robustness(r)
         settings = PlaceSettings(strategy=r["strategy"], placements=r["placements"], tries=r["tries"],
                                  resolution=r["resolution"], motion=motion, robustness=robustness)  # fmt: skip
-        robot = state.robot(r["robot"])
+        robot = state.robot(r["robot"], lane=lane)
         rmap = state.reach_map(robot, r["arm"])
         grid = scene.grid if r["use_grid"] else None
         return place_job(PlaceJob(r["targets"], robot, r["arm"], CloudInput(points=scene.cloud), grid,

@@ -18,7 +18,6 @@ import time
 import uuid
 from collections import OrderedDict
 from collections.abc import Sequence
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -26,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from baseplace.errors import BaseplaceError, InputError
+from baseplace.serve.lanes import FairLane
 
 CLOUD_FORMATS = ("ply", "pcd", "npy", "xyz")
 """Upload formats of a scene's cloud (the ``format`` query parameter)."""
@@ -61,8 +61,13 @@ class ServeSettings:
         allow_hosts: more names the ``Host`` header may give (besides loopback and ``host``).
         allow_origins: web origins (``https://app.example:8443``) whose pages may call the
             service; none by default (a browser page's own origin is the service's).
-        max_queue: jobs waiting or running per lane (placements, commands, lookups); more get
-            503 with ``Retry-After``.
+        max_queue: jobs waiting or running per lane (placements, heavy placements, commands,
+            lookups); more get 503 with ``Retry-After``.
+        max_client_queue: jobs one client (one peer address) may have waiting or running per
+            lane; more get 429 with ``Retry-After``. In the heavy lane a client has one.
+        heavy_work: a ``/place`` whose work, targets x (tries + placements x robustness
+            samples), is over this runs in the heavy lane (one thread of its own), so that
+            cheap placements never wait behind it.
         read_timeout_s: request headers must be complete, and a body must not stall, within
             this many seconds; a whole body within 4 times that [s].
         max_inflight_bytes: request bodies being received, all together; past it 503.
@@ -81,6 +86,8 @@ class ServeSettings:
     allow_hosts: tuple[str, ...] = ()
     allow_origins: tuple[str, ...] = ()
     max_queue: int = 16
+    max_client_queue: int = 8
+    heavy_work: int = 500
     read_timeout_s: float = 10.0
     max_inflight_bytes: int = 256 * 1024 * 1024
     max_connections: int = 128
@@ -98,6 +105,10 @@ class ServeSettings:
             raise InputError(f"max_scenes must be >= 1, got {self.max_scenes}")
         if self.max_queue < 1:
             raise InputError(f"max_queue must be >= 1, got {self.max_queue}")
+        if self.max_client_queue < 1:
+            raise InputError(f"max_client_queue must be >= 1, got {self.max_client_queue}")
+        if self.heavy_work < 1:
+            raise InputError(f"heavy_work must be >= 1, got {self.heavy_work}")
         if not (self.read_timeout_s > 0):
             raise InputError(f"read_timeout_s must be > 0, got {self.read_timeout_s}")
         if self.max_inflight_bytes < self.max_request_bytes:
@@ -174,26 +185,29 @@ class ServiceState:
         self.settings = settings
         self.started = time.time()
         n = (settings.kernel_threads,)
-        self.executor = ThreadPoolExecutor(
-            max_workers=1, thread_name_prefix="baseplace-job", initializer=_kernel_threads, initargs=n
-        )
+        self.executor = FairLane("job", 1, _kernel_threads, n)
+        # a placement over settings.heavy_work: on a thread and robots of its own, so that the
+        # cheap ones never wait behind it
+        self.heavy = FairLane("heavy", 1, _kernel_threads, n)
         # map lookups only read the map: they need not wait behind a placement
-        self.lookups = ThreadPoolExecutor(
-            max_workers=2, thread_name_prefix="baseplace-lookup", initializer=_kernel_threads, initargs=n
-        )
+        self.lookups = FairLane("lookup", 2, _kernel_threads, n)
         # candidates, navigation and surface maps: one at a time, beside the placements, on robots of their own
-        self.commands = ThreadPoolExecutor(
-            max_workers=1, thread_name_prefix="baseplace-command", initializer=_kernel_threads, initargs=n
-        )
+        self.commands = FairLane("command", 1, _kernel_threads, n)
         self.folder = Path(tempfile.mkdtemp(prefix="baseplace-serve-"))
         self._robots: dict[str, Any] = {}
-        self._command_robots: dict[str, Any] = {}
+        self._lane_robots: dict[str, dict[str, Any]] = {}  # lane -> robots of its own thread
         self._maps: dict[tuple[str, str | None], Any] = {}
         self._scenes: OrderedDict[str, Scene] = OrderedDict()
         self._lock = threading.Lock()  # scenes are added from the worker and read from the loop
         self.requests = 0
         self.inflight_bytes = 0  # request bodies being received (the event loop's count)
-        self.queued: dict[str, int] = {"jobs": 0, "commands": 0, "lookups": 0}  # per lane, waiting or running
+        self.queued: dict[str, int] = {
+            "jobs": 0,
+            "heavy": 0,
+            "commands": 0,
+            "lookups": 0,
+        }  # waiting or running
+        self.client_queued: dict[tuple[str, str], int] = {}  # (lane, client) -> its jobs waiting or running
         self.deadlines: set[Any] = set()  # of the jobs submitted and not ended: cancelled at shutdown
         self.closing = False
 
@@ -214,7 +228,7 @@ class ServiceState:
 
         if name not in BUILTIN_ROBOTS:
             raise InputError(f"unknown robot {name!r}; valid: {', '.join(BUILTIN_ROBOTS)}")
-        robots = self._robots if lane == "jobs" else self._command_robots
+        robots = self._robots if lane == "jobs" else self._lane_robots.setdefault(lane, {})
         if name not in robots:
             from baseplace.robots.model import Robot
 
@@ -385,12 +399,12 @@ class ServiceState:
         the process's exit (the worker threads are daemons of a process that is ending).
         """
         self.stop_jobs()
-        pools = (self.lookups, self.commands, self.executor)
+        pools = (self.lookups, self.commands, self.heavy, self.executor)
         for pool in pools:
             pool.shutdown(wait=False, cancel_futures=True)
         end = time.monotonic() + (self.settings.timeout_s if wait_s is None else wait_s)
         for pool in pools:
-            for thread in list(getattr(pool, "_threads", ())):
+            for thread in pool.threads:
                 thread.join(max(0.0, end - time.monotonic()))
         shutil.rmtree(self.folder, ignore_errors=True)
 
