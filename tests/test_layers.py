@@ -14,7 +14,6 @@ KNOWN_CIRCLES = [
     {"baseplace.reachability.build", "baseplace.reachability.certify", "baseplace.reachability.checkpoint"},
     {"baseplace.placement.candidates", "baseplace.placement.robustness", "baseplace.placement.verify"},
     {"baseplace.viz.view_scene", "baseplace.viz.viewer"},
-    {"baseplace.serve.jobs", "baseplace.serve.state"},
 ]
 """Module circles still to be broken (issue 26)."""
 

@@ -11,6 +11,7 @@ more (``commands``).
 
 from __future__ import annotations
 
+import json
 import shutil
 import tempfile
 import threading
@@ -354,9 +355,7 @@ class ServiceState:
                 for robot in list(self._robots.values()):  # the obstacle tree, before the first query
                     scene_environment(robot, cache)
             if grid is not None:
-                from baseplace.serve.jobs import add_grid_values
-
-                add_grid_values(scene, grid)
+                _attach_grid_values(scene, grid)
         except BaseException:
             shutil.rmtree(folder, ignore_errors=True)
             raise
@@ -454,6 +453,66 @@ def _transform_file(folder: Path, spec: str) -> str:
         path, "\n".join(" ".join(repr(float(v)) for v in row) for row in T).encode() + b"\n", "transform"
     )
     return str(path)
+
+
+def write_grid_files(scene: Scene, image: bytes, suffix: str, meta: dict[str, Any]) -> tuple[Path, Path]:
+    """A map_server image and its YAML (``meta``: the YAML's fields) in the scene's folder; their paths.
+
+    Under a new name: a new grid never breaks the one the scene has until it is read.
+    """
+    import uuid
+
+    from baseplace.files import write_bytes
+
+    if suffix not in ("pgm", "png"):
+        raise InputError(f"unknown grid image format {suffix!r}; valid: pgm, png")
+    if not image:
+        raise InputError("the upload is empty: send the grid image as the request body")
+    name = f"grid-{uuid.uuid4().hex[:8]}"
+    image_path, yaml_path = scene.folder / f"{name}.{suffix}", scene.folder / f"{name}.yaml"
+    write_bytes(image_path, image, "the grid image")
+    origin = [float(meta["origin_x"]), float(meta["origin_y"]), float(meta["origin_yaw"])]
+    doc = {"image": image_path.name, "resolution": float(meta["resolution"]), "origin": origin,
+           "negate": int(bool(meta["negate"])), "occupied_thresh": float(meta["occupied_thresh"]),
+           "free_thresh": float(meta["free_thresh"]), "mode": str(meta["mode"])}  # fmt: skip
+    try:
+        write_bytes(yaml_path, (json.dumps(doc) + "\n").encode(), "the grid's YAML")  # JSON is YAML
+    except BaseException:
+        image_path.unlink(missing_ok=True)
+        raise
+    return image_path, yaml_path
+
+
+def attach_grid(scene: Scene, image_path: Path, yaml_path: Path) -> None:
+    """Read the grid files back and make them the scene's grid (on failure they are deleted)."""
+    from baseplace.world.occupancy import load_occupancy
+
+    try:
+        grid = load_occupancy(yaml_path)
+    except BaseException:
+        image_path.unlink(missing_ok=True)
+        yaml_path.unlink(missing_ok=True)
+        raise
+    scene.grid_yaml, scene.grid = yaml_path, grid
+
+
+def _attach_grid_values(scene: Scene, grid: Any) -> None:
+    """Attach an :class:`~baseplace.world.occupancy.OccupancyGrid` (e.g. a recording's) as map_server files.
+
+    Written in map_server's ``raw`` mode (a pixel is the cell value, 255 unknown), which reads
+    back cell for cell.
+    """
+    import cv2
+
+    values = np.asarray(grid.data)
+    pixels = np.where((values >= 0) & (values <= 100), values, 255).astype(np.uint8)[::-1]
+    ok, png = cv2.imencode(".png", pixels)
+    if not ok:
+        raise InputError("cannot encode the recording's occupancy grid")
+    x, y, yaw = (float(v) for v in grid.origin)
+    meta = {"resolution": grid.resolution, "origin_x": x, "origin_y": y, "origin_yaw": yaw, "negate": False,
+            "occupied_thresh": 0.65, "free_thresh": 0.196, "mode": "raw"}  # fmt: skip
+    attach_grid(scene, *write_grid_files(scene, png.tobytes(), "png", meta))
 
 
 def _save_npy(path: Path, points: np.ndarray) -> None:
