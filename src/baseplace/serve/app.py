@@ -324,10 +324,10 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
             with limited(deadline):
                 return fn(*args)
 
+        future = asyncio.wrap_future(pool.submit_for(client, limited_job))  # counted once queued
         st.queued[name] += 1
         st.client_queued[key] = st.client_queued.get(key, 0) + 1
         st.deadlines.add(deadline)
-        future = asyncio.wrap_future(pool.submit_for(client, limited_job))
 
         def ended(f: asyncio.Future[Any]) -> None:
             st.queued[name] -= 1

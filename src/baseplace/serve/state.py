@@ -4,9 +4,10 @@ Robots are built once per name (their collision model and pair tables with them)
 once per (robot, arm), and each uploaded scene keeps its cloud, its segmentation and its
 obstacle set and collision environments (:class:`~baseplace.placement.scene_cache.SceneCache`).
 Placements run on one worker thread (:attr:`ServiceState.executor`): pinocchio's data and coal's
-trees are not shared between threads. Map lookups run on two more (``lookups``), and candidates,
-navigation and surface maps, on robots of their own (``robot(name, lane="commands")``), on one
-more (``commands``).
+trees are not shared between threads. Heavy placements run on one more, on robots of their own
+(``robot(name, lane="heavy")``); map lookups on two more (``lookups``); candidates, navigation
+and surface maps, on robots of their own (``robot(name, lane="commands")``), on one more
+(``commands``). Each is a :class:`~baseplace.serve.lanes.FairLane`: its clients take turns.
 """
 
 from __future__ import annotations
@@ -72,7 +73,8 @@ class ServeSettings:
         read_timeout_s: request headers must be complete, and a body must not stall, within
             this many seconds; a whole body within 4 times that [s].
         max_inflight_bytes: request bodies being received, all together; past it 503.
-        max_connections: open connections (uvicorn's ``limit_concurrency``); past it 503.
+        max_connections: open connections, and requests in flight; a request past it gets 503
+            (:class:`~baseplace.serve.guard.TimedH11Protocol`).
     """
 
     host: str = "127.0.0.1"
