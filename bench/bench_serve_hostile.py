@@ -11,7 +11,9 @@ with a client time limit; first alone, then while hostile clients run:
   (16 targets, 1,000 tries, 1,024 robustness samples);
 * malformed JSON: one client looping broken JSON, NaN, deep nesting and a wrong content type.
 
-Honest p50/p95/p99 and errors, with and without, and what the hostile clients got back.
+The hostile clients connect from ``--hostile-address`` (127.0.0.2), the honest ones from
+127.0.0.1: the service shares its queues out by peer address. Honest p50/p95/p99 and errors,
+with and without, and what the hostile clients got back.
 
 Usage: nice -n 10 python bench/bench_serve_hostile.py [--requests 400] [--clients 4] [--small-map]
 """
@@ -98,6 +100,7 @@ class Hostile:
 
     def __init__(self, url: str, port: int, scene: dict[str, Any], args: argparse.Namespace) -> None:
         self.url, self.port, self.scene = url, port, scene
+        self.address = args.hostile_address
         self.stopping = threading.Event()
         self.counts: dict[str, int] = {}
         self.lock = threading.Lock()
@@ -122,9 +125,12 @@ class Hostile:
             th.join(60)
 
     def _socket(self) -> socket.socket:
-        s = socket.create_connection(("127.0.0.1", self.port))
+        s = socket.create_connection(("127.0.0.1", self.port), source_address=(self.address, 0))
         s.settimeout(1.0)
         return s
+
+    def _transport(self) -> httpx.HTTPTransport:
+        return httpx.HTTPTransport(local_address=self.address)
 
     def slowloris(self) -> None:
         while not self.stopping.is_set():
@@ -163,7 +169,7 @@ class Hostile:
                 self.count("stalled body: refused or reset")
 
     def heavy(self) -> None:
-        with httpx.Client(base_url=self.url, timeout=120) as client:
+        with httpx.Client(base_url=self.url, timeout=120, transport=self._transport()) as client:
             while not self.stopping.is_set():
                 body = {"scene_id": self.scene["id"], "targets": [self.scene["target"]] * 16, **HEAVY}
                 try:
@@ -172,7 +178,7 @@ class Hostile:
                     self.count(f"heavy place: {type(exc).__name__}")
 
     def malformed(self) -> None:
-        with httpx.Client(base_url=self.url, timeout=30) as client:
+        with httpx.Client(base_url=self.url, timeout=30, transport=self._transport()) as client:
             k = 0
             while not self.stopping.is_set():
                 data, kind = MALFORMED[k % len(MALFORMED)]
@@ -216,6 +222,9 @@ def main() -> None:
     parser.add_argument("--slowloris", type=int, default=16)
     parser.add_argument("--stalled", type=int, default=8)
     parser.add_argument("--heavy", type=int, default=2)
+    parser.add_argument(
+        "--hostile-address", default="127.0.0.2", help="the hostile clients' loopback address"
+    )
     parser.add_argument("--small-map", action="store_true", help="a small default map (no default-map build)")
     args = parser.parse_args()
     folder = Path(tempfile.mkdtemp(prefix="bench-serve-hostile-"))
@@ -226,6 +235,7 @@ def main() -> None:
     server, url, port = start_server(env, args.server_timeout)
     result: dict[str, Any] = {"url": "loopback", "clients": args.clients, "requests_per_phase": args.requests,
                               "server_timeout_s": args.server_timeout, "small_map": args.small_map,
+                              "hostile_address": args.hostile_address,
                               "hostile": {"slowloris": args.slowloris, "stalled_50mb_bodies": args.stalled,
                                           "heavy_place_clients": args.heavy, "malformed_json_clients": 1}}  # fmt: skip
     try:

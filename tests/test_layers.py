@@ -13,7 +13,6 @@ import networkx as nx
 KNOWN_CIRCLES = [
     {"baseplace.reachability.build", "baseplace.reachability.certify", "baseplace.reachability.checkpoint"},
     {"baseplace.viz.view_scene", "baseplace.viz.viewer"},
-    {"baseplace.serve.jobs", "baseplace.serve.state"},
 ]
 """Module circles still to be broken (issue 26)."""
 

@@ -76,12 +76,31 @@ def load_collision_model(robot: Robot) -> pin.GeometryModel:
         ) from None
 
 
+MAX_SRDF_BYTES = 16 * 2**20
+"""The largest SRDF read (a robot's SRDF, every pair of its links disabled, is well under 1 MB)."""
+
+
 def _remove_srdf_pairs(model: pin.Model, geom: pin.GeometryModel, srdf: Path) -> None:
-    """Disable the SRDF's ``disable_collisions`` pairs; a malformed SRDF is a one-line error."""
+    """Disable the SRDF's ``disable_collisions`` pairs; a malformed, large or deep SRDF is a one-line error.
+
+    Size and nesting are checked before pinocchio's reader, which recurses once per level (a
+    700 kB SRDF nested 100,000 deep crashed the process).
+    """
+    from baseplace.robots.urdf import check_xml_depth
+
     try:
-        ElementTree.parse(srdf)
+        size = srdf.stat().st_size
+    except OSError as exc:
+        raise InputError(f"cannot read SRDF {srdf}: {exc.strerror or exc}") from None
+    if size > MAX_SRDF_BYTES:
+        raise InputError(
+            f"SRDF {srdf} is {size} bytes; the limit is {MAX_SRDF_BYTES} ({MAX_SRDF_BYTES >> 20} MB)"
+        )
+    try:
+        root = ElementTree.parse(srdf).getroot()
     except (ElementTree.ParseError, OSError) as exc:
         raise InputError(f"cannot parse SRDF {srdf}: {' '.join(str(exc).split())[:200]}") from None
+    check_xml_depth(root, f"SRDF {srdf}", 3)
     try:
         with native_stderr_captured():
             pin.removeCollisionPairs(model, geom, str(srdf))

@@ -68,6 +68,22 @@ def check_urdf_file(path: Path) -> None:
         )
 
 
+def check_xml_depth(root: ElementTree.Element, what: str, usual: int) -> None:
+    """Refuse XML nested over :data:`MAX_XML_DEPTH` elements deep (checked without recursion).
+
+    ``what`` names the file in the message ("URDF path"), ``usual`` how deep such a file nests.
+    C++ parsers (urdfdom's, pinocchio's SRDF reader) recurse once per level: a deep file
+    exhausts their stack.
+    """
+    stack = [(root, 1)]
+    while stack:
+        element, depth = stack.pop()
+        if depth > MAX_XML_DEPTH:
+            raise InputError(f"{what}: XML elements nested over {MAX_XML_DEPTH} deep; a {what.split()[0]} "
+                             f"nests {usual}")  # fmt: skip
+        stack.extend((child, depth + 1) for child in element)
+
+
 def check_urdf_tree(robot: ElementTree.Element, path: Path) -> None:
     """Refuse a URDF whose size or kinematic depth no robot has, before pinocchio or a viewer walks it.
 
@@ -79,12 +95,7 @@ def check_urdf_tree(robot: ElementTree.Element, path: Path) -> None:
     Raises:
         InputError: one line naming the count and the limit, or a joint cycle.
     """
-    stack = [(robot, 1)]
-    while stack:
-        element, depth = stack.pop()
-        if depth > MAX_XML_DEPTH:
-            raise InputError(f"URDF {path}: XML elements nested over {MAX_XML_DEPTH} deep; a URDF nests 5")
-        stack.extend((child, depth + 1) for child in element)
+    check_xml_depth(robot, f"URDF {path}", 5)
     n_links, joints = len(robot.findall("link")), robot.findall("joint")
     for what, count, limit in (("links", n_links, MAX_LINKS), ("joints", len(joints), MAX_JOINTS)):
         if count > limit:

@@ -30,7 +30,7 @@ from starlette.exceptions import HTTPException
 from baseplace.errors import BaseplaceError
 from baseplace.placement.deadline import Deadline, DeadlineExceeded, limited
 from baseplace.serve import jobs
-from baseplace.serve.guard import Guard, authorized
+from baseplace.serve.guard import CLIENT, Guard, authorized
 from baseplace.serve.state import ServeSettings, ServiceState, UnknownSceneError
 
 STRATEGIES = Literal["MR", "TO", "MRTO", "orm", "grid", "random"]
@@ -134,6 +134,16 @@ class PlaceRequest(RobustnessFields):
             )
         _robustness_work(targets, self.robustness_samples, self.placements)
         return self
+
+    @property
+    def work(self) -> int:
+        """What the request may cost at most: targets x (tries + placements x robustness samples).
+
+        Candidates checked and error draws checked cost about the same (an IK and a collision
+        check each, about 2 ms on one core), for every target.
+        """
+        targets = len(self.targets) + len(self.grasp_points)
+        return targets * (self.tries + self.placements * self.robustness_samples)
 
 
 class ExplainRequest(_Model):
@@ -281,36 +291,49 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
                   lifespan=lifespan)  # fmt: skip
     app.state.service = st
 
-    async def run(fn: Callable[..., Any], *args: Any, lookup: bool = False, lane: Any = None) -> Any:
+    async def run(
+        fn: Callable[..., Any], *args: Any, lookup: bool = False, lane: Any = None, heavy: bool = False
+    ) -> Any:
         """Run a job on its thread within the time limit, stopped when it is up.
 
-        Placements and scenes on the worker, a read-only lookup on the lookup threads,
-        candidates, navigation and surface maps on the command thread (``lane``: the job whose
-        thread ``fn`` runs on, if not ``fn`` itself). A lane holds at most ``max_queue`` jobs,
-        waiting or running (503 past it). The job runs under a deadline of the request's time
-        limit, counted from now: it stops at its next check once the request is answered 504,
-        and a job that waited out its time in the queue does not start.
+        Placements and scenes on the worker, a placement of more work than ``heavy_work``
+        (``heavy``) on the heavy thread, a read-only lookup on the lookup threads, candidates,
+        navigation and surface maps on the command thread (``lane``: the job whose thread
+        ``fn`` runs on, if not ``fn`` itself). A lane holds at most ``max_queue`` jobs, waiting
+        or running (503 past it), a client (the peer's address) at most ``max_client_queue`` of
+        them, one in the heavy lane (429 past it), and serves its clients in turn. The job runs
+        under a deadline of the request's time limit, counted from now: it stops at its next
+        check once the request is answered 504, and a job that waited out its time in the queue
+        does not start.
         """
-        loop = asyncio.get_running_loop()
         job = fn if lane is None else lane
-        name = "lookups" if lookup else "commands" if job in COMMAND_LANE else "jobs"
-        pool = {"lookups": st.lookups, "commands": st.commands, "jobs": st.executor}[name]
+        name = "lookups" if lookup else "commands" if job in COMMAND_LANE else "heavy" if heavy else "jobs"
+        pool = {"lookups": st.lookups, "commands": st.commands, "heavy": st.heavy, "jobs": st.executor}[name]
         if st.closing:
             raise _Busy("shutdown", settings)
         if st.queued[name] >= settings.max_queue:
             raise _Busy(name, settings)
+        client = CLIENT.get()
+        key = (name, client)
+        share = 1 if name == "heavy" else min(settings.max_client_queue, settings.max_queue)
+        if st.client_queued.get(key, 0) >= share:
+            raise _OverShare(name, client, share)
         deadline = Deadline.after(settings.timeout_s)
 
         def limited_job() -> Any:
             with limited(deadline):
                 return fn(*args)
 
+        future = asyncio.wrap_future(pool.submit_for(client, limited_job))  # counted once queued
         st.queued[name] += 1
+        st.client_queued[key] = st.client_queued.get(key, 0) + 1
         st.deadlines.add(deadline)
-        future = loop.run_in_executor(pool, limited_job)
 
         def ended(f: asyncio.Future[Any]) -> None:
             st.queued[name] -= 1
+            left = st.client_queued.pop(key) - 1
+            if left:
+                st.client_queued[key] = left
             st.deadlines.discard(deadline)
             if not f.cancelled():
                 f.exception()  # retrieved: a job stopped after its 504 is no error to log
@@ -325,7 +348,7 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
             raise _Timeout(settings.timeout_s) from None
 
     async def answer(
-        fn: Callable[..., dict[str, Any]], *args: Any, lookup: bool = False, **add: Any
+        fn: Callable[..., dict[str, Any]], *args: Any, lookup: bool = False, heavy: bool = False, **add: Any
     ) -> Response:
         """A job's report (with the fields ``add``) as the response, encoded on the job's thread.
 
@@ -336,7 +359,7 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
         def encoded() -> bytes:
             return json.dumps({**fn(*args), **add}, allow_nan=False, separators=(",", ":")).encode()
 
-        body = await run(encoded, lookup=lookup, lane=fn)
+        body = await run(encoded, lookup=lookup, lane=fn, heavy=heavy)
         return Response(body, media_type="application/json")
 
     @app.exception_handler(BaseplaceError)
@@ -360,6 +383,11 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
     async def _busy(request: Request, exc: _Busy) -> JSONResponse:
         retry = str(max(1, round(settings.timeout_s)))
         return JSONResponse({"error": str(exc)}, status_code=503, headers={"Retry-After": retry})
+
+    @app.exception_handler(_OverShare)
+    async def _over_share(request: Request, exc: _OverShare) -> JSONResponse:
+        retry = str(max(1, round(settings.timeout_s))) if exc.lane == "heavy" else "1"
+        return JSONResponse({"error": str(exc)}, status_code=429, headers={"Retry-After": retry})
 
     @app.exception_handler(HTTPException)
     async def _http_error(request: Request, exc: HTTPException) -> JSONResponse:
@@ -526,6 +554,8 @@ def create_app(settings: ServeSettings | None = None, state: ServiceState | None
     @app.post("/place", summary="baseplace place --json on an uploaded scene")
     async def place(req: PlaceRequest) -> Response:
         scene = st.scene(req.scene_id)
+        if req.work > settings.heavy_work:  # its own thread and robots: cheap placements never wait behind it
+            return await answer(jobs.place, st, scene, req.model_dump(), "heavy", heavy=True)
         return await answer(jobs.place, st, scene, req.model_dump())
 
     @app.post(
@@ -618,6 +648,18 @@ class _Busy(Exception):
         )
 
 
+class _OverShare(Exception):
+    def __init__(self, lane: str, client: str, share: int) -> None:
+        self.lane = lane
+        super().__init__(
+            f"this client ({client}) has a heavy placement (work over serve --heavy-work) waiting or running "
+            "already: one at a time per client; send the next when it is answered"
+            if lane == "heavy"
+            else f"this client ({client}) has {share} {lane} waiting or running already "
+            "(serve --max-client-queue); send the next when one is answered"
+        )
+
+
 _UPLOAD: dict[str, Any] = {
     "requestBody": {
         "required": True,
@@ -646,6 +688,7 @@ def warm_up(state: ServiceState) -> None:
     points = np.c_[floor, np.zeros(len(floor))]
     cache = SceneCache(points)
     for name in state.settings.robots:
+        state.robot(name, lane="heavy")  # built here, used by the heavy thread alone from now on
         robot = state.robot(name)
         rmap = state.reach_map(robot, None)
         target = pose_from_xyz_rpy([0.6, 0.0, 0.8, 0.0, 1.5708, 0.0])

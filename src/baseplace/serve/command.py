@@ -38,6 +38,12 @@ def add_serve_command(sub: Any) -> None:
                    help="a web origin whose pages may call the service, e.g. https://ui.example:8443 (repeat)")  # fmt: skip
     p.add_argument("--max-queue", type=int, default=16,
                    help="jobs waiting or running per lane; more get 503 (default 16)")  # fmt: skip
+    p.add_argument("--max-client-queue", type=int, default=8,
+                   help="jobs one client (peer address) may have waiting or running per lane; more get 429 "
+                        "(default 8)")  # fmt: skip
+    p.add_argument("--heavy-work", type=int, default=500,
+                   help="a /place of more work, targets x (tries + placements x robustness samples), runs in "
+                        "the heavy lane, one at a time and one per client (default 500)")  # fmt: skip
     p.add_argument("--read-timeout", type=float, default=10.0,
                    help="request headers within, and no body stall over, this many seconds (default 10)")  # fmt: skip
     p.add_argument("--max-inflight-mb", type=float, default=256.0,
@@ -59,7 +65,8 @@ def cmd_serve(args: argparse.Namespace) -> int:
                              timeout_s=args.timeout, max_scenes=args.max_scenes,
                              robots=tuple(args.robot or ("tiago",)), warm_up=not args.no_warm_up, token=token,
                              allow_hosts=tuple(args.allow_host), allow_origins=tuple(args.allow_origin),
-                             max_queue=args.max_queue, read_timeout_s=args.read_timeout,
+                             max_queue=args.max_queue, max_client_queue=args.max_client_queue,
+                             heavy_work=args.heavy_work, read_timeout_s=args.read_timeout,
                              max_inflight_bytes=int(args.max_inflight_mb * 2**20),
                              max_connections=args.max_connections)  # fmt: skip
     warm = f"warming {', '.join(settings.robots)}, then " if settings.warm_up else ""

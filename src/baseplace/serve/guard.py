@@ -8,8 +8,8 @@
 2. an ``Origin`` header names this service's own origin or an ``--allow-origin``, else 403: a
    web page the operator visits cannot drive the service;
 3. with a token (``--token``, ``$BASEPLACE_TOKEN``), ``Authorization: Bearer TOKEN``, compared in
-   constant time, else 401 (``/health``, ``/docs`` and ``/openapi.json`` stay open; ``/health``
-   then says only "ok");
+   constant time, else 401 (only ``/health`` stays open, and then says only "ok": the API's
+   description, ``/docs`` and ``/openapi.json``, needs the token too);
 4. a body's ``Content-Type`` is the endpoint's (``application/octet-stream`` for uploads,
    ``application/json`` for the rest), else 415;
 5. a body over ``--max-request-mb`` gets 413 by its ``Content-Length`` or while it streams;
@@ -18,13 +18,16 @@
    chunks, or is not all in within 4 times that, gets 408 and the connection is closed.
 
 :class:`TimedH11Protocol` closes a connection whose request headers are not complete within the
-read timeout (uvicorn itself waits for headers for ever). Every refusal is ``{"error": ...}``
-JSON naming the limit and its option.
+read timeout (uvicorn itself waits for headers for ever), and answers a request that finds
+``--max-connections`` connections open, or as many requests in flight, 503 (uvicorn's own
+``limit_concurrency`` answers that in plain text). Every refusal is ``{"error": ...}`` JSON
+naming the limit and its option.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextvars
 import hmac
 import json
 import math
@@ -37,10 +40,15 @@ from baseplace.serve.state import ServeSettings, ServiceState
 
 UPLOAD_TYPE = "application/octet-stream"
 JSON_TYPE = "application/json"
-OPEN_PATHS = ("/health", "/docs", "/docs/oauth2-redirect", "/openapi.json")
-"""Paths answered without the token: liveness and the API's description, no data."""
+OPEN_PATHS = ("/health",)
+"""Paths answered without the token: liveness, no data."""
 
 LOOPBACK_NAMES = ("127.0.0.1", "localhost", "[::1]")
+
+CLIENT: contextvars.ContextVar[str] = contextvars.ContextVar("baseplace_client", default="unknown")
+"""The client of the request being answered: the peer's address (its port changes with each
+connection). The service's queues are shared out by it. Forwarded-for headers are not trusted:
+behind a reverse proxy every client is the proxy."""
 
 
 def excerpt(text: str, limit: int = 80) -> str:
@@ -100,6 +108,8 @@ class Guard:
             await self.app(scope, receive, send)
             return
         self.state.requests += 1
+        peer = scope.get("client")
+        CLIENT.set(str(peer[0]) if peer else "unknown")
         t0 = time.perf_counter()
         headers = {k.lower(): v for k, v in scope.get("headers", [])}
         reserved = 0
@@ -236,6 +246,15 @@ async def send_error(
     await send({"type": "http.response.body", "body": body})
 
 
+def _too_many_connections(limit: int) -> Any:
+    async def refuse(scope: dict[str, Any], receive: Any, send: Any) -> None:
+        message = (f"the service has {limit} connections or requests open already (serve --max-connections); "
+                   "try again shortly")  # fmt: skip
+        await send_error(send, 503, message, (*_CLOSE, (b"retry-after", b"1")))
+
+    return refuse
+
+
 class TimedH11Protocol(H11Protocol):
     """uvicorn's h11 protocol that closes a connection whose request headers take over ``header_timeout`` s.
 
@@ -244,11 +263,15 @@ class TimedH11Protocol(H11Protocol):
     """
 
     header_timeout: float = 10.0
+    max_connections: int | None = None
+    """Open connections, and requests in flight, past which a request is answered 503 JSON (as
+    uvicorn's ``limit_concurrency`` counts them)."""
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         """Start the first request's header timer."""
         super().connection_made(transport)  # type: ignore[arg-type]
         self._header_timer: asyncio.TimerHandle | None = None
+        self._service = self.app
         self._arm()
 
     def _arm(self) -> None:
@@ -263,7 +286,15 @@ class TimedH11Protocol(H11Protocol):
             self.transport.close()
 
     def handle_events(self) -> None:
-        """Read the events; a new request's complete headers stop the timer."""
+        """Read the events; a new request's complete headers stop the timer.
+
+        A request that arrives while the connections or the requests in flight are at
+        ``max_connections`` goes to :func:`_too_many_connections` instead of the service
+        (uvicorn takes ``self.app`` when it reads the request's headers, in this call).
+        """
+        limit = self.max_connections
+        full = limit is not None and (len(self.connections) > limit or len(self.tasks) >= limit)
+        self.app = _too_many_connections(limit or 0) if full else self._service
         super().handle_events()
         if self._header_timer is not None and self.cycle is not self._waiting_after:
             self._header_timer.cancel()

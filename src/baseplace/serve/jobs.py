@@ -14,8 +14,6 @@ import json
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
 from baseplace.errors import BaseplaceError, InputError
 
 if TYPE_CHECKING:
@@ -112,11 +110,11 @@ def _obstacles(scene: Scene | None, req: dict[str, Any]) -> list[str]:
     return [*(scene.obstacles if scene is not None else ()), *(req.get("obstacles") or [])]
 
 
-def place(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[str, Any]:
+def place(state: ServiceState, scene: Scene, req: dict[str, Any], lane: str = "jobs") -> dict[str, Any]:
     """``baseplace place --json`` on an uploaded scene, with the scene's cache and warm robots and maps.
 
     The scene's grid (a recording's map topic, or POST /scenes/{id}/grid) is the CLI's
-    ``--occupancy`` unless ``use_grid`` is off.
+    ``--occupancy`` unless ``use_grid`` is off. ``lane``: whose robots (the thread it runs on).
     """
     from baseplace.jobs.inputs import CloudInput, motion_and_robustness
     from baseplace.jobs.place import PlaceJob, place_job
@@ -127,7 +125,7 @@ def place(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[str, A
         motion, robustness = motion_and_robustness(r)
         settings = PlaceSettings(strategy=r["strategy"], placements=r["placements"], tries=r["tries"],
                                  resolution=r["resolution"], motion=motion, robustness=robustness)  # fmt: skip
-        robot = state.robot(r["robot"])
+        robot = state.robot(r["robot"], lane=lane)
         rmap = state.reach_map(robot, r["arm"])
         grid = scene.grid if r["use_grid"] else None
         return place_job(PlaceJob(r["targets"], robot, r["arm"], CloudInput(points=scene.cloud), grid,
@@ -309,56 +307,16 @@ def _with_scene(report: dict[str, Any], scene: Scene) -> dict[str, Any]:
 
 def add_grid(scene: Scene, image: bytes, suffix: str, meta: dict[str, Any]) -> dict[str, Any]:
     """Attach an occupancy grid (map_server image + YAML fields) to a scene; ``baseplace occupancy --json``."""
-    from baseplace.world.occupancy import load_occupancy
-
-    if suffix not in ("pgm", "png"):
-        raise InputError(f"unknown grid image format {suffix!r}; valid: pgm, png")
-    if not image:
-        raise InputError("the upload is empty: send the grid image as the request body")
-    import uuid
-
-    name = f"grid-{uuid.uuid4().hex[:8]}"  # a new grid never breaks the one the scene has until it is read
-    image_path, yaml_path = scene.folder / f"{name}.{suffix}", scene.folder / f"{name}.yaml"
-    from baseplace.files import write_bytes
-
-    write_bytes(image_path, image, "the grid image")
-    origin = [float(meta["origin_x"]), float(meta["origin_y"]), float(meta["origin_yaw"])]
-    doc = {"image": image_path.name, "resolution": float(meta["resolution"]), "origin": origin,
-           "negate": int(bool(meta["negate"])), "occupied_thresh": float(meta["occupied_thresh"]),
-           "free_thresh": float(meta["free_thresh"]), "mode": str(meta["mode"])}  # fmt: skip
-    try:
-        write_bytes(yaml_path, (json.dumps(doc) + "\n").encode(), "the grid's YAML")  # JSON is YAML
-    except BaseException:
-        image_path.unlink(missing_ok=True)
-        raise
     from baseplace.jobs.world import occupancy_job
+    from baseplace.serve.state import attach_grid, write_grid_files
 
-    try:  # the report as ``baseplace occupancy --json`` gives it, and the grid the jobs read
+    image_path, yaml_path = write_grid_files(scene, image, suffix, meta)
+    try:  # the report as ``baseplace occupancy --json`` gives it
         report = run_job("occupancy", {"map": str(yaml_path)}, lambda: occupancy_job(str(yaml_path)),
                          str(scene.folder.parent))  # fmt: skip
-        grid = load_occupancy(yaml_path)
     except BaseException:
         image_path.unlink(missing_ok=True)
         yaml_path.unlink(missing_ok=True)
         raise
-    scene.grid_yaml, scene.grid = yaml_path, grid
+    attach_grid(scene, image_path, yaml_path)  # the grid the jobs read
     return _with_scene(report, scene)
-
-
-def add_grid_values(scene: Scene, grid: Any) -> None:
-    """Attach an :class:`~baseplace.world.occupancy.OccupancyGrid` (e.g. a recording's) as map_server files.
-
-    Written in map_server's ``raw`` mode (a pixel is the cell value, 255 unknown), which reads
-    back cell for cell.
-    """
-    import cv2
-
-    values = np.asarray(grid.data)
-    pixels = np.where((values >= 0) & (values <= 100), values, 255).astype(np.uint8)[::-1]
-    ok, png = cv2.imencode(".png", pixels)
-    if not ok:
-        raise InputError("cannot encode the recording's occupancy grid")
-    x, y, yaw = (float(v) for v in grid.origin)
-    meta = {"resolution": grid.resolution, "origin_x": x, "origin_y": y, "origin_yaw": yaw, "negate": False,
-            "occupied_thresh": 0.65, "free_thresh": 0.196, "mode": "raw"}  # fmt: skip
-    add_grid(scene, png.tobytes(), "png", meta)

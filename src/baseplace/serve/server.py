@@ -22,7 +22,8 @@ def create_app(settings: ServeSettings | None = None, state: Any = None) -> Any:
 def uvicorn_server(app: Any, settings: ServeSettings, log_level: str = "warning") -> Any:
     """A uvicorn server of ``app`` with the service's limits.
 
-    Connections over ``max_connections`` get 503; a connection whose request headers are not in
+    A request finding ``max_connections`` connections open gets 503 JSON (the protocol's check,
+    not uvicorn's plain-text one); a connection whose request headers are not in
     within ``read_timeout_s`` is closed (:class:`~baseplace.serve.guard.TimedH11Protocol`); an
     idle keep-alive connection after 5 s; headers over 16 KiB get 400 (h11's limit). On SIGINT or
     SIGTERM every job is cancelled at once (it stops at its next deadline check), requests in
@@ -32,9 +33,10 @@ def uvicorn_server(app: Any, settings: ServeSettings, log_level: str = "warning"
 
     from baseplace.serve.guard import TimedH11Protocol
 
-    protocol = type("ServiceH11Protocol", (TimedH11Protocol,), {"header_timeout": settings.read_timeout_s})
+    protocol = type("ServiceH11Protocol", (TimedH11Protocol,),
+                    {"header_timeout": settings.read_timeout_s, "max_connections": settings.max_connections})  # fmt: skip
     config = uvicorn.Config(app, host=settings.host, port=settings.port, log_level=log_level, lifespan="on",
-                            http=protocol, limit_concurrency=settings.max_connections, timeout_keep_alive=5,
+                            http=protocol, timeout_keep_alive=5,
                             h11_max_incomplete_event_size=16 * 1024,
                             timeout_graceful_shutdown=max(1, int(settings.timeout_s)), access_log=False)  # fmt: skip
     state = app.state.service

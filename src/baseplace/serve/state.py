@@ -4,13 +4,15 @@ Robots are built once per name (their collision model and pair tables with them)
 once per (robot, arm), and each uploaded scene keeps its cloud, its segmentation and its
 obstacle set and collision environments (:class:`~baseplace.placement.scene_cache.SceneCache`).
 Placements run on one worker thread (:attr:`ServiceState.executor`): pinocchio's data and coal's
-trees are not shared between threads. Map lookups run on two more (``lookups``), and candidates,
-navigation and surface maps, on robots of their own (``robot(name, lane="commands")``), on one
-more (``commands``).
+trees are not shared between threads. Heavy placements run on one more, on robots of their own
+(``robot(name, lane="heavy")``); map lookups on two more (``lookups``); candidates, navigation
+and surface maps, on robots of their own (``robot(name, lane="commands")``), on one more
+(``commands``). Each is a :class:`~baseplace.serve.lanes.FairLane`: its clients take turns.
 """
 
 from __future__ import annotations
 
+import json
 import shutil
 import tempfile
 import threading
@@ -18,7 +20,6 @@ import time
 import uuid
 from collections import OrderedDict
 from collections.abc import Sequence
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -26,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from baseplace.errors import BaseplaceError, InputError
+from baseplace.serve.lanes import FairLane
 
 CLOUD_FORMATS = ("ply", "pcd", "npy", "xyz")
 """Upload formats of a scene's cloud (the ``format`` query parameter)."""
@@ -61,12 +63,18 @@ class ServeSettings:
         allow_hosts: more names the ``Host`` header may give (besides loopback and ``host``).
         allow_origins: web origins (``https://app.example:8443``) whose pages may call the
             service; none by default (a browser page's own origin is the service's).
-        max_queue: jobs waiting or running per lane (placements, commands, lookups); more get
-            503 with ``Retry-After``.
+        max_queue: jobs waiting or running per lane (placements, heavy placements, commands,
+            lookups); more get 503 with ``Retry-After``.
+        max_client_queue: jobs one client (one peer address) may have waiting or running per
+            lane; more get 429 with ``Retry-After``. In the heavy lane a client has one.
+        heavy_work: a ``/place`` whose work, targets x (tries + placements x robustness
+            samples), is over this runs in the heavy lane (one thread of its own), so that
+            cheap placements never wait behind it.
         read_timeout_s: request headers must be complete, and a body must not stall, within
             this many seconds; a whole body within 4 times that [s].
         max_inflight_bytes: request bodies being received, all together; past it 503.
-        max_connections: open connections (uvicorn's ``limit_concurrency``); past it 503.
+        max_connections: open connections, and requests in flight; a request past it gets 503
+            (:class:`~baseplace.serve.guard.TimedH11Protocol`).
     """
 
     host: str = "127.0.0.1"
@@ -81,6 +89,8 @@ class ServeSettings:
     allow_hosts: tuple[str, ...] = ()
     allow_origins: tuple[str, ...] = ()
     max_queue: int = 16
+    max_client_queue: int = 8
+    heavy_work: int = 500
     read_timeout_s: float = 10.0
     max_inflight_bytes: int = 256 * 1024 * 1024
     max_connections: int = 128
@@ -98,6 +108,10 @@ class ServeSettings:
             raise InputError(f"max_scenes must be >= 1, got {self.max_scenes}")
         if self.max_queue < 1:
             raise InputError(f"max_queue must be >= 1, got {self.max_queue}")
+        if self.max_client_queue < 1:
+            raise InputError(f"max_client_queue must be >= 1, got {self.max_client_queue}")
+        if self.heavy_work < 1:
+            raise InputError(f"heavy_work must be >= 1, got {self.heavy_work}")
         if not (self.read_timeout_s > 0):
             raise InputError(f"read_timeout_s must be > 0, got {self.read_timeout_s}")
         if self.max_inflight_bytes < self.max_request_bytes:
@@ -174,26 +188,29 @@ class ServiceState:
         self.settings = settings
         self.started = time.time()
         n = (settings.kernel_threads,)
-        self.executor = ThreadPoolExecutor(
-            max_workers=1, thread_name_prefix="baseplace-job", initializer=_kernel_threads, initargs=n
-        )
+        self.executor = FairLane("job", 1, _kernel_threads, n)
+        # a placement over settings.heavy_work: on a thread and robots of its own, so that the
+        # cheap ones never wait behind it
+        self.heavy = FairLane("heavy", 1, _kernel_threads, n)
         # map lookups only read the map: they need not wait behind a placement
-        self.lookups = ThreadPoolExecutor(
-            max_workers=2, thread_name_prefix="baseplace-lookup", initializer=_kernel_threads, initargs=n
-        )
+        self.lookups = FairLane("lookup", 2, _kernel_threads, n)
         # candidates, navigation and surface maps: one at a time, beside the placements, on robots of their own
-        self.commands = ThreadPoolExecutor(
-            max_workers=1, thread_name_prefix="baseplace-command", initializer=_kernel_threads, initargs=n
-        )
+        self.commands = FairLane("command", 1, _kernel_threads, n)
         self.folder = Path(tempfile.mkdtemp(prefix="baseplace-serve-"))
         self._robots: dict[str, Any] = {}
-        self._command_robots: dict[str, Any] = {}
+        self._lane_robots: dict[str, dict[str, Any]] = {}  # lane -> robots of its own thread
         self._maps: dict[tuple[str, str | None], Any] = {}
         self._scenes: OrderedDict[str, Scene] = OrderedDict()
         self._lock = threading.Lock()  # scenes are added from the worker and read from the loop
         self.requests = 0
         self.inflight_bytes = 0  # request bodies being received (the event loop's count)
-        self.queued: dict[str, int] = {"jobs": 0, "commands": 0, "lookups": 0}  # per lane, waiting or running
+        self.queued: dict[str, int] = {
+            "jobs": 0,
+            "heavy": 0,
+            "commands": 0,
+            "lookups": 0,
+        }  # waiting or running
+        self.client_queued: dict[tuple[str, str], int] = {}  # (lane, client) -> its jobs waiting or running
         self.deadlines: set[Any] = set()  # of the jobs submitted and not ended: cancelled at shutdown
         self.closing = False
 
@@ -214,7 +231,7 @@ class ServiceState:
 
         if name not in BUILTIN_ROBOTS:
             raise InputError(f"unknown robot {name!r}; valid: {', '.join(BUILTIN_ROBOTS)}")
-        robots = self._robots if lane == "jobs" else self._command_robots
+        robots = self._robots if lane == "jobs" else self._lane_robots.setdefault(lane, {})
         if name not in robots:
             from baseplace.robots.model import Robot
 
@@ -340,9 +357,7 @@ class ServiceState:
                 for robot in list(self._robots.values()):  # the obstacle tree, before the first query
                     scene_environment(robot, cache)
             if grid is not None:
-                from baseplace.serve.jobs import add_grid_values
-
-                add_grid_values(scene, grid)
+                _attach_grid_values(scene, grid)
         except BaseException:
             shutil.rmtree(folder, ignore_errors=True)
             raise
@@ -385,12 +400,12 @@ class ServiceState:
         the process's exit (the worker threads are daemons of a process that is ending).
         """
         self.stop_jobs()
-        pools = (self.lookups, self.commands, self.executor)
+        pools = (self.lookups, self.commands, self.heavy, self.executor)
         for pool in pools:
             pool.shutdown(wait=False, cancel_futures=True)
         end = time.monotonic() + (self.settings.timeout_s if wait_s is None else wait_s)
         for pool in pools:
-            for thread in list(getattr(pool, "_threads", ())):
+            for thread in pool.threads:
                 thread.join(max(0.0, end - time.monotonic()))
         shutil.rmtree(self.folder, ignore_errors=True)
 
@@ -440,6 +455,66 @@ def _transform_file(folder: Path, spec: str) -> str:
         path, "\n".join(" ".join(repr(float(v)) for v in row) for row in T).encode() + b"\n", "transform"
     )
     return str(path)
+
+
+def write_grid_files(scene: Scene, image: bytes, suffix: str, meta: dict[str, Any]) -> tuple[Path, Path]:
+    """A map_server image and its YAML (``meta``: the YAML's fields) in the scene's folder; their paths.
+
+    Under a new name: a new grid never breaks the one the scene has until it is read.
+    """
+    import uuid
+
+    from baseplace.files import write_bytes
+
+    if suffix not in ("pgm", "png"):
+        raise InputError(f"unknown grid image format {suffix!r}; valid: pgm, png")
+    if not image:
+        raise InputError("the upload is empty: send the grid image as the request body")
+    name = f"grid-{uuid.uuid4().hex[:8]}"
+    image_path, yaml_path = scene.folder / f"{name}.{suffix}", scene.folder / f"{name}.yaml"
+    write_bytes(image_path, image, "the grid image")
+    origin = [float(meta["origin_x"]), float(meta["origin_y"]), float(meta["origin_yaw"])]
+    doc = {"image": image_path.name, "resolution": float(meta["resolution"]), "origin": origin,
+           "negate": int(bool(meta["negate"])), "occupied_thresh": float(meta["occupied_thresh"]),
+           "free_thresh": float(meta["free_thresh"]), "mode": str(meta["mode"])}  # fmt: skip
+    try:
+        write_bytes(yaml_path, (json.dumps(doc) + "\n").encode(), "the grid's YAML")  # JSON is YAML
+    except BaseException:
+        image_path.unlink(missing_ok=True)
+        raise
+    return image_path, yaml_path
+
+
+def attach_grid(scene: Scene, image_path: Path, yaml_path: Path) -> None:
+    """Read the grid files back and make them the scene's grid (on failure they are deleted)."""
+    from baseplace.world.occupancy import load_occupancy
+
+    try:
+        grid = load_occupancy(yaml_path)
+    except BaseException:
+        image_path.unlink(missing_ok=True)
+        yaml_path.unlink(missing_ok=True)
+        raise
+    scene.grid_yaml, scene.grid = yaml_path, grid
+
+
+def _attach_grid_values(scene: Scene, grid: Any) -> None:
+    """Attach an :class:`~baseplace.world.occupancy.OccupancyGrid` (e.g. a recording's) as map_server files.
+
+    Written in map_server's ``raw`` mode (a pixel is the cell value, 255 unknown), which reads
+    back cell for cell.
+    """
+    import cv2
+
+    values = np.asarray(grid.data)
+    pixels = np.where((values >= 0) & (values <= 100), values, 255).astype(np.uint8)[::-1]
+    ok, png = cv2.imencode(".png", pixels)
+    if not ok:
+        raise InputError("cannot encode the recording's occupancy grid")
+    x, y, yaw = (float(v) for v in grid.origin)
+    meta = {"resolution": grid.resolution, "origin_x": x, "origin_y": y, "origin_yaw": yaw, "negate": False,
+            "occupied_thresh": 0.65, "free_thresh": 0.196, "mode": "raw"}  # fmt: skip
+    attach_grid(scene, *write_grid_files(scene, png.tobytes(), "png", meta))
 
 
 def _save_npy(path: Path, points: np.ndarray) -> None:

@@ -531,6 +531,11 @@ def _check_pcd(path: Path) -> None:
     n_bytes = float(meta.points) * sum(s * c for s, c in zip(meta.size[:n], meta.count[:n], strict=False))
     data = meta.data.value if meta.data.value in ("ascii", "binary") else "binary_compressed"  # as pypcd4
     check_alloc(n_bytes, "point data", path, file_bytes - offset, _PER_FILE_BYTE[data])
+    if data == "ascii" and _text_rows_over(path, offset, meta.points):
+        raise InputError(  # numpy's loadtxt would read every row, however few the header declares
+            f"cannot read cloud {path}: its ASCII data has more rows than the header's {meta.points} POINTS; "
+            "the file is corrupt"
+        )
     columns = sum(meta.count[:n])
     if columns > _MAX_PCD_COLUMNS:
         raise InputError(  # pypcd4 builds its dtype even for 0 points
@@ -556,6 +561,30 @@ def _check_pcd(path: Path) -> None:
         check_alloc(n_bytes, "point data", path, compressed, _PER_FILE_BYTE[data])
     # pypcd4 holds the decompressed buffer, its records and one field's copy at once
     check_alloc(n_bytes * 3.0 + meta.points * _BYTES_PER_POINT, "points", path)
+
+
+def _text_rows_over(path: Path, offset: int, limit: int) -> bool:
+    """True when the text from ``offset`` on has more than ``limit`` rows as numpy's loadtxt counts them.
+
+    Read in 1 MiB blocks: the line ends counted first; only when they exceed ``limit`` are the
+    rows counted one by one, skipping blank lines and ``#`` comments as loadtxt does.
+    """
+    ends, last = 0, b"\n"
+    with path.open("rb") as f:
+        f.seek(offset)
+        while block := f.read(2**20):
+            ends += block.count(b"\n")
+            last = block[-1:]
+        if ends + (last != b"\n") <= limit:
+            return False
+        f.seek(offset)
+        rows = 0
+        for line in f:
+            if line.split(b"#", 1)[0].strip():
+                rows += 1
+                if rows > limit:
+                    return True
+    return False
 
 
 def _ply_header(path: Path) -> tuple[str, list[_PlyElement], int]:
