@@ -11,7 +11,6 @@ import grimp
 import networkx as nx
 
 KNOWN_CIRCLES = [
-    {"baseplace.reachability.build", "baseplace.reachability.certify", "baseplace.reachability.checkpoint"},
     {"baseplace.placement.candidates", "baseplace.placement.robustness", "baseplace.placement.verify"},
     {"baseplace.viz.view_scene", "baseplace.viz.viewer"},
     {"baseplace.serve.jobs", "baseplace.serve.state"},
