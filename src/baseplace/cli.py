@@ -22,7 +22,7 @@ from typing import Any, NoReturn
 from baseplace import __version__
 from baseplace.argtypes import count, finite_float, in_radians, nonneg_int
 from baseplace.errors import BaseplaceError
-from baseplace.jobs import candidates, demo, explain, navigate, place, point, reach, surface, world
+from baseplace.jobs import candidates, demo, explain, navigate, place, point, reach, surface, view, world
 from baseplace.jobs.inputs import DEFAULT_MAP_SAMPLES, Progress, motion_and_robustness
 
 DEFAULT_CHECKPOINT_EVERY = 50_000_000  # baseplace.reachability.build's, without importing numba for --help
@@ -516,9 +516,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_experiment_commands(sub)
 
-    from baseplace.viz.command import add_view_command
-
-    add_view_command(sub)
+    _add_view_command(sub)
 
     p = command("demo", "the main job on built-in defaults: out/demo.json and out/demo.png")
     p.add_argument("--out", default="out", help="output directory (default: out)")
@@ -541,6 +539,45 @@ def _add_robot_commands(sub: Any, command: Callable[..., argparse.ArgumentParser
     p.add_argument("robot", help="robot file (.toml/.yaml) or built-in name")
     p.add_argument("--png", default=None, help="picture of the robot (default: NAME_check.png here)")
     p.add_argument("--pairs", action="store_true", help="list the active self-collision pairs")
+
+
+def _add_view_command(sub: Any) -> None:
+    """Add ``view`` to ``baseplace``'s subparsers."""
+    p = sub.add_parser("view", help="interactive 3D viewer of any result in the browser (viser)",
+                       description="interactive 3D viewer of any result in the browser (viser)")  # fmt: skip
+    p.set_defaults(func=_view)
+    p.add_argument(
+        "result", nargs="?", default=None,
+        help="the --json of place, candidates, surface-map, surface-sample, navigate, segment, point or demo, "
+        "with the inputs it names (default: out/demo.json), or a reachability map (.rmap, .h5, .hdf5)",
+    )  # fmt: skip
+    p.add_argument(
+        "--map", default=None, help="draw this reachability map (build-map's --out) instead of a result"
+    )
+    p.add_argument("--out", default=None,
+                   help="with a map: write slices of it to this PNG (.png, .pdf, .svg) instead of serving a 3D view")  # fmt: skip
+    p.add_argument("--port", type=int, default=8080, help="port (default 8080; 0: any free port)")
+    p.add_argument(
+        "--host", default="127.0.0.1", help="address to bind (default 127.0.0.1: this machine only)"
+    )
+    g = p.add_argument_group("inputs in place of those the result names (moved files, or none named)")
+    g.add_argument("--cloud", action="append", default=None, help="point cloud; repeat for several")
+    g.add_argument(
+        "--transform", action="append", default=None, help="world_T_sensor file or up vector per --cloud"
+    )
+    g.add_argument(
+        "--floor", type=float, default=None, help="floor height [m] added under the cloud, as --floor"
+    )
+    g.add_argument("--occupancy", default=None, help="occupancy grid (map_server YAML)")
+    g.add_argument("--surface-map", default=None, help="surface map file (surface-map's --out)")
+    g.add_argument("--robot", default=None, help="robot name or robot file")
+
+
+def _view(a: argparse.Namespace) -> int:
+    """Serve the interactive 3D viewer of any result (the demo's by default) until Ctrl-C."""
+    given = {"cloud": a.cloud, "transform": a.transform, "floor": a.floor, "occupancy": a.occupancy,
+             "surface_map": a.surface_map, "robot": a.robot}  # fmt: skip
+    return view.view_job(view.ViewJob(a.result, a.map, a.out, a.host, a.port, given), announce=print)
 
 
 def _cache_warnings_in_one_line(show: Callable[..., None]) -> Callable[..., None]:

@@ -78,7 +78,7 @@ def demo_job(job: DemoJob, progress: Progress | None = None) -> DemoReport:
     from baseplace.terrain.pipeline import terrain_from_points
     from baseplace.terrain.polygons import footprint_outline
     from baseplace.viz.placement import plot_placement
-    from baseplace.viz.viewer import save_view_data, view_data_from
+    from baseplace.viz.view_data import save_view_data, view_data_from
 
     t0 = time.perf_counter()
     robot = Robot("tiago")
