@@ -26,6 +26,8 @@ from baseplace.jobs import candidates, demo, explain, navigate, place, point, re
 from baseplace.jobs.inputs import DEFAULT_MAP_SAMPLES, Progress, motion_and_robustness
 
 DEFAULT_CHECKPOINT_EVERY = 50_000_000  # baseplace.reachability.build's, without importing numba for --help
+PLUGIN_GROUP = "baseplace.commands"
+"""Entry-point group of commands added by other packages (:func:`_add_plugin_commands`)."""
 KINDS = {"robots": "robots", "robot": "robot_check", "build-map": "build_map", "reach": "reach", "place": "place",
          "candidates": "candidates", "navigate": "navigate", "surface-map": "surface_map",
          "surface-sample": "surface_samples", "occupancy": "occupancy", "segment": "segment", "scene": "scene",
@@ -512,9 +514,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="cloud file (.ply, .pcd or .npy)")
     p.add_argument("--truth", default=None, help="ground-truth JSON (default: next to --out)")
 
-    from baseplace_experiments.cli import add_experiment_commands
-
-    add_experiment_commands(sub)
+    _add_plugin_commands(sub)
 
     _add_view_command(sub)
 
@@ -525,6 +525,29 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--seed", type=nonneg_int, default=0, help="random seed (default 0)")
     return parser
+
+
+def _add_plugin_commands(sub: Any) -> None:
+    """Commands that other packages register under the entry-point group :data:`PLUGIN_GROUP`.
+
+    Each entry point is a function called with ``baseplace``'s subparsers (it adds its commands
+    with ``sub.add_parser``, as the papers' experiments add ``experiment``). A name registered
+    twice (two installs of one package) is added once; a plugin that fails to load is left out
+    with one ``warning: ...`` line, and the other commands still work.
+    """
+    from importlib.metadata import entry_points
+
+    added: set[str] = set()
+    for ep in sorted(entry_points(group=PLUGIN_GROUP), key=lambda e: e.name):
+        if ep.name in added:
+            continue
+        try:
+            ep.load()(sub)
+        except Exception as exc:  # a broken plugin must not take the library's commands with it
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            sys.stderr.write(f"warning: the {ep.name!r} commands ({ep.value}) did not load: {first}\n")
+            continue
+        added.add(ep.name)
 
 
 def _add_robot_commands(sub: Any, command: Callable[..., argparse.ArgumentParser]) -> None:
