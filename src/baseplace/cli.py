@@ -24,6 +24,7 @@ from baseplace.argtypes import count, finite_float, in_radians, nonneg_int
 from baseplace.errors import BaseplaceError
 from baseplace.jobs import candidates, demo, explain, navigate, place, point, reach, surface, view, world
 from baseplace.jobs.inputs import DEFAULT_MAP_SAMPLES, Progress, motion_and_robustness
+from baseplace.robots.defaults import DEFAULT_ROBOT
 
 DEFAULT_CHECKPOINT_EVERY = 50_000_000  # baseplace.reachability.build's, without importing numba for --help
 PLUGIN_GROUP = "baseplace.commands"
@@ -285,7 +286,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_serve_command(sub)
 
     p = command("build-map", "build a reachability map by random joint sampling")
-    p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
+    p.add_argument(
+        "--robot", default=DEFAULT_ROBOT, help=f"built-in name or robot file (default: {DEFAULT_ROBOT})"
+    )
     p.add_argument("--arm", default=None, help="arm name (default: the robot's default arm)")
     p.add_argument("--samples", type=count, default=DEFAULT_MAP_SAMPLES, help="joint samples (default 2e8)")
     p.add_argument("--out", required=True, help="output map file (.rmap, HDF5)")
@@ -319,7 +322,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_degrees_argument(p)
 
     p = command("place", "verified base placements for TCP targets in a scanned scene")
-    p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
+    p.add_argument(
+        "--robot", default=DEFAULT_ROBOT, help=f"built-in name or robot file (default: {DEFAULT_ROBOT})"
+    )
     p.add_argument("--arm", default=None, help="arm (default: the robot's default arm)")
     p.add_argument("--cloud", action="append", default=None,
                    help="scene cloud: .pcd, .ply, .bt, .npy, .xyz (z up, or --transform); repeat for several")  # fmt: skip
@@ -361,7 +366,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--grasp-point", default=None,
                    help='instead of --target: the pose of the point between the fingertips "x y z roll pitch yaw" [m, rad]')  # fmt: skip
     p.add_argument("--map", default=None, help="reachability map (default: the cached default map)")
-    p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
+    p.add_argument(
+        "--robot", default=DEFAULT_ROBOT, help=f"built-in name or robot file (default: {DEFAULT_ROBOT})"
+    )
     p.add_argument("--arm", default=None, help="arm (default: the robot's default arm)")
     p.add_argument("--cloud", action="append", default=None,
                    help="scene cloud, as place takes it (none: IK and self-collision only); repeat for several")  # fmt: skip
@@ -390,7 +397,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--robot-pose", default=None, help='robot pose "x y yaw": rank by motion cost, plan a path')  # fmt: skip
     p.add_argument("--method", default="radial", choices=["radial", "irm"],
                    help="radial (rays around the object) or irm (reachability map); both verified (default radial)")  # fmt: skip
-    p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
+    p.add_argument(
+        "--robot", default=DEFAULT_ROBOT, help=f"built-in name or robot file (default: {DEFAULT_ROBOT})"
+    )
     p.add_argument("--arm", default=None, help="arm (default: the robot's default arm)")
     p.add_argument("--map", default=None, help="reachability map (default: the cached default map)")
     p.add_argument("--standoff", type=float, default=None,
@@ -419,7 +428,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "whose centre lies at the smallest angle from the line (within 12 deg) (default first)")  # fmt: skip
     p.add_argument("--occupancy", default=None, help="occupancy grid (map_server YAML): also where to stand")
     p.add_argument("--robot-pose", default=None, help='robot pose "x y yaw": rank by motion cost, plan a path')  # fmt: skip
-    p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
+    p.add_argument(
+        "--robot", default=DEFAULT_ROBOT, help=f"built-in name or robot file (default: {DEFAULT_ROBOT})"
+    )
     p.add_argument("--arm", default=None, help="arm (default: the robot's default arm)")
     p.add_argument("--map", default=None, help="reachability map (default: the cached default map)")
     p.add_argument("--seed", type=nonneg_int, default=0, help="random seed (default 0)")
@@ -443,7 +454,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_degrees_argument(p)
 
     p = command("navigate", "a base path across the planar regions of a scanned scene")  # fmt: skip
-    p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
+    p.add_argument(
+        "--robot", default=DEFAULT_ROBOT, help=f"built-in name or robot file (default: {DEFAULT_ROBOT})"
+    )
     p.add_argument("--cloud", default=None, help="scene cloud: .pcd, .ply, .bt, .npy, .xyz (z up, or --transform)")  # fmt: skip
     p.add_argument("--transform", default=None, help='world_T_sensor file, or the sensor-frame up vector "ux uy uz"')  # fmt: skip
     _add_bag_args(p, grid=False)
@@ -461,7 +474,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_degrees_argument(p)
 
     p = command("surface-map", "where to stand to work on a whole table or shelf")
-    p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
+    p.add_argument(
+        "--robot", default=DEFAULT_ROBOT, help=f"built-in name or robot file (default: {DEFAULT_ROBOT})"
+    )
     p.add_argument("--arms", default="any",
                    help="any (either arm), both (both arms) or one arm's name (default: any)")  # fmt: skip
     p.add_argument("--polygon", required=True, help='the surface outline "x1,y1;x2,y2;..." [m]')

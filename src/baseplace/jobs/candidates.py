@@ -39,6 +39,7 @@ from baseplace.jobs.inputs import (
 )
 from baseplace.jobs.place import motion_and_robustness_json
 from baseplace.jobs.report import CandidatesReport, NoResultError, PoseRecord, RobotRef, path_json
+from baseplace.robots.defaults import DEFAULT_ROBOT
 
 if TYPE_CHECKING:
     from pathlib import Path
@@ -79,7 +80,7 @@ class CandidatesJob:
     cloud: CloudInput = field(default_factory=CloudInput)
     robot_pose: str | Sequence[float] | None = None
     method: str = "radial"
-    robot: Robot | str = "tiago"
+    robot: Robot | str = DEFAULT_ROBOT
     arm: str | None = None
     map: ReachabilityMap | str | None = None
     standoff: float | None = None

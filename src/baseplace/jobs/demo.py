@@ -19,6 +19,7 @@ import numpy as np
 
 from baseplace.jobs.inputs import DEFAULT_MAP_SAMPLES, Progress, map_step, step_progress
 from baseplace.jobs.report import DemoReport, NoResultError, PoseRecord, RobotRef, path_json
+from baseplace.robots.defaults import DEFAULT_ROBOT
 
 if TYPE_CHECKING:
     from baseplace.sim.scenes import Scene
@@ -81,7 +82,7 @@ def demo_job(job: DemoJob, progress: Progress | None = None) -> DemoReport:
     from baseplace.viz.view_data import save_view_data, view_data_from
 
     t0 = time.perf_counter()
-    robot = Robot("tiago")
+    robot = Robot(DEFAULT_ROBOT)
     settings = BuildSettings(samples=job.samples, seed=job.seed)
     update = step_progress(progress, map_step(robot.name, robot.spec.default_arm), settings.samples)
     rmap, map_path, built = cached_map(robot, settings, progress=update)

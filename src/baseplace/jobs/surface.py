@@ -26,6 +26,7 @@ from baseplace.jobs.inputs import (
     step_progress,
 )
 from baseplace.jobs.report import PoseRecord, RobotRef, SurfaceMapReport, SurfaceSamplesReport
+from baseplace.robots.defaults import DEFAULT_ROBOT
 
 if TYPE_CHECKING:
     from baseplace.jobs.inputs import BagInput
@@ -57,7 +58,7 @@ class SurfaceMapJob:
     polygon: Any
     height: float
     out: str
-    robot: Robot | str = "tiago"
+    robot: Robot | str = DEFAULT_ROBOT
     arms: str = "any"
     resolution: float = 0.05
     orientations: int = 16
