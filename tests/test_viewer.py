@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from baseplace.demo import DEMO_TARGET, demo_scene
 from baseplace.errors import InputError
 from baseplace.geometry.poses import parse_pose6
+from baseplace.jobs.demo import DEMO_TARGET, demo_scene
 from baseplace.placement.osrm import build_osrm
 from baseplace.robots.spec import load_spec
 from baseplace.terrain.pipeline import terrain_from_points
