@@ -38,12 +38,12 @@ import numpy as np
 import shapely
 from scipy.signal import fftconvolve
 
-from baseplace.demo import cached_map
 from baseplace.geometry.poses import BasePose
 from baseplace.placement.surface_map import _valid_poses, build_surface_map, point_map, surface_grid
 from baseplace.placement.surface_sampling import SurfaceSampler
 from baseplace.placement.surface_storage import load_surface_map, save_surface_map
 from baseplace.reachability.build import BuildSettings
+from baseplace.reachability.cache import cached_map
 from baseplace.robots.model import Robot
 from baseplace.terrain.polygons import footprint_in_world, footprint_outline
 from baseplace.viz.surface import plot_sampling_comparison, plot_surface_map, sample_spread

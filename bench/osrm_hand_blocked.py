@@ -17,9 +17,9 @@ import json
 import coal
 import numpy as np
 
-from baseplace.demo import cached_map
 from baseplace.placement.pipeline import PlaceSettings, _obstacles
 from baseplace.reachability.build import BuildSettings
+from baseplace.reachability.cache import cached_map
 from baseplace.robots.model import Robot
 from baseplace.terrain.polygons import footprint_outline
 from baseplace.world.environment import HandFilter, contact_groups

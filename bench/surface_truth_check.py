@@ -15,9 +15,9 @@ import argparse
 
 import numpy as np
 
-from baseplace.demo import cached_map
 from baseplace.placement.surface_map import build_surface_map
 from baseplace.reachability.build import BuildSettings
+from baseplace.reachability.cache import cached_map
 from baseplace.robots.model import Robot
 from baseplace_experiments.surface_truth import SEEDS, SurfaceTruth, agreement, poses_near_surface, validate
 from bench_surface_map import ARM, HEIGHT, ORIENTATIONS, RESOLUTION, TABLE

@@ -95,7 +95,7 @@ def test_the_jobs_import_no_front_end(tmp_path):
 import sys, baseplace
 baseplace.scene_job(baseplace.SceneJob({str(tmp_path / "s.npy")!r}, planes=0, box=False, extent=3.0))
 baseplace.occupancy_job({str(SANDBOX)!r})
-print(sorted(m for m in sys.modules if m in ("baseplace.cli", "baseplace_experiments", "baseplace.viz.command")))
+print(sorted(m for m in sys.modules if m in ("baseplace.cli", "baseplace_experiments", "baseplace.viz.viewer")))
 """
     out = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=300

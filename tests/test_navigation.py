@@ -92,7 +92,7 @@ def test_navigation_experiment_smoke():
 
 def test_true_traversability_on_the_demo_scene():
     """The ground-truth oracle: the platform is reached up the ramp only; its rim is off limits."""
-    from baseplace.demo import demo_scene
+    from baseplace.jobs.demo import demo_scene
     from baseplace_experiments.navigation_experiment import TrueTraversability
 
     truth = TrueTraversability(demo_scene(), radius=0.3, max_step=0.04)

@@ -99,8 +99,8 @@ def test_names_are_conservative_identifiers(tmp_path, name):
 
 
 def test_map_cache_paths_are_hashes_inside_the_cache(tmp_path, monkeypatch, planar3):
-    from baseplace.demo import cached_map
     from baseplace.reachability.build import BuildSettings
+    from baseplace.reachability.cache import cached_map
 
     monkeypatch.setenv("BASEPLACE_CACHE", str(tmp_path / "cache"))
     _, path, built = cached_map(planar3, BuildSettings(samples=200_000, voxel_size=0.1))

@@ -14,21 +14,16 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from baseplace.demo import DEMO_TARGET, demo_scene
 from baseplace.errors import InputError
 from baseplace.geometry.poses import parse_pose6
+from baseplace.jobs.demo import DEMO_TARGET, demo_scene
 from baseplace.placement.osrm import build_osrm
 from baseplace.robots.spec import load_spec
 from baseplace.terrain.pipeline import terrain_from_points
 from baseplace.terrain.polygons import footprint_outline
-from baseplace.viz import viewer
-from baseplace.viz.viewer import (
-    ViewData,
-    load_view_data,
-    save_view_data,
-    serve,
-    view_data_from,
-)
+from baseplace.viz import view_data, view_scene
+from baseplace.viz.view_data import ViewData, load_view_data, save_view_data, view_data_from
+from baseplace.viz.viewer import serve
 from conftest import free_port
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -129,26 +124,26 @@ def test_geometry_helpers(scene_data):
     # Heights follow the ramp's plane; quads of a region cell lie on its plane, lifted.
     ramp = int(np.argmax(np.abs(scene_data.planes[:, 0])))
     xy = np.array([[-1.1, 0.0], [-2.0, 0.0], [1.6, 0.0], [-4.0, 2.5], [50.0, 0.0]])
-    z = viewer.height_at(scene_data, xy)
+    z = view_data.height_at(scene_data, xy)
     n = scene_data.planes[ramp]
     assert z[0] == pytest.approx(-(n[3] + n[0] * -1.1) / n[2], abs=1e-9)
     assert z[1] < z[0] and z[2] == pytest.approx(0.3, abs=0.02) and abs(z[3]) < 0.02 and z[4] == 0.0
     rows, cols = np.nonzero(scene_data.labels == ramp)
-    verts, faces = viewer.cell_quads(scene_data, rows[:5], cols[:5], 0.1)
+    verts, faces = view_data.cell_quads(scene_data, rows[:5], cols[:5], 0.1)
     assert verts.shape == (20, 3) and faces.shape == (10, 3) and faces.max() == 19
     on_plane = -(n[3] + n[0] * verts[:, 0] + n[1] * verts[:, 1]) / n[2]
     np.testing.assert_allclose(verts[:, 2] - 0.1, on_plane, atol=1e-5)
-    dense = viewer.densify(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]), 0.1)
+    dense = view_scene.densify(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]), 0.1)
     assert len(dense) == 11 and dense[-1, 0] == 1.0
 
 
 def test_robot_meshes_and_joints():
     spec = load_spec("tiago")
-    handler = viewer._package_handler(spec)
+    handler = view_scene._package_handler(spec)
     text = spec.urdf.read_text()
     uris = {part.split('"')[0] for part in text.split('<mesh filename="')[1:]}
     assert uris and all(Path(handler(fname=u)).is_file() for u in uris)
-    cfg = viewer.joint_configuration(spec, JOINTS, ["arm_1_joint", "head_1_joint", "wheel_left_joint"])
+    cfg = view_scene.joint_configuration(spec, JOINTS, ["arm_1_joint", "head_1_joint", "wheel_left_joint"])
     assert cfg == {"arm_1_joint": 0.91, "head_1_joint": 0.0, "wheel_left_joint": 0.0}
 
 

@@ -22,10 +22,13 @@ from typing import Any, NoReturn
 from baseplace import __version__
 from baseplace.argtypes import count, finite_float, in_radians, nonneg_int
 from baseplace.errors import BaseplaceError
-from baseplace.jobs import candidates, demo, explain, navigate, place, point, reach, surface, world
+from baseplace.jobs import candidates, demo, explain, navigate, place, point, reach, surface, view, world
 from baseplace.jobs.inputs import DEFAULT_MAP_SAMPLES, Progress, motion_and_robustness
+from baseplace.robots.defaults import DEFAULT_ROBOT
 
 DEFAULT_CHECKPOINT_EVERY = 50_000_000  # baseplace.reachability.build's, without importing numba for --help
+PLUGIN_GROUP = "baseplace.commands"
+"""Entry-point group of commands added by other packages (:func:`_add_plugin_commands`)."""
 KINDS = {"robots": "robots", "robot": "robot_check", "build-map": "build_map", "reach": "reach", "place": "place",
          "candidates": "candidates", "navigate": "navigate", "surface-map": "surface_map",
          "surface-sample": "surface_samples", "occupancy": "occupancy", "segment": "segment", "scene": "scene",
@@ -283,7 +286,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_serve_command(sub)
 
     p = command("build-map", "build a reachability map by random joint sampling")
-    p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
+    p.add_argument(
+        "--robot", default=DEFAULT_ROBOT, help=f"built-in name or robot file (default: {DEFAULT_ROBOT})"
+    )
     p.add_argument("--arm", default=None, help="arm name (default: the robot's default arm)")
     p.add_argument("--samples", type=count, default=DEFAULT_MAP_SAMPLES, help="joint samples (default 2e8)")
     p.add_argument("--out", required=True, help="output map file (.rmap, HDF5)")
@@ -317,7 +322,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_degrees_argument(p)
 
     p = command("place", "verified base placements for TCP targets in a scanned scene")
-    p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
+    p.add_argument(
+        "--robot", default=DEFAULT_ROBOT, help=f"built-in name or robot file (default: {DEFAULT_ROBOT})"
+    )
     p.add_argument("--arm", default=None, help="arm (default: the robot's default arm)")
     p.add_argument("--cloud", action="append", default=None,
                    help="scene cloud: .pcd, .ply, .bt, .npy, .xyz (z up, or --transform); repeat for several")  # fmt: skip
@@ -359,7 +366,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--grasp-point", default=None,
                    help='instead of --target: the pose of the point between the fingertips "x y z roll pitch yaw" [m, rad]')  # fmt: skip
     p.add_argument("--map", default=None, help="reachability map (default: the cached default map)")
-    p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
+    p.add_argument(
+        "--robot", default=DEFAULT_ROBOT, help=f"built-in name or robot file (default: {DEFAULT_ROBOT})"
+    )
     p.add_argument("--arm", default=None, help="arm (default: the robot's default arm)")
     p.add_argument("--cloud", action="append", default=None,
                    help="scene cloud, as place takes it (none: IK and self-collision only); repeat for several")  # fmt: skip
@@ -388,7 +397,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--robot-pose", default=None, help='robot pose "x y yaw": rank by motion cost, plan a path')  # fmt: skip
     p.add_argument("--method", default="radial", choices=["radial", "irm"],
                    help="radial (rays around the object) or irm (reachability map); both verified (default radial)")  # fmt: skip
-    p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
+    p.add_argument(
+        "--robot", default=DEFAULT_ROBOT, help=f"built-in name or robot file (default: {DEFAULT_ROBOT})"
+    )
     p.add_argument("--arm", default=None, help="arm (default: the robot's default arm)")
     p.add_argument("--map", default=None, help="reachability map (default: the cached default map)")
     p.add_argument("--standoff", type=float, default=None,
@@ -417,7 +428,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "whose centre lies at the smallest angle from the line (within 12 deg) (default first)")  # fmt: skip
     p.add_argument("--occupancy", default=None, help="occupancy grid (map_server YAML): also where to stand")
     p.add_argument("--robot-pose", default=None, help='robot pose "x y yaw": rank by motion cost, plan a path')  # fmt: skip
-    p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
+    p.add_argument(
+        "--robot", default=DEFAULT_ROBOT, help=f"built-in name or robot file (default: {DEFAULT_ROBOT})"
+    )
     p.add_argument("--arm", default=None, help="arm (default: the robot's default arm)")
     p.add_argument("--map", default=None, help="reachability map (default: the cached default map)")
     p.add_argument("--seed", type=nonneg_int, default=0, help="random seed (default 0)")
@@ -441,7 +454,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_degrees_argument(p)
 
     p = command("navigate", "a base path across the planar regions of a scanned scene")  # fmt: skip
-    p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
+    p.add_argument(
+        "--robot", default=DEFAULT_ROBOT, help=f"built-in name or robot file (default: {DEFAULT_ROBOT})"
+    )
     p.add_argument("--cloud", default=None, help="scene cloud: .pcd, .ply, .bt, .npy, .xyz (z up, or --transform)")  # fmt: skip
     p.add_argument("--transform", default=None, help='world_T_sensor file, or the sensor-frame up vector "ux uy uz"')  # fmt: skip
     _add_bag_args(p, grid=False)
@@ -459,7 +474,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_degrees_argument(p)
 
     p = command("surface-map", "where to stand to work on a whole table or shelf")
-    p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
+    p.add_argument(
+        "--robot", default=DEFAULT_ROBOT, help=f"built-in name or robot file (default: {DEFAULT_ROBOT})"
+    )
     p.add_argument("--arms", default="any",
                    help="any (either arm), both (both arms) or one arm's name (default: any)")  # fmt: skip
     p.add_argument("--polygon", required=True, help='the surface outline "x1,y1;x2,y2;..." [m]')
@@ -512,13 +529,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="cloud file (.ply, .pcd or .npy)")
     p.add_argument("--truth", default=None, help="ground-truth JSON (default: next to --out)")
 
-    from baseplace_experiments.cli import add_experiment_commands
+    _add_plugin_commands(sub)
 
-    add_experiment_commands(sub)
-
-    from baseplace.viz.command import add_view_command
-
-    add_view_command(sub)
+    _add_view_command(sub)
 
     p = command("demo", "the main job on built-in defaults: out/demo.json and out/demo.png")
     p.add_argument("--out", default="out", help="output directory (default: out)")
@@ -527,6 +540,29 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--seed", type=nonneg_int, default=0, help="random seed (default 0)")
     return parser
+
+
+def _add_plugin_commands(sub: Any) -> None:
+    """Commands that other packages register under the entry-point group :data:`PLUGIN_GROUP`.
+
+    Each entry point is a function called with ``baseplace``'s subparsers (it adds its commands
+    with ``sub.add_parser``, as the papers' experiments add ``experiment``). A name registered
+    twice (two installs of one package) is added once; a plugin that fails to load is left out
+    with one ``warning: ...`` line, and the other commands still work.
+    """
+    from importlib.metadata import entry_points
+
+    added: set[str] = set()
+    for ep in sorted(entry_points(group=PLUGIN_GROUP), key=lambda e: e.name):
+        if ep.name in added:
+            continue
+        try:
+            ep.load()(sub)
+        except Exception as exc:  # a broken plugin must not take the library's commands with it
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            sys.stderr.write(f"warning: the {ep.name!r} commands ({ep.value}) did not load: {first}\n")
+            continue
+        added.add(ep.name)
 
 
 def _add_robot_commands(sub: Any, command: Callable[..., argparse.ArgumentParser]) -> None:
@@ -541,6 +577,45 @@ def _add_robot_commands(sub: Any, command: Callable[..., argparse.ArgumentParser
     p.add_argument("robot", help="robot file (.toml/.yaml) or built-in name")
     p.add_argument("--png", default=None, help="picture of the robot (default: NAME_check.png here)")
     p.add_argument("--pairs", action="store_true", help="list the active self-collision pairs")
+
+
+def _add_view_command(sub: Any) -> None:
+    """Add ``view`` to ``baseplace``'s subparsers."""
+    p = sub.add_parser("view", help="interactive 3D viewer of any result in the browser (viser)",
+                       description="interactive 3D viewer of any result in the browser (viser)")  # fmt: skip
+    p.set_defaults(func=_view)
+    p.add_argument(
+        "result", nargs="?", default=None,
+        help="the --json of place, candidates, surface-map, surface-sample, navigate, segment, point or demo, "
+        "with the inputs it names (default: out/demo.json), or a reachability map (.rmap, .h5, .hdf5)",
+    )  # fmt: skip
+    p.add_argument(
+        "--map", default=None, help="draw this reachability map (build-map's --out) instead of a result"
+    )
+    p.add_argument("--out", default=None,
+                   help="with a map: write slices of it to this PNG (.png, .pdf, .svg) instead of serving a 3D view")  # fmt: skip
+    p.add_argument("--port", type=int, default=8080, help="port (default 8080; 0: any free port)")
+    p.add_argument(
+        "--host", default="127.0.0.1", help="address to bind (default 127.0.0.1: this machine only)"
+    )
+    g = p.add_argument_group("inputs in place of those the result names (moved files, or none named)")
+    g.add_argument("--cloud", action="append", default=None, help="point cloud; repeat for several")
+    g.add_argument(
+        "--transform", action="append", default=None, help="world_T_sensor file or up vector per --cloud"
+    )
+    g.add_argument(
+        "--floor", type=float, default=None, help="floor height [m] added under the cloud, as --floor"
+    )
+    g.add_argument("--occupancy", default=None, help="occupancy grid (map_server YAML)")
+    g.add_argument("--surface-map", default=None, help="surface map file (surface-map's --out)")
+    g.add_argument("--robot", default=None, help="robot name or robot file")
+
+
+def _view(a: argparse.Namespace) -> int:
+    """Serve the interactive 3D viewer of any result (the demo's by default) until Ctrl-C."""
+    given = {"cloud": a.cloud, "transform": a.transform, "floor": a.floor, "occupancy": a.occupancy,
+             "surface_map": a.surface_map, "robot": a.robot}  # fmt: skip
+    return view.view_job(view.ViewJob(a.result, a.map, a.out, a.host, a.port, given), announce=print)
 
 
 def _cache_warnings_in_one_line(show: Callable[..., None]) -> Callable[..., None]:

@@ -45,6 +45,7 @@ from baseplace.jobs.report import (
     path_json,
     placement_row,
 )
+from baseplace.robots.defaults import DEFAULT_ROBOT
 
 if TYPE_CHECKING:
     from pathlib import Path
@@ -85,7 +86,7 @@ class CandidatesJob:
     cloud: CloudInput = field(default_factory=CloudInput)
     robot_pose: str | Sequence[float] | None = None
     method: str = "radial"
-    robot: Robot | str = "tiago"
+    robot: Robot | str = DEFAULT_ROBOT
     arm: str | None = None
     map: ReachabilityMap | str | None = None
     standoff: float | None = None

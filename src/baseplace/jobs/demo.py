@@ -17,8 +17,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from baseplace.jobs.inputs import DEFAULT_MAP_SAMPLES, Progress, map_step, step_progress
+from baseplace.jobs.inputs import DEFAULT_MAP_SAMPLES, Progress
 from baseplace.jobs.report import DemoReport, NoResultError, PoseRecord, RobotRef, path_json
+from baseplace.robots.defaults import DEFAULT_ROBOT
 
 if TYPE_CHECKING:
     from baseplace.sim.scenes import Scene
@@ -73,18 +74,18 @@ def demo_job(job: DemoJob, progress: Progress | None = None) -> DemoReport:
     from baseplace.navigation.planners import plan_path
     from baseplace.placement.pipeline import PlaceSettings, place
     from baseplace.reachability.build import BuildSettings
-    from baseplace.reachability.cache import cached_map
+    from baseplace.reachability.cache import resolve_map
     from baseplace.robots.model import Robot
     from baseplace.terrain.pipeline import terrain_from_points
     from baseplace.terrain.polygons import footprint_outline
     from baseplace.viz.placement import plot_placement
-    from baseplace.viz.viewer import save_view_data, view_data_from
+    from baseplace.viz.view_data import save_view_data, view_data_from
 
     t0 = time.perf_counter()
-    robot = Robot("tiago")
+    robot = Robot(DEFAULT_ROBOT)
     settings = BuildSettings(samples=job.samples, seed=job.seed)
-    update = step_progress(progress, map_step(robot.name, robot.spec.default_arm), settings.samples)
-    rmap, map_path, built = cached_map(robot, settings, progress=update)
+    chosen = resolve_map(robot, None, None, progress, settings)
+    rmap, map_path, built = chosen.rmap, chosen.cached_at, chosen.built
     t_map = time.perf_counter()
     rng = np.random.default_rng(job.seed)
     points = demo_scene().sample_cloud(rng)

@@ -31,6 +31,7 @@ from baseplace.jobs.inputs import (
     world_cloud,
 )
 from baseplace.jobs.report import PoseRecord, Report, RobotRef
+from baseplace.robots.defaults import DEFAULT_ROBOT
 
 if TYPE_CHECKING:
     from baseplace.placement.pipeline import PlaceSettings
@@ -68,7 +69,7 @@ class ExplainJob:
     base: str | Sequence[float] | None
     target: str | Sequence[float] | None
     map: ReachabilityMap | str | None = None
-    robot: Robot | str = "tiago"
+    robot: Robot | str = DEFAULT_ROBOT
     arm: str | None = None
     cloud: CloudInput = field(default_factory=CloudInput)
     object: str = "auto"

@@ -26,6 +26,7 @@ from baseplace.jobs.inputs import (
     write_mcap,
 )
 from baseplace.jobs.report import NavigateReport, PoseRecord, RobotRef, SegmentReport, path_json
+from baseplace.robots.defaults import DEFAULT_ROBOT
 
 if TYPE_CHECKING:
     from baseplace.placement.scene_cache import SceneCache
@@ -54,7 +55,7 @@ class NavigateJob:
     start: str | Sequence[float]
     goal: str | Sequence[float]
     cloud: CloudInput = field(default_factory=CloudInput)
-    robot: Robot | str = "tiago"
+    robot: Robot | str = DEFAULT_ROBOT
     planner: str = "rrt"
     time_limit: float = 2.0
     resolution: float | None = None

@@ -38,6 +38,7 @@ from baseplace.jobs.inputs import (
     write_mcap,
 )
 from baseplace.jobs.report import NoResultError, PlaceReport, RobotRef, placement_row
+from baseplace.robots.defaults import DEFAULT_ROBOT
 
 if TYPE_CHECKING:
     from pathlib import Path as FilePath
@@ -82,7 +83,7 @@ class PlaceJob:
     """
 
     targets: Sequence[str | Sequence[float]]
-    robot: Robot | str = "tiago"
+    robot: Robot | str = DEFAULT_ROBOT
     arm: str | None = None
     cloud: CloudInput = field(default_factory=CloudInput)
     occupancy: OccupancyGrid | str | None = None

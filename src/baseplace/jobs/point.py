@@ -24,6 +24,7 @@ import numpy as np
 from baseplace.errors import InputError, brief
 from baseplace.jobs.inputs import CloudInput, Progress, out_path
 from baseplace.jobs.report import NoResultError, Report, RobotRef
+from baseplace.robots.defaults import DEFAULT_ROBOT
 
 if TYPE_CHECKING:
     from baseplace.perception.objects import ObjectSettings
@@ -70,7 +71,7 @@ class PointJob:
     transform: str | None = None
     landmarks: str | None = None
     occupancy: OccupancyGrid | str | None = None
-    robot: Robot | str = "tiago"
+    robot: Robot | str = DEFAULT_ROBOT
     arm: str | None = None
     map: ReachabilityMap | str | None = None
     robot_pose: str | None = None

@@ -27,6 +27,7 @@ from baseplace.jobs.inputs import (
     xyz_text,
 )
 from baseplace.jobs.report import BuildMapReport, ReachReport, RobotRef
+from baseplace.robots.defaults import DEFAULT_ROBOT
 
 if TYPE_CHECKING:
     from baseplace.reachability.build import BuildSettings
@@ -198,7 +199,11 @@ def reach_job(job: ReachJob, progress: Progress | None = None) -> ReachReport:
         raise InputError("give exactly one of --base or --bases FILE")
     default = job.map is None or job.map == DEFAULT_MAP
     robot = (
-        load_robot(job.robot or "tiago") if default else None if job.robot is None else load_robot(job.robot)
+        load_robot(job.robot or DEFAULT_ROBOT)
+        if default
+        else None
+        if job.robot is None
+        else load_robot(job.robot)
     )
     if job.target is not None:
         targets = target_pose(job.target, "--target")[None]
@@ -260,7 +265,7 @@ class BuildMapJob:
     """
 
     out: str
-    robot: Robot | str = "tiago"
+    robot: Robot | str = DEFAULT_ROBOT
     arm: str | None = None
     settings: BuildSettings | None = None
     checkpoint: Path | None = None

@@ -20,12 +20,11 @@ from baseplace.jobs.inputs import (
     PLOT_SUFFIXES,
     Progress,
     load_robot,
-    map_step,
     occupancy_grid,
     out_path,
-    step_progress,
 )
 from baseplace.jobs.report import PoseRecord, RobotRef, SurfaceMapReport, SurfaceSamplesReport
+from baseplace.robots.defaults import DEFAULT_ROBOT
 
 if TYPE_CHECKING:
     from baseplace.jobs.inputs import BagInput
@@ -57,7 +56,7 @@ class SurfaceMapJob:
     polygon: Any
     height: float
     out: str
-    robot: Robot | str = "tiago"
+    robot: Robot | str = DEFAULT_ROBOT
     arms: str = "any"
     resolution: float = 0.05
     orientations: int = 16
@@ -102,7 +101,7 @@ def surface_map_job(job: SurfaceMapJob, progress: Progress | None = None) -> Sur
     from baseplace.placement.surface_map import build_surface_map, check_surface_grid, parse_polygon
     from baseplace.placement.surface_storage import save_surface_map
     from baseplace.reachability.build import BuildSettings
-    from baseplace.reachability.cache import cached_map
+    from baseplace.reachability.cache import resolve_map
 
     t0 = time.perf_counter()
     assert out is not None
@@ -117,8 +116,7 @@ def surface_map_job(job: SurfaceMapJob, progress: Progress | None = None) -> Sur
             raise InputError(f"no loaded map of arm(s) {', '.join(missing)}; loaded: {', '.join(job.maps)}")
         rmaps = {arm: job.maps[arm] for arm in arms}
     else:
-        rmaps = {arm: cached_map(robot, settings, arm, step_progress(progress, map_step(robot.name, arm),
-                                                                     settings.samples))[0] for arm in arms}  # fmt: skip
+        rmaps = {arm: resolve_map(robot, None, arm, progress, settings).rmap for arm in arms}
     for rmap in rmaps.values():
         _ = rmap.tables  # the dense lookup of the reachability map is built once, outside the timing
     t_maps = time.perf_counter()

@@ -41,18 +41,10 @@ from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import GRASPED, Environment
 from baseplace.world.obstacles import Obstacle
 
-# Stowed ("home"/"tucked") arm configurations of the built-in robots, in the arm's joint order
-# (torso first): PAL's TIAGo home motion and the PR2's pr2_tuck_arms values.
-_STOWED: dict[tuple[str, str], tuple[float, ...]] = {
-    ("tiago", "arm"): (0.15, 0.20, -1.34, -0.20, 1.94, -1.57, 1.37, 0.0),
-    ("pr2", "right"): (0.0, -0.023593, 1.10728, -1.5566882, -2.124408, -1.4175, -1.8417, 0.21436),
-    ("pr2", "left"): (0.0, 0.06024, 1.248526, 1.78907, -1.683386, -1.7343417, -0.0962141, -0.0864053),
-}
-
 
 def stowed_configuration(robot: Robot, arm: Arm) -> FloatArray:
-    """The arm's stowed joint values (n,): the robot's home pose, else its reference values in limits."""
-    values = _STOWED.get((robot.name, arm.name))
+    """The arm's stowed joint values (n,): its spec's (``ArmSpec.stowed``), else the reference values in limits."""
+    values = robot.spec.arm(arm.name).stowed
     if values is not None and len(values) == arm.n_joints:
         return np.array(values, dtype=float)
     return np.clip(arm.from_pinocchio(robot.q_reference), arm.lower, arm.upper)

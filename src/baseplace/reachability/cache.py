@@ -110,11 +110,14 @@ def resolve_map(
     rmap: ReachabilityMap | str | Path | None,
     arm: str | None = None,
     progress: Callable[[str, int, int], None] | None = None,
+    settings: BuildSettings | None = None,
 ) -> MapChoice:
     """The map given (loaded, or a file checked against ``robot`` and ``arm``), else the cached default.
 
-    ``rmap`` None or ``"default"`` is the robot's cached default map, built on first use; its build
-    reports to ``progress(step, done, total)`` under one step per arm, with the build's sample count.
+    ``rmap`` None or ``"default"`` is the robot's cached default map, built on first use with
+    ``settings`` (None: :class:`BuildSettings`' defaults); its build reports to
+    ``progress(step, done, total)`` under one step per arm, with the build's sample count. Every
+    job and the service find their maps here.
 
     Raises:
         InputError: the file is missing, corrupt, or built for another robot or arm.
@@ -127,7 +130,7 @@ def resolve_map(
         return MapChoice(rmap)
     if rmap is not None and str(rmap) != DEFAULT_MAP:
         return MapChoice(load_map(rmap, robot, arm))
-    settings = BuildSettings()
+    settings = settings or BuildSettings()
     arm_name = arm or robot.spec.default_arm
     update = step_progress(progress, map_step(robot.name, arm_name), settings.samples)
     loaded, path, built = cached_map(robot, settings, arm_name, update)

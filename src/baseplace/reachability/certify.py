@@ -24,6 +24,7 @@ capability maps, which resolve cells by IK rather than by sampling).
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import json
 import math
 import time
@@ -92,8 +93,6 @@ def certify_map(
     Returns:
         The certified map: removed cells gone, :attr:`quality` set, ``info`` recording how.
     """
-    from baseplace.reachability.build import CHUNK
-
     start = time.perf_counter()
     arm = robot.arm(rmap.info.arm)
     grid = rmap.grid
@@ -101,7 +100,7 @@ def certify_map(
     quality = np.full(len(rmap.cells), np.nan, dtype=np.float32)
     if len(low):
         low_cells = rmap.cells[low]
-        seeds_q = _cell_configurations(arm, grid, low_cells, rmap.info.samples, CHUNK, chunk_samples)
+        seeds_q = _cell_configurations(arm, grid, low_cells, rmap.info.samples, chunk_samples)
         rng = np.random.default_rng([rmap.info.seed, CERTIFY_STREAM])
         solved = np.zeros(len(low), dtype=np.int64)
         for lo in range(0, len(low), BATCH):
@@ -129,14 +128,20 @@ def certify_map(
 
 
 def _cell_configurations(
-    arm: Arm, grid: SE3Grid, cells: NDArray[np.int64], samples: int, chunk: int, chunk_samples: object
+    arm: Arm, grid: SE3Grid, cells: NDArray[np.int64], samples: int, chunk_samples: object
 ) -> FloatArray:
-    """(L, n) one build sample per (sorted) cell, found by replaying the build's chunks."""
+    """(L, n) one build sample per (sorted) cell, found by replaying the build's ``samples`` in its chunks."""
     kernels = arm_kernels(arm)
     out = np.full((len(cells), arm.n_joints), np.nan)
     found = np.zeros(len(cells), dtype=np.bool_)
-    for k in range(math.ceil(samples / chunk)):
+    replayed = 0
+    for k in itertools.count():
+        if replayed >= samples:
+            break
         Q = chunk_samples(k)  # type: ignore[operator]
+        if not len(Q):
+            break
+        replayed += len(Q)
         c = np.empty(len(Q), dtype=np.int64)
         kernels.bin_chunk(Q, *grid.params, c)
         pos = np.minimum(np.searchsorted(cells, c), len(cells) - 1)

@@ -49,8 +49,8 @@ from baseplace.h5files import (
     write_header,
     write_text,
 )
-from baseplace.reachability.build import CHUNK, MapAccumulator, PartialMap
 from baseplace.reachability.rmap import ReachabilityMap
+from baseplace.reachability.sampling import CHUNK, MapAccumulator, PartialMap
 
 FORMAT = "baseplace-build-checkpoint"
 FORMAT_VERSION = 2  # 1 kept build in a variable-length string attribute

@@ -3,7 +3,7 @@
 The chunks of a build (``build.py``: chunk ``k`` drawn from ``default_rng([seed, k])``) are split
 into contiguous runs, about four tasks per worker. Each task builds its robot from the spec (a
 built-in name or a robot file that every worker can read at the same path), runs a
-:class:`~baseplace.reachability.build.MapAccumulator` over its chunks and returns the sparse
+:class:`~baseplace.reachability.sampling.MapAccumulator` over its chunks and returns the sparse
 :class:`~baseplace.reachability.build.PartialMap`; the client adds the partials up. Counts are
 integers and manipulability is a max, so the map is identical to the single-process one whatever
 the number of workers, the task split or the order tasks finish in; only ``build_time_s`` differs.
@@ -38,8 +38,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from baseplace.errors import InputError
-from baseplace.reachability.build import DEFAULT_CHECKPOINT_EVERY, BuildSettings, MapAccumulator, PartialMap
+from baseplace.reachability.build import DEFAULT_CHECKPOINT_EVERY
 from baseplace.reachability.rmap import ReachabilityMap
+from baseplace.reachability.sampling import BuildSettings, MapAccumulator, PartialMap
 from baseplace.robots.model import Robot
 
 if TYPE_CHECKING:

@@ -1,13 +1,50 @@
-"""Robot models: specs, pinocchio models, compiled FK, IK and self-collision."""
+"""Robot models: specs, pinocchio models, compiled FK, IK and self-collision.
 
-from baseplace.robots.collision import SelfCollision
-from baseplace.robots.fk import forward_kinematics
-from baseplace.robots.ik import DampedLeastSquaresIK, IKSolver
-from baseplace.robots.model import Arm, Robot
-from baseplace.robots.spec import BUILTIN_ROBOTS, ArmSpec, Mount, RobotSpec, load_spec
+The models are imported on first use (PEP 562), so that :data:`DEFAULT_ROBOT` costs no pinocchio.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+from baseplace.robots.defaults import DEFAULT_ROBOT
+
+if TYPE_CHECKING:
+    from baseplace.robots.collision import SelfCollision
+    from baseplace.robots.fk import forward_kinematics
+    from baseplace.robots.ik import DampedLeastSquaresIK, IKSolver
+    from baseplace.robots.model import Arm, Robot
+    from baseplace.robots.spec import BUILTIN_ROBOTS, ArmSpec, Mount, RobotSpec, load_spec
+
+_LAZY = {
+    "SelfCollision": "baseplace.robots.collision",
+    "forward_kinematics": "baseplace.robots.fk",
+    "DampedLeastSquaresIK": "baseplace.robots.ik",
+    "IKSolver": "baseplace.robots.ik",
+    "Arm": "baseplace.robots.model",
+    "Robot": "baseplace.robots.model",
+    "BUILTIN_ROBOTS": "baseplace.robots.spec",
+    "ArmSpec": "baseplace.robots.spec",
+    "Mount": "baseplace.robots.spec",
+    "RobotSpec": "baseplace.robots.spec",
+    "load_spec": "baseplace.robots.spec",
+}
+
+
+def __getattr__(name: str) -> Any:
+    """Import a public name on first use and keep it, so later lookups are plain attributes."""
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'baseplace.robots' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
 
 __all__ = [
     "BUILTIN_ROBOTS",
+    "DEFAULT_ROBOT",
     "Arm",
     "ArmSpec",
     "DampedLeastSquaresIK",

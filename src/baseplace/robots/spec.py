@@ -67,12 +67,15 @@ class ArmSpec:
             link (``--grasp-point`` targets it); None: the TCP is the grasp point (PR2's
             ``*_gripper_tool_frame``). TIAGo's is ``hand_grasping_frame``, 0.151 m ahead of
             ``arm_tool_link``.
+        stowed: the arm's stowed ("home", "tucked") joint values in the order of ``joints``
+            [rad, m], where the reaching motion starts; None: the robot's reference values.
     """
 
     joints: tuple[str, ...]
     tcp_frame: str
     approach: str = "x"
     grasp_frame: str | None = None
+    stowed: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         if self.approach not in APPROACH_AXES:
@@ -259,7 +262,10 @@ def _builtin_specs() -> dict[str, RobotSpec]:
             base_frame="base_footprint",
             arms={
                 "arm": ArmSpec(
-                    ("torso_lift_joint", *_TIAGO_ARM), "arm_tool_link", grasp_frame="hand_grasping_frame"
+                    ("torso_lift_joint", *_TIAGO_ARM),
+                    "arm_tool_link",
+                    grasp_frame="hand_grasping_frame",
+                    stowed=(0.15, 0.20, -1.34, -0.20, 1.94, -1.57, 1.37, 0.0),  # PAL's home motion
                 )
             },
             default_arm="arm",
@@ -272,8 +278,17 @@ def _builtin_specs() -> dict[str, RobotSpec]:
             srdf=_erd("pr2_description/srdf/pr2.srdf"),
             base_frame="base_footprint",
             arms={
-                "left": ArmSpec(("torso_lift_joint", *(f"l_{j}" for j in _PR2_ARM)), "l_gripper_tool_frame"),
-                "right": ArmSpec(("torso_lift_joint", *(f"r_{j}" for j in _PR2_ARM)), "r_gripper_tool_frame"),
+                # stowed: pr2_tuck_arms' values
+                "left": ArmSpec(
+                    ("torso_lift_joint", *(f"l_{j}" for j in _PR2_ARM)),
+                    "l_gripper_tool_frame",
+                    stowed=(0.0, 0.06024, 1.248526, 1.78907, -1.683386, -1.7343417, -0.0962141, -0.0864053),
+                ),
+                "right": ArmSpec(
+                    ("torso_lift_joint", *(f"r_{j}" for j in _PR2_ARM)),
+                    "r_gripper_tool_frame",
+                    stowed=(0.0, -0.023593, 1.10728, -1.5566882, -2.124408, -1.4175, -1.8417, 0.21436),
+                ),
             },
             default_arm="right",
             footprint_polygon=(

@@ -242,12 +242,11 @@ class ServiceState:
         """The robot's cached default map for ``arm`` (default arm: None), loaded once (read only: any thread)."""
         key = (robot.name, arm)
         if key not in self._maps:
-            from baseplace.demo import cached_map
-            from baseplace.reachability.build import BuildSettings
+            from baseplace.reachability.cache import map_or_default
 
             if arm is not None and arm not in robot.spec.arms:
                 raise InputError(f"unknown arm {arm!r} of {robot.name}; valid: {', '.join(robot.spec.arms)}")
-            self._maps[key] = cached_map(robot, BuildSettings(), arm)[0]
+            self._maps[key] = map_or_default(robot, None, arm)
             self._maps[key].tables  # noqa: B018  the lookup tables, built now, not in a query
         return self._maps[key]
 

@@ -23,6 +23,7 @@ import math
 import threading
 import time
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -30,20 +31,12 @@ from numpy.typing import NDArray
 
 from baseplace.errors import InputError
 from baseplace.viz.result_view import FloatArray, Motion, ResultView
-from baseplace.viz.viewer import (
-    HEATMAP_LIFT,
+from baseplace.viz.view_data import (
     MAX_POINTS,
-    PATH_LIFT,
-    REGION_LIFT,
     ViewData,
     _cells,
-    _colormap,
-    _orthonormal,
-    _package_handler,
     cell_quads,
-    densify,
     height_at,
-    joint_configuration,
     load_view_data,
     view_data_from,
 )
@@ -66,6 +59,10 @@ MARKER_LIFT = 0.1
 """Candidate and rejected positions are drawn this far above the ground [m]."""
 MOTION_STEPS = 8
 """Straight joint-space segments between waypoints are drawn and played in this many steps."""
+REGION_LIFT = 0.03
+"""Regions are drawn this far above their planes [m], above most of a 25 mm-noise cloud's points."""
+HEATMAP_LIFT = 0.045
+PATH_LIFT = 0.08
 
 
 @dataclass(frozen=True)
@@ -154,6 +151,63 @@ def load_inputs(view: ResultView, robot_name: str, segment: bool) -> SceneInputs
     return SceneInputs(
         data, points, grid, surface, image, T_world_camera, 2 * math.atan2(image.shape[0] / 2, K.fy)
     )
+
+
+def _colormap(name: str, values: NDArray[np.floating]) -> NDArray[np.uint8]:
+    from matplotlib import colormaps
+
+    rgba = colormaps[name](np.clip(values, 0.0, 1.0))
+    return (np.asarray(rgba)[:, :3] * 255).round().astype(np.uint8)
+
+
+def densify(poses: NDArray[np.float64], step: float = 0.05) -> NDArray[np.float64]:
+    """The (x, y) polyline through base poses (N, 3), with a point at least every ``step`` metres."""
+    xy = poses[:, :2]
+    if len(xy) < 2:
+        return xy.copy()
+    out = [xy[:1]]
+    for a, b in itertools.pairwise(xy):
+        n = max(1, math.ceil(float(np.hypot(*(b - a))) / step))
+        t = np.arange(1, n + 1)[:, None] / n
+        out.append(a + t * (b - a))
+    return np.concatenate(out)
+
+
+def joint_configuration(spec: RobotSpec, joints: dict[str, float], names: list[str]) -> dict[str, float]:
+    """Values of the URDF's actuated joints ``names``: the placement's, else the spec's reference, else 0."""
+    return {n: float(joints.get(n, spec.reference.get(n, 0.0))) for n in names}
+
+
+def _package_handler(spec: RobotSpec) -> Any:
+    """A yourdfpy ``filename_handler`` (called as ``handler(fname=...)``) for the spec's mesh URIs."""
+    urdf_dir = spec.urdf.parent
+
+    def handler(fname: str) -> str:
+        if fname.startswith("package://"):
+            rest = fname[len("package://") :]
+            for d in spec.package_dirs:
+                if (Path(d) / rest).is_file():
+                    return str(Path(d) / rest)
+            tail = rest.split("/", 1)[1] if "/" in rest else rest  # package name dropped
+            for d in (*spec.package_dirs, urdf_dir, urdf_dir.parent):
+                if (Path(d) / tail).is_file():
+                    return str(Path(d) / tail)
+            return fname
+        if fname.startswith("file://"):
+            return fname[len("file://") :]
+        p = Path(fname)
+        return str(p if p.is_absolute() else urdf_dir / p)
+
+    return handler
+
+
+def _orthonormal(R: NDArray[np.float64]) -> NDArray[np.float64]:
+    u, _, vt = np.linalg.svd(R)
+    out = u @ vt
+    if np.linalg.det(out) < 0:
+        u[:, -1] *= -1
+        out = u @ vt
+    return np.asarray(out)
 
 
 def _wxyz(T: FloatArray) -> NDArray[np.float64]:

@@ -20,8 +20,8 @@ occupancy grid, surface map, robot), and draws them (:mod:`baseplace.viz.view_sc
   the finger's 3D ray and, with a grid, the candidates to pick the object up as for candidates.
 
 The demo's result also names a *view data* file (key ``"view_data"``, relative to the JSON's
-directory or absolute): an ``.npz`` written by :func:`save_view_data` with the segmented scene and
-the OSRM heat map, made in one call::
+directory or absolute): an ``.npz`` with the segmented scene and the OSRM heat map
+(:mod:`baseplace.viz.view_data`)::
 
     data = view_data_from(terrain, result.osrm, points, robot_name)
     save_view_data(out_dir / "demo_view.npz", data)
@@ -38,328 +38,26 @@ import contextlib
 import errno
 import html
 import io
-import itertools
 import math
 import socket
 import string
 import sys
 import time
-import zipfile
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError
-from baseplace.files import atomic_write
 from baseplace.geometry.poses import yaw_of
+from baseplace.viz.result_view import ResultView, read_result
+from baseplace.viz.view_scene import SceneInputs, build_scene, ground, load_inputs
 
 if TYPE_CHECKING:
     import viser
 
-    from baseplace.placement.osrm import OSRM
-    from baseplace.robots.spec import RobotSpec
-    from baseplace.terrain.pipeline import Terrain
-    from baseplace.viz.result_view import ResultView
-    from baseplace.viz.view_scene import SceneInputs
-
 DEFAULT_RESULT = Path("out") / "demo.json"
 """What ``baseplace view`` shows without an argument: the demo's result."""
-VIEW_DATA_VERSION = 1
-MAX_POINTS = 200_000
-"""Clouds are subsampled to at most this many points for the browser."""
-MAX_CELLS = 400_000
-"""Region and heat-map meshes are drawn on a coarser grid when they would have more cells."""
-
-REGION_LIFT = 0.03
-"""Regions are drawn this far above their planes [m], above most of a 25 mm-noise cloud's points."""
-HEATMAP_LIFT = 0.045
-PATH_LIFT = 0.08
-
-_KEYS = ("version", "robot", "points", "origin", "resolution", "labels", "heights", "planes", "osrm")
-
-
-@dataclass(frozen=True)
-class ViewData:
-    """What the viewer needs besides the result JSON.
-
-    Attributes:
-        robot: robot name or robot-file path, as :class:`baseplace.robots.model.Robot` takes it.
-        points: (N, 3) float32 cloud [m], subsampled to at most :data:`MAX_POINTS`.
-        origin: (x, y) of the lower-left corner of height-map cell (0, 0) [m].
-        resolution: height-map cell edge [m].
-        labels: (H, W) int16 region id per cell (rows along y), -1 where none.
-        heights: (H, W) float32 surface height per cell [m]: the region's plane at the cell
-            centre where there is a region, else the height map, NaN where unknown.
-        planes: (R, 4) float64 region planes ``(nx, ny, nz, d)`` with ``n . p + d = 0``.
-        osrm: (H, W) float32 OSRM summed over orientations; zero where nothing is reachable.
-    """
-
-    robot: str
-    points: NDArray[np.float32]
-    origin: tuple[float, float]
-    resolution: float
-    labels: NDArray[np.int16]
-    heights: NDArray[np.float32]
-    planes: NDArray[np.float64]
-    osrm: NDArray[np.float32]
-
-    def __post_init__(self) -> None:
-        shape = self.labels.shape
-        if self.points.ndim != 2 or self.points.shape[1] != 3:
-            raise InputError(f"view data: points must be (N, 3), got {self.points.shape}")
-        if len(shape) != 2 or self.heights.shape != shape or self.osrm.shape != shape:
-            raise InputError(
-                f"view data: labels {shape}, heights {self.heights.shape} and osrm {self.osrm.shape} "
-                "must be the same (H, W) grid"
-            )
-        if self.planes.ndim != 2 or self.planes.shape[1] != 4:
-            raise InputError(f"view data: planes must be (R, 4), got {self.planes.shape}")
-        if shape[0] * shape[1] and int(self.labels.max(initial=-1)) >= len(self.planes):
-            raise InputError(f"view data: a label exceeds the {len(self.planes)} region planes")
-        if not (math.isfinite(self.resolution) and self.resolution > 0):
-            raise InputError(f"view data: resolution must be positive, got {self.resolution}")
-        if not self.robot:
-            raise InputError("view data: no robot name")
-
-
-def view_data_from(
-    terrain: Terrain,
-    osrm: OSRM | ArrayLike | None,
-    points: ArrayLike,
-    robot_name: str,
-    max_points: int = MAX_POINTS,
-    seed: int = 0,
-) -> ViewData:
-    """The view data of a segmented scene and its OSRM.
-
-    Args:
-        terrain: the segmented scene (its height map and regions).
-        osrm: the OSRM over ``terrain``'s segmentation, or its (H, W) summed grid, or None (no heat map).
-        points: (N, 3) world cloud [m]; a random subset of ``max_points`` is kept.
-        robot_name: robot name or robot-file path (what ``Robot()`` takes).
-        max_points: most cloud points kept.
-        seed: seed of the subsampling.
-    """
-    seg = terrain.segmentation
-    hmap = seg.hmap
-    pts = np.asarray(points, dtype=np.float32).reshape(-1, 3)
-    pts = pts[np.isfinite(pts).all(axis=1)]
-    if len(pts) > max_points:
-        keep = np.sort(np.random.default_rng(seed).choice(len(pts), max_points, replace=False))
-        pts = pts[keep]
-    heights = np.asarray(hmap.raw, dtype=np.float64).copy()
-    X, Y = hmap.cell_centres()
-    for region in seg.regions:
-        sel = seg.labels == region.id
-        heights[sel] = region.height_at(np.c_[X[sel], Y[sel]])
-    planes = np.array([[*r.normal, r.d] for r in seg.regions], dtype=np.float64).reshape(-1, 4)
-    if osrm is None:
-        summed = np.zeros(hmap.shape, dtype=np.float32)
-    elif hasattr(osrm, "summed"):
-        summed = np.asarray(osrm.summed, dtype=np.float32)
-    else:
-        summed = np.asarray(osrm, dtype=np.float32)
-    if summed.shape != hmap.shape:
-        raise InputError(f"the OSRM grid {summed.shape} is not the segmentation's {hmap.shape}")
-    return ViewData(
-        robot=robot_name,
-        points=np.ascontiguousarray(pts),
-        origin=(float(hmap.origin[0]), float(hmap.origin[1])),
-        resolution=float(hmap.resolution),
-        labels=seg.labels.astype(np.int16),
-        heights=heights.astype(np.float32),
-        planes=planes,
-        osrm=np.nan_to_num(summed, nan=0.0).astype(np.float32),
-    )
-
-
-def save_view_data(path: str | Path, data: ViewData) -> None:
-    """Write ``data`` to ``path`` as a compressed ``.npz`` (atomically; no pickled objects).
-
-    Raises:
-        InputError: the directory does not exist.
-    """
-    path = Path(path)
-    with atomic_write(path, "view data") as tmp, open(tmp, "wb") as fh:
-        np.savez_compressed(
-            fh,
-            version=np.array(VIEW_DATA_VERSION, dtype=np.int64),
-            robot=np.array(data.robot),
-            points=data.points.astype(np.float32),
-            origin=np.array(data.origin, dtype=np.float64),
-            resolution=np.array(data.resolution, dtype=np.float64),
-            labels=data.labels.astype(np.int16),
-            heights=data.heights.astype(np.float32),
-            planes=data.planes.astype(np.float64),
-            osrm=data.osrm.astype(np.float32),
-        )
-
-
-def load_view_data(path: str | Path) -> ViewData:
-    """Read view data written by :func:`save_view_data`.
-
-    Raises:
-        InputError: the file is missing, not a view-data ``.npz`` or of another version.
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"view data {path} does not exist")
-    try:
-        with np.load(path, allow_pickle=False) as npz:
-            missing = [k for k in _KEYS if k not in npz.files]
-            if missing:
-                raise InputError(
-                    f"view data {path} lacks {missing}; rewrite it with this version of baseplace"
-                )
-            arrays = {k: npz[k] for k in _KEYS}
-    except InputError:
-        raise
-    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise InputError(f"cannot read view data {path}: {first}") from None
-    if int(arrays["version"]) != VIEW_DATA_VERSION:
-        raise InputError(
-            f"view data {path} has version {int(arrays['version'])}, this baseplace reads {VIEW_DATA_VERSION}"
-        )
-    if arrays["robot"].dtype.kind != "U" or arrays["origin"].shape != (2,):
-        raise InputError(f"view data {path} is malformed (robot name or origin)")
-    return ViewData(
-        robot=str(arrays["robot"]),
-        points=arrays["points"].astype(np.float32),
-        origin=(float(arrays["origin"][0]), float(arrays["origin"][1])),
-        resolution=float(arrays["resolution"]),
-        labels=arrays["labels"].astype(np.int16),
-        heights=arrays["heights"].astype(np.float32),
-        planes=arrays["planes"].astype(np.float64),
-        osrm=arrays["osrm"].astype(np.float32),
-    )
-
-
-# ----------------------------------------------------------------------------------------------
-# Geometry for the browser
-
-
-def _colormap(name: str, values: NDArray[np.floating]) -> NDArray[np.uint8]:
-    from matplotlib import colormaps
-
-    rgba = colormaps[name](np.clip(values, 0.0, 1.0))
-    return (np.asarray(rgba)[:, :3] * 255).round().astype(np.uint8)
-
-
-def _stride(n_cells: int) -> int:
-    return max(1, math.ceil(math.sqrt(n_cells / MAX_CELLS)))
-
-
-def cell_quads(
-    data: ViewData, rows: NDArray[np.int64], cols: NDArray[np.int64], lift: float, stride: int = 1
-) -> tuple[NDArray[np.float32], NDArray[np.uint32]]:
-    """One horizontal-footprint quad per cell on its region's plane, ``lift`` above it.
-
-    Cells without a region sit flat at their height. ``stride`` > 1 draws cells that many times
-    larger (the caller picks every stride-th cell).
-
-    Returns:
-        (4 N, 3) vertices and (2 N, 3) faces, counter-clockwise seen from above.
-    """
-    res = data.resolution * stride
-    x0 = data.origin[0] + cols * data.resolution
-    y0 = data.origin[1] + rows * data.resolution
-    cx = np.stack([x0, x0 + res, x0 + res, x0], axis=1)
-    cy = np.stack([y0, y0, y0 + res, y0 + res], axis=1)
-    label = data.labels[rows, cols].astype(np.int64)
-    z = np.repeat(np.nan_to_num(data.heights[rows, cols], nan=0.0).astype(np.float64)[:, None], 4, axis=1)
-    has = label >= 0
-    if has.any() and len(data.planes):
-        pl = data.planes[label[has]]
-        z[has] = -(pl[:, 3:4] + pl[:, 0:1] * cx[has] + pl[:, 1:2] * cy[has]) / pl[:, 2:3]
-    verts = np.stack([cx, cy, z + lift], axis=2).reshape(-1, 3).astype(np.float32)
-    base = (np.arange(len(rows), dtype=np.uint32) * 4)[:, None]
-    faces = (base + np.array([0, 1, 2, 0, 2, 3], dtype=np.uint32)).reshape(-1, 3)
-    return verts, faces
-
-
-def _cells(mask: NDArray[np.bool_]) -> tuple[NDArray[np.int64], NDArray[np.int64], int]:
-    stride = _stride(int(mask.sum()))
-    sub = np.zeros_like(mask)
-    sub[::stride, ::stride] = mask[::stride, ::stride]
-    rows, cols = np.nonzero(sub)
-    return rows.astype(np.int64), cols.astype(np.int64), stride
-
-
-def height_at(data: ViewData, xy: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Surface height [m] under points (N, 2): the region plane, else the height map, else 0."""
-    col = np.floor((xy[:, 0] - data.origin[0]) / data.resolution).astype(np.int64)
-    row = np.floor((xy[:, 1] - data.origin[1]) / data.resolution).astype(np.int64)
-    h, w = data.labels.shape
-    inside = (row >= 0) & (row < h) & (col >= 0) & (col < w)
-    out = np.zeros(len(xy))
-    r, c = row[inside], col[inside]
-    label = data.labels[r, c].astype(np.int64)
-    z = np.nan_to_num(data.heights[r, c].astype(np.float64), nan=0.0)
-    has = label >= 0
-    if has.any():
-        pl = data.planes[label[has]]
-        pts = xy[inside][has]
-        z[has] = -(pl[:, 3] + pl[:, 0] * pts[:, 0] + pl[:, 1] * pts[:, 1]) / pl[:, 2]
-    out[inside] = z
-    return out
-
-
-def densify(poses: NDArray[np.float64], step: float = 0.05) -> NDArray[np.float64]:
-    """The (x, y) polyline through base poses (N, 3), with a point at least every ``step`` metres."""
-    xy = poses[:, :2]
-    if len(xy) < 2:
-        return xy.copy()
-    out = [xy[:1]]
-    for a, b in itertools.pairwise(xy):
-        n = max(1, math.ceil(float(np.hypot(*(b - a))) / step))
-        t = np.arange(1, n + 1)[:, None] / n
-        out.append(a + t * (b - a))
-    return np.concatenate(out)
-
-
-def joint_configuration(spec: RobotSpec, joints: dict[str, float], names: list[str]) -> dict[str, float]:
-    """Values of the URDF's actuated joints ``names``: the placement's, else the spec's reference, else 0."""
-    return {n: float(joints.get(n, spec.reference.get(n, 0.0))) for n in names}
-
-
-def _package_handler(spec: RobotSpec) -> Any:
-    """A yourdfpy ``filename_handler`` (called as ``handler(fname=...)``) for the spec's mesh URIs."""
-    urdf_dir = spec.urdf.parent
-
-    def handler(fname: str) -> str:
-        if fname.startswith("package://"):
-            rest = fname[len("package://") :]
-            for d in spec.package_dirs:
-                if (Path(d) / rest).is_file():
-                    return str(Path(d) / rest)
-            tail = rest.split("/", 1)[1] if "/" in rest else rest  # package name dropped
-            for d in (*spec.package_dirs, urdf_dir, urdf_dir.parent):
-                if (Path(d) / tail).is_file():
-                    return str(Path(d) / tail)
-            return fname
-        if fname.startswith("file://"):
-            return fname[len("file://") :]
-        p = Path(fname)
-        return str(p if p.is_absolute() else urdf_dir / p)
-
-    return handler
-
-
-def _orthonormal(R: NDArray[np.float64]) -> NDArray[np.float64]:
-    u, _, vt = np.linalg.svd(R)
-    out = u @ vt
-    if np.linalg.det(out) < 0:
-        u[:, -1] *= -1
-        out = u @ vt
-    return np.asarray(out)
-
-
-# ----------------------------------------------------------------------------------------------
-# The server
 
 
 def _check_port(host: str, port: int) -> None:
@@ -383,8 +81,6 @@ def _check_port(host: str, port: int) -> None:
 
 def _camera(server: viser.ViserServer, view: ResultView, inputs: SceneInputs, layers: dict[str, Any]) -> None:
     """Look at the robot (or the result's poses) from behind the path's start, high enough to see the map."""
-    from baseplace.viz.view_scene import ground
-
     robot_pose = layers.get("robot_pose")
     focus = [robot_pose[:3, 3]] if robot_pose is not None else []
     # with a robot, frame it and what it reaches for; paths may lead far away
@@ -520,9 +216,6 @@ def open_view(
     Raises:
         InputError: the result is not one the viewer shows, or an input is missing or malformed.
     """
-    from baseplace.viz.result_view import read_result
-    from baseplace.viz.view_scene import load_inputs
-
     view = read_result(result_json, given=given)
     robot = view.robot
     # segment the cloud for the regions and ground heights, unless the result carries its own
@@ -558,8 +251,6 @@ def serve(
             missing, the URDF does not load, or the port is in use.
     """
     import viser
-
-    from baseplace.viz.view_scene import build_scene
 
     path = DEFAULT_RESULT if result_json is None else Path(result_json)
     if result_json is None and not path.is_file():
