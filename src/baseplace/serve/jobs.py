@@ -211,7 +211,10 @@ def point(state: ServiceState, scene: Scene | None, req: dict[str, Any]) -> dict
             if len(numbers) == 16:  # a matrix: the file the CLI reads
                 (Path(folder) / "T_world_camera.txt").write_text(" ".join(numbers))
                 transform = str(Path(folder) / "T_world_camera.txt")
-            (Path(folder) / "landmarks.json").write_text(json.dumps(req["landmarks"]))
+            landmarks = None  # none: MediaPipe's hand landmarker, as the CLI without --landmarks
+            if req["landmarks"] is not None:
+                landmarks = str(Path(folder) / "landmarks.json")
+                Path(landmarks).write_text(json.dumps(req["landmarks"]))
             robot: Any = req["robot"]
             rmap = None
             if scene is not None:
@@ -221,7 +224,7 @@ def point(state: ServiceState, scene: Scene | None, req: dict[str, Any]) -> dict
             rgb, depth = (str(files[k]) if k in files else None for k in ("rgb", "depth"))
             bag = str(files["bag"]) if "bag" in files else None
             return point_job(PointJob(rgb, depth, req["intrinsics"], transform,
-                                      str(Path(folder) / "landmarks.json"), None if scene is None else scene.grid,
+                                      landmarks, None if scene is None else scene.grid,
                                       robot, req["arm"], rmap, req["robot_pose"], req["seed"], motion, robustness,
                                       selection=req["selection"], bag=bag, rgb_topic=req["rgb_topic"],
                                       depth_topic=req["depth_topic"], camera_info_topic=req["camera_info_topic"],
