@@ -86,16 +86,9 @@ def _remove_srdf_pairs(model: pin.Model, geom: pin.GeometryModel, srdf: Path) ->
     Size and nesting are checked before pinocchio's reader, which recurses once per level (a
     700 kB SRDF nested 100,000 deep crashed the process).
     """
-    from baseplace.robots.urdf import check_xml_depth
+    from baseplace.robots.urdf import check_file_size, check_xml_depth
 
-    try:
-        size = srdf.stat().st_size
-    except OSError as exc:
-        raise InputError(f"cannot read SRDF {srdf}: {exc.strerror or exc}") from None
-    if size > MAX_SRDF_BYTES:
-        raise InputError(
-            f"SRDF {srdf} is {size} bytes; the limit is {MAX_SRDF_BYTES} ({MAX_SRDF_BYTES >> 20} MB)"
-        )
+    check_file_size(srdf, "SRDF", MAX_SRDF_BYTES)
     try:
         root = ElementTree.parse(srdf).getroot()
     except (ElementTree.ParseError, OSError) as exc:

@@ -58,14 +58,21 @@ def check_urdf_file(path: Path) -> None:
     Raises:
         InputError: one line with the size and the limit.
     """
+    check_file_size(path, "URDF", MAX_URDF_BYTES)
+
+
+def check_file_size(path: Path, what: str, limit: int) -> None:
+    """Refuse a robot file (``what``: "URDF", "SRDF") over ``limit`` bytes before it is read.
+
+    Raises:
+        InputError: one line with the size and the limit, or why the file cannot be read.
+    """
     try:
         size = path.stat().st_size
     except OSError as exc:
-        raise InputError(f"cannot read URDF {path}: {exc.strerror or exc}") from None
-    if size > MAX_URDF_BYTES:
-        raise InputError(
-            f"URDF {path} is {size} bytes; the limit is {MAX_URDF_BYTES} ({MAX_URDF_BYTES >> 20} MB)"
-        )
+        raise InputError(f"cannot read {what} {path}: {exc.strerror or exc}") from None
+    if size > limit:
+        raise InputError(f"{what} {path} is {size} bytes; the limit is {limit} ({limit >> 20} MB)")
 
 
 def check_xml_depth(root: ElementTree.Element, what: str, usual: int) -> None:
