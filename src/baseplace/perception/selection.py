@@ -1,11 +1,15 @@
 """Which object the operator points at (seed 004, section 3.1).
 
-As in the seed, the line fitted to the index finger's landmarks (in the image) is extended from the
-fingertip until it enters an object's image box or leaves the image; the box it enters first is the
-target. The geometry is :mod:`baseplace.placement.pointing`'s (least-squares line through landmarks
-5-8, slab-method box entry). Beside it, when the depth at the index finger is valid, the same fit
-through the finger's 3-D points gives a world ray and the world box it enters first: reported, not
-used to choose (the seed's choice is the image line's).
+As in the seed (rule ``first``), the line fitted to the index finger's landmarks (in the image) is
+extended from the fingertip until it enters an object's image box or leaves the image; the box it
+enters first is the target. The geometry is :mod:`baseplace.placement.pointing`'s (least-squares
+line through landmarks 5-8, slab-method box entry). That line cannot tell an object between the hand
+and the target in the image from the target, nor a box corner beside the line; depth can: the
+default rule ``finger3d`` (:func:`select`) fits the finger's 3-D line to the front-most depth points
+along its image line (:func:`finger_line`) and takes the object whose centre lies closest in angle
+to it (:func:`aimed_object`), falling back on ``nearest`` (the image-box centre closest in angle to
+the image line) when the finger has no usable depth. Chosen on the pointing experiment's
+development scenes (docs/protocols/pointing_v2.md).
 """
 
 from __future__ import annotations
@@ -202,7 +206,7 @@ def front_points(landmarks_px: ArrayLike, points: NDArray[np.float64], viewpoint
     The finger lies in front of what is behind it (the curled fingers, the table): across the
     finger's 2-D line (landmarks 5-8, :func:`~baseplace.placement.pointing.pointing_ray`), within
     ``half_width`` px on either side, the valid point nearest to the camera is taken, one per pixel
-    step from the MCP's projection onto the line to the tip.
+    step from landmark :data:`FINGER_FROM`'s projection onto the line to the tip.
 
     Args:
         landmarks_px: (21, 2) hand landmarks [px].
