@@ -137,3 +137,19 @@ def test_a_finger_hidden_behind_the_hand_gives_no_3d_line():
     ]
     points = _render(wall)  # a flat row of knuckles 10 cm in front of the finger, across its image line
     assert finger_line(L, points, CAMERA, K) is None
+
+
+def test_the_ransac_memory_stays_bounded_on_a_very_long_finger():
+    """A finger line thousands of pixels long (a large image) must not allocate pairs x points."""
+    import tracemalloc
+
+    from baseplace.perception.selection import _line_inliers
+
+    pts = np.c_[np.linspace(0, 1, 20_000), np.zeros(20_000), np.ones(20_000)]
+    pts[::10, 1] += 0.05  # a tenth off the line
+    tracemalloc.start()
+    keep = _line_inliers(pts, 0.006)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert keep.sum() == 18_000 and not keep[::10].any()
+    assert peak < 20e6, f"{peak / 1e6:.0f} MB"

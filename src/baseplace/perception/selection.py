@@ -42,7 +42,7 @@ MIN_FINGER_POINTS = 8
 FINGER_INLIER_M = 0.006
 """Front-most points farther than this from the fitted finger line are not the finger's [m]."""
 MAX_RANSAC_POINTS = 48
-"""Line hypotheses through pairs of at most this many of the finger's points (memory: pairs x points)."""
+"""Line hypotheses through pairs of at most this many of the finger's points, counted on them (memory ~ its cube)."""
 FINGER3D_MAX_ANGLE_DEG = 12.0
 """The ``finger3d`` rule's widest angle [deg] between the 3-D finger line and an object's centre."""
 
@@ -307,24 +307,26 @@ def _line_inliers(pts: FloatArray, tolerance: float) -> NDArray[np.bool_]:
     """The points within ``tolerance`` of the line through the pair of points that has the most (exhaustive RANSAC).
 
     Every pair at least a third of the points apart is tried (ties: the first pair), so the result
-    does not depend on a random draw; (K,) bool.
+    does not depend on a random draw; beyond :data:`MAX_RANSAC_POINTS` points, the pairs and their
+    counts come from that many spread evenly over them. Returns (K,) bool over all points.
     """
     n = len(pts)
-    if n > MAX_RANSAC_POINTS:  # pairs of a subset (evenly along the finger); inliers over all points
-        subset = np.linspace(0, n - 1, MAX_RANSAC_POINTS).round().astype(int)
-        i, j = (subset[k] for k in np.triu_indices(MAX_RANSAC_POINTS, k=MAX_RANSAC_POINTS // 3))
-    else:
-        i, j = np.triu_indices(n, k=max(n // 3, 1))
+    sample = pts  # hypotheses and their counts from at most MAX_RANSAC_POINTS points, evenly along the finger
+    if n > MAX_RANSAC_POINTS:
+        sample = pts[np.linspace(0, n - 1, MAX_RANSAC_POINTS).round().astype(int)]
+    m = len(sample)
+    i, j = np.triu_indices(m, k=max(m // 3, 1))
     if len(i) == 0:
         return np.zeros(n, dtype=bool)
-    axis = pts[j] - pts[i]
+    axis = sample[j] - sample[i]
     length = np.linalg.norm(axis, axis=1)
     axis = axis / np.maximum(length, 1e-12)[:, None]
-    offset = pts[None, :, :] - pts[i][:, None, :]  # (pairs, K, 3)
+    offset = sample[None, :, :] - sample[i][:, None, :]  # (pairs, m, 3): memory bounded by MAX_RANSAC_POINTS
     along = np.einsum("pkd,pd->pk", offset, axis)
     residual = np.linalg.norm(offset - along[..., None] * axis[:, None, :], axis=2)
-    count = np.where(length > 1e-6, (residual <= tolerance).sum(axis=1), -1)
-    return np.asarray(residual[int(np.argmax(count))] <= tolerance)
+    best = int(np.argmax(np.where(length > 1e-6, (residual <= tolerance).sum(axis=1), -1)))
+    rel = pts - sample[i[best]]
+    return np.asarray(np.linalg.norm(rel - np.outer(rel @ axis[best], axis[best]), axis=1) <= tolerance)
 
 
 def aimed_object(tip: ArrayLike, direction: ArrayLike, boxes_world: ArrayLike,
