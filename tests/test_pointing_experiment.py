@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from baseplace_experiments.pointing_experiment import SEEDS, run_scene, summarize, wilson
+from baseplace_experiments.pointing_experiment import HELD_OUT_V1, SEEDS, run_scene, summarize, wilson
 
 
 def test_the_wilson_interval_against_known_values():
@@ -17,11 +17,17 @@ def test_dev_and_held_out_seeds_are_disjoint_and_large_enough():
     assert not set(SEEDS.dev) & set(SEEDS.held_out) and len(SEEDS.held_out) >= 200
 
 
+def test_protocol_v2_holds_out_scenes_that_v1_did_not_spend():
+    assert not set(SEEDS.held_out) & set(HELD_OUT_V1) and not set(SEEDS.dev) & set(HELD_OUT_V1)
+
+
 def test_a_few_dev_scenes_select_the_target_within_2_cm():
     rows = [run_scene(seed) for seed in (1, 2)]
     summary = summarize(rows)
     assert summary["selected"] == 2 and summary["within_2cm"] == 2, rows
     assert all(r["error_m"] < 0.02 for r in rows)
+    assert set(summary["rules"]) == {"finger3d", "first", "nearest"}
+    assert summary["rules"]["finger3d"]["selected"] == summary["selected"]
 
 
 @pytest.mark.slow

@@ -423,9 +423,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help='world_T_camera file (4x4, optical frame), or the camera-frame up vector "ux uy uz"')  # fmt: skip
     p.add_argument("--landmarks", default=None,
                    help="JSON of 21 MediaPipe hand landmarks (normalised x, y; relative z) instead of the hand model")  # fmt: skip
-    p.add_argument("--selection", default="first", choices=["first", "nearest"],
-                   help="first: the seed's, the first object box the finger's line enters; nearest: the object "
-                        "whose centre lies at the smallest angle from the line (within 12 deg) (default first)")  # fmt: skip
+    p.add_argument("--selection", default="finger3d", choices=["finger3d", "first", "nearest"],
+                   help="finger3d: the object at the smallest angle from the index finger's 3-D line from depth "
+                        "(within 12 deg; nearest without depth on the finger); first: the seed's, the first object "
+                        "box the finger's image line enters; nearest: the object whose box centre lies at the "
+                        "smallest angle from the image line (within 12 deg) (default finger3d)")  # fmt: skip
     p.add_argument("--occupancy", default=None, help="occupancy grid (map_server YAML): also where to stand")
     p.add_argument("--robot-pose", default=None, help='robot pose "x y yaw": rank by motion cost, plan a path')  # fmt: skip
     p.add_argument(

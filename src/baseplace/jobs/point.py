@@ -1,7 +1,8 @@
 """The ``point`` job: from an RGB-D frame of a person pointing to the object and where to stand (seed 004).
 
 Seed 004, section 3.1 and Fig. 1b: the operator's hand landmarks give the gesture; on *Point*, the
-line fitted to the index finger selects the first object whose image box it meets; the object's
+index finger selects the object (by default the one its 3-D line from depth aims at; the seed's rule,
+the first object image box its image line meets, with ``selection="first"``); the object's
 position and size come from depth, in the world frame; with an occupancy grid, the ``candidates``
 job (seed 004 Algorithm 1, verified) gives where to stand to pick it up.
 
@@ -54,8 +55,10 @@ class PointJob:
         occupancy: occupancy grid (map_server YAML or loaded): also the candidates to pick the object up.
         robot, arm, map, robot_pose, seed, motion, robustness: as the candidates job's.
         objects: how objects are cut out of the frame (None: defaults).
-        selection: "first" (the seed's: the first image box the line enters) or "nearest" (the
-            object whose centre lies at the smallest angle from the line, within 12 deg).
+        selection: "finger3d" (the object whose centre lies at the smallest angle from the index
+            finger's 3-D line from depth, within 12 deg; "nearest" when the finger has no usable
+            depth), "first" (the seed's: the first image box the line enters) or "nearest" (the
+            object whose box centre lies at the smallest angle from the image line, within 12 deg).
         png: also write a picture here: the image with the hand, the line and the boxes; with a
             grid, the candidates from above (also on exit 3, what was found).
         bag: a ROS recording to read the frame from instead of image files: the colour image
@@ -79,7 +82,7 @@ class PointJob:
     motion: MotionSettings | None = None
     robustness: RobustnessSettings | None = None
     objects: ObjectSettings | None = None
-    selection: str = "first"
+    selection: str = "finger3d"
     png: str | None = None
     bag: str | None = None
     rgb_topic: str | None = None
@@ -112,7 +115,8 @@ class PointReport(Report):
         gesture: ``{"name": Scan | Point | Stop | none, "fingers": {...}}``, or None without a hand.
         objects: every object found: ``position``, ``size`` [m, world], ``box_world``, ``image_box`` [px] ...
         ray_2d: the index-finger line in the image (origin, direction, end, hit, length [px]).
-        ray_3d: the same from the finger's depth in the world frame [m], or None without depth there.
+        ray_3d: the index finger's 3-D line from its front-most depth points, world frame [m], with the
+            object it aims at (``finger3d``'s choice), or None without usable depth on the finger.
         selected: index into ``objects`` of the target, or None.
         object: the target: ``position`` and ``size`` [m], world frame, or None.
         candidates: base placements to pick it up, best first (with a grid), or None.
@@ -259,7 +263,7 @@ def _find(job: PointJob, frame: Any, T_world_camera: np.ndarray, report: PointRe
     """The hand, the gesture, the objects, the selection and the candidates, into ``report``."""
     from baseplace.perception.gestures import classify
     from baseplace.perception.objects import NoSupportPlaneError, detect_objects
-    from baseplace.perception.selection import depth_hole, image_ray, nearest_box, world_ray
+    from baseplace.perception.selection import FINGER3D_MAX_ANGLE_DEG, depth_hole, select
 
     t_load = time.perf_counter()
     hand = _hand_landmarks(job, frame.rgb)
@@ -285,10 +289,9 @@ def _find(job: PointJob, frame: Any, T_world_camera: np.ndarray, report: PointRe
     if gesture.name != "Point":
         raise NoResultError(f"the gesture is {gesture.name}, not Point: nothing is selected", report)
     boxes = np.array([o.image_box for o in objects]).reshape(-1, 2, 2)
-    ray = image_ray(hand[:, :2], boxes, frame.width, frame.height)
-    if job.selection == "nearest":
-        ray = nearest_box(ray, boxes)
-    ray3 = world_ray(hand[:, :2], points, np.array([o.box_world for o in objects]).reshape(-1, 2, 3))
+    K = frame.intrinsics
+    ray, ray3 = select(job.selection, hand[:, :2], boxes, np.array([o.box_world for o in objects]).reshape(-1, 2, 3),
+                       points, T_world_camera, (K.fx, K.fy, K.cx, K.cy), frame.width, frame.height)  # fmt: skip
     report.ray_2d, report.ray_3d = ray.to_json(), None if ray3 is None else ray3.to_json()
     t_select = time.perf_counter()
     report.timings_ms["selection"] = (t_select - t_objects) * 1e3
@@ -300,6 +303,9 @@ def _find(job: PointJob, frame: Any, T_world_camera: np.ndarray, report: PointRe
                 f"({at[0]:.0f}, {at[1]:.0f}): an object there would be unseen by the depth camera (too close, dark or shiny)",
                 report,
             )
+        if job.selection == "finger3d" and ray3 is not None:
+            raise NoResultError(f"the finger's 3-D line passes more than {FINGER3D_MAX_ANGLE_DEG:g} deg from "
+                                f"each of the {len(objects)} objects' centres", report)  # fmt: skip
         raise NoResultError(
             f"the pointing line meets none of the {len(objects)} objects before the image border", report
         )

@@ -218,7 +218,7 @@ class PointRequest(RobustnessFields):
         max_length=21,
         description="21 MediaPipe landmarks [x, y, z]; [] no hand; none: MediaPipe's hand model",
     )
-    selection: Literal["first", "nearest"] = "first"
+    selection: Literal["finger3d", "first", "nearest"] = "finger3d"
     scene_id: str | None = Field(None, max_length=64, description="a scene with a grid: also the candidates")
     robot_pose: str | None = Field(None, max_length=100, description='robot pose "x y yaw"')
     robot: str = Field("tiago", max_length=64)
