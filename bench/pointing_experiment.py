@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 from baseplace_experiments.pointing_experiment import SEEDS, run_scene, summarize
-from baseplace_experiments.results import RunClock, write_results
+from baseplace_experiments.results import RunClock, fixed_protocol, write_results
 
 ROOT = Path(__file__).resolve().parents[1]
 PROTOCOL = "docs/protocols/pointing_v2.md"
@@ -36,6 +36,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--results", default=None, help="results JSON (bench/results/...)")
     parser.add_argument("--limit", type=int, default=None, help="only the first N seeds (a quick check)")
     args = parser.parse_args(argv)
+    protocol_file = fixed_protocol(PROTOCOL, args.split)  # before any work: a held-out run needs it clean
     clock = RunClock()
     seeds = list(SEEDS.seeds(args.split))[: args.limit]
     rows = []
@@ -48,7 +49,7 @@ def main(argv: list[str] | None = None) -> int:
     print(json.dumps(result["summary"], indent=1))
     if args.results:
         write_results(args.results, result, clock, seeds=SEEDS, split=args.split, used_seeds=seeds,
-                      protocol=f"{PROTOCOL} at commit {result['protocol_commit']}")  # fmt: skip
+                      protocol_file=protocol_file)  # fmt: skip
     return 0
 
 
