@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from baseplace.perception.selection import border_distance, depth_hole, image_ray, nearest_box, world_ray
+from baseplace.perception.selection import border_distance, depth_hole, image_ray, nearest_box
 
 
 def _finger(tip, direction, step=10.0, dim=2):
@@ -35,20 +35,6 @@ def test_the_border_distance_in_every_direction():
     assert border_distance([10, 10], [0, 1], 100, 50) == pytest.approx(39.5)
     d = np.array([1.0, 1.0]) / np.sqrt(2)
     assert border_distance([10, 10], d, 100, 50) == pytest.approx(39.5 * np.sqrt(2))
-
-
-def test_the_3d_ray_from_the_finger_depth_meets_the_world_box_and_is_none_without_depth():
-    H, W = 60, 80
-    points = np.full((H, W, 3), np.nan)
-    L = _finger([40, 30], [1, 0], step=5)
-    for i in (5, 6, 7, 8):  # the finger's points: along +x at 1 m height, 2 cm apart
-        u, v = L[i]
-        points[int(v) - 2 : int(v) + 3, int(u) - 2 : int(u) + 3] = [0.5 + (u - 40) * 0.004, 0.0, 1.0]
-    ray = world_ray(L, points, [[[0.8, -0.1, 0.9], [0.9, 0.1, 1.1]], [[0.3, -0.1, 0.9], [0.4, 0.1, 1.1]]])
-    assert ray is not None and ray.hit == 0 and ray.length == pytest.approx(0.3, abs=1e-6)
-    assert ray.direction == pytest.approx([1, 0, 0], abs=1e-9)
-    points[..., :] = np.nan
-    assert world_ray(L, points, [[[0.8, -0.1, 0.9], [0.9, 0.1, 1.1]]]) is None
 
 
 def test_the_longest_run_of_the_line_without_depth():

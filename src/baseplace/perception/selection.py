@@ -21,11 +21,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from baseplace.placement.pointing import INDEX_FINGER, pointing_ray, ray_box_distances
+from baseplace.placement.pointing import pointing_ray, ray_box_distances
 
 FloatArray = NDArray[np.float64]
-MIN_FINGER_LENGTH = 0.01
-"""The 3-D ray needs the index finger's MCP and tip at least this far apart [m]."""
 FINGER_FROM = 6
 """The 3-D finger line is fitted from this landmark's projection (6, the PIP) to the tip: nearer the
 knuckles the curled fingers lie beside and in front of the index finger."""
@@ -146,62 +144,9 @@ def nearest_box(ray: Ray, image_boxes: ArrayLike, max_angle_deg: float = NEAREST
     return Ray(ray.origin, ray.direction, best, float(distance[best] * cos[best]))
 
 
-def finger_points(landmarks_px: ArrayLike, points: NDArray[np.float64], window: int = 2) -> FloatArray | None:
-    """The index finger's 3-D points (4, 3) from an organised cloud (H, W, 3), or None.
-
-    Each of MCP, PIP, DIP and TIP is the median of the valid points within ``window`` px of its
-    landmark; None when one of them has no depth.
-    """
-    L = np.asarray(landmarks_px, dtype=float)
-    H, W = points.shape[:2]
-    out = []
-    for i in INDEX_FINGER:
-        u, v = L[i, 0], L[i, 1]
-        r, c = round(v), round(u)
-        if not (0 <= r < H and 0 <= c < W):
-            return None
-        patch = points[max(r - window, 0) : r + window + 1, max(c - window, 0) : c + window + 1].reshape(
-            -1, 3
-        )
-        patch = patch[np.all(np.isfinite(patch), axis=1)]
-        if len(patch) == 0:
-            return None
-        out.append(np.median(patch, axis=0))
-    return np.asarray(out)
-
-
-def world_ray(
-    landmarks_px: ArrayLike, points_world: NDArray[np.float64], boxes_world: ArrayLike
-) -> Ray | None:
-    """The 3-D ray through the index finger's depth points, and the world box it enters first.
-
-    Args:
-        landmarks_px: (21, 2) hand landmarks [px].
-        points_world: (H, W, 3) the frame's world points [m], NaN without depth.
-        boxes_world: (M, 2, 3) objects' world boxes [m].
-
-    Returns:
-        The ray, or None when the finger has no depth or its points are closer than
-        :data:`MIN_FINGER_LENGTH` (the finger points along the camera's view).
-    """
-    finger = finger_points(landmarks_px, points_world)
-    if finger is None or np.linalg.norm(finger[-1] - finger[0]) < MIN_FINGER_LENGTH:
-        return None
-    full = np.zeros((21, 3))
-    full[list(INDEX_FINGER)] = finger
-    origin, direction = pointing_ray(full)
-    boxes = np.asarray(boxes_world, dtype=float).reshape(-1, 2, 3)
-    if len(boxes):
-        t = ray_box_distances(origin, direction, boxes)
-        best = int(np.argmin(t))
-        if np.isfinite(t[best]):
-            return Ray(origin, direction, best, float(t[best]))
-    return Ray(origin, direction, None, float("inf"))
-
-
 def front_points(landmarks_px: ArrayLike, points: NDArray[np.float64], viewpoint: ArrayLike,
                  half_width: int = FRONT_HALF_WIDTH_PX) -> tuple[FloatArray, FloatArray]:  # fmt: skip
-    """The front-most depth point across the index finger at each pixel of its image line, MCP to tip.
+    """The front-most depth point across the index finger at each pixel of its image line, PIP to tip.
 
     The finger lies in front of what is behind it (the curled fingers, the table): across the
     finger's 2-D line (landmarks 5-8, :func:`~baseplace.placement.pointing.pointing_ray`), within
@@ -425,10 +370,8 @@ __all__ = [
     "border_distance",
     "depth_hole",
     "finger_line",
-    "finger_points",
     "front_points",
     "image_ray",
     "nearest_box",
     "select",
-    "world_ray",
 ]
