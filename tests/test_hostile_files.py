@@ -58,9 +58,10 @@ print(json.dumps({"outcome": outcome, "seconds": elapsed, "peak_mb": rss("VmHWM"
 """
 
 
-def probe(kind: str, path: Path) -> dict[str, object]:
+def probe(kind: str, path: Path, **env: str) -> dict[str, object]:
+    """Load ``path`` as ``kind`` in a fresh process (``env`` added to its environment): outcome, seconds, peak_mb."""
     proc = subprocess.run([sys.executable, "-c", _PROBE, kind, str(path)], capture_output=True, text=True,
-                          timeout=300, env={**os.environ, "PYTHONPATH": SRC})  # fmt: skip
+                          timeout=300, env={**os.environ, "PYTHONPATH": SRC, **env})  # fmt: skip
     assert proc.returncode == 0, proc.stderr[-3000:]
     return json.loads(proc.stdout.strip().splitlines()[-1])  # type: ignore[no-any-return]
 

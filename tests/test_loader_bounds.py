@@ -7,34 +7,11 @@ memory (``VmHWM`` minus its resident set after the imports) is the oracle, as in
 
 from __future__ import annotations
 
-import json
-import os
 import subprocess
-import sys
 from pathlib import Path
 
+from test_hostile_files import probe
 from test_security import _env, _robot_dir, cli, one_line
-
-SRC = str(Path(__file__).resolve().parents[1] / "src")
-
-_PROBE = """
-import json, sys, time
-import baseplace.terrain.io, pypcd4
-
-def rss(field):
-    for line in open("/proc/self/status"):
-        if line.startswith(field):
-            return int(line.split()[1]) / 1024.0
-
-base = rss("VmRSS")
-from baseplace.errors import InputError
-t0 = time.perf_counter()
-try:
-    outcome = f"loaded {len(baseplace.terrain.io.load_cloud(sys.argv[1]).points)} points"
-except InputError as exc:
-    outcome = "error: " + str(exc)
-print(json.dumps({"outcome": outcome, "seconds": time.perf_counter() - t0, "peak_mb": rss("VmHWM") - base}))
-"""
 
 
 def _with_srdf(tmp_path: Path, text: str) -> Path:
@@ -71,10 +48,7 @@ def test_ascii_pcd_rows_beyond_its_points_are_refused_before_they_are_read(tmp_p
     path = tmp_path / "rows.pcd"
     path.write_text(header + "0 0 0\n" * 4_000_000)  # 24 MB: 96 MB of rows for a 1-point header
     cap_mb = 64
-    proc = subprocess.run([sys.executable, "-c", _PROBE, str(path)], capture_output=True, text=True, timeout=300,
-                          env={**os.environ, "PYTHONPATH": SRC, "BASEPLACE_MAX_MEMORY_MB": str(cap_mb)})  # fmt: skip
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    result = json.loads(proc.stdout.strip().splitlines()[-1])
+    result = probe("cloud", path, BASEPLACE_MAX_MEMORY_MB=str(cap_mb))
     print(result)
     assert result["peak_mb"] < cap_mb / 2, result
     assert (
