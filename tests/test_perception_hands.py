@@ -39,6 +39,35 @@ def test_mediapipe_finds_the_hand_marked_thumb_tip_in_real_photographs(photo):
     assert np.linalg.norm(landmarks[4, :2] - THUMB_TIPS[photo]) < 0.05 * image.shape[1]
 
 
+def test_the_model_is_made_once_and_carries_nothing_from_one_image_to_the_next(monkeypatch):
+    """One landmarker per process (no 60 ms model start per /point request), and each image is its own.
+
+    Oracle for "its own": a landmarker made fresh for each photograph gives the same landmarks.
+    """
+    from mediapipe.python.solutions import hands as mp_hands
+
+    from baseplace.perception import hands
+
+    made = []
+    real = mp_hands.Hands
+
+    def counting(*args, **kwargs):
+        made.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(hands, "_MODEL", None, raising=False)
+    monkeypatch.setattr(mp_hands, "Hands", counting)
+    photos = sorted(THUMB_TIPS)
+    images = {p: load_rgb(HANDS / p) for p in photos}
+    kept = [detect_hand(images[p]) for p in [*photos, *photos]]
+    assert len(made) == 1
+    for p, landmarks in zip([*photos, *photos], kept, strict=True):
+        monkeypatch.setattr(hands, "_MODEL", None)  # a fresh landmarker for this photograph alone
+        fresh = detect_hand(images[p])
+        assert landmarks is not None and fresh is not None
+        np.testing.assert_allclose(landmarks, fresh, atol=1e-3)
+
+
 def test_point_without_landmarks_runs_the_hand_model_on_a_real_photograph(tmp_path):
     """Photograph -> MediaPipe's landmarks -> gesture through the CLI, in a process of its own.
 
