@@ -134,7 +134,7 @@ def _place(a: argparse.Namespace, progress: Progress) -> Any:
 
     motion, robustness = motion_and_robustness(vars(a))
     job.settings = PlaceSettings(strategy=a.strategy, placements=a.placements, tries=a.tries, resolution=a.resolution,
-                                 motion=motion, robustness=robustness)  # fmt: skip
+                                 motion=motion, robustness=robustness, clearance=a.clearance)  # fmt: skip
     return place.place_job(job, progress)
 
 
@@ -143,7 +143,7 @@ def _explain(a: argparse.Namespace, progress: Progress) -> Any:
 
     from baseplace.placement.pipeline import PlaceSettings
 
-    settings = PlaceSettings(resolution=a.resolution)
+    settings = PlaceSettings(resolution=a.resolution, clearance=a.clearance)
     if a.no_motion_check:
         settings = replace(settings, motion=None)
     job = explain.ExplainJob(
@@ -355,6 +355,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--obstacle", action="append", default=None, help=OBSTACLE_HELP)
     p.add_argument("--floor", type=finite_float, default=None,
                    help="add a floor plane at this height [m] (z up) under and around a cloud that shows none")  # fmt: skip
+    p.add_argument("--clearance", type=finite_float, default=None, metavar="METRES",
+                   help="keep this far [m] from the scene near the grasped object (default: 3 sigma of the "
+                        "support plane's residuals, at least 3 mm; 0.01 without a plane)")  # fmt: skip
     _add_motion_and_robustness_arguments(p)
     _add_degrees_argument(p)
 
@@ -379,6 +382,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--obstacle", action="append", default=None, help=OBSTACLE_HELP)
     p.add_argument("--floor", type=finite_float, default=None,
                    help="add a floor plane at this height [m] (z up) under and around a cloud that shows none")  # fmt: skip
+    p.add_argument("--clearance", type=finite_float, default=None, metavar="METRES",
+                   help="keep this far [m] from the scene near the grasped object (default: 3 sigma of the "
+                        "support plane's residuals, at least 3 mm; 0.01 without a plane)")  # fmt: skip
     p.add_argument("--resolution", type=finite_float, default=None,
                    help="height-map cell [m] (default: from the cloud, as place)")  # fmt: skip
     p.add_argument(
