@@ -6,6 +6,8 @@ robot's collision meshes loaded here from the URDF, never the code's own collisi
 
 from __future__ import annotations
 
+import json
+
 import coal
 import numpy as np
 import pinocchio as pin
@@ -15,7 +17,9 @@ from baseplace.errors import InputError
 from baseplace.geometry.poses import pose_from_xyz_rpy
 from baseplace.placement.pipeline import PlaceSettings, place, with_floor
 from baseplace.robots.ik import DampedLeastSquaresIK
+from baseplace.reachability.storage import save_map
 from baseplace.world.grasped_object import GraspedObject
+from conftest import run_cli
 
 GRASP = pose_from_xyz_rpy([0.75, -0.15, 0.85, 0.0, 0.0, 0.0])  # side grasp, base at the origin
 TABLE_XY = ((0.45, 1.25), (-0.6, 0.45))
@@ -195,3 +199,29 @@ def test_a_link_5mm_into_the_neighbour_is_refused_naming_the_link(tiago, tiago_m
 def test_a_bad_clearance_is_an_input_error(bad):
     with pytest.raises(InputError, match="clearance"):
         PlaceSettings(clearance=bad)
+
+
+@pytest.mark.parametrize("bad", ["-0.001", "nan", "inf", "0.2"])
+def test_cli_bad_clearance_exits_2_with_one_line(tmp_path, bad):
+    cloud = tmp_path / "cloud.npy"
+    np.save(cloud, np.zeros((10, 3)))
+    out = run_cli("place", "--cloud", str(cloud), "--target", "0.75 -0.15 0.85 0 0 0", f"--clearance={bad}")
+    assert out.returncode == 2
+    line = out.stderr.strip()
+    assert "\n" not in line and "clearance" in line
+
+
+def test_cli_reports_the_clearance_and_how_it_was_derived(tiago_map, grasp_scene, tmp_path):
+    _, _, point, top, y = grasp_scene
+    cloud, map_file = tmp_path / "scene.npy", tmp_path / "tiago.rmap"
+    np.save(cloud, _cloud(point, top, y, np.random.default_rng(7)))
+    save_map(tiago_map, map_file)
+    common = ["place", "--cloud", str(cloud), "--map", str(map_file), "--target", "0.75 -0.15 0.85 0 0 0",
+              "--tries", "60", "--json"]  # fmt: skip
+    derived = json.loads(run_cli(*common).stdout)
+    assert derived["exit_code"] == 0 and derived["placements"]
+    assert derived["clearance"]["derived"].startswith("3 sigma of the support plane's residuals (sigma 3.")
+    assert 0.0085 <= derived["clearance"]["metres"] <= 0.0095  # 3 x 3 mm
+    given = json.loads(run_cli(*common, "--clearance", "0.03").stdout)
+    # 3 cm: more than the hand's 16 mm over the table, so the grasp is refused, and says why
+    assert given["clearance"] == {"metres": 0.03, "derived": "given"} and given["exit_code"] == 3
