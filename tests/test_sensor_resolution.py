@@ -16,8 +16,8 @@ import pytest
 from baseplace.errors import InputError
 from baseplace.geometry.poses import pose_from_xyz_rpy
 from baseplace.placement.pipeline import PlaceSettings, place, with_floor
-from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.reachability.storage import save_map
+from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.world.grasped_object import GraspedObject
 from conftest import run_cli
 

@@ -129,7 +129,9 @@ def _key_sets(cells: list[VoxelMap]) -> dict[float, set[tuple[int, ...]]]:
 def _in_hull(xy: np.ndarray, hull: np.ndarray) -> np.ndarray:
     """Oracle: inside the convex polygon (H, 2), either orientation (cross products of every edge)."""
     e = np.roll(hull, -1, axis=0) - hull
-    cross = e[None, :, 0] * (xy[:, None, 1] - hull[None, :, 1]) - e[None, :, 1] * (xy[:, None, 0] - hull[None, :, 0])
+    cross = e[None, :, 0] * (xy[:, None, 1] - hull[None, :, 1]) - e[None, :, 1] * (
+        xy[:, None, 0] - hull[None, :, 0]
+    )
     return np.all(cross >= -1e-9, axis=1) | np.all(cross <= 1e-9, axis=1)
 
 
