@@ -225,3 +225,14 @@ def test_cli_reports_the_clearance_and_how_it_was_derived(tiago_map, grasp_scene
     given = json.loads(run_cli(*common, "--clearance", "0.03").stdout)
     # 3 cm: more than the hand's 16 mm over the table, so the grasp is refused, and says why
     assert given["clearance"] == {"metres": 0.03, "derived": "given"} and given["exit_code"] == 3
+
+
+@pytest.mark.parametrize("bad", [-0.001, float("nan"), float("inf"), 0.2])
+def test_service_request_bounds_the_clearance(bad):
+    pydantic = pytest.importorskip("pydantic")
+    from baseplace.serve.app import PlaceRequest
+
+    ok = PlaceRequest(scene_id="s", targets=["0.75 -0.15 0.85 0 0 0"], clearance=0.005)
+    assert ok.clearance == 0.005
+    with pytest.raises(pydantic.ValidationError, match="clearance"):
+        PlaceRequest(scene_id="s", targets=["0.75 -0.15 0.85 0 0 0"], clearance=bad)

@@ -16,6 +16,11 @@ its points lies in both the voxel and the slab, so the model stays conservative 
 and it is never higher than the voxel nor than the slab. Every other voxel stays as it is. When
 the fit is poor (too few points, a 99th percentile of the residuals above :data:`MAX_RESIDUAL`, a
 plane tilted more than :data:`MAX_TILT`) nothing changes.
+
+The checks of ``place`` no longer cut voxels down to the slab (issue 25): they take the fit's plane
+as an exact plane and its noise (:attr:`SupportSlab.sigma`) for the clearance
+(:mod:`baseplace.world.sensor_resolution`). :func:`with_support_slab` stays for the experiments
+that measured the slab (``baseplace_experiments.execution_experiment``).
 """
 
 from __future__ import annotations
