@@ -18,7 +18,11 @@ from baseplace.geometry.poses import pose_from_xyz_rpy
 from baseplace.placement.pipeline import PlaceSettings, place, with_floor
 from baseplace.reachability.storage import save_map
 from baseplace.robots.ik import DampedLeastSquaresIK
-from baseplace.world.grasped_object import GraspedObject
+from baseplace.terrain.voxels import VoxelMap
+from baseplace.world.environment import Environment, contact_groups
+from baseplace.world.grasped_object import GraspedObject, find_grasped_object
+from baseplace.world.sensor_resolution import SupportPlane
+from baseplace.world.support_plane import SUPPORT_PLANE
 from conftest import run_cli
 
 GRASP = pose_from_xyz_rpy([0.75, -0.15, 0.85, 0.0, 0.0, 0.0])  # side grasp, base at the origin
@@ -236,3 +240,24 @@ def test_service_request_bounds_the_clearance(bad):
     assert ok.clearance == 0.005
     with pytest.raises(pydantic.ValidationError, match="clearance"):
         PlaceRequest(scene_id="s", targets=["0.75 -0.15 0.85 0 0 0"], clearance=bad)
+
+
+def test_the_clearance_decides_whether_the_hand_16mm_over_the_plane_touches_it(tiago, grasp_scene):
+    """The security margin reaches the exact plane: the hand 16 mm over the true top (the oracle)
+    touches ``support_plane`` at a 20 mm clearance and not at 10 mm."""
+    _, q_full, point, top, y = grasp_scene
+    cloud = _cloud(point, top, y, np.random.default_rng(7))
+    obj = find_grasped_object(cloud, point)
+    assert obj is not None
+    voxels = VoxelMap.from_points(cloud)
+    groups, object_group = contact_groups(voxels, voxels, obj, cloud)
+    assert isinstance(groups[SUPPORT_PLANE], SupportPlane)
+    arm, hand = tiago.arm(), _hand_links(tiago)
+
+    def hand_on_plane(clearance: float) -> set[str]:
+        env = Environment(tiago, groups, grasped=object_group, clearance=clearance)
+        contacts = env.contacts_arm(arm, arm.from_pinocchio(q_full), np.eye(4))
+        return {link for link, what in contacts if link in hand and what == SUPPORT_PLANE}
+
+    assert hand_on_plane(0.010) == set()
+    assert "hand_little_flex_3_link" in hand_on_plane(0.020)
