@@ -15,7 +15,7 @@ import pytest
 
 from baseplace.errors import InputError
 from baseplace.geometry.poses import pose_from_xyz_rpy
-from baseplace.placement.pipeline import PlaceSettings, place, with_floor
+from baseplace.placement.pipeline import PlaceSettings, object_checks, place, with_floor
 from baseplace.reachability.storage import save_map
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.terrain.voxels import VoxelMap
@@ -261,3 +261,16 @@ def test_the_clearance_decides_whether_the_hand_16mm_over_the_plane_touches_it(t
 
     assert hand_on_plane(0.010) == set()
     assert "hand_little_flex_3_link" in hand_on_plane(0.020)
+
+
+def test_candidates_checks_keep_the_same_clearance(tiago, grasp_scene):
+    """``candidates`` (object_checks) derives the clearance as ``place`` does, or takes the given one."""
+    _, _, point, top, y = grasp_scene
+    cloud = _cloud(point, top, y, np.random.default_rng(7))
+    obj = find_grasped_object(cloud, point)
+    derived = object_checks(tiago, "arm", None, cloud, obj, None)
+    assert 0.0085 <= derived.environment.clearance <= 0.0095 and derived.clearance_note.startswith("3 sigma")
+    given = object_checks(tiago, "arm", None, cloud, obj, None, clearance=0.02)
+    assert given.environment.clearance == 0.02 and given.clearance_note == "given"
+    with pytest.raises(InputError, match="clearance"):
+        object_checks(tiago, "arm", None, cloud, obj, None, clearance=-0.01)

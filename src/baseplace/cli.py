@@ -166,7 +166,7 @@ def _explain(a: argparse.Namespace, progress: Progress) -> Any:
 def _candidates(a: argparse.Namespace, progress: Progress) -> Any:
     job = candidates.CandidatesJob(a.object, a.occupancy, _cloud(a), a.robot_pose, a.method, a.robot, a.arm, a.map,
                                    a.standoff, a.seed, a.object_shape, None, None, a.png, a.mcap,
-                                   obstacles=a.obstacle or [])  # fmt: skip
+                                   obstacles=a.obstacle or [], clearance=a.clearance)  # fmt: skip
     job.check_outputs()  # before the settings' imports (seconds)
     job.motion, job.robustness = motion_and_robustness(vars(a))
     return candidates.candidates_job(job, progress)
@@ -417,6 +417,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--object-shape", default="auto",
                    help=OBJECT_HELP.replace("first target's grasp point", "--object position"))  # fmt: skip
     p.add_argument("--obstacle", action="append", default=None, help=OBSTACLE_HELP)
+    p.add_argument("--clearance", type=finite_float, default=None, metavar="METRES",
+                   help="keep this far [m] from the scene near the object (default: as place's)")  # fmt: skip
     _add_motion_and_robustness_arguments(p)
     _add_degrees_argument(p)
 

@@ -277,6 +277,7 @@ class CandidatesReport(Report):
         path: the base path (K, 3) to the first reachable candidate, or None.
         object_shape: requested and allowed object shape.
         settings: the radial search's settings.
+        clearance: as ``place``'s (:class:`PlaceReport`).
     """
 
     kind: ClassVar[str] = "candidates"
@@ -288,6 +289,7 @@ class CandidatesReport(Report):
     path: list[list[float]] | None = None
     object_shape: dict[str, Any] = field(default_factory=dict)
     settings: dict[str, Any] = field(default_factory=dict)
+    clearance: dict[str, Any] | None = None
 
 
 @dataclass

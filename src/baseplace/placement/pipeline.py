@@ -342,10 +342,13 @@ class ObjectChecks:
         environment: the whole robot against the cloud's voxels and the obstacles; only the hand
             may touch the grasped object.
         motion: the reaching-motion check, or None.
+        clearance_note: how the environment's clearance was chosen (see
+            :attr:`PlacementResult.clearance_note`).
     """
 
     environment: Environment
     motion: MotionChecker | None
+    clearance_note: str = ""
 
 
 def object_checks(
@@ -375,21 +378,21 @@ def object_checks(
     """
     check_clearance(clearance)
 
-    def environments() -> tuple[Environment, dict[str, Group], Group | None]:
+    def environments() -> tuple[Environment, dict[str, Group], Group | None, str]:
         voxels = VoxelMap(0.025, np.zeros((0, 3), np.int64))
         if points is not None:
             voxels = VoxelMap.from_points(points) if cache is None else cache.shared(
                 ("voxels", 0.025), lambda: VoxelMap.from_points(points))  # fmt: skip
         groups, object_voxels = contact_groups(voxels, voxels, grasped, points)
-        kept = clearance_of(groups, clearance)[0] if grasped is not None else 0.0
+        kept = clearance_of(groups, clearance) if grasped is not None else NO_FINE_SCENE
         environment = Environment(robot, groups, grasped=object_voxels, hand_arm=hand_arm, shapes=obstacles,
-                                  clearance=kept)  # fmt: skip
-        return environment, groups, object_voxels
+                                  clearance=kept[0])  # fmt: skip
+        return environment, groups, object_voxels, kept[1]
 
     if cache is None:
-        environment, groups, object_voxels = environments()
+        environment, groups, object_voxels, note = environments()
     else:  # per robot, arm and grasped object, kept for the scene's next queries
-        environment, groups, object_voxels = cache.per_object(
+        environment, groups, object_voxels, note = cache.per_object(
             ("candidates", robot, hand_arm, object_key(grasped), obstacles_key(obstacles), clearance),
             environments,
         )
@@ -399,7 +402,7 @@ def object_checks(
         transit = transit_environment(robot, groups, object_voxels, obstacles, environment.clearance)
         checker = MotionChecker(robot, arm, environment if transit is None else transit,
                                 None if transit is None else environment, motion)  # fmt: skip
-    return ObjectChecks(environment, checker)
+    return ObjectChecks(environment, checker, note)
 
 
 def scene_environment(

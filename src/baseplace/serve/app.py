@@ -181,6 +181,8 @@ class CandidatesRequest(RobustnessFields):
     robot: str = Field("tiago", max_length=64)
     arm: str | None = Field(None, max_length=64)
     standoff: float | None = Field(None, ge=0.0, le=1.0)
+    clearance: float | None = Field(None, ge=0.0, le=0.1, allow_inf_nan=False,
+                                    description="as /place's: keep this far [m] from the scene near the object")  # fmt: skip
     seed: int = SEED
     object_shape: str = Field("auto", max_length=200)
     use_cloud: bool = Field(True, description="verify against the scene's cloud (else the grid alone)")

@@ -176,7 +176,7 @@ def candidates(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[s
                                             robot, r["arm"], rmap, r["standoff"], r["seed"],
                                             r["object_shape"], *motion_and_robustness(r),
                                             cache=scene.cache if r["use_cloud"] else None,
-                                            obstacles=_obstacles(scene, r)))  # fmt: skip
+                                            obstacles=_obstacles(scene, r), clearance=r["clearance"]))  # fmt: skip
 
     return _with_scene(run_job("candidates", req, job, str(state.folder)), scene)
 
