@@ -134,7 +134,7 @@ def _place(a: argparse.Namespace, progress: Progress) -> Any:
 
     motion, robustness = motion_and_robustness(vars(a))
     job.settings = PlaceSettings(strategy=a.strategy, placements=a.placements, tries=a.tries, resolution=a.resolution,
-                                 motion=motion, robustness=robustness)  # fmt: skip
+                                 motion=motion, robustness=robustness, clearance=a.clearance)  # fmt: skip
     return place.place_job(job, progress)
 
 
@@ -143,7 +143,7 @@ def _explain(a: argparse.Namespace, progress: Progress) -> Any:
 
     from baseplace.placement.pipeline import PlaceSettings
 
-    settings = PlaceSettings(resolution=a.resolution)
+    settings = PlaceSettings(resolution=a.resolution, clearance=a.clearance)
     if a.no_motion_check:
         settings = replace(settings, motion=None)
     job = explain.ExplainJob(
@@ -166,7 +166,7 @@ def _explain(a: argparse.Namespace, progress: Progress) -> Any:
 def _candidates(a: argparse.Namespace, progress: Progress) -> Any:
     job = candidates.CandidatesJob(a.object, a.occupancy, _cloud(a), a.robot_pose, a.method, a.robot, a.arm, a.map,
                                    a.standoff, a.seed, a.object_shape, None, None, a.png, a.mcap,
-                                   obstacles=a.obstacle or [])  # fmt: skip
+                                   obstacles=a.obstacle or [], clearance=a.clearance)  # fmt: skip
     job.check_outputs()  # before the settings' imports (seconds)
     job.motion, job.robustness = motion_and_robustness(vars(a))
     return candidates.candidates_job(job, progress)
@@ -355,6 +355,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--obstacle", action="append", default=None, help=OBSTACLE_HELP)
     p.add_argument("--floor", type=finite_float, default=None,
                    help="add a floor plane at this height [m] (z up) under and around a cloud that shows none")  # fmt: skip
+    p.add_argument("--clearance", type=finite_float, default=None, metavar="METRES",
+                   help="keep this far [m] from the scene near the grasped object (default: 3 sigma of the "
+                        "support plane's residuals, at least 3 mm; 0.01 without a plane)")  # fmt: skip
     _add_motion_and_robustness_arguments(p)
     _add_degrees_argument(p)
 
@@ -379,6 +382,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--obstacle", action="append", default=None, help=OBSTACLE_HELP)
     p.add_argument("--floor", type=finite_float, default=None,
                    help="add a floor plane at this height [m] (z up) under and around a cloud that shows none")  # fmt: skip
+    p.add_argument("--clearance", type=finite_float, default=None, metavar="METRES",
+                   help="keep this far [m] from the scene near the grasped object (default: 3 sigma of the "
+                        "support plane's residuals, at least 3 mm; 0.01 without a plane)")  # fmt: skip
     p.add_argument("--resolution", type=finite_float, default=None,
                    help="height-map cell [m] (default: from the cloud, as place)")  # fmt: skip
     p.add_argument(
@@ -411,6 +417,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--object-shape", default="auto",
                    help=OBJECT_HELP.replace("first target's grasp point", "--object position"))  # fmt: skip
     p.add_argument("--obstacle", action="append", default=None, help=OBSTACLE_HELP)
+    p.add_argument("--clearance", type=finite_float, default=None, metavar="METRES",
+                   help="keep this far [m] from the scene near the object (default: as place's)")  # fmt: skip
     _add_motion_and_robustness_arguments(p)
     _add_degrees_argument(p)
 

@@ -76,6 +76,8 @@ class CandidatesJob:
         robustness: the robustness score and ranking (None: defaults).
         png, mcap: also write a plot / an MCAP recording here.
         obstacles: collision objects given by hand, as ``place``'s (box, cylinder or mesh file).
+        clearance: as ``place``'s (:attr:`~baseplace.placement.pipeline.PlaceSettings.clearance`;
+            None: derived).
         cache: a :class:`~baseplace.placement.scene_cache.SceneCache` of ``cloud.points``: the
             cloud's voxels and, per grasped object, the collision environments kept between
             queries (the service).
@@ -98,6 +100,7 @@ class CandidatesJob:
     mcap: str | None = None
     cache: SceneCache | None = field(default=None, repr=False, compare=False)
     obstacles: Sequence[str] = ()
+    clearance: float | None = None
 
     def echo(self) -> dict[str, Any]:
         """The inputs as given."""
@@ -110,7 +113,7 @@ class CandidatesJob:
             "standoff": self.standoff, "seed": self.seed, "object_shape": self.object_shape,
             "motion_check": self.motion is not None,
             "rank": "reachability" if self.robustness is None else self.robustness.rank,
-            "obstacles": list(self.obstacles),
+            "obstacles": list(self.obstacles), "clearance": self.clearance,
         }  # fmt: skip
 
     def check_outputs(self) -> tuple[Path | None, Path | None]:
@@ -196,7 +199,8 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
     if shape == "auto" and points is not None:
         grasped = find_grasped_object(points, p_o) if cache is None else cache.grasped_object(p_o)
     held = grasped if isinstance(grasped, GraspedObject) else None
-    checks = object_checks(robot, rmap.info.arm, job.arm, points, held, job.motion, cache, obstacles)
+    checks = object_checks(robot, rmap.info.arm, job.arm, points, held, job.motion, cache, obstacles,
+                           job.clearance)  # fmt: skip
     grasps = grasp_poses(p_o, n=16, top_down=True, standoff=standoff, approach_axis=arm.approach_axis)
     t_search = time.perf_counter()
     found = search_around_object(robot, rmap, p_o, grasps, "irm" if job.method == "irm" else "radial", checks,
@@ -214,6 +218,7 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
                       "allowed": grasped.to_json() if isinstance(grasped, GraspedObject) else None},
         settings={"r_r": settings.r_r, "d_min": settings.d_min, "d_max": round(settings.d_max, 4),
                   "theta": round(settings.theta, 5), "k_obs": settings.k_obs, "grasp_standoff": standoff},
+        clearance={"metres": round(checks.environment.clearance, 5), "derived": checks.clearance_note},
     )  # fmt: skip
     if png is not None:
         from baseplace.viz.candidates import plot_candidates

@@ -283,6 +283,7 @@ def place_job(job: PlaceJob, progress: Progress | None = None) -> PlaceReport:
         object={"requested": job.object, "found": result.grasped_note,
                 "allowed": None if result.grasped is None else result.grasped.to_json()},
         floor=job.floor, regions=len(result.terrain.segmentation.regions),
+        clearance={"metres": round(result.clearance, 5), "derived": result.clearance_note},
     )  # fmt: skip
     report.outputs.update(map_output(chosen))
     if png is not None:

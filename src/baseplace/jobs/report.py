@@ -246,6 +246,8 @@ class PlaceReport(Report):
         object: the grasped object: requested, found, allowed.
         floor: the added floor height [m] or None.
         regions: number of planar regions.
+        clearance: the clearance kept from the scene near the grasped object: ``metres`` and how
+            it was ``derived`` ("given", "3 sigma of the support plane's residuals (...)", "default: ...").
     """
 
     kind: ClassVar[str] = "place"
@@ -258,6 +260,7 @@ class PlaceReport(Report):
     object: dict[str, Any] = field(default_factory=dict)
     floor: float | None = None
     regions: int = 0
+    clearance: dict[str, Any] | None = None
 
 
 @dataclass
@@ -274,6 +277,7 @@ class CandidatesReport(Report):
         path: the base path (K, 3) to the first reachable candidate, or None.
         object_shape: requested and allowed object shape.
         settings: the radial search's settings.
+        clearance: as ``place``'s (:class:`PlaceReport`).
     """
 
     kind: ClassVar[str] = "candidates"
@@ -285,6 +289,7 @@ class CandidatesReport(Report):
     path: list[list[float]] | None = None
     object_shape: dict[str, Any] = field(default_factory=dict)
     settings: dict[str, Any] = field(default_factory=dict)
+    clearance: dict[str, Any] | None = None
 
 
 @dataclass

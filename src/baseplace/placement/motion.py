@@ -37,9 +37,9 @@ from baseplace.geometry.poses import FloatArray, invert_transforms
 from baseplace.placement import deadline
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Arm, Robot
-from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import GRASPED, Environment
 from baseplace.world.obstacles import Obstacle
+from baseplace.world.sensor_resolution import Group, group_size
 
 
 def stowed_configuration(robot: Robot, arm: Arm) -> FloatArray:
@@ -65,18 +65,23 @@ def approach_axis(arm: Arm) -> FloatArray:
 
 
 def transit_environment(
-    robot: Robot, groups: Mapping[str, VoxelMap], grasped: VoxelMap | None, shapes: Sequence[Obstacle] = ()
+    robot: Robot,
+    groups: Mapping[str, Group],
+    grasped: Group | None,
+    shapes: Sequence[Obstacle] = (),
+    clearance: float = 0.0,
 ) -> Environment | None:
     """The collision model of the transit to the pre-grasp, where nothing may be touched.
 
     ``groups`` and ``grasped`` are what the verification's :class:`Environment` was built from
-    (:func:`~baseplace.world.environment.contact_groups`) and its obstacles given by hand
-    (``shapes``); here the grasped object is one more obstacle group, checked against every link, the hand's included. None when there is no
-    grasped object: the verification's environment already allows no contact.
+    (:func:`~baseplace.world.environment.contact_groups`), its obstacles given by hand
+    (``shapes``) and its ``clearance`` [m]; here the grasped object is one more obstacle group,
+    checked against every link, the hand's included. None when there is no grasped object: the
+    verification's environment already allows no contact.
     """
-    if grasped is None or len(grasped) == 0:
+    if grasped is None or group_size(grasped) == 0:
         return None
-    return Environment(robot, {**groups, GRASPED: grasped}, shapes=shapes)
+    return Environment(robot, {**groups, GRASPED: grasped}, shapes=shapes, clearance=clearance)
 
 
 @dataclass(frozen=True)

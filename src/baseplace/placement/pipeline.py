@@ -38,9 +38,16 @@ from baseplace.terrain.pipeline import Terrain, terrain_from_points
 from baseplace.terrain.polygons import footprint_outline
 from baseplace.terrain.segmentation import Segmentation
 from baseplace.terrain.voxels import VoxelMap
-from baseplace.world.environment import SUPPORT_DIST, Environment, contact_groups, obstacle_voxels
+from baseplace.world.environment import (
+    SUPPORT_DIST,
+    Environment,
+    contact_groups,
+    obstacle_voxels,
+    support_plane,
+)
 from baseplace.world.grasped_object import GraspedObject, find_grasped_object
 from baseplace.world.obstacles import Obstacle, obstacles_key
+from baseplace.world.sensor_resolution import Group, check_clearance, derived_clearance
 
 POSE_ONLY_CHECKS: dict[str, Any] = {"motion": None, "robustness": RobustnessSettings(samples=0)}
 """PlaceSettings overrides that check the placement's pose alone (IK + collision at the exact pose,
@@ -63,6 +70,10 @@ class PlaceSettings:
         motion: the reaching-motion check (:mod:`baseplace.placement.motion`), None: off.
         robustness: the score under base error and whether to rank by it or require a minimum
             (:mod:`baseplace.placement.robustness`).
+        clearance: a link closer than this [m] to the scene at sensor resolution (the cloud's
+            points near the grasped object, the plane it stands on) touches it; None: derived from
+            the cloud, 3 sigma of the support plane's residuals
+            (:func:`~baseplace.world.sensor_resolution.derived_clearance`).
     """
 
     strategy: str = "MR"
@@ -74,8 +85,10 @@ class PlaceSettings:
     resolution: float | None = None
     motion: MotionSettings | None = field(default_factory=MotionSettings)
     robustness: RobustnessSettings = field(default_factory=RobustnessSettings)
+    clearance: float | None = None
 
     def __post_init__(self) -> None:
+        check_clearance(self.clearance)
         if self.placements < 1 or self.tries < 1:
             raise InputError(f"placements and tries must be >= 1, got {self.placements} and {self.tries}")
         if not (0 < self.gamma_max <= math.pi):
@@ -101,6 +114,8 @@ class PlacementResult:
         rejected: per rejected candidate, (x, y) [m], reason and first contact.
         grasped: the object only the hand may touch, or None.
         grasped_note: how it was found ("given", "auto: ..." or "none").
+        clearance: the clearance [m] the checks kept (:attr:`PlaceSettings.clearance`).
+        clearance_note: how it was chosen ("given", "3 sigma of ...", "default: ...").
     """
 
     placements: list[Placement]
@@ -113,6 +128,8 @@ class PlacementResult:
     rejected: list[tuple[tuple[float, float], str, tuple[str, str] | None]] = field(default_factory=list)
     grasped: GraspedObject | None = None
     grasped_note: str = "none"
+    clearance: float = 0.0
+    clearance_note: str = ""
 
 
 def place(
@@ -219,7 +236,7 @@ def place(
         "total": (t4 - t0) * 1e3,
     }
     return PlacementResult(placements, verifier.failures, tries, timings, terrain, osrm, verifier.contacts,
-                           verifier.rejected, obj, note)  # fmt: skip
+                           verifier.rejected, obj, note, checks.clearance, checks.clearance_note)  # fmt: skip
 
 
 @dataclass
@@ -230,11 +247,15 @@ class SceneChecks:
         verifier: footprint, IK, collision and (with ``settings.motion``) reaching-motion checks.
         grasped: the object only the hand may touch, or None.
         grasped_note: how it was found ("given", "auto: ..." or "none").
+        clearance: the clearance [m] kept from the scene at sensor resolution.
+        clearance_note: how it was chosen (see :attr:`PlacementResult.clearance_note`).
     """
 
     verifier: Verifier
     grasped: GraspedObject | None
     grasped_note: str
+    clearance: float = 0.0
+    clearance_note: str = ""
 
 
 def scene_checks(
@@ -265,18 +286,21 @@ def scene_checks(
     voxels = cache.shared(("obstacles", key, s.resolution, s.support_dist, outline.tobytes()),
                           lambda: _obstacles(terrain, seg, s, outline))  # fmt: skip
     transit = None
+    clearance, clearance_note = NO_FINE_SCENE
     if obj is not None:  # the allowed contact: per grasped object, kept for the scene's next queries
 
-        def environments_for_object() -> tuple[Environment, Environment | None]:
-            # the surface under it: a slab fitted to the cloud where it is planar, else voxels
+        def environments_for_object() -> tuple[Environment, Environment | None, tuple[float, str]]:
+            # near it the cloud's points and the exact plane it stands on, kept at the clearance
             groups, object_voxels = contact_groups(terrain.voxels, voxels, obj, cache.points)
-            hand = Environment(robot, groups, grasped=object_voxels, hand_arm=arm_name, shapes=obstacles)
+            kept = clearance_of(groups, s.clearance)
+            hand = Environment(robot, groups, grasped=object_voxels, hand_arm=arm_name, shapes=obstacles,
+                               clearance=kept[0])  # fmt: skip
             # on the way to the pre-grasp the hand may not touch it either
-            return hand, transit_environment(robot, groups, object_voxels, obstacles)
+            return hand, transit_environment(robot, groups, object_voxels, obstacles, kept[0]), kept
 
-        env, transit = cache.per_object(
+        env, transit, (clearance, clearance_note) = cache.per_object(
             ("environment", robot, arm_name, key, s.resolution, s.support_dist, object_key(obj),
-             obstacles_key(obstacles)),
+             obstacles_key(obstacles), s.clearance),
             environments_for_object,
         )  # fmt: skip
     elif environments is not None:
@@ -296,7 +320,18 @@ def scene_checks(
     verifier = Verifier(arm, DampedLeastSquaresIK(arm), env, targets,
                         {r.id: terrain.polygons[r.id] for r in seg.regions}, outline,
                         motion=motion)  # fmt: skip
-    return SceneChecks(verifier, obj, note)
+    return SceneChecks(verifier, obj, note, clearance, clearance_note)
+
+
+NO_FINE_SCENE = (0.0, "not used: no grasped object, the scene is 25 mm voxels")
+"""The clearance of a scene checked without a grasped object: nothing is at sensor resolution."""
+
+
+def clearance_of(groups: dict[str, Group], given: float | None) -> tuple[float, str]:
+    """The clearance [m] for the groups of :func:`contact_groups` and how it was chosen: given or derived."""
+    if given is not None:
+        return float(given), "given"
+    return derived_clearance(support_plane(groups))
 
 
 @dataclass
@@ -307,10 +342,13 @@ class ObjectChecks:
         environment: the whole robot against the cloud's voxels and the obstacles; only the hand
             may touch the grasped object.
         motion: the reaching-motion check, or None.
+        clearance_note: how the environment's clearance was chosen (see
+            :attr:`PlacementResult.clearance_note`).
     """
 
     environment: Environment
     motion: MotionChecker | None
+    clearance_note: str = ""
 
 
 def object_checks(
@@ -322,6 +360,7 @@ def object_checks(
     motion: MotionSettings | None,
     cache: SceneCache | None = None,
     obstacles: Sequence[Obstacle] = (),
+    clearance: float | None = None,
 ) -> ObjectChecks:
     """The collision model and reaching-motion check around an object, for the seed-004 methods.
 
@@ -335,30 +374,35 @@ def object_checks(
         cache: the scene's cache of ``points``: the voxels and, per grasped object, the
             environments are kept for its next queries.
         obstacles: collision objects given by hand.
+        clearance: as :attr:`PlaceSettings.clearance` (None: derived).
     """
+    check_clearance(clearance)
 
-    def environments() -> tuple[Environment, dict[str, VoxelMap], VoxelMap | None]:
+    def environments() -> tuple[Environment, dict[str, Group], Group | None, str]:
         voxels = VoxelMap(0.025, np.zeros((0, 3), np.int64))
         if points is not None:
             voxels = VoxelMap.from_points(points) if cache is None else cache.shared(
                 ("voxels", 0.025), lambda: VoxelMap.from_points(points))  # fmt: skip
         groups, object_voxels = contact_groups(voxels, voxels, grasped, points)
-        environment = Environment(robot, groups, grasped=object_voxels, hand_arm=hand_arm, shapes=obstacles)
-        return environment, groups, object_voxels
+        kept = clearance_of(groups, clearance) if grasped is not None else NO_FINE_SCENE
+        environment = Environment(robot, groups, grasped=object_voxels, hand_arm=hand_arm, shapes=obstacles,
+                                  clearance=kept[0])  # fmt: skip
+        return environment, groups, object_voxels, kept[1]
 
     if cache is None:
-        environment, groups, object_voxels = environments()
+        environment, groups, object_voxels, note = environments()
     else:  # per robot, arm and grasped object, kept for the scene's next queries
-        environment, groups, object_voxels = cache.per_object(
-            ("candidates", robot, hand_arm, object_key(grasped), obstacles_key(obstacles)), environments
+        environment, groups, object_voxels, note = cache.per_object(
+            ("candidates", robot, hand_arm, object_key(grasped), obstacles_key(obstacles), clearance),
+            environments,
         )
     checker = None
     if motion is not None:  # the way to the pre-grasp must avoid the object too
         arm = robot.arm(arm_name)
-        transit = transit_environment(robot, groups, object_voxels, obstacles)
+        transit = transit_environment(robot, groups, object_voxels, obstacles, environment.clearance)
         checker = MotionChecker(robot, arm, environment if transit is None else transit,
                                 None if transit is None else environment, motion)  # fmt: skip
-    return ObjectChecks(environment, checker)
+    return ObjectChecks(environment, checker, note)
 
 
 def scene_environment(

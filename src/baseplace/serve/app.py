@@ -109,6 +109,9 @@ class PlaceRequest(RobustnessFields):
     seed: int = SEED
     object: str = Field("auto", max_length=200, description='"auto", "none", "box x y z sx sy sz [yaw]" ...')
     resolution: float | None = Field(None, ge=0.005, le=1.0, description="height-map cell [m]")
+    clearance: float | None = Field(None, ge=0.0, le=0.1, allow_inf_nan=False,
+                                    description="keep this far [m] from the scene near the grasped object "
+                                                "(default: 3 sigma of the support plane's residuals)")  # fmt: skip
     start: Pose | None = Field(
         None, description='current base pose "x y yaw": also plan a path to each placement'
     )
@@ -178,6 +181,8 @@ class CandidatesRequest(RobustnessFields):
     robot: str = Field("tiago", max_length=64)
     arm: str | None = Field(None, max_length=64)
     standoff: float | None = Field(None, ge=0.0, le=1.0)
+    clearance: float | None = Field(None, ge=0.0, le=0.1, allow_inf_nan=False,
+                                    description="as /place's: keep this far [m] from the scene near the object")  # fmt: skip
     seed: int = SEED
     object_shape: str = Field("auto", max_length=200)
     use_cloud: bool = Field(True, description="verify against the scene's cloud (else the grid alone)")

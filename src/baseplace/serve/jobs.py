@@ -124,7 +124,8 @@ def place(state: ServiceState, scene: Scene, req: dict[str, Any], lane: str = "j
         r = in_radians("place", req)
         motion, robustness = motion_and_robustness(r)
         settings = PlaceSettings(strategy=r["strategy"], placements=r["placements"], tries=r["tries"],
-                                 resolution=r["resolution"], motion=motion, robustness=robustness)  # fmt: skip
+                                 resolution=r["resolution"], motion=motion, robustness=robustness,
+                                 clearance=r["clearance"])  # fmt: skip
         robot = state.robot(r["robot"], lane=lane)
         rmap = state.reach_map(robot, r["arm"])
         grid = scene.grid if r["use_grid"] else None
@@ -175,7 +176,7 @@ def candidates(state: ServiceState, scene: Scene, req: dict[str, Any]) -> dict[s
                                             robot, r["arm"], rmap, r["standoff"], r["seed"],
                                             r["object_shape"], *motion_and_robustness(r),
                                             cache=scene.cache if r["use_cloud"] else None,
-                                            obstacles=_obstacles(scene, r)))  # fmt: skip
+                                            obstacles=_obstacles(scene, r), clearance=r["clearance"]))  # fmt: skip
 
     return _with_scene(run_job("candidates", req, job, str(state.folder)), scene)
 

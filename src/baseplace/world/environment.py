@@ -8,8 +8,8 @@ OcTrees, checked against every collision mesh of the robot, together with self-c
 At a grasp only the hand may touch the grasped object (:mod:`baseplace.world.grasped_object`):
 its voxels are checked against every other link, and the surface under it stays an obstacle
 (:func:`contact_groups`); collisions are reported per robot link and per thing touched. Given the
-cloud, the voxels of the planar part of that surface are cut down to a thin slab around the
-fitted plane (:mod:`baseplace.world.support_plane`): no longer up to 25 mm above the surface.
+cloud, the scene within reach of the hand is its points in 5 mm cells and the plane the object
+stands on an exact plane (:mod:`baseplace.world.sensor_resolution`), kept at a clearance.
 
 Obstacles given by hand (boxes, cylinders, meshes: :mod:`baseplace.world.obstacles`) are coal
 shapes at their world poses beside the voxels, checked against every link and reported by name.
@@ -32,7 +32,16 @@ from baseplace.terrain.segmentation import Segmentation
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.grasped_object import GraspedObject, rows_in
 from baseplace.world.obstacles import Obstacle
-from baseplace.world.support_plane import fit_support_slab, with_support_slab
+from baseplace.world.sensor_resolution import (
+    Group,
+    SupportPlane,
+    check_clearance,
+    fine_groups,
+    group_parts,
+    group_size,
+    is_fine,
+)
+from baseplace.world.support_plane import fit_support_slab
 
 SUPPORT_DIST = 0.1
 """Voxels this close [m] to their region's plane are support: 4 sigma of seed 000's 25 mm noise."""
@@ -63,18 +72,18 @@ def obstacle_voxels(
 
 def contact_groups(
     voxels: VoxelMap, obstacles: VoxelMap, grasped: GraspedObject | None, points: ArrayLike | None = None
-) -> tuple[dict[str, VoxelMap], VoxelMap | None]:
-    """Split the scene for :class:`Environment`: ({"support": ..., "obstacle": ...}, object voxels).
+) -> tuple[dict[str, Group], Group | None]:
+    """Split the scene for :class:`Environment`: ({"support": ..., "obstacle": ...}, the object).
 
     The object's voxels come from all ``voxels`` (it may stand on a planar region); its support is
     every voxel of ``voxels`` just under and around it (:meth:`GraspedObject.support_mask`), even
     one a planar region removed from ``obstacles``; the other obstacles are ``obstacles`` less
     both. Without an object: ({"obstacle": obstacles}, None).
 
-    ``points``: the cloud (N, 3) the voxels were made from. Given, the planar surface the object
-    stands on is fitted (:func:`~baseplace.world.support_plane.fit_support_slab`) and, when the
-    fit is good, the voxels only its points occupy are cut down to a thin slab around the plane
-    (5 mm cells, group "support_plane"; :func:`~baseplace.world.support_plane.with_support_slab`).
+    ``points``: the cloud (N, 3) the voxels were made from. Given, the voxels near the object
+    become their points in 5 mm cells, and the planar surface the object stands on, when the cloud
+    fits a good plane (:func:`~baseplace.world.support_plane.fit_support_slab`), an exact plane
+    (group "support_plane"): :func:`~baseplace.world.sensor_resolution.fine_groups`.
     """
     if grasped is None:
         return {"obstacle": obstacles}, None
@@ -88,9 +97,18 @@ def contact_groups(
     }
     object_voxels = VoxelMap(voxels.resolution, voxels.keys[mine])
     if points is None:
-        return groups, object_voxels
+        return dict(groups), object_voxels
     slab = fit_support_slab(points, grasped.footprint_distance, grasped.bottom, voxels.resolution)
-    return with_support_slab(groups, points, slab), object_voxels
+    return fine_groups(groups, object_voxels, points, grasped, slab)
+
+
+def support_plane(groups: Mapping[str, Group]) -> SupportPlane | None:
+    """The exact support plane among the groups (:func:`contact_groups`), or None."""
+    for group in groups.values():
+        for part in group_parts(group):
+            if isinstance(part, SupportPlane):
+                return part
+    return None
 
 
 _SELF_COLLISION = "_baseplace_self_collision"
@@ -125,28 +143,41 @@ class Environment:
 
     Obstacles come in named groups (e.g. "support", "obstacle"), each checked against every robot
     link; collision reports name the group. The grasped object's voxels, if given, are checked
-    against every link but the hand's (:func:`hand_geometry_ids`): only the hand may touch them.
+    against every link but the hand's (:func:`hand_geometry_ids`): only the hand may touch them,
+    to any depth (coal handles no negative security margin for meshes and OcTrees, so a limit on
+    how deep is not checked).
+
+    A link closer than ``clearance`` to a part of a group at sensor resolution (cells of at most
+    :data:`~baseplace.world.sensor_resolution.FINE`, the exact support plane) touches it (coal's
+    security margin). Coarser voxels (25 mm) keep no margin: a voxel's cube already reaches up to a
+    whole edge beyond its points, more than any clearance; obstacles given by hand are exact and
+    keep none either.
 
     Args:
         robot: the robot.
         obstacles: obstacle voxels in the world frame (see :func:`obstacle_voxels`), or a mapping
-            name -> voxels.
+            name -> group (voxels, cells, the exact support plane: :func:`contact_groups`).
         self_collision: also check self-collision (default True).
-        grasped: voxels of the grasped object (world frame), or None.
+        grasped: the grasped object's voxels or cells (world frame), or None.
         hand_arm: the arm whose hand holds the object (default: the robot's first arm).
         shapes: obstacles given by hand (world frame), each checked against every link and
             reported as its :attr:`~baseplace.world.obstacles.Obstacle.label` (``obstacle box#0``).
+        clearance: the distance [m] to the parts at sensor resolution below which a link touches
+            them (>= 0).
     """
 
     def __init__(
         self,
         robot: Robot,
-        obstacles: VoxelMap | Mapping[str, VoxelMap],
+        obstacles: VoxelMap | Mapping[str, Group],
         self_collision: bool = True,
-        grasped: VoxelMap | None = None,
+        grasped: Group | None = None,
         hand_arm: str | None = None,
         shapes: Sequence[Obstacle] = (),
+        clearance: float = 0.0,
     ) -> None:
+        check_clearance(clearance)
+        self.clearance = float(clearance)
         self.robot = robot
         self.model = robot.model
         self._self = _self_collision(robot) if self_collision else None
@@ -159,15 +190,21 @@ class Environment:
         groups = dict(obstacles) if isinstance(obstacles, Mapping) else {"obstacle": obstacles}
         self.hand_ids = set(hand_geometry_ids(robot, self.geom, hand_arm)) if grasped is not None else set()
         self.env_ids: list[int] = []
-        for name, voxels in [*groups.items(), (GRASPED, grasped)]:
-            if voxels is None or len(voxels) == 0:
-                continue
-            tree = coal.makeOctree(np.ascontiguousarray(voxels.centres), voxels.resolution)
-            gid = self.geom.addGeometryObject(pin.GeometryObject(name, 0, pin.SE3.Identity(), tree))
-            self.env_ids.append(gid)
-            for k in range(n_robot):
-                if name != GRASPED or k not in self.hand_ids:
-                    self.geom.addCollisionPair(pin.CollisionPair(k, gid))
+        margins: list[float] = []  # per collision pair
+        for name, group in [*groups.items(), (GRASPED, grasped)]:
+            for part in () if group is None else group_parts(group):
+                if len(part) == 0:
+                    continue
+                if isinstance(part, SupportPlane):
+                    geometry: coal.CollisionGeometry = part.geometry()
+                else:
+                    geometry = coal.makeOctree(np.ascontiguousarray(part.centres), part.resolution)
+                gid = self.geom.addGeometryObject(pin.GeometryObject(name, 0, pin.SE3.Identity(), geometry))
+                self.env_ids.append(gid)
+                for k in range(n_robot):
+                    if name != GRASPED or k not in self.hand_ids:
+                        self.geom.addCollisionPair(pin.CollisionPair(k, gid))
+                        margins.append(self.clearance if is_fine(part) else 0.0)
         self.shapes = tuple(shapes)
         self._T_world_env: dict[int, pin.SE3] = {}  # the shapes' poses; voxels are in the world frame
         for shape in self.shapes:
@@ -177,9 +214,12 @@ class Environment:
             self._T_world_env[gid] = pin.SE3(np.asarray(shape.T_world_obstacle, dtype=float))
             for k in range(n_robot):
                 self.geom.addCollisionPair(pin.CollisionPair(k, gid))
-        self.obstacle_names = [n for n, v in groups.items() if len(v)] + [o.label for o in self.shapes]
+                margins.append(0.0)
+        self.obstacle_names = [n for n, v in groups.items() if group_size(v)] + [o.label for o in self.shapes]
         self.data = self.model.createData()
         self.geom_data = pin.GeometryData(self.geom)
+        for request, margin in zip(self.geom_data.collisionRequests, margins, strict=True):
+            request.security_margin = margin
         if self._self is not None:  # build the arm-pruned pair tables now, not in the first query
             for arm_name in robot.spec.arms:
                 self._self.colliding_arm(robot.arm(arm_name), robot.arm(arm_name).lower)
@@ -198,7 +238,9 @@ class Environment:
         return [
             self.geom.geometryObjects[g].geometry
             for g in self.env_ids
-            if self.geom.geometryObjects[g].name != GRASPED and g not in self._T_world_env
+            if self.geom.geometryObjects[g].name != GRASPED
+            and g not in self._T_world_env
+            and isinstance(self.geom.geometryObjects[g].geometry, coal.OcTree)
         ]
 
     @property

@@ -16,6 +16,11 @@ its points lies in both the voxel and the slab, so the model stays conservative 
 and it is never higher than the voxel nor than the slab. Every other voxel stays as it is. When
 the fit is poor (too few points, a 99th percentile of the residuals above :data:`MAX_RESIDUAL`, a
 plane tilted more than :data:`MAX_TILT`) nothing changes.
+
+The checks of ``place`` no longer cut voxels down to the slab (issue 25): they take the fit's plane
+as an exact plane and its noise (:attr:`SupportSlab.sigma`) for the clearance
+(:mod:`baseplace.world.sensor_resolution`). :func:`with_support_slab` stays for the experiments
+that measured the slab (``baseplace_experiments.execution_experiment``).
 """
 
 from __future__ import annotations
@@ -66,6 +71,9 @@ class SupportSlab:
         hull: (H, 2) the footprint's convex hull, counter-clockwise [m].
         residual_p99: 99th percentile of the plane's points' |vertical residual| [m].
         points: how many points were fitted.
+        sigma: the robust standard deviation (median absolute deviation) of the plane's points'
+            vertical residuals [m]: the sensor's noise, from which the clearance is derived
+            (:func:`~baseplace.world.sensor_resolution.derived_clearance`).
     """
 
     coeffs: FloatArray
@@ -74,6 +82,7 @@ class SupportSlab:
     hull: FloatArray
     residual_p99: float
     points: int
+    sigma: float
 
     def height(self, xy: ArrayLike) -> FloatArray:
         """The plane's height (N,) [m] at xy points (N, 2)."""
@@ -95,7 +104,7 @@ class SupportSlab:
     def to_json(self) -> dict[str, float | int]:
         """What replaced the support's voxels, for results files."""
         return {"margin": round(self.margin, 4), "depth": round(self.depth, 4),
-                "residual_p99": round(self.residual_p99, 4), "points": self.points,
+                "residual_p99": round(self.residual_p99, 4), "sigma": round(self.sigma, 5), "points": self.points,
                 "hull_vertices": len(self.hull)}  # fmt: skip
 
 
@@ -150,6 +159,7 @@ def fit_support_slab(
     tilt = math.atan(math.hypot(coeffs[0], coeffs[1]))
     if p99 > MAX_RESIDUAL or tilt > MAX_TILT:
         return None
+    sigma = _robust_sigma(residual)
     margin = max(float(np.abs(residual).max()), MIN_MARGIN)
     depth = max(margin, voxel)
     try:
@@ -157,7 +167,7 @@ def fit_support_slab(
     except (QhullError, ValueError):
         return None
     a, b, c = (float(v) for v in coeffs)
-    return SupportSlab(np.array([a, b, c]), margin, depth, hull, p99, len(p))
+    return SupportSlab(np.array([a, b, c]), margin, depth, hull, p99, len(p), sigma)
 
 
 def densest_height(z: FloatArray, bin_size: float = BIN) -> float:

@@ -1,0 +1,227 @@
+"""The scene near the grasped object at sensor resolution, its support an exact plane (issue 25).
+
+A 25 mm voxel over-approximates its points by up to a whole cube, so the hand working a few
+centimetres from a table top or a neighbour met voxels while the true scene was free. Within
+:data:`~baseplace.world.support_plane.RADIUS` of the object's footprint (the hand's approach plus
+its length) the support and obstacle groups are the cloud's own points in :data:`FINE` cells
+instead (:func:`fine_groups`); farther away the 25 mm voxels stay. The plane the object stands on,
+when the cloud fits one (:func:`~baseplace.world.support_plane.fit_support_slab`), is an exact
+plane (:class:`SupportPlane`): a prism whose top face is the fitted plane, and its points leave
+the point groups. The robot keeps :attr:`~baseplace.world.environment.Environment.clearance` from
+the fine cells and the plane, derived from the plane's noise (:func:`derived_clearance`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import coal
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import ConvexHull, QhullError
+
+from baseplace.errors import InputError
+from baseplace.geometry.poses import FloatArray
+from baseplace.terrain.voxels import VoxelMap
+from baseplace.world.grasped_object import GraspedObject, rows_in
+from baseplace.world.support_plane import DEPTH, RADIUS, SUPPORT_PLANE, SupportSlab
+
+FINE = 0.005
+"""Cell edge [m] of the points near the object: about the spacing of a depth camera's points at 1 m."""
+PLANE_DEPTH = 0.05
+"""The exact plane is a prism this thick [m] under its top face."""
+OBJECT_TOLERANCE = 0.0125
+"""Points this close [m] to a given box or cylinder are the object's (4 sigma of 3 mm sensor noise)."""
+CLEARANCE_SIGMAS = 3.0
+"""The derived clearance is this many robust standard deviations of the support plane's residuals."""
+MIN_CLEARANCE = 0.003
+"""The derived clearance is at least this [m]: a sensor's quantisation and calibration error."""
+DEFAULT_CLEARANCE = 0.01
+"""The clearance [m] when no support plane is fitted (no noise measured): 3 sigma of 3 mm noise, rounded up."""
+MAX_CLEARANCE = 0.1
+"""The largest clearance [m] accepted: more would forbid most grasps outright."""
+
+
+@dataclass(frozen=True)
+class SupportPlane:
+    """The surface the grasped object stands on as an exact plane (world frame).
+
+    Attributes:
+        slab: the fit (plane z = a x + b y + c, its residuals' sigma).
+        hull: (H, 2) counter-clockwise footprint [m] of the points the plane replaces.
+        points: how many points it replaces.
+    """
+
+    slab: SupportSlab
+    hull: FloatArray
+    points: int
+
+    def geometry(self) -> coal.Convex:
+        """A coal prism over :attr:`hull`: top face on the plane, :data:`PLANE_DEPTH` thick (world frame)."""
+        top = np.c_[self.hull, self.slab.height(self.hull)]
+        vertices = coal.StdVec_Vec3s()
+        for v in np.concatenate([top, top - [0.0, 0.0, PLANE_DEPTH]]):
+            vertices.append(np.asarray(v, dtype=float))
+        return coal.Convex.convexHull(vertices, False, "")
+
+    def __len__(self) -> int:
+        return 1
+
+
+Group = VoxelMap | SupportPlane | tuple[VoxelMap, ...]
+"""An obstacle group of :class:`~baseplace.world.environment.Environment`: voxels or cells of one
+resolution, the exact support plane, or several of those parts (coarse far away, fine near)."""
+
+
+def group_parts(group: Group) -> tuple[VoxelMap | SupportPlane, ...]:
+    """The parts of a group, each one collision geometry."""
+    return group if isinstance(group, tuple) else (group,)
+
+
+def group_size(group: Group) -> int:
+    """How many cells (or planes) a group holds."""
+    return sum(len(p) for p in group_parts(group))
+
+
+def is_fine(part: VoxelMap | SupportPlane) -> bool:
+    """True for the parts the clearance applies to: the exact plane and cells no coarser than :data:`FINE`."""
+    return isinstance(part, SupportPlane) or part.resolution <= FINE + 1e-12
+
+
+def derived_clearance(plane: SupportPlane | None) -> tuple[float, str]:
+    """The default clearance [m] and how it was derived: 3 sigma of the plane's residuals, or a default."""
+    if plane is None:
+        return DEFAULT_CLEARANCE, "default: no support plane fitted"
+    sigma = plane.slab.sigma
+    metres = max(CLEARANCE_SIGMAS * sigma, MIN_CLEARANCE)
+    floor = f", at least {MIN_CLEARANCE * 1e3:.0f} mm" if metres == MIN_CLEARANCE else ""
+    return metres, (
+        f"3 sigma of the support plane's residuals (sigma {sigma * 1e3:.1f} mm, {plane.slab.points} points{floor})"
+    )
+
+
+def check_clearance(clearance: float | None) -> None:
+    """Raise InputError unless ``clearance`` is None or a finite distance in [0, :data:`MAX_CLEARANCE`] [m]."""
+    if clearance is None:
+        return
+    if not (
+        isinstance(clearance, int | float) and math.isfinite(clearance) and 0 <= clearance <= MAX_CLEARANCE
+    ):
+        raise InputError(f"clearance must be a finite distance in [0, {MAX_CLEARANCE}] m, got {clearance}")
+
+
+def fine_groups(
+    groups: dict[str, VoxelMap],
+    object_voxels: VoxelMap,
+    points: ArrayLike,
+    grasped: GraspedObject,
+    slab: SupportSlab | None,
+    radius: float = RADIUS,
+) -> tuple[dict[str, Group], Group]:
+    """The groups with their voxels near the object replaced by their points' :data:`FINE` cells.
+
+    Args:
+        groups: name -> 25 mm voxels (e.g. "support", "obstacle"), as
+            :func:`~baseplace.world.environment.contact_groups` splits them.
+        object_voxels: the grasped object's voxels.
+        points: (N, 3) the cloud the voxels were made from [m].
+        grasped: the grasped object.
+        slab: the fitted support plane, or None (then no plane: its points stay cells).
+        radius: voxels whose centre lies within this horizontal distance [m] of the object's
+            footprint are replaced.
+
+    Returns:
+        The groups (each near voxel's points in fine cells of the same group, the object's points
+        in fine cells of the object, the plane's points as :data:`SUPPORT_PLANE`) and the object.
+    """
+    res = object_voxels.resolution
+    p = np.asarray(points, dtype=float).reshape(-1, 3)
+    p = p[np.all(np.isfinite(p), axis=1)]
+    near = {name: grasped.footprint_distance(v.centres[:, :2]) <= radius if len(v) else np.zeros(0, bool)
+            for name, v in [*groups.items(), (_OBJECT, object_voxels)]}  # fmt: skip
+    keys = np.floor(p / res).astype(np.int64)
+    owner = np.full(len(p), -1)
+    names = list(near)
+    for k, name in enumerate(names):
+        v = groups[name] if name != _OBJECT else object_voxels
+        if near[name].any():
+            owner[rows_in(keys, v.keys[near[name]])] = k
+    taken = owner >= 0
+    p, owner = p[taken], owner[taken]
+    is_object = _object_points(p, grasped)
+    plane = None
+    if slab is not None:
+        r = p[:, 2] - slab.height(p[:, :2])
+        flat = ~is_object & (r <= slab.margin) & (r >= -slab.depth)
+        plane = _plane(slab, p[flat])
+        if plane is not None:
+            p, owner, is_object = p[~flat], owner[~flat], is_object[~flat]
+    out: dict[str, Group] = {}
+    for k, name in enumerate(names):
+        coarse = (groups[name] if name != _OBJECT else object_voxels).without(near[name])
+        mine = is_object if name == _OBJECT else (owner == k) & ~is_object
+        if name == _OBJECT:  # an object voxel's other points are obstacles
+            mine_other = (owner == k) & ~is_object
+            out["obstacle"] = _joined(out.get("obstacle"), _cells(p[mine_other]))
+        fine = _cells(p[mine])
+        out[name] = _joined(out.get(name), coarse, fine)
+    grasped_group = out.pop(_OBJECT)
+    out = {name: g for name, g in out.items() if group_size(g)}
+    if plane is not None:
+        out[SUPPORT_PLANE] = plane
+    return out, grasped_group
+
+
+_OBJECT = "\0object"
+
+
+def _object_points(p: FloatArray, grasped: GraspedObject) -> NDArray[np.bool_]:
+    """(N,) True for the points (N, 3) on the object.
+
+    Those within :data:`OBJECT_TOLERANCE` of its footprint and no higher than that above its top;
+    for a box or cylinder, above its bottom's cell; for points, also down to its support (a found
+    object leaves out its foot, the band of its support), and every point in one of its cells.
+    """
+    if len(p) == 0:
+        return np.zeros(0, dtype=bool)
+    top = grasped.bottom + grasped.size[2]
+    # a shape's lowest cell holds the support's surface too: not the object's
+    low = grasped.bottom - DEPTH if grasped.kind == "points" else grasped.bottom + FINE / 2
+    z_ok = (p[:, 2] >= low) & (p[:, 2] <= top + OBJECT_TOLERANCE)
+    out = np.zeros(len(p), dtype=bool)
+    if z_ok.any():
+        out[z_ok] = grasped.footprint_distance(p[z_ok, :2]) <= OBJECT_TOLERANCE
+    if grasped.kind == "points":
+        mine = np.unique(np.floor(grasped.points / FINE).astype(np.int64), axis=0)
+        out |= rows_in(np.floor(p / FINE).astype(np.int64), mine)
+    return out
+
+
+def _cells(p: FloatArray) -> VoxelMap:
+    if len(p) == 0:
+        return VoxelMap(FINE, np.zeros((0, 3), dtype=np.int64))
+    return VoxelMap.from_points(p, FINE)
+
+
+def _joined(group: Group | None, *parts: VoxelMap) -> Group:
+    """A group of the non-empty parts (merged per resolution)."""
+    by_res: dict[float, list[NDArray[np.int64]]] = {}
+    for part in [*(group_parts(group) if group is not None else ()), *parts]:
+        if isinstance(part, VoxelMap) and len(part):
+            by_res.setdefault(part.resolution, []).append(part.keys)
+    merged = tuple(VoxelMap(r, np.unique(np.concatenate(k), axis=0)) for r, k in sorted(by_res.items()))
+    if not merged:
+        return VoxelMap(FINE, np.zeros((0, 3), dtype=np.int64))
+    return merged[0] if len(merged) == 1 else merged
+
+
+def _plane(slab: SupportSlab, p: FloatArray) -> SupportPlane | None:
+    """The exact plane over the footprint of the points ``p`` (N, 3) it replaces, or None (too few)."""
+    if len(p) < 3:
+        return None
+    try:
+        hull = p[ConvexHull(p[:, :2]).vertices, :2]
+    except (QhullError, ValueError):
+        return None
+    return SupportPlane(slab, hull, len(p))
