@@ -134,7 +134,8 @@ def _place(a: argparse.Namespace, progress: Progress) -> Any:
 
     motion, robustness = motion_and_robustness(vars(a))
     job.settings = PlaceSettings(strategy=a.strategy, placements=a.placements, tries=a.tries, resolution=a.resolution,
-                                 motion=motion, robustness=robustness, clearance=a.clearance)  # fmt: skip
+                                 motion=motion, robustness=robustness, clearance=a.clearance,
+                                 stand_on=a.stand_on)  # fmt: skip
     return place.place_job(job, progress)
 
 
@@ -358,6 +359,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--clearance", type=finite_float, default=None, metavar="METRES",
                    help="keep this far [m] from the scene near the grasped object (default: 3 sigma of the "
                         "support plane's residuals, at least 3 mm; 0.01 without a plane)")  # fmt: skip
+    p.add_argument("--stand-on", default="ground", choices=["ground", "any"],
+                   help="where the base may stand: the ground and the regions it can drive onto from it "
+                        "over steps up to 4 cm (ground, default), or every planar region large enough "
+                        "(any: seed 000's experiments; a table top too)")  # fmt: skip
     _add_motion_and_robustness_arguments(p)
     _add_degrees_argument(p)
 

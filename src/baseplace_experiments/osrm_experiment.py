@@ -375,8 +375,9 @@ def osrm_scene(
         reachable += 1
         for name, st in stats.items():
             st.n += 1
-            try:
-                res = place(robot, rmap, points, grasp, PlaceSettings(strategy=name, tries=s.tries, **POSE_ONLY_CHECKS),
+            try:  # stand_on "any": seed 000 counts a placement on every planar region, raised ones too
+                res = place(robot, rmap, points, grasp, PlaceSettings(strategy=name, tries=s.tries, stand_on="any",
+                                                                      **POSE_ONLY_CHECKS),
                             np.random.default_rng([s.seed, class_index, k, reachable, len(name)]), terrain=terrain,
                             grasped=obj)  # fmt: skip
             except BaseplaceError as exc:  # e.g. no region in reach: a failure of that query

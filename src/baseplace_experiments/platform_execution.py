@@ -237,12 +237,15 @@ def method_settings(
     The default's robustness score only annotates its placements (ranking by reachability, no
     minimum), so it is not computed here: the choice is the same.
     """
+    # stand_on "any": seed 000's scenes count placements on every planar region, raised ones too
     if method in ("TO", "MR", "MRTO"):
-        return PlaceSettings(strategy=method, tries=tries, **POSE_ONLY_CHECKS)
+        return PlaceSettings(strategy=method, tries=tries, stand_on="any", **POSE_ONLY_CHECKS)
     if method == "default":
-        return PlaceSettings(tries=tries, motion=motion, robustness=RobustnessSettings(samples=0))
+        return PlaceSettings(
+            tries=tries, motion=motion, robustness=RobustnessSettings(samples=0), stand_on="any"
+        )
     if method == "robust":
-        return PlaceSettings(tries=tries, motion=motion, robustness=robust)
+        return PlaceSettings(tries=tries, motion=motion, robustness=robust, stand_on="any")
     raise ValueError(f"unknown method {method!r}; choose from {PLATFORM_METHODS}")
 
 
@@ -275,7 +278,7 @@ def platform_scene_trials(robot: Robot, rmap: ReachabilityMap, shapes: RobotShap
     )
     truth = GroundTruth()
     outline = footprint_outline(robot.spec.footprint_radius, robot.spec.footprint_polygon)
-    obstacles = place_obstacles(terrain, PlaceSettings(), outline)
+    obstacles = place_obstacles(terrain, PlaceSettings(stand_on="any"), outline)
     out: list[dict[str, Any]] = []
     for g, (grasp, obj) in enumerate(zip(grasps, objects, strict=True)):
         if len(out) >= queries:

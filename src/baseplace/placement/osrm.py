@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Collection
 from dataclasses import dataclass
 
 import cv2
@@ -138,6 +139,7 @@ def build_osrm(
     outline: FloatArray,
     reach: float,
     n_orientations: int = 36,
+    regions: Collection[int] | None = None,
 ) -> OSRM:
     """Algorithm 1 of seed 000, vectorized over cells and orientations.
 
@@ -148,6 +150,7 @@ def build_osrm(
         outline: (F, 2) base footprint in the base frame [m].
         reach: largest horizontal distance [m] from the base origin to a reachable TCP.
         n_orientations: l, orientations per cell (seed 000: 36).
+        regions: the ids of the regions the base may stand on (default: every region).
     """
     start = time.perf_counter()
     hmap = seg.hmap
@@ -165,6 +168,8 @@ def build_osrm(
     kernel_of = [distinct.setdefault(k.tobytes() + bytes(k.shape), i) for i, k in enumerate(kernels)]
     pad = max(k.shape[0] for k in kernels)
     for r in seg.regions:
+        if regions is not None and r.id not in regions:
+            continue
         cand = (seg.labels == r.id) & near
         if not cand.any():
             continue

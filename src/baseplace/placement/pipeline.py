@@ -34,6 +34,7 @@ from baseplace.placement.verify import Placement, Verifier
 from baseplace.reachability.rmap import ReachabilityMap
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Robot
+from baseplace.terrain.graph import GraphSettings
 from baseplace.terrain.pipeline import Terrain, terrain_from_points
 from baseplace.terrain.polygons import footprint_outline
 from baseplace.terrain.segmentation import Segmentation
@@ -48,11 +49,16 @@ from baseplace.world.environment import (
 from baseplace.world.grasped_object import GraspedObject, find_grasped_object
 from baseplace.world.obstacles import Obstacle, obstacles_key
 from baseplace.world.sensor_resolution import Group, check_clearance, derived_clearance
+from baseplace.world.support_plane import RADIUS
 
 POSE_ONLY_CHECKS: dict[str, Any] = {"motion": None, "robustness": RobustnessSettings(samples=0)}
 """PlaceSettings overrides that check the placement's pose alone (IK + collision at the exact pose,
 no reaching motion, no robustness score), as seed 000's experiments measure it:
 ``PlaceSettings(..., **POSE_ONLY_CHECKS)``."""
+
+
+STAND_ON = ("ground", "any")
+"""Where the base may stand (:attr:`PlaceSettings.stand_on`)."""
 
 
 @dataclass(frozen=True)
@@ -74,6 +80,11 @@ class PlaceSettings:
             points near the grasped object, the plane it stands on) touches it; None: derived from
             the cloud, 3 sigma of the support plane's residuals
             (:func:`~baseplace.world.sensor_resolution.derived_clearance`).
+        stand_on: where the base may stand. "ground" (default): the planar regions large enough
+            for the footprint that the base can drive onto from the ground, the lowest of them,
+            over traversable borders (:func:`ground_regions`); a table top with no ramp to it
+            stays an obstacle. "any": every region large enough, as seed 000's experiments
+            count placements (its Tables I and II).
     """
 
     strategy: str = "MR"
@@ -86,9 +97,12 @@ class PlaceSettings:
     motion: MotionSettings | None = field(default_factory=MotionSettings)
     robustness: RobustnessSettings = field(default_factory=RobustnessSettings)
     clearance: float | None = None
+    stand_on: str = "ground"
 
     def __post_init__(self) -> None:
         check_clearance(self.clearance)
+        if self.stand_on not in STAND_ON:
+            raise InputError(f"stand_on must be one of {', '.join(STAND_ON)}, got {self.stand_on!r}")
         if self.placements < 1 or self.tries < 1:
             raise InputError(f"placements and tries must be >= 1, got {self.placements} and {self.tries}")
         if not (0 < self.gamma_max <= math.pi):
@@ -182,13 +196,21 @@ def place(
     t1 = time.perf_counter()
     outline = footprint_outline(robot.spec.footprint_radius, robot.spec.footprint_polygon)
     _check_targets(seg, T_targets)
-    osrm = build_osrm(seg, rmap, T_targets, outline, rmap.horizontal_reach, s.n_orientations)
+    allowed = support_regions(terrain, s, outline, cache)
+    osrm = build_osrm(seg, rmap, T_targets, outline, rmap.horizontal_reach, s.n_orientations, allowed)
     if not osrm.near.any():
         raise InputError(
             f"no planar region lies within the arm's reach ({rmap.horizontal_reach:.2f} m) of every target"
         )
     if not osrm.fits.any():
         size = robot.spec.footprint_bounding_radius
+        if allowed is not None and len(allowed) < len(standable_regions(seg, outline)):
+            raise InputError(
+                f"no planar region within reach of the targets is large enough for the robot's footprint "
+                f"(bounding radius {size:.2f} m) and joined to the ground by borders the base can drive "
+                f"over (steps up to {GraphSettings().max_step} m; regions {sorted(allowed)}); "
+                f"--stand-on any counts every region"
+            )
         raise InputError(
             f"no planar region within reach of the targets is large enough for the robot's footprint "
             f"(bounding radius {size:.2f} m)"
@@ -283,8 +305,8 @@ def scene_checks(
     key = "floor" if s.strategy == "orm" else "regions"
     if cache is None:
         cache = SceneCache(points, terrain, s.resolution)  # this query only
-    voxels = cache.shared(("obstacles", key, s.resolution, s.support_dist, outline.tobytes()),
-                          lambda: _obstacles(terrain, seg, s, outline))  # fmt: skip
+    voxels = cache.shared(("obstacles", key, s.resolution, s.support_dist, s.stand_on, outline.tobytes()),
+                          lambda: _obstacles(terrain, s, outline, cache))  # fmt: skip
     transit = None
     clearance, clearance_note = NO_FINE_SCENE
     if obj is not None:  # the allowed contact: per grasped object, kept for the scene's next queries
@@ -292,7 +314,7 @@ def scene_checks(
         def environments_for_object() -> tuple[Environment, Environment | None, tuple[float, str]]:
             # near it the cloud's points and the exact plane it stands on, kept at the clearance
             groups, object_voxels = contact_groups(terrain.voxels, voxels, obj, cache.points)
-            kept = clearance_of(groups, s.clearance)
+            kept = clearance_of(groups, s.clearance, cache.points, obj)
             hand = Environment(robot, groups, grasped=object_voxels, hand_arm=arm_name, shapes=obstacles,
                                clearance=kept[0])  # fmt: skip
             # on the way to the pre-grasp the hand may not touch it either
@@ -327,11 +349,22 @@ NO_FINE_SCENE = (0.0, "not used: no grasped object, the scene is 25 mm voxels")
 """The clearance of a scene checked without a grasped object: nothing is at sensor resolution."""
 
 
-def clearance_of(groups: dict[str, Group], given: float | None) -> tuple[float, str]:
-    """The clearance [m] for the groups of :func:`contact_groups` and how it was chosen: given or derived."""
+def clearance_of(
+    groups: dict[str, Group], given: float | None, points: ArrayLike, grasped: GraspedObject
+) -> tuple[float, str]:
+    """The clearance [m] for the groups of :func:`contact_groups` and how it was chosen: given or derived.
+
+    Derived from the support plane's noise, or without one from the noise of the cloud (N, 3)
+    within :data:`~baseplace.world.support_plane.RADIUS` of the grasped object.
+    """
     if given is not None:
         return float(given), "given"
-    return derived_clearance(support_plane(groups))
+    plane = support_plane(groups)
+    if plane is not None:
+        return derived_clearance(plane)
+    p = np.asarray(points, dtype=float).reshape(-1, 3)
+    p = p[np.all(np.isfinite(p), axis=1)]
+    return derived_clearance(None, p[grasped.footprint_distance(p[:, :2]) <= RADIUS])
 
 
 @dataclass
@@ -384,7 +417,9 @@ def object_checks(
             voxels = VoxelMap.from_points(points) if cache is None else cache.shared(
                 ("voxels", 0.025), lambda: VoxelMap.from_points(points))  # fmt: skip
         groups, object_voxels = contact_groups(voxels, voxels, grasped, points)
-        kept = clearance_of(groups, clearance) if grasped is not None else NO_FINE_SCENE
+        kept = NO_FINE_SCENE
+        if grasped is not None:
+            kept = clearance_of(groups, clearance, np.zeros((0, 3)) if points is None else points, grasped)
         environment = Environment(robot, groups, grasped=object_voxels, hand_arm=hand_arm, shapes=obstacles,
                                   clearance=kept[0])  # fmt: skip
         return environment, groups, object_voxels, kept[1]
@@ -417,9 +452,9 @@ def scene_environment(
     terrain = cache.terrain(s.resolution)
     outline = footprint_outline(robot.spec.footprint_radius, robot.spec.footprint_polygon)
     key = "floor" if s.strategy == "orm" else "regions"
-    voxels = cache.shared(("obstacles", key, s.resolution, s.support_dist, outline.tobytes()),
-                          lambda: _obstacles(terrain, terrain.segmentation, s, outline))  # fmt: skip
-    env_key = ("environment", robot, key, s.resolution, s.support_dist, outline.tobytes())
+    voxels = cache.shared(("obstacles", key, s.resolution, s.support_dist, s.stand_on, outline.tobytes()),
+                          lambda: _obstacles(terrain, s, outline, cache))  # fmt: skip
+    env_key = ("environment", robot, key, s.resolution, s.support_dist, s.stand_on, outline.tobytes())
     if not obstacles:
         return cache.shared(env_key, lambda: Environment(robot, voxels))
     # per query's obstacles, like a grasped object: only the last few are kept (a service's scene lives long)
@@ -491,12 +526,64 @@ def place_obstacles(terrain: Terrain, settings: PlaceSettings, outline: FloatArr
 
     For a caller that builds the same collision model outside a query (an experiment's own planner).
     """
-    return _obstacles(terrain, terrain.segmentation, settings, outline)
+    return _obstacles(terrain, settings, outline)
 
 
-def _obstacles(terrain: Terrain, seg: Segmentation, s: PlaceSettings, outline: FloatArray) -> VoxelMap:
+def ground_regions(terrain: Terrain, outline: FloatArray) -> list[int]:
+    """Ids of the regions the base can drive onto from the ground: where a wheeled base may stand.
+
+    The ground is the lowest of the regions large enough for the footprint (F, 2)
+    (:func:`standable_regions`; by the height of its centroid), a robot starts on the floor, and
+    every such region whose centroid lies within ``max_step`` of its plane (a floor that clutter
+    splits into several regions). Another region counts when a path of traversable borders of the region graph
+    (seed 000 V: height steps up to ``max_step``) joins it to the ground through regions large
+    enough too: a ramp and the platform at its top, not a table top (no border the base can
+    cross) nor a raised platform with a ledge all round.
+    """
+    import networkx as nx
+
+    seg = terrain.segmentation
+    big = standable_regions(seg, outline)
+    if not big:
+        return []
+    regions = {r.id: r for r in seg.regions}
+    lowest = regions[min(big, key=lambda i: float(regions[i].centroid[2]))]
+    step = GraphSettings().max_step
+    # the floor split by clutter into several regions is one level: each part within a step of
+    # the lowest region's plane at its centroid is ground too
+    level = [
+        i
+        for i in big
+        if abs(float(regions[i].centroid[2] - lowest.height_at(regions[i].centroid[None, :2])[0])) <= step
+    ]
+    roads = nx.Graph()
+    roads.add_nodes_from(big)
+    roads.add_edges_from((a, b) for a, b, traversable in terrain.graph.edges(data="traversable")
+                         if traversable and a in roads and b in roads)  # fmt: skip
+    return sorted(set().union(*(nx.node_connected_component(roads, i) for i in level)))
+
+
+def support_regions(
+    terrain: Terrain, settings: PlaceSettings, outline: FloatArray, cache: SceneCache | None = None
+) -> list[int] | None:
+    """The regions the base may stand on under ``settings.stand_on`` (None: every region, "any")."""
+    if settings.stand_on == "any":
+        return None
+    if cache is None:
+        return ground_regions(terrain, outline)
+    return cache.shared(
+        ("ground regions", id(terrain), outline.tobytes()), lambda: ground_regions(terrain, outline)
+    )
+
+
+def _obstacles(
+    terrain: Terrain, s: PlaceSettings, outline: FloatArray, cache: SceneCache | None = None
+) -> VoxelMap:
+    seg = terrain.segmentation
     if s.strategy != "orm":
-        return obstacle_voxels(terrain.voxels, seg, s.support_dist, standable_regions(seg, outline))
+        allowed = support_regions(terrain, s, outline, cache)
+        return obstacle_voxels(terrain.voxels, seg, s.support_dist,
+                               standable_regions(seg, outline) if allowed is None else allowed)  # fmt: skip
     # The flat-floor baseline knows one support surface: the floor at z = 0. Ramps are obstacles.
     z = terrain.voxels.centres[:, 2]
     return terrain.voxels.without(np.abs(z) <= s.support_dist)

@@ -112,6 +112,8 @@ class PlaceRequest(RobustnessFields):
     clearance: float | None = Field(None, ge=0.0, le=0.1, allow_inf_nan=False,
                                     description="keep this far [m] from the scene near the grasped object "
                                                 "(default: 3 sigma of the support plane's residuals)")  # fmt: skip
+    stand_on: Literal["ground", "any"] = Field("ground", description="where the base may stand: the ground and "
+                                               "what it can drive onto (ground), or every planar region (any)")  # fmt: skip
     start: Pose | None = Field(
         None, description='current base pose "x y yaw": also plan a path to each placement'
     )

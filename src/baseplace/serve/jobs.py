@@ -125,7 +125,7 @@ def place(state: ServiceState, scene: Scene, req: dict[str, Any], lane: str = "j
         motion, robustness = motion_and_robustness(r)
         settings = PlaceSettings(strategy=r["strategy"], placements=r["placements"], tries=r["tries"],
                                  resolution=r["resolution"], motion=motion, robustness=robustness,
-                                 clearance=r["clearance"])  # fmt: skip
+                                 clearance=r["clearance"], stand_on=r["stand_on"])  # fmt: skip
         robot = state.robot(r["robot"], lane=lane)
         rmap = state.reach_map(robot, r["arm"])
         grid = scene.grid if r["use_grid"] else None
