@@ -275,9 +275,11 @@ class Oracle:
         that counts). With ``first`` it stops at the first counting contact; with ``skip_hand`` the
         hand's geometries are not checked (the search checks them once, at the grasp).
         """
-        if not bool(self.arm.within_limits(q_arm)):
-            return ["joint limits"]
         out = []
+        if not bool(self.arm.within_limits(q_arm)):
+            out.append("joint limits")
+            if first:
+                return out
         if self.self_collision.colliding_arm(self.arm, q_arm)[0]:
             out.append("self")
             if first:
@@ -384,6 +386,14 @@ class Oracle:
                 "blocked_by": dict(blocked), "seconds": round(time.perf_counter() - t0, 2)}  # fmt: skip
 
 
+def unrounded(q: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Joints (n,) of a result row, which rounds them to 1e-6 rad: one at its limit may come back
+    just past it. Those within 1e-6 of the limits are put back on them; returns (q, whether any was)."""
+    inside = np.clip(q, lower, upper)
+    rounded = bool(np.any(inside != q) and np.all(np.abs(inside - q) <= 1e-6))
+    return (inside, True) if rounded else (q, False)
+
+
 def run_place(scene: Scene, oracle: Oracle) -> dict[str, Any]:
     """``place`` with its defaults on the noisy cloud; every returned placement checked on the true scene."""
     from baseplace.jobs.inputs import CloudInput
@@ -408,10 +418,12 @@ def run_place(scene: Scene, oracle: Oracle) -> dict[str, Any]:
     for row in report.placements:
         T = np.asarray(row["base_pose"], dtype=float)
         q = np.array([row["joints"][0][n] for n in oracle.arm.joint_names])
+        q, rounded = unrounded(q, oracle.arm.lower, oracle.arm.upper)
         touched = oracle.contacts(q, T, scene, first=False)
         rows.append({"base": [row["x"], row["y"], row["yaw"]], "base_z": row["z"], "joints": q.round(6).tolist(),
                      "touches": oracle.counting(touched),
-                     "hand_on_bottle": any(c.endswith("(hand)") for c in touched)})  # fmt: skip
+                     "hand_on_bottle": any(c.endswith("(hand)") for c in touched),
+                     "joints_clipped_from_rounding": rounded})  # fmt: skip
     return {"found": bool(rows), "seconds": round(seconds, 2), "placements": rows, "failures": dict(report.failures),
             "tries": report.tries, "object": report.object.get("found")}  # fmt: skip
 
