@@ -21,10 +21,14 @@ and what does one check cost?
 * Per (scene, grasp, base pose): ``MotionChecker.check`` with the product's ``MotionSettings()``
   (1 s wall limit), with the experiments' ``max_checks=500`` (30 s wall cap), and the reference:
   the same checker, ``max_checks=50_000``, ``time_limit=100``, ``approach_restarts=40``. One OMPL
-  seed per check (:func:`check_seed`), the same for the three. A reference motion is re-checked state by
-  state (every joint line at ``joint_resolution / 4``; transit in the transit model, approach in
-  the approach model). False "no motion": the product says None, the re-checked reference finds
-  a motion.
+  seed per check (:func:`check_seed`), the same for the three. Every motion found is re-checked
+  state by state (every joint line at ``joint_resolution / 4``; transit in the transit model,
+  approach in the approach model). False "no motion": the product says None, the reference finds
+  a motion that passes this re-check; its rate is given over all checks and over those where
+  such a motion exists. A refusal's reason: ``approach_ik`` (no IK walk along the approach line,
+  restarts included), ``approach_collision``, ``pregrasp_collision`` / ``transit_start_collision``
+  (an end of the transit collides in the transit model, where nothing may be touched),
+  ``no_rrt_path`` (RRTConnect ran out of its budget).
 * Timing: wall time of ``check``; calls of ``Environment.colliding_arm`` (state checks) and the
   time inside its two parts, the obstacle check (``Environment._touches_obstacles``) and
   self-collision (``SelfCollision.colliding_arm``). One process, no pools.
@@ -136,21 +140,27 @@ def check_seed(seed: int, cell: tuple[int, int], grasp: int, k: int) -> int:
 
 
 class Recorder:
-    """What one ``MotionChecker.check`` did: its approach, whether RRT ran and what it returned."""
+    """What one ``MotionChecker.check`` did: its approach, whether RRT ran and what it returned, and their times."""
 
     def __init__(self, checker: MotionChecker) -> None:
         self.approach: FloatArray | None = None
         self.rrt_called = False
         self.rrt_found = False
+        self.approach_s = 0.0
+        self.rrt_s = 0.0
         approach, rrt = checker.approach, checker._rrt
 
         def recorded_approach(*args: Any, **kwargs: Any) -> FloatArray | None:
+            t = time.perf_counter()
             self.approach = approach(*args, **kwargs)
+            self.approach_s += time.perf_counter() - t
             return self.approach
 
         def recorded_rrt(*args: Any, **kwargs: Any) -> FloatArray | None:
             self.rrt_called = True
+            t = time.perf_counter()
             path = rrt(*args, **kwargs)
+            self.rrt_s += time.perf_counter() - t
             self.rrt_found = path is not None
             return path
 
@@ -163,8 +173,12 @@ def refusal_reason(checker: MotionChecker, rec: Recorder) -> str:
     blocked = checker._blocked
     if rec.approach is None:
         return "approach_collision" if blocked is not None and blocked[1] == "approach" else "approach_ik"
-    if blocked is not None and blocked[1] == "transit":
-        return "transit_start_or_goal_collision"
+    if (
+        blocked is not None and blocked[1] == "transit"
+    ):  # the stowed start, or the pre-grasp (the approach's first)
+        return (
+            "transit_start_collision" if np.array_equal(blocked[0], checker.q_start) else "pregrasp_collision"
+        )
     return "no_rrt_path" if rec.rrt_called else "other"
 
 
@@ -176,7 +190,9 @@ def run_check(
     t = time.perf_counter()
     motion = checker.check(q, T_base, target, seed=seed)
     wall = time.perf_counter() - t
-    out: dict[str, Any] = {"found": motion is not None, "wall_ms": round(wall * 1e3, 2), **meter.snapshot()}
+    out: dict[str, Any] = {"found": motion is not None, "wall_ms": round(wall * 1e3, 2),
+                           "approach_ms": round(rec.approach_s * 1e3, 2), "rrt_ms": round(rec.rrt_s * 1e3, 2),
+                           **meter.snapshot()}  # fmt: skip
     if motion is None:
         out["reason"] = refusal_reason(checker, rec)
         out["contacts"] = [list(c) for c in checker.last_contacts[:3]]
@@ -191,10 +207,13 @@ def run_check(
 def recheck(
     checker: MotionChecker, path: FloatArray, approach: FloatArray, T_base: FloatArray
 ) -> dict[str, Any]:
-    """Every state of a motion, joint lines cut at ``joint_resolution / RECHECK``, in its model."""
+    """Every state of a motion, joint lines cut at ``joint_resolution / RECHECK``, in its model.
+
+    Returns the states checked, how many collide, in which part, and what the colliding ones touch.
+    """
     step = checker.settings.joint_resolution / RECHECK
     approach_env = checker.approach_environment or checker.environment
-    states, colliding = 0, []
+    states, colliding, touched = 0, [], Counter[str]()
     for part, env, waypoints in (
         ("transit", checker.environment, path),
         ("approach", approach_env, approach),
@@ -203,9 +222,18 @@ def recheck(
             n = max(1, math.ceil(float(np.linalg.norm(b - a)) / step))
             for k in range(n + 1):
                 states += 1
-                if env.colliding_arm(checker.arm, a + (b - a) * (k / n), T_base):
+                q = a + (b - a) * (k / n)
+                if env.colliding_arm(checker.arm, q, T_base):
                     colliding.append(part)
-    return {"states": states, "colliding": len(colliding), "parts": sorted(set(colliding))}
+                    touched.update(
+                        f"{link} / {what}" for link, what in env.contacts_arm(checker.arm, q, T_base)
+                    )
+    return {
+        "states": states,
+        "colliding": len(colliding),
+        "parts": sorted(set(colliding)),
+        "touched": dict(touched),
+    }
 
 
 def stats(values: list[float]) -> dict[str, float | None]:
@@ -217,11 +245,13 @@ def stats(values: list[float]) -> dict[str, float | None]:
 
 
 def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
-    out: dict[str, Any] = {"checks": len(rows)}
+    feasible = sum(row["reference_valid"] for row in rows)
+    out: dict[str, Any] = {"checks": len(rows), "reference_feasible": feasible}
     for name in ("product", "product_500"):
         r = [row[name] for row in rows]
         false_none = sum(1 for row in rows if not row[name]["found"] and row["reference_valid"])
         low, high = wilson_interval(false_none, len(rows)) if rows else (0.0, 1.0)
+        low_f, high_f = wilson_interval(false_none, feasible) if feasible else (0.0, 1.0)
         states = [sum(v for k, v in x["calls"].items() if k.startswith("states_")) for x in r]
         obstacle_ms = sum(x["ms"].get("obstacles", 0.0) for x in r)
         self_ms = sum(x["ms"].get("self_collision", 0.0) for x in r)
@@ -235,6 +265,12 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
             "false_no_motion": false_none,
             "false_no_motion_rate": round(false_none / len(rows), 4) if rows else None,
             "false_no_motion_ci95": [round(low, 4), round(high, 4)],
+            "false_no_motion_of_feasible": round(false_none / feasible, 4) if feasible else None,
+            "false_no_motion_of_feasible_ci95": [round(low_f, 4), round(high_f, 4)],
+            "found_touching_at_finer_recheck": sum(1 for x in r if x["found"] and x["recheck"]["colliding"]),
+            "approach_ms": stats([x["approach_ms"] for x in r]),
+            "approach_share": round(sum(x["approach_ms"] for x in r) / total_ms, 3) if total_ms else None,
+            "rrt_share": round(sum(x["rrt_ms"] for x in r) / total_ms, 3) if total_ms else None,
             "refusals": dict(Counter(x["reason"] for x in r if not x["found"])),
             "ms": stats([x["wall_ms"] for x in r]),
             "ms_found": stats([x["wall_ms"] for x in r if x["found"]]),
@@ -249,7 +285,8 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
     ref = [row["reference"] for row in rows]
     out["reference"] = {
         "found": sum(x["found"] for x in ref),
-        "found_and_rechecked_free": sum(row["reference_valid"] for row in rows),
+        "found_and_rechecked_free": feasible,
+        "found_touching_at_finer_recheck": sum(1 for x in ref if x["found"] and x["recheck"]["colliding"]),
         "refusals": dict(Counter(x["reason"] for x in ref if not x["found"])),
         "ms": stats([x["wall_ms"] for x in ref]),
     }
@@ -323,13 +360,10 @@ def main() -> None:
                                            ("reference", REFERENCE)):  # fmt: skip
                         checker = MotionChecker(robot, arm, transit, approach, settings)
                         row[name], motion = run_check(checker, meter, q, T_base, target, ompl_seed)
-                        if name == "reference":
-                            row["reference_valid"] = False
-                            if motion is not None:
-                                row["reference_recheck"] = recheck(
-                                    checker, motion.path, motion.approach, T_base
-                                )
-                                row["reference_valid"] = row["reference_recheck"]["colliding"] == 0
+                        if motion is not None:
+                            row[name]["recheck"] = recheck(checker, motion.path, motion.approach, T_base)
+                    ref = row["reference"]
+                    row["reference_valid"] = ref["found"] and ref["recheck"]["colliding"] == 0
                     rows.append(row)
                     print("  ", k, {n: (row[n]["found"], row[n]["wall_ms"], row[n].get("reason"))
                                     for n in ("product", "product_500", "reference")}, flush=True)  # fmt: skip
@@ -358,7 +392,9 @@ def print_table(summary: dict[str, Any]) -> None:
     )
     line: Callable[[str, dict[str, Any]], str] = lambda name, x: (  # noqa: E731
         f"{name:12s} found {x['found']:3d}  false none {x['false_no_motion']} "
-        f"({x['false_no_motion_rate']}, CI95 {x['false_no_motion_ci95']})  "
+        f"({x['false_no_motion_rate']}, CI95 {x['false_no_motion_ci95']}; of feasible "
+        f"{x['false_no_motion_of_feasible']}, CI95 {x['false_no_motion_of_feasible_ci95']})  "
+        f"found touching at finer recheck {x['found_touching_at_finer_recheck']}  "
         f"ms median {x['ms']['median']} p90 {x['ms']['p90']}  states median {x['state_checks']['median']}  "
         f"ms/state {x['ms_per_state_check']} (obstacles {x['ms_per_obstacle_check']}, "
         f"self {x['ms_per_self_collision_check']})"
