@@ -23,9 +23,12 @@ and what does one check cost?
   the same checker, ``max_checks=50_000``, ``time_limit=100``, ``approach_restarts=40``. One OMPL
   seed per check (:func:`check_seed`), the same for the three. Every motion found is re-checked
   state by state (every joint line at ``joint_resolution / 4``; transit in the transit model,
-  approach in the approach model). False "no motion": the product says None, the reference finds
-  a motion that passes this re-check; its rate is given over all checks and over those where
-  such a motion exists. A refusal's reason: ``approach_ik`` (no IK walk along the approach line,
+  approach in the approach model), and on the true table and bottle by the execution oracle
+  (``ExecutionOracle.path_free``, coal, same step; the hand may touch the bottle in the approach
+  only). False "no motion": the product says None, the reference finds a motion that passes the
+  re-check in its own models; its rate is given over all checks and over those where such a
+  motion exists. The results file keeps each check's inputs (base pose, target, grasp
+  configuration) and every motion's waypoints, for a later checker to run on the same inputs. A refusal's reason: ``approach_ik`` (no IK walk along the approach line,
   restarts included), ``approach_collision``, ``pregrasp_collision`` / ``transit_start_collision``
   (an end of the transit collides in the transit model, where nothing may be touched),
   ``no_rrt_path`` (RRTConnect ran out of its budget).
@@ -58,7 +61,15 @@ from baseplace.placement.scene_cache import SceneCache
 from baseplace.reachability.cache import resolve_map
 from baseplace.robots.model import Robot
 from baseplace.world.environment import Environment
-from baseplace_experiments.table_grid import TableGridSettings, object_cloud, table_cloud
+from baseplace_experiments.execution import ExecutionOracle, ExecutionSettings
+from baseplace_experiments.table_grid import (
+    RobotShapes,
+    TableGridSettings,
+    object_cloud,
+    table_cloud,
+    true_bottle,
+    true_table,
+)
 from common import report
 
 SEEDS = (0, 1, 2)
@@ -236,6 +247,31 @@ def recheck(
     }
 
 
+def true_scene(
+    oracle: ExecutionOracle, path: FloatArray, approach: FloatArray, T_base: FloatArray
+) -> dict[str, Any]:
+    """What a motion's states touch of the true table and bottle (``ExecutionOracle``'s rule and step).
+
+    The transit may touch nothing; in the approach the hand may touch the bottle. Per part, the
+    number of states per contact ("self" or "LINK GEOMETRY - SHAPE", the first found).
+    """
+    out: dict[str, Any] = {}
+    for part, waypoints, hand_may_touch in (("transit", path, False), ("approach", approach, True)):
+        scene = oracle.scene if hand_may_touch or oracle.grasped is None else [*oracle.scene, oracle.grasped]
+        held = oracle.grasped if hand_may_touch else None
+        touched: Counter[str] = Counter()
+        states = [waypoints[0]]
+        for a, b in itertools.pairwise(waypoints):
+            n = max(1, math.ceil(float(np.linalg.norm(b - a)) / oracle.settings.path_step))
+            states += [a + (b - a) * (k / n) for k in range(1, n + 1)]
+        for q in states:
+            what = oracle.shapes.touching(q, T_base, scene, held)
+            if what is not None:
+                touched[what] += 1
+        out[part] = dict(touched)
+    return out
+
+
 def stats(values: list[float]) -> dict[str, float | None]:
     if not values:
         return {"median": None, "p90": None, "mean": None}
@@ -268,6 +304,7 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
             "false_no_motion_of_feasible": round(false_none / feasible, 4) if feasible else None,
             "false_no_motion_of_feasible_ci95": [round(low_f, 4), round(high_f, 4)],
             "found_touching_at_finer_recheck": sum(1 for x in r if x["found"] and x["recheck"]["colliding"]),
+            "found_touching_true_scene": sum(1 for x in r if x["found"] and any(x["true_scene"].values())),
             "approach_ms": stats([x["approach_ms"] for x in r]),
             "approach_share": round(sum(x["approach_ms"] for x in r) / total_ms, 3) if total_ms else None,
             "rrt_share": round(sum(x["rrt_ms"] for x in r) / total_ms, 3) if total_ms else None,
@@ -287,6 +324,7 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "found": sum(x["found"] for x in ref),
         "found_and_rechecked_free": feasible,
         "found_touching_at_finer_recheck": sum(1 for x in ref if x["found"] and x["recheck"]["colliding"]),
+        "found_touching_true_scene": sum(1 for x in ref if x["found"] and any(x["true_scene"].values())),
         "refusals": dict(Counter(x["reason"] for x in ref if not x["found"])),
         "ms": stats([x["wall_ms"] for x in ref]),
     }
@@ -315,11 +353,14 @@ def main() -> None:
     arm = robot.arm(rmap.info.arm)
     s = TableGridSettings()
     meter = Meter()
+    shapes = RobotShapes(robot, arm.name)
+    true_step = ExecutionSettings(path_step=PRODUCT.joint_resolution / RECHECK)
     rows: list[dict[str, Any]] = []
     t_run = time.perf_counter()
     for seed in args.seeds:
         for cell in CELLS[: args.cells]:
-            _, p_est, seen = scene(seed, cell, s)
+            p_true, p_est, seen = scene(seed, cell, s)
+            oracle = ExecutionOracle(shapes, true_table(s), true_bottle(p_true, s), true_step)
             points = with_floor(seen, 0.0)
             cache = SceneCache(points)
             grasps = s.grasps(p_est, s.method_top_below)
@@ -355,6 +396,8 @@ def main() -> None:
                         "base": [round(float(T_base[0, 3]), 3), round(float(T_base[1, 3]), 3),
                                  round(math.atan2(T_base[1, 0], T_base[0, 0]), 3)],
                         "grasped": res.grasped_note.split(" at ")[0],
+                        "T_world_base": np.round(T_base, 6).tolist(), "target": np.round(target, 6).tolist(),
+                        "q_grasp": np.round(q, 6).tolist(),
                     }  # fmt: skip
                     for name, settings in (("product", PRODUCT), ("product_500", PRODUCT_500),
                                            ("reference", REFERENCE)):  # fmt: skip
@@ -362,6 +405,9 @@ def main() -> None:
                         row[name], motion = run_check(checker, meter, q, T_base, target, ompl_seed)
                         if motion is not None:
                             row[name]["recheck"] = recheck(checker, motion.path, motion.approach, T_base)
+                            row[name]["true_scene"] = true_scene(oracle, motion.path, motion.approach, T_base)
+                            row[name]["path"] = np.round(motion.path, 5).tolist()
+                            row[name]["approach"] = np.round(motion.approach, 5).tolist()
                     ref = row["reference"]
                     row["reference_valid"] = ref["found"] and ref["recheck"]["colliding"] == 0
                     rows.append(row)
@@ -394,7 +440,8 @@ def print_table(summary: dict[str, Any]) -> None:
         f"{name:12s} found {x['found']:3d}  false none {x['false_no_motion']} "
         f"({x['false_no_motion_rate']}, CI95 {x['false_no_motion_ci95']}; of feasible "
         f"{x['false_no_motion_of_feasible']}, CI95 {x['false_no_motion_of_feasible_ci95']})  "
-        f"found touching at finer recheck {x['found_touching_at_finer_recheck']}  "
+        f"found touching at finer recheck {x['found_touching_at_finer_recheck']}, true scene "
+        f"{x['found_touching_true_scene']}  "
         f"ms median {x['ms']['median']} p90 {x['ms']['p90']}  states median {x['state_checks']['median']}  "
         f"ms/state {x['ms_per_state_check']} (obstacles {x['ms_per_obstacle_check']}, "
         f"self {x['ms_per_self_collision_check']})"
