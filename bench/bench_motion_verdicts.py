@@ -280,7 +280,18 @@ def stats(values: list[float]) -> dict[str, float | None]:
             "mean": round(float(v.mean()), 2)}  # fmt: skip
 
 
+ON_FLOOR = 0.3
+"""A base pose below this height [m] stands on the floor; above it, ``place`` put the robot on the
+table top (a 0.8 x 1.8 m plane, large enough for TIAGo's footprint, is a region it may stand on)."""
+
+
 def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """The figures over every check, and over those whose base pose stands on the floor."""
+    floor = [row for row in rows if row["T_world_base"][2][3] < ON_FLOOR]
+    return {**figures(rows), "base_on_table_top": len(rows) - len(floor), "floor_only": figures(floor)}
+
+
+def figures(rows: list[dict[str, Any]]) -> dict[str, Any]:
     feasible = sum(row["reference_valid"] for row in rows)
     out: dict[str, Any] = {"checks": len(rows), "reference_feasible": feasible}
     for name in ("product", "product_500"):
@@ -305,6 +316,12 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
             "false_no_motion_of_feasible_ci95": [round(low_f, 4), round(high_f, 4)],
             "found_touching_at_finer_recheck": sum(1 for x in r if x["found"] and x["recheck"]["colliding"]),
             "found_touching_true_scene": sum(1 for x in r if x["found"] and any(x["true_scene"].values())),
+            "found_touching_true_scene_in_transit": sum(
+                1 for x in r if x["found"] and x["true_scene"]["transit"]
+            ),
+            "found_touching_true_scene_in_approach": sum(
+                1 for x in r if x["found"] and x["true_scene"]["approach"]
+            ),
             "approach_ms": stats([x["approach_ms"] for x in r]),
             "approach_share": round(sum(x["approach_ms"] for x in r) / total_ms, 3) if total_ms else None,
             "rrt_share": round(sum(x["rrt_ms"] for x in r) / total_ms, 3) if total_ms else None,
@@ -428,6 +445,8 @@ def main() -> None:
     }  # fmt: skip
     report(args.name, result)
     print_table(summary)
+    print("base on the floor only:")
+    print_table(summary["floor_only"])
 
 
 def print_table(summary: dict[str, Any]) -> None:
