@@ -11,10 +11,12 @@ from __future__ import annotations
 import json
 from functools import cache
 from importlib import resources
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from baseplace.jobs.explain import ExplainJob, ExplainReport, explain_job
 from baseplace.jobs.report import SCHEMA_VERSION, NoResultError, PoseRecord, Report, RobotRef
+
+if TYPE_CHECKING:
+    from baseplace.jobs.explain import ExplainJob, ExplainReport, explain_job
 
 
 @cache
@@ -23,6 +25,15 @@ def result_schema() -> dict[str, Any]:
     text = resources.files("baseplace.jobs").joinpath("result.schema.json").read_text()
     schema: dict[str, Any] = json.loads(text)
     return schema
+
+
+def __getattr__(name: str) -> Any:
+    """The explain job's names, imported on first use: a job imports what it uses alone."""
+    if name in ("ExplainJob", "ExplainReport", "explain_job"):
+        from baseplace.jobs import explain
+
+        return getattr(explain, name)
+    raise AttributeError(f"module 'baseplace.jobs' has no attribute {name!r}")
 
 
 __all__ = [
