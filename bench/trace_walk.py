@@ -94,7 +94,7 @@ class Walk:
         }
         if listing:
             out["files"] = {rel(k[0]): [] for k in sorted(entered)}
-            for k in sorted(functions):
+            for k in sorted(entered):
                 how = f"x{self.calls[k]}" if k in self.calls else "at import"
                 out["files"][rel(k[0])].append(f"{k[1]}:{k[2]} {how}")
         return out
