@@ -56,7 +56,6 @@ _LAZY: dict[str, str] = {
     # the jobs, their inputs and their report
     "SCHEMA_VERSION": "baseplace.jobs",
     "NoResultError": "baseplace.jobs",
-    "PoseRecord": "baseplace.jobs",
     "Report": "baseplace.jobs",
     "RobotRef": "baseplace.jobs",
     "result_schema": "baseplace.jobs",
@@ -91,7 +90,7 @@ _LAZY: dict[str, str] = {
 
 if TYPE_CHECKING:  # what type checkers and IDEs see; at run time __getattr__ imports these
     from baseplace.geometry import BasePose, parse_base_pose, parse_pose6, plane_base_poses
-    from baseplace.jobs import SCHEMA_VERSION, NoResultError, PoseRecord, Report, RobotRef, result_schema
+    from baseplace.jobs import SCHEMA_VERSION, NoResultError, Report, RobotRef, result_schema
     from baseplace.jobs.candidates import CandidatesJob, candidates_job
     from baseplace.jobs.demo import DemoJob, demo_job
     from baseplace.jobs.inputs import BagInput, CloudInput
@@ -170,7 +169,6 @@ __all__ = [  # every name above: the errors, __version__ and each of _LAZY (test
     "PlaceJob",
     "PlaceSettings",
     "PlacementResult",
-    "PoseRecord",
     "RadialSettings",
     "ReachJob",
     "ReachabilityMap",

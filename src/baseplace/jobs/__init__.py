@@ -13,7 +13,8 @@ from functools import cache
 from importlib import resources
 from typing import TYPE_CHECKING, Any
 
-from baseplace.jobs.report import SCHEMA_VERSION, NoResultError, PoseRecord, Report, RobotRef
+from baseplace.jobs.report import SCHEMA_VERSION, NoResultError, Report, RobotRef
+from baseplace.jobs.report import PoseRecord as PoseRecord  # BasePose, by its old name in reports
 
 if TYPE_CHECKING:
     from baseplace.jobs.explain import ExplainJob, ExplainReport, explain_job
@@ -41,7 +42,6 @@ __all__ = [
     "ExplainJob",
     "ExplainReport",
     "NoResultError",
-    "PoseRecord",
     "Report",
     "RobotRef",
     "explain_job",
