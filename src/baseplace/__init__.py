@@ -11,10 +11,10 @@ stays cheap and does not load numba or the robot models until they are needed.
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from baseplace.errors import BaseplaceError, InputError, NothingFoundError
+from baseplace.lazy import lazy_getattr
 
 __version__ = "0.1.0"
 
@@ -128,14 +128,7 @@ if TYPE_CHECKING:  # what type checkers and IDEs see; at run time __getattr__ im
     from baseplace.world.occupancy import OccupancyGrid, load_occupancy
 
 
-def __getattr__(name: str) -> Any:
-    """Import a public name on first use (PEP 562) and keep it, so later lookups are plain attributes."""
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module 'baseplace' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
+__getattr__ = lazy_getattr(__name__, _LAZY, globals())
 
 
 def __dir__() -> list[str]:

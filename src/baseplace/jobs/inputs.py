@@ -236,6 +236,8 @@ def occupancy_grid(
     grid: OccupancyGrid | str | None, bag: BagInput | None = None, holder: CloudInput | None = None
 ) -> OccupancyGrid | None:
     """The occupancy grid given (loaded, or a map_server YAML), else the recording's map topic, else None."""
+    if grid is None and (bag is None or bag.map_topic is None):
+        return None  # before the import: a query on a cloud alone never loads the grid reader
     from baseplace.world.occupancy import OccupancyGrid, load_occupancy
 
     if isinstance(grid, OccupancyGrid):

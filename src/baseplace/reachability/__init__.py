@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from baseplace.lazy import lazy_getattr
 
 if TYPE_CHECKING:
     from baseplace.reachability.build import BuildSettings, build_map
@@ -28,13 +29,7 @@ _LAZY = {
 """Public name -> its module, imported on first use (PEP 562): a query that loads a map never imports the builder."""
 
 
-def __getattr__(name: str) -> Any:
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module 'baseplace.reachability' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
+__getattr__ = lazy_getattr(__name__, _LAZY, globals())
 
 
 __all__ = [
