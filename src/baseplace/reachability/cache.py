@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 
 from baseplace.errors import InputError
 from baseplace.files import OutputError, skip_cache_entry
-from baseplace.reachability.sampling import BuildSettings
+from baseplace.reachability.settings import BuildSettings
 from baseplace.reachability.storage import FORMAT_VERSION, is_compressed, load_map, save_map
 from baseplace.robots.codegen import cache_dir, private_dir
 from baseplace.status import map_step, step_progress
