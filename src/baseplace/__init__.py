@@ -11,10 +11,10 @@ stays cheap and does not load numba or the robot models until they are needed.
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from baseplace.errors import BaseplaceError, InputError, NothingFoundError
+from baseplace.lazy import lazy_getattr
 
 __version__ = "0.1.0"
 
@@ -56,7 +56,6 @@ _LAZY: dict[str, str] = {
     # the jobs, their inputs and their report
     "SCHEMA_VERSION": "baseplace.jobs",
     "NoResultError": "baseplace.jobs",
-    "PoseRecord": "baseplace.jobs",
     "Report": "baseplace.jobs",
     "RobotRef": "baseplace.jobs",
     "result_schema": "baseplace.jobs",
@@ -91,7 +90,7 @@ _LAZY: dict[str, str] = {
 
 if TYPE_CHECKING:  # what type checkers and IDEs see; at run time __getattr__ imports these
     from baseplace.geometry import BasePose, parse_base_pose, parse_pose6, plane_base_poses
-    from baseplace.jobs import SCHEMA_VERSION, NoResultError, PoseRecord, Report, RobotRef, result_schema
+    from baseplace.jobs import SCHEMA_VERSION, NoResultError, Report, RobotRef, result_schema
     from baseplace.jobs.candidates import CandidatesJob, candidates_job
     from baseplace.jobs.demo import DemoJob, demo_job
     from baseplace.jobs.inputs import BagInput, CloudInput
@@ -129,14 +128,7 @@ if TYPE_CHECKING:  # what type checkers and IDEs see; at run time __getattr__ im
     from baseplace.world.occupancy import OccupancyGrid, load_occupancy
 
 
-def __getattr__(name: str) -> Any:
-    """Import a public name on first use (PEP 562) and keep it, so later lookups are plain attributes."""
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module 'baseplace' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
+__getattr__ = lazy_getattr(__name__, _LAZY, globals())
 
 
 def __dir__() -> list[str]:
@@ -170,7 +162,6 @@ __all__ = [  # every name above: the errors, __version__ and each of _LAZY (test
     "PlaceJob",
     "PlaceSettings",
     "PlacementResult",
-    "PoseRecord",
     "RadialSettings",
     "ReachJob",
     "ReachabilityMap",

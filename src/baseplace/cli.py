@@ -12,19 +12,47 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import importlib.util
 import json
 import os
 import sys
 import warnings
 from collections.abc import Callable, Sequence
-from typing import Any, NoReturn
+from types import ModuleType
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from baseplace import __version__
 from baseplace.argtypes import count, finite_float, in_radians, nonneg_int
 from baseplace.errors import BaseplaceError
-from baseplace.jobs import candidates, demo, explain, navigate, place, point, reach, surface, view, world
 from baseplace.jobs.inputs import DEFAULT_MAP_SAMPLES, Progress, motion_and_robustness
 from baseplace.robots.defaults import DEFAULT_ROBOT
+
+
+def _lazy_module(name: str) -> ModuleType:
+    """Module ``name``, executed on its first attribute access: a command imports its own job alone."""
+    if name in sys.modules:
+        return sys.modules[name]
+    spec = importlib.util.find_spec(name)
+    assert spec is not None and spec.loader is not None, name
+    spec.loader = importlib.util.LazyLoader(spec.loader)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    parent, _, child = name.rpartition(".")
+    setattr(sys.modules[parent], child, module)  # as an import does: ``import a.b`` then ``a.b`` works
+    return module
+
+
+if TYPE_CHECKING:
+    from importlib.metadata import EntryPoint
+
+    from baseplace.jobs import candidates, demo, explain, navigate, place, point, reach, surface, view, world
+else:
+    candidates, demo, explain, navigate, place, point, reach, surface, view, world = (
+        _lazy_module(f"baseplace.jobs.{name}")
+        for name in ("candidates", "demo", "explain", "navigate", "place", "point", "reach", "surface", "view",
+                     "world")
+    )  # fmt: skip
 
 DEFAULT_CHECKPOINT_EVERY = 50_000_000  # baseplace.reachability.build's, without importing numba for --help
 PLUGIN_GROUP = "baseplace.commands"
@@ -34,6 +62,8 @@ KINDS = {"robots": "robots", "robot": "robot_check", "build-map": "build_map", "
          "surface-sample": "surface_samples", "occupancy": "occupancy", "segment": "segment", "scene": "scene",
          "demo": "demo", "explain": "explain", "point": "point"}  # fmt: skip
 """Command -> the kind of report it prints."""
+COMMANDS = {*KINDS, "serve", "view"}
+"""The library's own commands (the plugins add theirs)."""
 
 
 class _Parser(argparse.ArgumentParser):
@@ -265,8 +295,14 @@ def _add_degrees_argument(p: argparse.ArgumentParser) -> None:
                         "an object's yaw) are in degrees; without it radians, and values beyond 2 pi are refused")  # fmt: skip
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of the ``baseplace`` command."""
+def build_parser(chosen: str | None = None) -> argparse.ArgumentParser:
+    """The argument parser of the ``baseplace`` command.
+
+    With ``chosen`` (the command a command line names) the modules that register other commands
+    (the service's, each plugin's) are not imported; None, or a name no one registers: all of them.
+    """
+    plugins = _plugins()
+    everything = chosen is None or chosen not in COMMANDS | {ep.name for ep in plugins}
     parser = _Parser(prog="baseplace", description="Where should a mobile manipulator stand?", formatter_class=_Formatter)  # fmt: skip
     parser.add_argument("--version", action="version", version=f"baseplace {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
@@ -282,9 +318,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     command("robots", "list the built-in robots, their arms and TCP frames")
     _add_robot_commands(sub, command)
-    from baseplace.serve.command import add_serve_command
+    if everything or chosen == "serve":
+        from baseplace.serve.command import add_serve_command
 
-    add_serve_command(sub)
+        add_serve_command(sub)
 
     p = command("build-map", "build a reachability map by random joint sampling")
     p.add_argument(
@@ -544,7 +581,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="cloud file (.ply, .pcd or .npy)")
     p.add_argument("--truth", default=None, help="ground-truth JSON (default: next to --out)")
 
-    _add_plugin_commands(sub)
+    _add_plugin_commands(sub, [ep for ep in plugins if everything or ep.name == chosen])
 
     _add_view_command(sub)
 
@@ -557,27 +594,33 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _add_plugin_commands(sub: Any) -> None:
-    """Commands that other packages register under the entry-point group :data:`PLUGIN_GROUP`.
+def _plugins() -> list[EntryPoint]:
+    """The entry points of :data:`PLUGIN_GROUP`, by name, a name registered twice (two installs) once.
 
-    Each entry point is a function called with ``baseplace``'s subparsers (it adds its commands
-    with ``sub.add_parser``, as the papers' experiments add ``experiment``). A name registered
-    twice (two installs of one package) is added once; a plugin that fails to load is left out
-    with one ``warning: ...`` line, and the other commands still work.
+    Listed from the installed packages' metadata: none of their modules is imported.
     """
     from importlib.metadata import entry_points
 
-    added: set[str] = set()
+    found: dict[str, EntryPoint] = {}
     for ep in sorted(entry_points(group=PLUGIN_GROUP), key=lambda e: e.name):
-        if ep.name in added:
-            continue
+        found.setdefault(ep.name, ep)
+    return list(found.values())
+
+
+def _add_plugin_commands(sub: Any, plugins: Sequence[EntryPoint]) -> None:
+    """Commands that other packages register under the entry-point group :data:`PLUGIN_GROUP`.
+
+    Each entry point is a function called with ``baseplace``'s subparsers (it adds its commands
+    with ``sub.add_parser``, as the papers' experiments add ``experiment``); its name is the
+    command it adds, so that a command line naming another command never imports it. A plugin
+    that fails to load is left out with one ``warning: ...`` line, and the other commands still work.
+    """
+    for ep in plugins:
         try:
             ep.load()(sub)
         except Exception as exc:  # a broken plugin must not take the library's commands with it
             first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
             sys.stderr.write(f"warning: the {ep.name!r} commands ({ep.value}) did not load: {first}\n")
-            continue
-        added.add(ep.name)
 
 
 def _add_robot_commands(sub: Any, command: Callable[..., argparse.ArgumentParser]) -> None:
@@ -657,9 +700,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     words = [a for a in argv if not a.startswith("-")]
     _Parser.json_argv = argv if "--json" in argv else None
     _Parser.json_kind = KINDS.get(words[0]) if words else None
-    args = build_parser().parse_args(argv)
+    args = build_parser(words[0] if words else None).parse_args(argv)
     from baseplace.jobs.report import NoResultError, Report
-    from baseplace.jobs.text import report_text
     from baseplace.status import ProgressBars, elapsed_status
 
     as_json = getattr(args, "json", False)
@@ -703,7 +745,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not isinstance(report, Report):  # view and the experiments print their own output
         return int(report)
     obj = report.to_json()
-    return _out((json.dumps(obj) if as_json else report_text(obj)) + "\n") or 0
+    if as_json:
+        return _out(json.dumps(obj) + "\n") or 0
+    from baseplace.jobs.text import report_text
+
+    return _out(report_text(obj) + "\n") or 0
 
 
 def _out(text: str) -> int | None:

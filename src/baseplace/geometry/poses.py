@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -134,6 +135,17 @@ def yaw_of(T_world_base: ArrayLike) -> FloatArray:
     return wrap_angle(np.arctan2(T[..., 1, 0], T[..., 0, 0]))
 
 
+def pose_json(T_world_base: ArrayLike) -> dict[str, Any]:
+    """A base pose in the one JSON shape of every report, from its (4, 4) ``T_world_base``.
+
+    ``{"base_pose": the 4x4 (6 decimals), "x", "y", "z" [m] (4 decimals), "yaw" [rad] in (-pi, pi]
+    (:func:`yaw_of`, 4 decimals)}``; a placement on an incline keeps its tilt in ``base_pose``.
+    """
+    T = np.asarray(T_world_base, dtype=float)
+    return {"base_pose": np.round(T, 6).tolist(), "x": round(float(T[0, 3]), 4),
+            "y": round(float(T[1, 3]), 4), "z": round(float(T[2, 3]), 4), "yaw": round(float(yaw_of(T)), 4)}  # fmt: skip
+
+
 def _parse_numbers(text: str, count: int, what: str) -> FloatArray:
     parts = text.replace(",", " ").split()
     if len(parts) != count:
@@ -194,18 +206,31 @@ def parse_base_pose(text: str) -> BasePose:
 
 @dataclass(frozen=True)
 class BasePose:
-    """A base pose on the flat floor: position (x, y) [m] and heading yaw [rad] about world z.
+    """A base pose on a level floor: position (x, y) [m], heading yaw [rad] about world z, floor height z [m].
 
-    ``matrix()`` is ``T_world_base`` with the base frame on the floor (z = 0).
+    z is 0 on the world's floor. ``matrix()`` is ``T_world_base`` with the base frame on that floor; ``to_json()`` is the shape
+    every report gives a base pose in (:func:`pose_json`).
     """
 
     x: float
     y: float
     yaw: float
+    z: float = 0.0
 
     def matrix(self) -> FloatArray:
         """``T_world_base``, shape (4, 4)."""
-        return pose_from_xyz_rpy([self.x, self.y, 0.0, 0.0, 0.0, self.yaw])
+        return pose_from_xyz_rpy([self.x, self.y, self.z, 0.0, 0.0, self.yaw])
+
+    @classmethod
+    def from_xyyaw(cls, x: float, y: float, yaw: float, z: float = 0.0) -> BasePose:
+        """From numbers of any numeric type (numpy's too): position [m], heading [rad, any range]."""
+        return cls(float(x), float(y), float(yaw), float(z))
+
+    def to_json(self) -> dict[str, Any]:
+        """:func:`pose_json` of this pose: the heading wrapped to (-pi, pi]."""
+        T = self.batch_matrix([self.x, self.y, self.yaw])[0]
+        T[2, 3] = self.z
+        return pose_json(T)
 
     @classmethod
     def from_matrix(cls, T_world_base: ArrayLike) -> BasePose:

@@ -11,10 +11,13 @@ from __future__ import annotations
 import json
 from functools import cache
 from importlib import resources
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from baseplace.jobs.explain import ExplainJob, ExplainReport, explain_job
-from baseplace.jobs.report import SCHEMA_VERSION, NoResultError, PoseRecord, Report, RobotRef
+from baseplace.jobs.report import SCHEMA_VERSION, NoResultError, Report, RobotRef
+from baseplace.jobs.report import PoseRecord as PoseRecord  # BasePose, by its old name in reports
+
+if TYPE_CHECKING:
+    from baseplace.jobs.explain import ExplainJob, ExplainReport, explain_job
 
 
 @cache
@@ -25,12 +28,20 @@ def result_schema() -> dict[str, Any]:
     return schema
 
 
+def __getattr__(name: str) -> Any:
+    """The explain job's names, imported on first use: a job imports what it uses alone."""
+    if name in ("ExplainJob", "ExplainReport", "explain_job"):
+        from baseplace.jobs import explain
+
+        return getattr(explain, name)
+    raise AttributeError(f"module 'baseplace.jobs' has no attribute {name!r}")
+
+
 __all__ = [
     "SCHEMA_VERSION",
     "ExplainJob",
     "ExplainReport",
     "NoResultError",
-    "PoseRecord",
     "Report",
     "RobotRef",
     "explain_job",

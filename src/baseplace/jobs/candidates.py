@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from baseplace.errors import InputError
+from baseplace.geometry.poses import BasePose
 from baseplace.jobs.inputs import (
     CHECK_MARGIN,
     PLOT_SUFFIXES,
@@ -40,7 +41,6 @@ from baseplace.jobs.inputs import (
 from baseplace.jobs.report import (
     CandidatesReport,
     NoResultError,
-    PoseRecord,
     RobotRef,
     path_json,
     placement_row,
@@ -211,7 +211,7 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
     report = CandidatesReport(
         robot=RobotRef.of(robot, rmap.info.arm), inputs=job.echo(), failures=found.failures(), method=job.method,
         object=[float(v) for v in p_o],
-        robot_pose=None if robot_pose is None else PoseRecord.from_xyyaw(*robot_pose), candidates=rows,
+        robot_pose=None if robot_pose is None else BasePose.from_xyyaw(*robot_pose), candidates=rows,
         rejected=[{"x": round(xy[0], 4), "y": round(xy[1], 4), "reason": why} for xy, why in rejected],
         path=None if route is None or found.chosen is None else path_json(route.poses),
         object_shape={"requested": job.object_shape,

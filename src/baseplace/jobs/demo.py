@@ -17,8 +17,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from baseplace.geometry.poses import BasePose, pose_json
 from baseplace.jobs.inputs import DEFAULT_MAP_SAMPLES, Progress
-from baseplace.jobs.report import DemoReport, NoResultError, PoseRecord, RobotRef, path_json
+from baseplace.jobs.report import DemoReport, NoResultError, RobotRef, path_json
 from baseplace.robots.defaults import DEFAULT_ROBOT
 
 if TYPE_CHECKING:
@@ -97,7 +98,7 @@ def demo_job(job: DemoJob, progress: Progress | None = None) -> DemoReport:
         robot=RobotRef.of(robot, rmap.info.arm), inputs={"out": job.out, "samples": job.samples, "seed": job.seed,
                                                          "target": DEMO_TARGET, "start": DEMO_START},
         failures=dict(result.failures), targets=[DEMO_TARGET],
-        start=PoseRecord.from_xyyaw(*[float(v) for v in DEMO_START.split()]),
+        start=BasePose.from_xyyaw(*[float(v) for v in DEMO_START.split()]),
         map={"path": str(map_path), "built_now": built, "samples": rmap.info.samples,
              "cells_reached": rmap.n_reached, "build_time_s": round(rmap.info.build_time_s, 2)},
         regions=len(terrain.segmentation.regions),
@@ -118,7 +119,7 @@ def demo_job(job: DemoJob, progress: Progress | None = None) -> DemoReport:
                    [path.poses])  # fmt: skip
     region = terrain.segmentation.regions[placement.region]
     report.placement = {
-        **PoseRecord(T).to_json(), "region": placement.region,
+        **pose_json(T), "region": placement.region,
         "region_tilt_deg": round(float(np.degrees(region.tilt)), 2),
         "reachability": round(placement.reachability, 5),
         "joints": dict(zip(placement.joint_names, np.round(placement.joints[0], 6).tolist(), strict=True)),

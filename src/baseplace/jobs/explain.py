@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 from baseplace.errors import InputError
+from baseplace.geometry.poses import BasePose, pose_json
 from baseplace.jobs.inputs import (
     CloudInput,
     Progress,
@@ -30,7 +31,7 @@ from baseplace.jobs.inputs import (
     map_timing,
     world_cloud,
 )
-from baseplace.jobs.report import PoseRecord, Report, RobotRef
+from baseplace.jobs.report import Report, RobotRef
 from baseplace.robots.defaults import DEFAULT_ROBOT
 
 if TYPE_CHECKING:
@@ -190,7 +191,7 @@ def explain_job(job: ExplainJob, progress: Progress | None = None) -> ExplainRep
         object_json["found"] = checks.grasped_note
         object_json["allowed"] = None if checks.grasped is None else checks.grasped.to_json()
     else:
-        T_base, region = PoseRecord.from_xyyaw(x, y, yaw).T_world_base, -1
+        T_base, region = BasePose.batch_matrix([x, y, yaw])[0], -1
         verifier = _self_collision_only(robot, arm.name, T_target, obstacles)
     t_setup = time.perf_counter()
     value = _map_value(rmap, T_base, T_target)
@@ -227,7 +228,7 @@ def explain_job(job: ExplainJob, progress: Progress | None = None) -> ExplainRep
                     "collision_setup": (t_setup - t_map) * 1e3, "checks": (t_checks - t_setup) * 1e3},
         target=pose_text(T_target) if job.target is None else
         job.target if isinstance(job.target, str) else " ".join(f"{float(v):g}" for v in job.target),
-        base={**PoseRecord(T_base).to_json(), "region": region}, map=value, footprint=footprint, ik=ik_json,
+        base={**pose_json(T_base), "region": region}, map=value, footprint=footprint, ik=ik_json,
         collisions=collisions, motion=motion, verdict=verdict, object=object_json,
     )  # fmt: skip
 
@@ -265,7 +266,7 @@ def base_on_terrain(terrain: Terrain, x: float, y: float, yaw: float) -> tuple[n
     seg = terrain.segmentation
     region = int(seg.region_at(np.array([[x, y]]))[0])
     if region < 0:
-        return PoseRecord.from_xyyaw(x, y, yaw).T_world_base, -1
+        return BasePose.batch_matrix([x, y, yaw])[0], -1
     plane = seg.regions[region]
     R0 = plane_frame(plane.normal)
     # the base x axis is R0 (cos g, sin g, 0): the gamma whose xy projection points along yaw

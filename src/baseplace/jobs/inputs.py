@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from baseplace.errors import InputError
+from baseplace.reachability.settings import DEFAULT_SAMPLES
 from baseplace.status import Progress as Progress  # re-exported: jobs and the CLI take them from here
 from baseplace.status import map_step as map_step
 from baseplace.status import step_progress as step_progress
@@ -82,9 +83,8 @@ def out_path(path: str | Path | None, what: str, suffixes: Sequence[str] | None)
 
 
 PLOT_SUFFIXES = (".png", ".pdf", ".svg")
-DEFAULT_MAP_SAMPLES = 200_000_000
-"""``BuildSettings().samples`` (``reachability/build.py``), here so that ``--help`` and the jobs' inputs
-do not import numba (a test keeps the two equal)."""
+DEFAULT_MAP_SAMPLES = DEFAULT_SAMPLES
+"""``BuildSettings().samples``, from the settings' module: ``--help`` and the jobs' inputs import no numba."""
 
 
 @dataclass(frozen=True)
@@ -236,6 +236,8 @@ def occupancy_grid(
     grid: OccupancyGrid | str | None, bag: BagInput | None = None, holder: CloudInput | None = None
 ) -> OccupancyGrid | None:
     """The occupancy grid given (loaded, or a map_server YAML), else the recording's map topic, else None."""
+    if grid is None and (bag is None or bag.map_topic is None):
+        return None  # before the import: a query on a cloud alone never loads the grid reader
     from baseplace.world.occupancy import OccupancyGrid, load_occupancy
 
     if isinstance(grid, OccupancyGrid):

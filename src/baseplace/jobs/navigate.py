@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from baseplace.errors import InputError
+from baseplace.geometry.poses import BasePose
 from baseplace.jobs.inputs import (
     CHECK_MARGIN,
     PLOT_SUFFIXES,
@@ -25,7 +26,7 @@ from baseplace.jobs.inputs import (
     world_cloud,
     write_mcap,
 )
-from baseplace.jobs.report import NavigateReport, PoseRecord, RobotRef, SegmentReport, path_json
+from baseplace.jobs.report import NavigateReport, RobotRef, SegmentReport, path_json
 from baseplace.robots.defaults import DEFAULT_ROBOT
 
 if TYPE_CHECKING:
@@ -110,7 +111,7 @@ def navigate_job(job: NavigateJob) -> NavigateReport:
     path = plan_path(navmap, start, goal, job.planner, job.time_limit, job.seed)
     report = NavigateReport(
         robot=RobotRef.of(robot), inputs=job.echo(), planner=path.planner,
-        start=PoseRecord.from_xyyaw(*start), goal=PoseRecord.from_xyyaw(*goal), poses=path_json(path.poses),
+        start=BasePose.from_xyyaw(*start), goal=BasePose.from_xyyaw(*goal), poses=path_json(path.poses),
         length=round(path.length, 3), regions=[int(r) for r in path.regions], footprint_radius=navmap.radius,
     )  # fmt: skip
     if png is not None:

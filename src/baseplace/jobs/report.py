@@ -11,7 +11,8 @@ failure alike; the service returns the same object. The envelope is the same for
 * ``outputs``: what -> path of each file written (png, mcap, map, json ...);
 * ``error``: null, or the one-line message; ``exit_code``: 0, 2 (bad input) or 3 (nothing found).
 
-Base poses appear in one shape everywhere (:class:`PoseRecord`): ``base_pose`` the 4x4
+Base poses appear in one shape everywhere (:func:`~baseplace.geometry.poses.pose_json`, a
+:class:`~baseplace.geometry.poses.BasePose`'s ``to_json``): ``base_pose`` the 4x4
 ``T_world_base`` and ``x``, ``y``, ``z`` [m], ``yaw`` [rad] wrapped to (-pi, pi].
 The fields of each kind follow the envelope at the top level (the subclasses below).
 """
@@ -26,7 +27,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 from baseplace.errors import NothingFoundError
-from baseplace.geometry.poses import BasePose, matrix_to_rpy, wrap_angle, yaw_of
+from baseplace.geometry.poses import BasePose, matrix_to_rpy, pose_json, wrap_angle
 
 if TYPE_CHECKING:
     from baseplace.navigation.path import Path
@@ -45,7 +46,7 @@ KINDS = (
 
 def _json(value: Any) -> Any:
     """Plain JSON data from dataclasses, numpy values and containers."""
-    if isinstance(value, PoseRecord | RobotRef):
+    if isinstance(value, BasePose | RobotRef):
         return value.to_json()
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
         return {f.name: _json(getattr(value, f.name)) for f in dataclasses.fields(value)}
@@ -95,33 +96,8 @@ class RobotRef:
                 "tcp_frames": dict(self.tcp_frames)}  # fmt: skip
 
 
-@dataclass(frozen=True)
-class PoseRecord:
-    """A base pose in the one shape every report uses.
-
-    Attributes:
-        T_world_base: (4, 4) the base frame in the world frame [m].
-    """
-
-    T_world_base: np.ndarray
-
-    @classmethod
-    def from_xyyaw(cls, x: float, y: float, yaw: float, z: float = 0.0) -> PoseRecord:
-        """A planar base pose: position [m], heading [rad, any range] about world z."""
-        T = BasePose.batch_matrix([x, y, yaw])[0]
-        T[2, 3] = z
-        return cls(T)
-
-    @property
-    def yaw(self) -> float:
-        """Heading [rad] in (-pi, pi]: the angle of the base's x axis in the world xy plane."""
-        return float(yaw_of(self.T_world_base))
-
-    def to_json(self) -> dict[str, Any]:
-        """``{"base_pose": 4x4, "x", "y", "z" [m], "yaw" [rad, (-pi, pi]]}``."""
-        T = np.asarray(self.T_world_base, dtype=float)
-        return {"base_pose": np.round(T, 6).tolist(), "x": round(float(T[0, 3]), 4),
-                "y": round(float(T[1, 3]), 4), "z": round(float(T[2, 3]), 4), "yaw": round(self.yaw, 4)}  # fmt: skip
+PoseRecord = BasePose
+"""The name reports gave :class:`BasePose` before it was their pose type; kept for existing callers."""
 
 
 def placement_row(p: Placement, motion_cost: float | None = None, path: Path | None = None) -> dict[str, Any]:
@@ -136,7 +112,7 @@ def placement_row(p: Placement, motion_cost: float | None = None, path: Path | N
     a = p.approach
     if a is None:
         row = {
-            **PoseRecord(T).to_json(), "roll_pitch_yaw": [round(float(v), 5) for v in matrix_to_rpy(T[:3, :3])],
+            **pose_json(T), "roll_pitch_yaw": [round(float(v), 5) for v in matrix_to_rpy(T[:3, :3])],
             "region": p.region, "reachability": round(p.reachability, 5),
             "joints": [dict(zip(p.joint_names, np.round(q, 6).tolist(), strict=True)) for q in p.joints],
         }  # fmt: skip
@@ -145,7 +121,7 @@ def placement_row(p: Placement, motion_cost: float | None = None, path: Path | N
             "a seed-004 row needs its grasp and motion cost"
         )
         row = {
-            **PoseRecord(T).to_json(), "distance": round(a.distance, 4), "motion_cost": round(float(motion_cost), 4),
+            **pose_json(T), "distance": round(a.distance, 4), "motion_cost": round(float(motion_cost), 4),
             "method": a.method, "reachability": round(p.reachability, 5), "grasp": p.targets[0].round(5).tolist(),
             "joints": dict(zip(p.joint_names, np.round(p.joints[0], 6).tolist(), strict=True)),
         }  # fmt: skip
@@ -238,7 +214,7 @@ class PlaceReport(Report):
         targets: the TCP targets "x y z roll pitch yaw" [m, rad], world frame.
         strategy: candidate strategy (MR, TO, MRTO, orm, grid, random).
         seed: random seed.
-        placements: best first; each a pose (:class:`PoseRecord` fields) plus ``roll_pitch_yaw``,
+        placements: best first; each a pose (:func:`~baseplace.geometry.poses.pose_json` fields) plus ``roll_pitch_yaw``,
             ``region``, ``reachability``, ``joints`` (one name -> value map per target), and
             optionally ``motion``, ``robustness`` and ``path`` (the base path from the start).
         tries: candidates checked.
@@ -283,7 +259,7 @@ class CandidatesReport(Report):
     kind: ClassVar[str] = "candidates"
     method: str = "radial"
     object: list[float] = field(default_factory=list)
-    robot_pose: PoseRecord | None = None
+    robot_pose: BasePose | None = None
     candidates: list[dict[str, Any]] = field(default_factory=list)
     rejected: list[dict[str, Any]] = field(default_factory=list)
     path: list[list[float]] | None = None
@@ -344,8 +320,8 @@ class NavigateReport(Report):
 
     kind: ClassVar[str] = "navigate"
     planner: str = "rrt"
-    start: PoseRecord | None = None
-    goal: PoseRecord | None = None
+    start: BasePose | None = None
+    goal: BasePose | None = None
     poses: list[list[float]] = field(default_factory=list)
     length: float = 0.0
     regions: list[int] = field(default_factory=list)
@@ -405,7 +381,7 @@ class DemoReport(Report):
 
     kind: ClassVar[str] = "demo"
     targets: list[str] = field(default_factory=list)
-    start: PoseRecord | None = None
+    start: BasePose | None = None
     map: dict[str, Any] = field(default_factory=dict)
     regions: int = 0
     placement: dict[str, Any] = field(default_factory=dict)

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from baseplace.errors import InputError
+from baseplace.geometry.poses import BasePose
 from baseplace.jobs.inputs import (
     DEFAULT_MAP_SAMPLES,
     PLOT_SUFFIXES,
@@ -23,7 +24,7 @@ from baseplace.jobs.inputs import (
     occupancy_grid,
     out_path,
 )
-from baseplace.jobs.report import PoseRecord, RobotRef, SurfaceMapReport, SurfaceSamplesReport
+from baseplace.jobs.report import RobotRef, SurfaceMapReport, SurfaceSamplesReport
 from baseplace.robots.defaults import DEFAULT_ROBOT
 
 if TYPE_CHECKING:
@@ -188,7 +189,7 @@ def surface_samples_job(job: SurfaceSamplesJob) -> SurfaceSamplesReport:
     sampler = SurfaceSampler(smap, robot, grid, job.candidates, discounted=job.discount)
     rng = np.random.default_rng(job.seed)
     samples = [sampler.sample(rng) for _ in range(job.n)]
-    poses = [{**PoseRecord.from_xyyaw(s.x, s.y, s.yaw).to_json(), "reachability": round(s.reachability, 4),
+    poses = [{**BasePose.from_xyyaw(s.x, s.y, s.yaw).to_json(), "reachability": round(s.reachability, 4),
               "score": round(s.score, 4)} for s in samples]  # fmt: skip
     occupancy = job.occupancy if isinstance(job.occupancy, str) else (job.bag.path if job.bag else None)
     arm = smap.arms[0] if len(smap.arms) == 1 else None

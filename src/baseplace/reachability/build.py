@@ -17,16 +17,8 @@ from baseplace.errors import InputError
 from baseplace.files import output_lock, remove_stray_temporaries
 from baseplace.reachability.checkpoint import Checkpoints
 from baseplace.reachability.rmap import ReachabilityMap
-from baseplace.reachability.sampling import (
-    CHUNK,
-    DEFAULT_SAMPLES,
-    MAX_SAMPLES,
-    BuildSettings,
-    MapAccumulator,
-    PartialMap,
-    grid_for,
-    support_count,
-)
+from baseplace.reachability.sampling import CHUNK, MapAccumulator, PartialMap, grid_for, support_count
+from baseplace.reachability.settings import DEFAULT_SAMPLES, MAX_SAMPLES, BuildSettings
 from baseplace.reachability.storage import load_map, save_map
 from baseplace.reachability.support import built_threshold
 from baseplace.robots.model import Robot

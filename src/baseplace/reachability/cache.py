@@ -17,8 +17,7 @@ from typing import TYPE_CHECKING
 
 from baseplace.errors import InputError
 from baseplace.files import OutputError, skip_cache_entry
-from baseplace.reachability.build import BuildSettings, build_map
-from baseplace.reachability.checkpoint import default_checkpoint_path
+from baseplace.reachability.settings import BuildSettings
 from baseplace.reachability.storage import FORMAT_VERSION, is_compressed, load_map, save_map
 from baseplace.robots.codegen import cache_dir, private_dir
 from baseplace.status import map_step, step_progress
@@ -73,6 +72,9 @@ def cached_map(
             except (OSError, InputError):
                 pass  # a read-only cache opens slower, nothing else
         return rmap, path, False
+    from baseplace.reachability.build import build_map  # a query that loads the map never builds one
+    from baseplace.reachability.checkpoint import default_checkpoint_path
+
     try:
         private_dir(path.parent)
     except OutputError as exc:  # no room for the folder: the map is built all the same

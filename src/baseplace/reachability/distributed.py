@@ -40,7 +40,8 @@ from numpy.typing import NDArray
 from baseplace.errors import InputError
 from baseplace.reachability.build import DEFAULT_CHECKPOINT_EVERY
 from baseplace.reachability.rmap import ReachabilityMap
-from baseplace.reachability.sampling import BuildSettings, MapAccumulator, PartialMap
+from baseplace.reachability.sampling import MapAccumulator, PartialMap
+from baseplace.reachability.settings import BuildSettings
 from baseplace.robots.model import Robot
 
 if TYPE_CHECKING:

@@ -5,9 +5,9 @@ The models are imported on first use (PEP 562), so that :data:`DEFAULT_ROBOT` co
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
+from baseplace.lazy import lazy_getattr
 from baseplace.robots.defaults import DEFAULT_ROBOT
 
 if TYPE_CHECKING:
@@ -32,14 +32,7 @@ _LAZY = {
 }
 
 
-def __getattr__(name: str) -> Any:
-    """Import a public name on first use and keep it, so later lookups are plain attributes."""
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module 'baseplace.robots' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
+__getattr__ = lazy_getattr(__name__, _LAZY, globals())
 
 
 __all__ = [

@@ -716,9 +716,13 @@ def _line(message: Any, limit: int = 400) -> str:
 
 
 def warm_up(state: ServiceState) -> None:
-    """Make the first request as fast as the next: robots, maps, kernels and a first placement."""
-    from baseplace.geometry.poses import pose_from_xyz_rpy
-    from baseplace.placement.pipeline import PlaceSettings, place
+    """Make the first request as fast as the next: robots, maps, kernels and a first placement.
+
+    The placement is the place job's, as a request runs it: a first request imports nothing more.
+    """
+    from baseplace.jobs.inputs import CloudInput
+    from baseplace.jobs.place import PlaceJob, place_job
+    from baseplace.placement.pipeline import PlaceSettings
     from baseplace.placement.scene_cache import SceneCache
 
     floor = np.mgrid[-2.0:2.0:0.02, -2.0:2.0:0.02].reshape(2, -1).T
@@ -727,10 +731,10 @@ def warm_up(state: ServiceState) -> None:
     for name in state.settings.robots:
         state.robot(name, lane="heavy")  # built here, used by the heavy thread alone from now on
         robot = state.robot(name)
-        rmap = state.reach_map(robot, None)
-        target = pose_from_xyz_rpy([0.6, 0.0, 0.8, 0.0, 1.5708, 0.0])
+        job = PlaceJob(["0.6 0 0.8 0 1.5708 0"], robot, cloud=CloudInput(points=points),
+                       map=state.reach_map(robot, None), settings=PlaceSettings(tries=5), cache=cache)  # fmt: skip
         try:
-            place(robot, rmap, points, target, PlaceSettings(tries=5), np.random.default_rng(0), cache=cache)
+            place_job(job)
         except BaseplaceError:
             pass  # the kernels are loaded all the same
 

@@ -1,0 +1,54 @@
+"""A command imports its own modules alone (issue 26: the ``place`` walk).
+
+The parser lists the plugins' entry points without importing them, registers the service's
+command only for ``serve``, and the other commands' job modules stay unexecuted.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+PROBE = """
+import json, sys, types
+from baseplace.cli import main
+code = main(sys.argv[1:])
+executed = sorted(n for n, m in sys.modules.items()
+                  if n.split(".")[0] in ("baseplace", "baseplace_experiments") and type(m) is types.ModuleType)
+sys.stderr.write("\\n" + json.dumps({"code": code, "modules": executed}) + "\\n")
+"""
+
+NOT_FOR_PLACE = (
+    "baseplace.serve", "baseplace.serve.command", "baseplace_experiments", "baseplace_experiments.cli",
+    "baseplace.viz", "baseplace.jobs.candidates", "baseplace.jobs.demo", "baseplace.jobs.explain",
+    "baseplace.jobs.navigate", "baseplace.jobs.point", "baseplace.jobs.reach", "baseplace.jobs.surface",
+    "baseplace.jobs.view", "baseplace.jobs.world", "baseplace.jobs.text", "baseplace.reachability.build",
+)  # fmt: skip
+
+
+def _modules(*argv: str) -> tuple[int, set[str]]:
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT / "src"), os.environ.get("PYTHONPATH", "")])}
+    out = subprocess.run([sys.executable, "-c", PROBE, *argv], capture_output=True, text=True, env=env,
+                         timeout=120)  # fmt: skip
+    last = json.loads(out.stderr.strip().splitlines()[-1])
+    return last["code"], set(last["modules"])
+
+
+def test_place_imports_neither_the_service_nor_the_plugins_nor_other_jobs(tmp_path):
+    """A place that stops at its cloud (missing) has imported its job, not another command's."""
+    code, modules = _modules("place", "--cloud", str(tmp_path / "none.ply"), "--target", "1 0.5 0.75 0 1.5708 0",
+                             "--json")  # fmt: skip
+    assert code == 2
+    assert "baseplace.jobs.place" in modules and "baseplace.placement.pipeline" in modules
+    assert not modules & set(NOT_FOR_PLACE), sorted(modules & set(NOT_FOR_PLACE))
+
+
+def test_serve_help_still_registers_the_service():
+    out = subprocess.run([sys.executable, "-m", "baseplace.cli", "serve", "--help"], capture_output=True,
+                         text=True, timeout=120)  # fmt: skip
+    assert out.returncode == 0 and "usage: baseplace serve" in out.stdout and "--max-scenes" in out.stdout
