@@ -25,14 +25,16 @@ Per scene (one seed each; even seeds a side grasp, odd seeds a top-down grasp):
   placement is checked by the oracle's collision check at its own joints: a false positive touches
   the true scene (the hand on the grasped bottle excepted) or itself.
 
-Keeps to one process and one thread (``NUMBA_NUM_THREADS=1`` is set before any import of numba).
+Keeps to one process and one thread (run as a script, ``NUMBA_NUM_THREADS=1`` is set before any import
+of numba).
 """
 
 from __future__ import annotations
 
 import os
 
-os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # one core: the machine is shared
+if __name__ == "__main__":  # one core: the machine is shared (not when a test imports this file:
+    os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # numba then refuses a second thread count)
 
 import argparse
 import hashlib
