@@ -11,12 +11,21 @@ check, run after the shared verification (:class:`~baseplace.placement.verify.Ve
 2. a straight approach from the pre-grasp, ``pregrasp_distance`` back along the TCP's approach
    axis, to the grasp: the Cartesian line is followed in ``approach_step`` steps by IK seeded with
    the previous step (walked backwards from the verified grasp configuration, so the motion ends in
-   exactly that configuration) and each step is checked. Only here may the robot touch the
+   exactly that configuration) and the joint line between steps is checked. The pre-grasp distance
+   can be derived from the hand (``pregrasp_distance=None``: :func:`hand_reach` +
+   :data:`PREGRASP_MARGIN`, the open hand at the pre-grasp wholly behind the plane through the
+   grasp's TCP, so clear of any object held between the fingers). Only here may the robot touch the
    grasped object, and only with the hand: the steps are checked against ``approach_environment``,
    an :class:`Environment` built with ``grasped=`` (:mod:`baseplace.world.grasped_object`), whose
    grasped-object voxels every link but the hand must clear. In the transit (part 1) nothing may
    be touched: ``environment`` has the grasped object as an ordinary obstacle group
    (:func:`transit_environment`).
+
+Every joint-space edge (the straight line, the shortcut, OMPL's edges through a motion validator,
+the joint lines between approach steps) is checked at states close enough that no point of the
+robot moves more than ``point_step`` between two of them: a joint's change times its lever arm
+(:func:`lever_arms`, an upper bound at any configuration), summed over the joints, bounds how far
+any point of the links they move travels along the edge.
 
 The result is the joint waypoints of both parts (:class:`ReachingMotion`).
 """
@@ -24,9 +33,10 @@ The result is the joint waypoints of both parts (:class:`ReachingMotion`).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,9 +47,74 @@ from baseplace.geometry.poses import FloatArray, invert_transforms
 from baseplace.placement import deadline
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Arm, Robot
-from baseplace.world.environment import GRASPED, Environment
+from baseplace.world.environment import GRASPED, Environment, HandFilter
 from baseplace.world.obstacles import Obstacle
 from baseplace.world.sensor_resolution import Group, group_size
+
+PREGRASP_MARGIN = 0.02
+"""How far [m] behind the plane through the grasp's TCP (normal: the approach axis) the open hand's
+foremost collision geometry stands at the derived pre-grasp."""
+
+
+def _points(geometry: object) -> FloatArray:
+    """(k, 3) points whose convex hull holds the coal geometry, in its own frame.
+
+    A mesh's vertices, else the corners of its local bounding box.
+    """
+    vertices = getattr(geometry, "vertices", None)
+    if callable(vertices) and getattr(geometry, "num_vertices", False):
+        return np.asarray(vertices(), dtype=float).reshape(-1, 3)
+    geometry.computeLocalAABB()  # type: ignore[attr-defined]
+    box = geometry.aabb_local  # type: ignore[attr-defined]
+    lo, hi = np.asarray(box.min_, dtype=float), np.asarray(box.max_, dtype=float)
+    return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+
+
+def hand_reach(robot: Robot, arm: Arm, geom: object | None = None) -> float:
+    """How far [m] the hand's collision geometry reaches ahead of the TCP along the approach axis.
+
+    The hand as :class:`~baseplace.world.environment.HandFilter` takes it (every geometry the arm's
+    last joint moves, at the robot's reference configuration: TIAGo's open fingers), measured on
+    the URDF's collision model (``geom``, e.g. ``Environment.geom``; default: loaded). 0.245 m for
+    TIAGo (the middle fingertip).
+    """
+    parts = HandFilter(robot, arm.name, geom).parts
+    axis = approach_axis(arm)
+    reach = [float(np.max((_points(g) @ T[:3, :3].T + T[:3, 3]) @ axis)) for g, T in parts]
+    return max(reach, default=0.0)
+
+
+def lever_arms(robot: Robot, arm: Arm, geom: object) -> FloatArray:
+    """(n,) per arm joint, how far a point of the links it moves can be from its axis [m], at most.
+
+    An upper bound at every configuration, from the collision model ``geom`` (pinocchio
+    GeometryModel, e.g. ``Environment.geom``): the farthest geometry point from each joint's
+    origin, plus the distances between successive joint origins down the kinematic tree (a
+    prismatic joint's travel added). 1 for a prismatic joint (a point moves as far as the joint).
+    Along a straight joint line a -> b no point of the robot moves more than
+    ``sum(|b - a| * lever_arms)``.
+    """
+    model = robot.model
+    bound = np.zeros(model.njoints)
+    for obj in geom.geometryObjects:  # type: ignore[attr-defined]
+        if obj.parentJoint == 0:
+            continue  # the world's obstacles
+        M = obj.placement
+        p = _points(obj.geometry) @ np.asarray(M.rotation).T + np.asarray(M.translation)
+        bound[obj.parentJoint] = max(bound[obj.parentJoint], float(np.max(np.linalg.norm(p, axis=1))))
+    for k in range(model.njoints - 1, 0, -1):  # pinocchio numbers children after their parents
+        offset = float(np.linalg.norm(model.jointPlacements[k].translation))
+        if _prismatic(model, k):
+            i = model.joints[k].idx_q
+            offset += float(max(abs(model.lowerPositionLimit[i]), abs(model.upperPositionLimit[i])))
+        parent = model.parents[k]
+        bound[parent] = max(bound[parent], offset + bound[k])
+    ids = [model.getJointId(name) for name in arm.joint_names]
+    return np.array([1.0 if _prismatic(model, j) else bound[j] for j in ids])
+
+
+def _prismatic(model: object, joint: int) -> bool:
+    return "P" in model.joints[joint].shortname().removeprefix("JointModel")  # type: ignore[attr-defined]
 
 
 def stowed_configuration(robot: Robot, arm: Arm) -> FloatArray:
@@ -90,16 +165,24 @@ class MotionSettings:
 
     Attributes:
         pregrasp_distance: the pre-grasp lies this far back from the grasp along the approach
-            axis [m]; the last segment, the straight approach, is this long. 0.15 m, as MoveIt
-            pick pipelines' usual pre-grasp approach: the whole hand, fingers open (TIAGo's
-            ``hand_safety_box`` reaches 0.2 m ahead of the wrist), must be clear of the object
-            there, since only the approach may touch it.
+            axis [m]; the last segment, the straight approach, is this long. The whole open hand
+            must be clear of the object there (the transit checks it), since only the approach
+            may touch it. 0.15 m leaves TIAGo's open fingertips (0.245 m ahead of its TCP) 5.5 cm
+            short of the grasp point: objects deeper than that towards the hand are refused at
+            the pre-grasp. None: derived from the hand, :func:`hand_reach` +
+            :data:`PREGRASP_MARGIN` (0.265 m for TIAGo), the whole open hand behind the grasp's
+            TCP; not the default, since TIAGo cannot follow a 0.265 m straight line down onto a
+            top-down grasp on a table (find-rate dev seeds: every top-down approach walk failed).
         approach_step: Cartesian step along the approach line [m]; each step is IK + collision
             (0.01 m: below the 25 mm obstacle voxels).
         max_joint_step: largest joint change between two approach steps [rad or m]; a larger
             one means the IK jumped branches, so the arm would not move straight.
         joint_resolution: the joint path is checked at states at most this far apart
             (Euclidean in joint space [rad]).
+        point_step: and at states close enough that no point of the robot moves more than this
+            between two of them [m] (bounded by :func:`lever_arms`); a robot kept ``clearance``
+            from the scene at every checked state keeps ``clearance - point_step / 2`` in between.
+            At 0.05 rad alone a fingertip 1 m from the shoulder moved 5 cm between checks.
         time_limit: OMPL planning time for one joint path [s]; no path in it rejects the placement.
         max_checks: also stop planning after this many state validity checks (None: no such
             limit). A budget that does not depend on the machine's load, for experiments on a
@@ -109,10 +192,11 @@ class MotionSettings:
         q_start: start arm configuration (n,), e.g. the robot's current one; default: stowed.
     """
 
-    pregrasp_distance: float = 0.15
+    pregrasp_distance: float | None = 0.15
     approach_step: float = 0.01
     max_joint_step: float = 0.2
     joint_resolution: float = 0.05
+    point_step: float = 0.01
     time_limit: float = 1.0
     approach_restarts: int = 4
     q_start: tuple[float, ...] | None = None
@@ -124,9 +208,12 @@ class MotionSettings:
             "approach_step",
             "max_joint_step",
             "joint_resolution",
+            "point_step",
             "time_limit",
         ):
             value = getattr(self, name)
+            if value is None and name == "pregrasp_distance":
+                continue
             if not (math.isfinite(value) and value > 0):
                 raise InputError(f"motion setting {name} must be a finite number > 0, got {value}")
         if self.approach_restarts < 0:
@@ -194,6 +281,16 @@ class MotionChecker:
             )
         self.q_start = q0
         self.axis = approach_axis(arm)
+        self.pregrasp_distance = (
+            hand_reach(robot, arm, environment.geom) + PREGRASP_MARGIN
+            if s.pregrasp_distance is None
+            else s.pregrasp_distance
+        )
+        """The approach's length [m]: the setting, or derived from the hand."""
+        self.levers = lever_arms(robot, arm, environment.geom)
+        """(n,) the arm joints' lever arms [m] (:func:`lever_arms`)."""
+        self.state_checks = 0
+        """Collision checks of transit states so far."""
         self._ik = DampedLeastSquaresIK(arm)
         self._ik_any = DampedLeastSquaresIK(arm, restarts=20)
         self.elapsed_s = 0.0
@@ -215,6 +312,7 @@ class MotionChecker:
         self.last_contacts = _contacts_of(environment, self.arm, q, T_world_base, stage)
 
     def _free(self, q: FloatArray, T_world_base: FloatArray) -> bool:
+        self.state_checks += 1
         return not self.environment.colliding_arm(self.arm, q, T_world_base)
 
     def _approach_free(self, q: FloatArray, T_world_base: FloatArray) -> bool:
@@ -234,12 +332,12 @@ class MotionChecker:
         then ends in another grasp configuration, checked the same way. A walk fails on an IK
         failure, a joint jump above ``max_joint_step`` or a collision.
         """
-        s = self.settings
-        n_steps = max(1, math.ceil(s.pregrasp_distance / s.approach_step))
+        s, distance = self.settings, self.pregrasp_distance
+        n_steps = max(1, math.ceil(distance / s.approach_step))
         line = []
         for k in range(n_steps + 1):  # grasp first, pre-grasp last
             T = T_base_tcp.copy()
-            T[:3, 3] -= (k / n_steps) * s.pregrasp_distance * (T_base_tcp[:3, :3] @ self.axis)
+            T[:3, 3] -= (k / n_steps) * distance * (T_base_tcp[:3, :3] @ self.axis)
             line.append(T)
         q = np.asarray(q_grasp, dtype=float)
         if not self._approach_free(q, T_world_base):
@@ -269,21 +367,48 @@ class MotionChecker:
             q_next = self._ik.solve_from(T, seeds)
             if q_next is None or np.max(np.abs(q_next - q)) > self.settings.max_joint_step:
                 return None
-            q = q_next
-            if not self._approach_free(q, T_world_base):
-                self._blocked = (q, "approach")
+            blocked = self._blocking(q, q_next, T_world_base, self._approach_free)
+            if blocked is not None:
+                self._blocked = (blocked, "approach")
                 return None
+            q = q_next
             steps.append(q)
         return np.array(steps)
 
-    def _line_free(self, a: FloatArray, b: FloatArray, T_world_base: FloatArray) -> bool:
-        """Whether the straight joint line a -> b (n,) is free at states ``joint_resolution`` apart.
+    def edge_states(self, a: FloatArray, b: FloatArray) -> int:
+        """Steps a straight joint line a -> b (n,) is cut into for checking (>= 1).
 
-        The states are the same whatever the order; they are checked end first, then in bisection
-        order (midpoint, quarter points, ...), so a blocked line is usually rejected after a few.
+        Enough that consecutive states are at most ``joint_resolution`` apart in joint space and
+        no point of the robot moves more than ``point_step`` between them (:func:`lever_arms`).
         """
-        n = max(1, math.ceil(float(np.linalg.norm(b - a)) / self.settings.joint_resolution))
-        return all(self._free(a + (b - a) * (k / n), T_world_base) for k in bisection_order(n))
+        s, d = self.settings, np.abs(b - a)
+        by_joints = float(np.linalg.norm(d)) / s.joint_resolution
+        by_points = float(d @ self.levers) / s.point_step
+        return max(1, math.ceil(by_joints), math.ceil(by_points))
+
+    def _blocking(
+        self,
+        a: FloatArray,
+        b: FloatArray,
+        T_world_base: FloatArray,
+        free: Callable[[FloatArray, FloatArray], bool],
+    ) -> FloatArray | None:
+        """The first state of the line a -> b (n,) found not ``free``, or None; a itself is not checked.
+
+        The states (:meth:`edge_states`) are the same whatever the order; they are checked end
+        first, then in bisection order (midpoint, quarter points, ...), so a blocked line is
+        usually rejected after a few.
+        """
+        n = self.edge_states(a, b)
+        for k in bisection_order(n):
+            q = a + (b - a) * (k / n)
+            if not free(q, T_world_base):
+                return q
+        return None
+
+    def _line_free(self, a: FloatArray, b: FloatArray, T_world_base: FloatArray) -> bool:
+        """Whether the straight joint line a -> b (n,) of the transit is free (:meth:`_blocking`)."""
+        return self._blocking(a, b, T_world_base, self._free) is None
 
     def _shortcut(self, path: FloatArray, T_world_base: FloatArray) -> FloatArray:
         """The path (P, n) with waypoints skipped greedily.
@@ -336,15 +461,15 @@ class MotionChecker:
             space.setBounds(bounds)
             setup = og.SimpleSetup(space)
 
-            checks = [0]
+            checks0 = self.state_checks
 
             def valid(state: object) -> bool:
-                checks[0] += 1
                 return self._free(np.array([state[i] for i in range(n)]), T_world_base)  # type: ignore[index]
 
             setup.setStateValidityChecker(valid)
             info = setup.getSpaceInformation()
-            info.setStateValidityCheckingResolution(self.settings.joint_resolution / space.getMaximumExtent())
+            validator = _edge_validator(info, self, T_world_base)  # our edge states, not OMPL's resolution
+            info.setMotionValidator(validator)
             a, b = space.allocState(), space.allocState()
             for i in range(n):
                 a[i], b[i] = float(q0[i]), float(q_goal[i])
@@ -358,7 +483,10 @@ class MotionChecker:
                     ob.plannerOrTerminationCondition(
                         ob.timedPlannerTerminationCondition(self.settings.time_limit),
                         ob.PlannerTerminationCondition(
-                            lambda: (limit is not None and checks[0] >= limit) or deadline.expired()
+                            lambda: (
+                                (limit is not None and self.state_checks - checks0 >= limit)
+                                or deadline.expired()
+                            )
                         ),
                     )
                 )
@@ -368,9 +496,9 @@ class MotionChecker:
             states = setup.getSolutionPath().getStates()
             path = np.array([[s[i] for i in range(n)] for s in states])
         finally:
-            setup = info = None  # drop the OMPL objects (and the callback they hold) now
+            setup = info = validator = None  # drop the OMPL objects (and the callbacks they hold) now
         path[0], path[-1] = q0, q_goal
-        # RRTConnect's tree vertices, joined by lines OMPL checked at the same resolution;
+        # RRTConnect's tree vertices, joined by lines checked by the edge validator;
         # shortened here instead of by OMPL's random shortcutting, which checked ~5x more states
         # than planning did (bench/bench_robustness.py, motion timing)
         return self._shortcut(path, T_world_base)
@@ -400,6 +528,32 @@ class MotionChecker:
             return ReachingMotion(path, approach, planned)
         finally:
             self.elapsed_s += time.perf_counter() - t0
+
+
+@functools.cache
+def _edge_validator_class() -> type:
+    from ompl import base as ob
+
+    class EdgeValidator(ob.MotionValidator):
+        """OMPL's edges checked at the checker's edge states (:meth:`MotionChecker.edge_states`)."""
+
+        def __init__(self, info: object, checker: MotionChecker, T_world_base: FloatArray) -> None:
+            super().__init__(info)
+            self.checker, self.T_world_base = checker, T_world_base
+            self.n = checker.arm.n_joints
+
+        def checkMotion(self, s1: object, s2: object, *last_valid: object) -> bool:
+            if last_valid:
+                raise NotImplementedError("RRTConnect asks only whether a motion is valid")
+            a = np.array([s1[i] for i in range(self.n)])  # type: ignore[index]
+            b = np.array([s2[i] for i in range(self.n)])  # type: ignore[index]
+            return self.checker._line_free(a, b, self.T_world_base)
+
+    return EdgeValidator
+
+
+def _edge_validator(info: object, checker: MotionChecker, T_world_base: FloatArray) -> object:
+    return _edge_validator_class()(info, checker, T_world_base)
 
 
 def bisection_order(n: int) -> list[int]:
@@ -438,11 +592,14 @@ def with_start(settings: MotionSettings, q_start: ArrayLike | None) -> MotionSet
 
 
 __all__ = [
+    "PREGRASP_MARGIN",
     "MotionChecker",
     "MotionSettings",
     "ReachingMotion",
     "approach_axis",
     "bisection_order",
+    "hand_reach",
+    "lever_arms",
     "stowed_configuration",
     "transit_environment",
     "with_start",
