@@ -21,9 +21,10 @@ check, run after the shared verification (:class:`~baseplace.placement.verify.Ve
    be touched: ``environment`` has the grasped object as an ordinary obstacle group
    (:func:`transit_environment`).
 
-Every joint-space edge (the straight line, the shortcut, OMPL's edges through a motion validator,
-the joint lines between approach steps) is checked at states close enough that no point of the
-robot moves more than ``point_step`` between two of them: a joint's change times its lever arm
+Every joint-space edge (the straight line, the shortcut, OMPL's edges, the joint lines between
+approach steps) is checked at states ``joint_resolution`` apart in joint space; with
+``point_step`` set (off by default: too slow until the edge check is compiled), also close
+enough that no point of the robot moves more than ``point_step`` between two of them: a joint's change times its lever arm
 (:func:`lever_arms`, an upper bound at any configuration), summed over the joints, bounds how far
 any point of the links they move travels along the edge.
 
@@ -179,10 +180,14 @@ class MotionSettings:
             one means the IK jumped branches, so the arm would not move straight.
         joint_resolution: the joint path is checked at states at most this far apart
             (Euclidean in joint space [rad]).
-        point_step: and at states close enough that no point of the robot moves more than this
-            between two of them [m] (bounded by :func:`lever_arms`); a robot kept ``clearance``
-            from the scene at every checked state keeps ``clearance - point_step / 2`` in between.
-            At 0.05 rad alone a fingertip 1 m from the shoulder moved 5 cm between checks.
+        point_step: and, when set, at states close enough that no point of the robot moves more
+            than this between two of them [m] (bounded by :func:`lever_arms`); a robot kept
+            ``clearance`` from the scene at every checked state keeps ``clearance - point_step / 2``
+            in between. At 0.05 rad alone a fingertip 1 m from the shoulder moves 5 cm between
+            checks. Default None (off): at 0.01 m the checker, a Python callback per state,
+            found 2 of 6 dev find-rate scenes instead of 3 and took 20 s instead of 1 s per
+            found scene (RRTConnect runs out of its time); the compiled edge check of issue 25
+            is what makes it affordable.
         time_limit: OMPL planning time for one joint path [s]; no path in it rejects the placement.
         max_checks: also stop planning after this many state validity checks (None: no such
             limit). A budget that does not depend on the machine's load, for experiments on a
@@ -196,7 +201,7 @@ class MotionSettings:
     approach_step: float = 0.01
     max_joint_step: float = 0.2
     joint_resolution: float = 0.05
-    point_step: float = 0.01
+    point_step: float | None = None
     time_limit: float = 1.0
     approach_restarts: int = 4
     q_start: tuple[float, ...] | None = None
@@ -212,7 +217,7 @@ class MotionSettings:
             "time_limit",
         ):
             value = getattr(self, name)
-            if value is None and name == "pregrasp_distance":
+            if value is None and name in ("pregrasp_distance", "point_step"):
                 continue
             if not (math.isfinite(value) and value > 0):
                 raise InputError(f"motion setting {name} must be a finite number > 0, got {value}")
@@ -383,7 +388,7 @@ class MotionChecker:
         """
         s, d = self.settings, np.abs(b - a)
         by_joints = float(np.linalg.norm(d)) / s.joint_resolution
-        by_points = float(d @ self.levers) / s.point_step
+        by_points = 0.0 if s.point_step is None else float(d @ self.levers) / s.point_step
         return max(1, math.ceil(by_joints), math.ceil(by_points))
 
     def _blocking(
@@ -468,8 +473,14 @@ class MotionChecker:
 
             setup.setStateValidityChecker(valid)
             info = setup.getSpaceInformation()
-            validator = _edge_validator(info, self, T_world_base)  # our edge states, not OMPL's resolution
-            info.setMotionValidator(validator)
+            validator = None  # referenced here while OMPL calls it
+            if self.settings.point_step is None:  # OMPL's own edge checks, at the joint resolution
+                info.setStateValidityCheckingResolution(
+                    self.settings.joint_resolution / space.getMaximumExtent()
+                )
+            else:  # our edge states (:meth:`edge_states`), not OMPL's resolution
+                validator = _edge_validator(info, self, T_world_base)
+                info.setMotionValidator(validator)
             a, b = space.allocState(), space.allocState()
             for i in range(n):
                 a[i], b[i] = float(q0[i]), float(q_goal[i])
