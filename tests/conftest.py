@@ -45,6 +45,12 @@ def tiago_map(tiago: Robot):
     return build_map(tiago, None, BuildSettings(samples=2_000_000, seed=3))
 
 
+@pytest.fixture(scope="session")
+def tiago_map_10m(tiago: Robot):
+    """A TIAGo map of 1e7 samples, for placements that need a denser map (built once per session)."""
+    return build_map(tiago, None, BuildSettings(samples=10_000_000, seed=1))
+
+
 @pytest.fixture()
 def rng() -> np.random.Generator:
     return np.random.default_rng(2024)

@@ -30,8 +30,9 @@ def _pose_text(T: np.ndarray) -> str:
 
 
 def _place(tiago, tiago_map, points, **given):
+    # stand_on "any": the target lies over plane 1 of a generated scene, a raised platform or a ramp
     job = PlaceJob(robot=tiago, map=tiago_map, cloud=CloudInput(points=points), seed=4,
-                   settings=PlaceSettings(placements=2, tries=200, **POSE_ONLY_CHECKS),
+                   settings=PlaceSettings(placements=2, tries=200, stand_on="any", **POSE_ONLY_CHECKS),
                    segmentation_cache=False, **given)  # fmt: skip
     return place_job(job)
 

@@ -10,16 +10,10 @@ from shapely.geometry import Point, Polygon
 from baseplace.errors import InputError
 from baseplace.geometry.poses import pose_from_xyz_rpy
 from baseplace.placement.pipeline import PlaceSettings, place
-from baseplace.reachability.build import BuildSettings, build_map
 from baseplace.sim.scenes import Plane, Scene, SceneSettings
 from baseplace.terrain.pipeline import terrain_from_points
 
 STRATEGIES = ["MR", "TO", "MRTO", "orm", "random", "grid"]
-
-
-@pytest.fixture(scope="module")
-def tiago_map_10m(tiago):
-    return build_map(tiago, None, BuildSettings(samples=10_000_000, seed=1))
 
 
 def _scene(planes: list[Plane], extent: float = 8.0) -> Scene:

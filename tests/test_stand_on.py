@@ -15,7 +15,6 @@ from shapely.geometry import Point, Polygon
 from baseplace.errors import InputError
 from baseplace.geometry.poses import pose_from_xyz_rpy
 from baseplace.placement.pipeline import POSE_ONLY_CHECKS, PlaceSettings, ground_regions, place
-from baseplace.reachability.build import BuildSettings, build_map
 from baseplace.sim.scenes import Plane, Scene, SceneSettings
 from baseplace.terrain.pipeline import terrain_from_points
 from baseplace.terrain.polygons import footprint_outline
@@ -56,11 +55,6 @@ def test_the_ground_and_the_ramp_are_standable_a_table_top_and_a_ledged_platform
     assert on[0] and on[1] and on[2] and on[3], truth  # each true surface has a region
     assert on[0] <= allowed and on[1] <= allowed  # the floor and the ramp from it
     assert not (on[2] | on[3]) & allowed  # neither the table top nor the platform behind its ledge
-
-
-@pytest.fixture(scope="module")
-def tiago_map_10m(tiago):
-    return build_map(tiago, None, BuildSettings(samples=10_000_000, seed=1))
 
 
 def test_a_target_over_the_middle_of_a_table_gets_no_placement_on_the_table(tiago, tiago_map_10m):
