@@ -8,7 +8,7 @@ OcTrees, checked against every collision mesh of the robot, together with self-c
 At a grasp only the hand may touch the grasped object (:mod:`baseplace.world.grasped_object`):
 its voxels are checked against every other link, and the surface under it stays an obstacle
 (:func:`contact_groups`); collisions are reported per robot link and per thing touched. Given the
-cloud, the scene within reach of the hand is its points in 5 mm cells and the plane the object
+cloud, the scene within reach of the hand is its points in 2.5 mm cells and the plane the object
 stands on an exact plane (:mod:`baseplace.world.sensor_resolution`), kept at a clearance.
 
 Obstacles given by hand (boxes, cylinders, meshes: :mod:`baseplace.world.obstacles`) are coal
@@ -81,7 +81,7 @@ def contact_groups(
     both. Without an object: ({"obstacle": obstacles}, None).
 
     ``points``: the cloud (N, 3) the voxels were made from. Given, the voxels near the object
-    become their points in 5 mm cells, and the planar surface the object stands on, when the cloud
+    become their points (each put onto its local plane) in 2.5 mm cells, and the planar surface the object stands on, when the cloud
     fits a good plane (:func:`~baseplace.world.support_plane.fit_support_slab`), an exact plane
     (group "support_plane"): :func:`~baseplace.world.sensor_resolution.fine_groups`.
     """
@@ -148,7 +148,7 @@ class Environment:
     how deep is not checked).
 
     A link closer than ``clearance`` to a part of a group at sensor resolution (cells of at most
-    :data:`~baseplace.world.sensor_resolution.FINE`, the exact support plane) touches it (coal's
+    :data:`~baseplace.world.sensor_resolution.MAX_FINE`, the exact support plane) touches it (coal's
     security margin). Coarser voxels (25 mm) keep no margin: a voxel's cube already reaches up to a
     whole edge beyond its points, more than any clearance; obstacles given by hand are exact and
     keep none either.
