@@ -4,8 +4,8 @@ A neighbour bottle scanned with 3 mm noise: its points lie up to about 3 sigma o
 surface, and each becomes a cell; the clearance (3 sigma of the table's residuals) was then added
 on top, so the neighbour stood about 6 sigma plus a cell (2-3 cm) proud while the exact plane stood
 3 sigma. Oracle: coal on the true cylinder (the probe's true distance); the model's verdict is
-coal's collision with the clearance as security margin against the scene's own groups, as
-:class:`~baseplace.world.environment.Environment` checks them.
+coal's collision against the scene's own groups with the security margin that
+:class:`~baseplace.world.environment.Environment` gives each (:func:`~baseplace.world.sensor_resolution.margin`).
 """
 
 from __future__ import annotations
@@ -17,9 +17,13 @@ import numpy as np
 import pytest
 
 from baseplace.terrain.voxels import VoxelMap
+from baseplace.world import sensor_resolution
 from baseplace.world.environment import contact_groups, support_plane
 from baseplace.world.grasped_object import GraspedObject
-from baseplace.world.sensor_resolution import SupportPlane, derived_clearance, group_parts, is_fine
+from baseplace.world.sensor_resolution import SupportPlane, derived_clearance, group_parts
+
+# Environment's security margin per part (before the allowance for denoised cells: the clearance)
+_margin = getattr(sensor_resolution, "margin", lambda part, c: c if sensor_resolution.is_fine(part) else 0.0)
 
 SIGMA = 0.003
 TOP = 0.75  # the table top [m]
@@ -59,11 +63,10 @@ def scene():
     for group in groups.values():
         for part in group_parts(group):
             if isinstance(part, SupportPlane):
-                parts.append((part.geometry(), True))
+                parts.append((part.geometry(), _margin(part, clearance)))
             elif len(part):
-                parts.append(
-                    (coal.makeOctree(np.ascontiguousarray(part.centres), part.resolution), is_fine(part))
-                )
+                octree = coal.makeOctree(np.ascontiguousarray(part.centres), part.resolution)
+                parts.append((octree, _margin(part, clearance)))
     return parts, clearance
 
 
@@ -84,17 +87,17 @@ def _probes(gap: float):
 
 def _touches(parts, clearance: float, cube, T) -> bool:
     request = coal.CollisionRequest()
-    for geometry, fine in parts:
-        request.security_margin = clearance if fine else 0.0
+    for geometry, security_margin in parts:
+        request.security_margin = security_margin
         if coal.collide(cube, T, geometry, coal.Transform3s(), request, coal.CollisionResult()):
             return True
     return False
 
 
-def test_a_probe_1_5_clearances_from_the_true_noisy_neighbour_is_free(scene):
+def test_a_probe_1_75_clearances_from_the_true_noisy_neighbour_is_free(scene):
     parts, clearance = scene
-    for cube, T, true in _probes(1.5 * clearance):
-        assert true == pytest.approx(1.5 * clearance, abs=1e-4)
+    for cube, T, true in _probes(1.75 * clearance):
+        assert true == pytest.approx(1.75 * clearance, abs=1e-4)
         assert not _touches(parts, clearance, cube, T), (
             f"a probe {true * 1e3:.1f} mm from the true neighbour (clearance {clearance * 1e3:.1f} mm) touches the model"
         )
@@ -106,3 +109,23 @@ def test_a_probe_half_a_clearance_from_the_true_noisy_neighbour_is_refused(scene
         assert _touches(parts, clearance, cube, T), (
             f"a probe {true * 1e3:.1f} mm from the true neighbour (clearance {clearance * 1e3:.1f} mm) is free"
         )
+
+
+def test_the_margin_from_the_true_side_is_never_less_than_the_clearance(scene):
+    """Small spheres (5 mm, a fingertip) 0.9 clearances from the true side, over the gaps between the
+    points (1 cm apart) and all around the side that faces away from the grasped bottle: all refused."""
+    parts, clearance = scene
+    true = coal.Cylinder(RADIUS, HEIGHT)
+    T_true = coal.Transform3s(np.eye(3), np.array([*NEIGHBOUR, TOP + HEIGHT / 2]))
+    sphere = coal.Sphere(0.005)
+    for angle in np.radians(np.arange(-80, 81, 5)):
+        u = np.array([math.cos(angle), math.sin(angle), 0.0])
+        for z in np.arange(TOP + 0.03, TOP + HEIGHT - 0.02, 0.005):
+            T = coal.Transform3s(
+                np.eye(3), np.array([*NEIGHBOUR, z]) + (RADIUS + 0.9 * clearance + 0.005) * u
+            )
+            d = coal.distance(sphere, T, true, T_true, coal.DistanceRequest(), coal.DistanceResult())
+            assert d == pytest.approx(0.9 * clearance, abs=1e-4)
+            assert _touches(parts, clearance, sphere, T), (
+                f"a sphere {d * 1e3:.1f} mm from the true side is free"
+            )
