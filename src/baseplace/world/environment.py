@@ -8,7 +8,7 @@ OcTrees, checked against every collision mesh of the robot, together with self-c
 At a grasp only the hand may touch the grasped object (:mod:`baseplace.world.grasped_object`):
 its voxels are checked against every other link, and the surface under it stays an obstacle
 (:func:`contact_groups`); collisions are reported per robot link and per thing touched. Given the
-cloud, the scene within reach of the hand is its points in 1.25 mm cells and the plane the object
+cloud, the scene within reach of the hand is its points in fine cells and the plane the object
 stands on an exact plane (:mod:`baseplace.world.sensor_resolution`), kept at a clearance.
 
 Obstacles given by hand (boxes, cylinders, meshes: :mod:`baseplace.world.obstacles`) are coal
@@ -81,9 +81,10 @@ def contact_groups(
     both. Without an object: ({"obstacle": obstacles}, None).
 
     ``points``: the cloud (N, 3) the voxels were made from. Given, the voxels near the object
-    become their points (each put onto its local plane) in 1.25 mm cells, and the planar surface the object stands on, when the cloud
-    fits a good plane (:func:`~baseplace.world.support_plane.fit_support_slab`), an exact plane
-    (group "support_plane"): :func:`~baseplace.world.sensor_resolution.fine_groups`.
+    become their points in fine cells (those on smooth surfaces put onto their local plane first),
+    and the planar surface the object stands on, when the cloud fits a good plane
+    (:func:`~baseplace.world.support_plane.fit_support_slab`), an exact plane (group
+    "support_plane"): :func:`~baseplace.world.sensor_resolution.fine_groups`.
     """
     if grasped is None:
         return {"obstacle": obstacles}, None
@@ -151,9 +152,8 @@ class Environment:
     :data:`~baseplace.world.sensor_resolution.MAX_FINE`, the exact support plane) touches it (coal's
     security margin; from the point cells the clearance plus an allowance for how far inside the true
     surface they may lie: :func:`~baseplace.world.sensor_resolution.margin`). Coarser voxels (25 mm)
-    keep no margin: a voxel's cube already reaches up to a
-    whole edge beyond its points, more than any clearance; obstacles given by hand are exact and
-    keep none either.
+    keep no margin: a voxel's cube already reaches up to a whole edge beyond its points, more than
+    any clearance; obstacles given by hand are exact and keep none either.
 
     Args:
         robot: the robot.

@@ -14,16 +14,21 @@ The noise is counted once. A noisy point lies up to about 3 sigma outside the tr
 as measured in its 5 mm cell, the clearance stood on top of that noise and of the cell (measured on
 bench/find_rate.py's dev scenes, 3 mm noise: cells up to 11-15 mm outside the true bottles, so the
 margin from a bottle was the clearance plus 5 mm (median) to 12 mm, while the exact plane stood at
-the clearance). So each point is first put onto the plane fitted to its neighbours, an edge's
-points onto the faces' planes (:func:`denoised`), and the cells are :data:`FINE` = 1.25 mm. A
-denoised point may lie a little inside a curved surface (the plane is a chord of it), and a small
-link may come between points 1 cm apart: the point cells keep the clearance plus
-:data:`SURFACE_ALLOWANCE` (:func:`margin`). The margin from the true surface, measured with
-5 mm spheres all around a noisy 3.5 cm bottle (tests/test_clearance_from_true_surface.py's scene,
-three noise draws, 510 probes): the clearance plus 0.0 to 5.5 mm, median 2.6 mm (before: plus
-0.2 to 12.4 mm, median 5.3 mm, and then 0.9 clearances from the side were free between points).
-That test checks it with coal on the true cylinder: 0.9 clearances refused everywhere, a 4 cm
-cube 1.75 clearances away free everywhere.
+the clearance). So a point on a smooth surface (a face, a bottle's side) is first put onto the
+plane fitted to its neighbours (:func:`denoised`) and kept in :data:`FINE` cells at the clearance
+plus :data:`SURFACE_ALLOWANCE` (the plane is a chord of a curved surface, and a small link may come
+between points 1 cm apart: :func:`margin`); a point at an edge or a corner stays as measured, in
+:data:`EDGE_CELL` cells at the clearance, as before, so no corner is rounded off. The margin from
+the true surface, measured with 5 mm spheres (three noise draws each, 3 mm noise, points 1 cm
+apart), in mm beyond the clearance, min / median / max:
+
+* around a 3.5 cm bottle's side (510 probes, tests/test_clearance_from_true_surface.py's scene):
+  0.0 / 2.6 / 6.5 (before: 0.2 / 5.3 / 12.4, and 0.9 clearances from the side were free between points);
+* around a 10 cm box, corners and edges included (1200 probes): -1.6 / 4.7 / 13.2 (before: -1.5 /
+  4.8 / 13.2; a corner itself lies between the points).
+
+tests/test_clearance_from_true_surface.py checks the bottle with coal on the true cylinder: 0.9
+clearances refused everywhere, a 4 cm cube 1.75 clearances away free everywhere.
 """
 
 from __future__ import annotations
@@ -47,10 +52,14 @@ FINE = 0.00125
 a cell reaches 0 to FINE beyond its point along each axis."""
 MAX_FINE = 0.005
 """Cells no coarser than this [m] are at sensor resolution and kept at the clearance: the :data:`FINE`
-cells here and the experiments' 5 mm slab cells (:func:`~baseplace.world.support_plane.with_support_slab`)."""
+and :data:`EDGE_CELL` cells here and the experiments' 5 mm slab cells
+(:func:`~baseplace.world.support_plane.with_support_slab`)."""
+EDGE_CELL = 0.005
+"""Cell edge [m] of the points near the object that lie at an edge or a corner (not on a smooth
+surface, :func:`denoised`): kept as measured, at the clearance (no allowance)."""
 SURFACE_ALLOWANCE = 0.004
-"""Added [m] to the clearance kept from the point cells (not from the exact plane): how much closer
-than the true surface their cells may let a link come. Measured with the allowance 0
+"""Added [m] to the clearance kept from the :data:`FINE` cells (the denoised points; not from the
+exact plane or the edges' cells): how much closer than the true surface they may let a link come. Measured with the allowance 0
 (tests/test_clearance_from_true_surface.py's scene, 3 mm noise, points 1 cm apart, a 3.5 cm bottle;
 spheres of 5 mm radius): 4.0 mm at most, from the local plane's chord under a curved surface (about
 rho^2 / (8 r): 2.2 mm there), the gaps between the points and the plane's own error (sigma / 4)."""
@@ -73,12 +82,15 @@ NOISE_SAMPLES = 4000
 """At most this many points (every n-th) have their local plane fitted."""
 MAX_CLEARANCE = 0.1
 """The largest clearance [m] accepted: more would forbid most grasps outright."""
-PLANAR_FACTOR = 1.5
-"""A point is moved onto its local plane (:func:`denoised`) when that plane's fit is no worse than
-this many times the surfaces' noise; above it (an edge, a corner) the point goes onto a neighbour's plane."""
-MAX_MOVE_SIGMAS = 3.0
-""":func:`denoised` moves a point at an edge by at most this many times the surfaces' noise (a larger
-offset is shape, not noise): no corner is rounded inward by more than that, about the derived clearance."""
+PLANAR_FACTOR = 1.2
+"""A point is on a smooth surface (:func:`denoised`) when a quadric through its neighbours leaves
+residuals of at most this many times the surfaces' noise (7 % of a flat surface's points fail it)."""
+SMOOTH_NEIGHBOURS = 32
+"""Whether a point's surface is smooth (:func:`denoised`) is judged on this many nearest neighbours."""
+SMOOTH_VOTES = 9
+"""A point's surface is smooth when the median quadric residual of its this many nearest points is."""
+DENOISE_CHUNK = 65536
+""":func:`denoised` fits this many points' neighbourhoods at a time (about 25 MB of (chunk, 32, 3))."""
 
 
 @dataclass(frozen=True)
@@ -253,16 +265,15 @@ def fine_groups(
         plane = _plane(slab, p[flat])
         if plane is not None:
             p, owner, is_object = p[~flat], owner[~flat], is_object[~flat]
-    moved = denoised(p)  # the noise once: the clearance stands on the surface, not on the noise
+    moved, smooth = denoised(p)  # the noise once: the clearance stands on the surface, not on the noise
     out: dict[str, Group] = {}
     for k, name in enumerate(names):
         coarse = (groups[name] if name != _OBJECT else object_voxels).without(near[name])
         mine = is_object if name == _OBJECT else (owner == k) & ~is_object
         if name == _OBJECT:  # an object voxel's other points are obstacles
             mine_other = (owner == k) & ~is_object
-            out["obstacle"] = _joined(out.get("obstacle"), _cells(moved[mine_other]))
-        fine = _cells(moved[mine])
-        out[name] = _joined(out.get(name), coarse, fine)
+            out["obstacle"] = _joined(out.get("obstacle"), *_cells(moved, smooth, mine_other))
+        out[name] = _joined(out.get(name), coarse, *_cells(moved, smooth, mine))
     grasped_group = out.pop(_OBJECT)
     out = {name: g for name, g in out.items() if group_size(g)}
     if plane is not None:
@@ -273,51 +284,59 @@ def fine_groups(
 _OBJECT = "\0object"
 
 
-def denoised(points: ArrayLike) -> FloatArray:
-    """The points (N, 3) [m] with their noise across their surface taken out, corners kept.
+def denoised(points: ArrayLike) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """The points (N, 3) [m] on smooth surfaces put onto their local plane, and which those are (N,).
 
-    A point whose :data:`NOISE_NEIGHBOURS` nearest neighbours are planar (the plane fitted to them
-    leaves residuals of at most :data:`PLANAR_FACTOR` times the surfaces' noise,
-    :func:`surface_noise`) goes onto that plane. A point at an edge or a corner, whose neighbours
-    lie on two faces, is not put onto that fit (a plane through both faces would cut the corner
-    off); instead, for each planar neighbour's plane (a face near it) on whose far side from the
-    neighbourhood it lies, it goes back onto that plane: at a convex edge the far side is outside
-    the solid, so the point ends on the solid's faces, never inside (but for the fits' own error,
-    about sigma / sqrt(k)); at a concave one (a bottle's foot on a table) the neighbourhood lies
-    outside the solid and the move is outward. No point at an edge moves by more than
-    :data:`MAX_MOVE_SIGMAS` times the noise per face (a larger offset is shape, not noise). All
-    stay where they were measured when the noise cannot be measured. On a curved surface the fitted
-    plane lies inside it by about rho^2 / (8 r) (rho the neighbourhood's radius, r the curvature's):
-    2.6 mm on a 3 cm bottle sampled every centimetre.
+    A point's surface is smooth when a quadric fitted to its :data:`SMOOTH_NEIGHBOURS` nearest
+    points leaves residuals of at most :data:`PLANAR_FACTOR` times the surfaces' noise
+    (:func:`surface_noise`; :func:`_smooth_residual`), as the median over its :data:`SMOOTH_VOTES`
+    nearest points: a face, a bottle's side. Such a point goes onto the plane fitted to its
+    :data:`NOISE_NEIGHBOURS` nearest, which leaves about sigma / 4 of the noise; on a curved
+    surface that plane is a chord, inside it by about rho^2 / (8 r) (rho the neighbourhood's
+    radius, r the curvature's): 2.6 mm on a 3 cm bottle sampled every centimetre. A point near an
+    edge or a corner stays where it was measured: a plane through both faces would cut the corner
+    off. All stay when the noise cannot be measured (too few points).
     """
     from scipy.spatial import cKDTree
 
     p = np.asarray(points, dtype=float).reshape(-1, 3)
     noise = surface_noise(p)
     if noise is None:
-        return p
-    k, sigma = NOISE_NEIGHBOURS, noise[0]
-    _, idx = cKDTree(p).query(p, k=k)
-    nb = p[idx]
-    centre = nb.mean(axis=1)
-    centred = nb - centre[:, None, :]
-    values, vectors = np.linalg.eigh(np.einsum("nki,nkj->nij", centred, centred) / (k - 3))
-    normal = vectors[:, :, 0]
-    planar = np.sqrt(np.maximum(values[:, 0], 0.0)) <= PLANAR_FACTOR * sigma
-    out = p.copy()
-    out[planar] -= np.einsum("ni,ni->n", p[planar] - centre[planar], normal[planar])[:, None] * normal[planar]
-    edge = np.flatnonzero(~planar)
-    for j in range(1, k):  # the planes of the edge points' planar neighbours, nearest first
-        face = idx[edge, j]
-        use = planar[face]
-        e, f = edge[use], face[use]
-        n, c = normal[f], centre[f]
-        # which side of the face the point's neighbourhood lies on (0: on it)
-        side = np.einsum("nki,ni->n", p[idx[e]] - c[:, None, :], n) / k
-        offset = np.einsum("ni,ni->n", out[e] - c, n)
-        far = ((offset * side < 0) | (np.abs(side) < sigma / 2)) & (np.abs(offset) <= MAX_MOVE_SIGMAS * sigma)
-        out[e[far]] -= offset[far, None] * n[far]
-    return out
+        return p, np.zeros(len(p), dtype=bool)
+    k = NOISE_NEIGHBOURS
+    tree = cKDTree(p)
+    shift = np.empty_like(p)  # from each point onto its plane
+    residual = np.empty(len(p))
+    for lo in range(0, len(p), DENOISE_CHUNK):  # (chunk, k, 3) at a time: bounded memory
+        rows = slice(lo, lo + DENOISE_CHUNK)
+        wide = p[tree.query(p[rows], k=min(len(p), SMOOTH_NEIGHBOURS))[1]]
+        centre = wide[:, :k].mean(axis=1)
+        centred = wide - centre[:, None, :]
+        near = centred[:, :k]
+        _, axes = np.linalg.eigh(np.einsum("nki,nkj->nij", near, near))
+        normal = axes[:, :, 0]
+        residual[rows] = _smooth_residual(centred, axes)
+        shift[rows] = -np.einsum("ni,ni->n", p[rows] - centre, normal)[:, None] * normal
+    # an edge is a line of bad fits; one bad fit among good ones is the noise's tail (the median of
+    # the nearest fits decides)
+    votes = tree.query(p, k=min(len(p), SMOOTH_VOTES))[1]
+    smooth = np.median(residual[votes], axis=1) <= PLANAR_FACTOR * noise[0]
+    return np.where(smooth[:, None], p + shift, p), smooth
+
+
+def _smooth_residual(centred: FloatArray, axes: FloatArray) -> FloatArray:
+    """(N,) the residuals' standard deviation [m] of a quadric fitted to each neighbourhood (N, m, 3).
+
+    The quadric gives the height along the first column of ``axes`` (N, 3, 3) over the other two. A quadric follows a bottle's curve but not an edge: a plane through both faces of an edge
+    passes for noise where the points are 1 cm apart and the noise 3 mm; a quadric's residuals do not.
+    """
+    local = np.einsum("nki,nij->nkj", centred, axes)
+    h, u, v = local[..., 0], local[..., 1], local[..., 2]
+    design = np.stack([np.ones_like(u), u, v, u * u, u * v, v * v], axis=-1)
+    gram = np.einsum("nki,nkj->nij", design, design) + 1e-12 * np.eye(6)
+    coef = np.linalg.solve(gram, np.einsum("nki,nk->ni", design, h)[..., None])[..., 0]
+    residual = h - np.einsum("nkj,nj->nk", design, coef)
+    return np.sqrt(np.einsum("nk,nk->n", residual, residual) / max(h.shape[1] - 6, 1))
 
 
 def _object_points(p: FloatArray, grasped: GraspedObject) -> NDArray[np.bool_]:
@@ -342,9 +361,12 @@ def _object_points(p: FloatArray, grasped: GraspedObject) -> NDArray[np.bool_]:
     return out
 
 
-def _cells(p: FloatArray) -> VoxelMap:
+def _cells(p: FloatArray, smooth: NDArray[np.bool_], mine: NDArray[np.bool_]) -> tuple[VoxelMap, VoxelMap]:
+    """The points ``p[mine]`` (N, 3): smooth ones in :data:`FINE` cells, the others in :data:`EDGE_CELL` cells."""
     # finer than a user may ask of VoxelMap.from_points: these are the few points near the object
-    return VoxelMap(FINE, np.unique(np.floor(p / FINE).astype(np.int64).reshape(-1, 3), axis=0))
+    fine = np.unique(np.floor(p[mine & smooth] / FINE).astype(np.int64).reshape(-1, 3), axis=0)
+    edge = np.unique(np.floor(p[mine & ~smooth] / EDGE_CELL).astype(np.int64).reshape(-1, 3), axis=0)
+    return VoxelMap(FINE, fine), VoxelMap(EDGE_CELL, edge)
 
 
 def _joined(group: Group | None, *parts: VoxelMap) -> Group:
