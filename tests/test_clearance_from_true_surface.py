@@ -43,14 +43,26 @@ def _cylinder_points(xy, step: float = 0.01) -> np.ndarray:
     return np.concatenate([side, top])
 
 
-@pytest.fixture(scope="module")
-def scene():
-    rng = np.random.default_rng(2511)
+def _box_points(centre, half: float, step: float = 0.01) -> np.ndarray:
+    """A box's top and four sides standing on the table, edges and corners included."""
+    g = np.arange(-half, half + 1e-9, step)
+    A, B = np.meshgrid(g, g)
+    z = np.arange(TOP, TOP + 2 * half + 1e-9, step)
+    S, Z = np.meshgrid(g, z)
+    parts = [np.c_[centre[0] + A.ravel(), centre[1] + B.ravel(), np.full(A.size, TOP + 2 * half)]]
+    for sgn in (-1, 1):
+        parts.append(np.c_[centre[0] + S.ravel(), np.full(S.size, centre[1] + sgn * half), Z.ravel()])
+        parts.append(np.c_[np.full(S.size, centre[0] + sgn * half), centre[1] + S.ravel(), Z.ravel()])
+    return np.unique(np.round(np.concatenate(parts), 9), axis=0)
+
+
+def _model(neighbour: np.ndarray, footprint, seed: int):
+    """(parts: (geometry, security margin) as Environment checks them, clearance) of a noisy scene."""
+    rng = np.random.default_rng(seed)
     X, Y = np.meshgrid(np.arange(-0.4, 0.4, 0.01), np.arange(-0.4, 0.4, 0.01))
     table = np.c_[X.ravel(), Y.ravel(), np.full(X.size, TOP)]
-    table = table[(np.hypot(X.ravel() - BOTTLE[0], Y.ravel() - BOTTLE[1]) > RADIUS)
-                  & (np.hypot(X.ravel() - NEIGHBOUR[0], Y.ravel() - NEIGHBOUR[1]) > RADIUS)]  # fmt: skip
-    clean = np.concatenate([table, _cylinder_points(BOTTLE), _cylinder_points(NEIGHBOUR)])
+    table = table[(np.hypot(X.ravel() - BOTTLE[0], Y.ravel() - BOTTLE[1]) > RADIUS) & ~footprint(table)]
+    clean = np.concatenate([table, _cylinder_points(BOTTLE), neighbour])
     points = clean + rng.normal(0.0, SIGMA, clean.shape)
     voxels = VoxelMap.from_points(points)
     grasped = GraspedObject.cylinder([*BOTTLE, TOP + HEIGHT / 2], RADIUS, HEIGHT)
@@ -68,6 +80,25 @@ def scene():
                 octree = coal.makeOctree(np.ascontiguousarray(part.centres), part.resolution)
                 parts.append((octree, _margin(part, clearance)))
     return parts, clearance
+
+
+@pytest.fixture(scope="module")
+def scene():
+    def footprint(p):
+        return np.hypot(p[:, 0] - NEIGHBOUR[0], p[:, 1] - NEIGHBOUR[1]) <= RADIUS
+
+    return _model(_cylinder_points(NEIGHBOUR), footprint, 2511)
+
+
+BOX_HALF = 0.04  # the neighbour box: an 8 cm cube where the bottle stood
+
+
+@pytest.fixture(scope="module")
+def box_scene():
+    def footprint(p):
+        return np.all(np.abs(p[:, :2] - NEIGHBOUR) <= BOX_HALF, axis=1)
+
+    return _model(_box_points(NEIGHBOUR, BOX_HALF), footprint, 2512)
 
 
 def _probes(gap: float):
@@ -129,3 +160,24 @@ def test_the_margin_from_the_true_side_is_never_less_than_the_clearance(scene):
             assert _touches(parts, clearance, sphere, T), (
                 f"a sphere {d * 1e3:.1f} mm from the true side is free"
             )
+
+
+def test_a_noisy_box_keeps_its_corners_within_a_quarter_clearance(box_scene):
+    """Spheres (5 mm) 0.75 clearances from a noisy box's true top, edges and corners: all refused.
+
+    Points near an edge are not smoothed onto a plane through both faces (that would cut the corner
+    off); between the points 1 cm apart a corner may still let a sphere a little nearer than the clearance.
+    """
+    parts, clearance = box_scene
+    sphere = coal.Sphere(0.005)
+    g = np.linspace(-BOX_HALF, BOX_HALF, 9)
+    for x in g:
+        for y in g:
+            q = np.array([NEIGHBOUR[0] + x, NEIGHBOUR[1] + y, TOP + 2 * BOX_HALF])  # on the top face
+            outward = np.array([np.sign(x) * (abs(x) == BOX_HALF), np.sign(y) * (abs(y) == BOX_HALF), 1.0])
+            for n in {tuple(outward), (outward[0], 0.0, 1.0), (0.0, outward[1], 1.0), (0.0, 0.0, 1.0)}:
+                u = np.asarray(n) / np.linalg.norm(n)  # a direction in the normal cone at q
+                T = coal.Transform3s(np.eye(3), q + (0.75 * clearance + 0.005) * u)
+                assert _touches(parts, clearance, sphere, T), (
+                    f"a sphere 0.75 clearances from the box at {np.round(q, 3)} along {np.round(u, 2)} is free"
+                )
