@@ -8,7 +8,7 @@ OcTrees, checked against every collision mesh of the robot, together with self-c
 At a grasp only the hand may touch the grasped object (:mod:`baseplace.world.grasped_object`):
 its voxels are checked against every other link, and the surface under it stays an obstacle
 (:func:`contact_groups`); collisions are reported per robot link and per thing touched. Given the
-cloud, the scene within reach of the hand is its points in 5 mm cells and the plane the object
+cloud, the scene within reach of the hand is its points in fine cells and the plane the object
 stands on an exact plane (:mod:`baseplace.world.sensor_resolution`), kept at a clearance.
 
 Obstacles given by hand (boxes, cylinders, meshes: :mod:`baseplace.world.obstacles`) are coal
@@ -39,7 +39,7 @@ from baseplace.world.sensor_resolution import (
     fine_groups,
     group_parts,
     group_size,
-    is_fine,
+    margin,
 )
 from baseplace.world.support_plane import fit_support_slab
 
@@ -81,9 +81,10 @@ def contact_groups(
     both. Without an object: ({"obstacle": obstacles}, None).
 
     ``points``: the cloud (N, 3) the voxels were made from. Given, the voxels near the object
-    become their points in 5 mm cells, and the planar surface the object stands on, when the cloud
-    fits a good plane (:func:`~baseplace.world.support_plane.fit_support_slab`), an exact plane
-    (group "support_plane"): :func:`~baseplace.world.sensor_resolution.fine_groups`.
+    become their points in fine cells (those on smooth surfaces put onto their local plane first),
+    and the planar surface the object stands on, when the cloud fits a good plane
+    (:func:`~baseplace.world.support_plane.fit_support_slab`), an exact plane (group
+    "support_plane"): :func:`~baseplace.world.sensor_resolution.fine_groups`.
     """
     if grasped is None:
         return {"obstacle": obstacles}, None
@@ -148,10 +149,11 @@ class Environment:
     how deep is not checked).
 
     A link closer than ``clearance`` to a part of a group at sensor resolution (cells of at most
-    :data:`~baseplace.world.sensor_resolution.FINE`, the exact support plane) touches it (coal's
-    security margin). Coarser voxels (25 mm) keep no margin: a voxel's cube already reaches up to a
-    whole edge beyond its points, more than any clearance; obstacles given by hand are exact and
-    keep none either.
+    :data:`~baseplace.world.sensor_resolution.MAX_FINE`, the exact support plane) touches it (coal's
+    security margin; from the point cells the clearance plus an allowance for how far inside the true
+    surface they may lie: :func:`~baseplace.world.sensor_resolution.margin`). Coarser voxels (25 mm)
+    keep no margin: a voxel's cube already reaches up to a whole edge beyond its points, more than
+    any clearance; obstacles given by hand are exact and keep none either.
 
     Args:
         robot: the robot.
@@ -204,7 +206,7 @@ class Environment:
                 for k in range(n_robot):
                     if name != GRASPED or k not in self.hand_ids:
                         self.geom.addCollisionPair(pin.CollisionPair(k, gid))
-                        margins.append(self.clearance if is_fine(part) else 0.0)
+                        margins.append(margin(part, self.clearance))
         self.shapes = tuple(shapes)
         self._T_world_env: dict[int, pin.SE3] = {}  # the shapes' poses; voxels are in the world frame
         for shape in self.shapes:
@@ -218,8 +220,8 @@ class Environment:
         self.obstacle_names = [n for n, v in groups.items() if group_size(v)] + [o.label for o in self.shapes]
         self.data = self.model.createData()
         self.geom_data = pin.GeometryData(self.geom)
-        for request, margin in zip(self.geom_data.collisionRequests, margins, strict=True):
-            request.security_margin = margin
+        for request, metres in zip(self.geom_data.collisionRequests, margins, strict=True):
+            request.security_margin = metres
         if self._self is not None:  # build the arm-pruned pair tables now, not in the first query
             for arm_name in robot.spec.arms:
                 self._self.colliding_arm(robot.arm(arm_name), robot.arm(arm_name).lower)
