@@ -62,11 +62,10 @@ from baseplace.reachability.cache import resolve_map
 from baseplace.robots.model import Robot
 from baseplace.world.environment import Environment
 from baseplace_experiments.execution import ExecutionOracle, ExecutionSettings
+from baseplace_experiments.execution_experiment import trial_scene
 from baseplace_experiments.table_grid import (
     RobotShapes,
     TableGridSettings,
-    object_cloud,
-    table_cloud,
     true_bottle,
     true_table,
 )
@@ -136,13 +135,7 @@ def scene(
     seed: int, cell: tuple[int, int], s: TableGridSettings
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """(true bottle centre, its estimate, the noisy cloud), drawn as ``execution_trial`` draws them."""
-    rng = np.random.default_rng([seed, *cell, 0])
-    p_true = s.cell_centre(*cell)
-    p_true[:2] += rng.uniform(-s.placement_noise, s.placement_noise, 2)
-    p_est = p_true + rng.normal(0.0, s.estimate_sigma, 3)
-    clean = np.concatenate([table_cloud(s), object_cloud(p_true, s)])
-    seen = clean + rng.normal(0.0, s.cloud_sigma, clean.shape)
-    return p_true, p_est, seen
+    return trial_scene(seed, cell, s)
 
 
 def check_seed(seed: int, cell: tuple[int, int], grasp: int, k: int) -> int:

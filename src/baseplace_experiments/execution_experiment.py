@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from baseplace.geometry.poses import BasePose
+from baseplace.geometry.poses import BasePose, FloatArray
 from baseplace.navigation.gridnav import GridNavigator
 from baseplace.placement.candidates import pickup, radial_search
 from baseplace.placement.irm_candidates import IrmSettings, irm_candidates
@@ -69,6 +69,18 @@ from baseplace_experiments.table_grid import (
 EXECUTION_METHODS = ("baseline", "radial", "default", "robust")
 
 
+def trial_scene(
+    seed: int, cell: tuple[int, int], s: TableGridSettings
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """One trial's (true bottle centre, its estimate, the noisy cloud the robot sees) [m]."""
+    rng = np.random.default_rng([seed, *cell, 0])
+    p_true = s.cell_centre(*cell)
+    p_true[:2] += rng.uniform(-s.placement_noise, s.placement_noise, 2)
+    p_est = p_true + rng.normal(0.0, s.estimate_sigma, 3)
+    clean = np.concatenate([table_cloud(s), object_cloud(p_true, s)])
+    return p_true, p_est, clean + rng.normal(0.0, s.cloud_sigma, clean.shape)
+
+
 def execution_trial(robot: Robot, rmap: ReachabilityMap, shapes: RobotShapes, seed: int, cell: tuple[int, int],
                     robust: RobustnessSettings, rank_key: str = "rate", draws: int = 5,
                     s: TableGridSettings | None = None,
@@ -92,12 +104,7 @@ def execution_trial(robot: Robot, rmap: ReachabilityMap, shapes: RobotShapes, se
     if support not in ("voxels", "slab"):
         raise ValueError(f"support must be 'voxels' or 'slab', got {support!r}")
     s = s or TableGridSettings()
-    rng = np.random.default_rng([seed, *cell, 0])
-    p_true = s.cell_centre(*cell)
-    p_true[:2] += rng.uniform(-s.placement_noise, s.placement_noise, 2)
-    p_est = p_true + rng.normal(0.0, s.estimate_sigma, 3)
-    clean = np.concatenate([table_cloud(s), object_cloud(p_true, s)])
-    seen = clean + rng.normal(0.0, s.cloud_sigma, clean.shape)
+    p_true, p_est, seen = trial_scene(seed, cell, s)
     occupancy = table_occupancy(s)
     radial = radial_settings(robot, rmap, s)
     start = BasePose(*s.start)
