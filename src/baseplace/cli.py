@@ -395,7 +395,7 @@ def build_parser(chosen: str | None = None) -> argparse.ArgumentParser:
                    help="add a floor plane at this height [m] (z up) under and around a cloud that shows none")  # fmt: skip
     p.add_argument("--clearance", type=finite_float, default=None, metavar="METRES",
                    help="keep this far [m] from the scene near the grasped object (default: 3 sigma of the "
-                        "support plane's residuals, at least 3 mm; 0.01 without a plane)")  # fmt: skip
+                        "support plane's residuals or, without one, of the surfaces' noise near it; at least 3 mm)")  # fmt: skip
     p.add_argument("--stand-on", default="ground", choices=["ground", "any"],
                    help="where the base may stand: the ground and the regions it can drive onto from it "
                         "over steps up to 4 cm (ground, default), or every planar region large enough "
@@ -426,7 +426,7 @@ def build_parser(chosen: str | None = None) -> argparse.ArgumentParser:
                    help="add a floor plane at this height [m] (z up) under and around a cloud that shows none")  # fmt: skip
     p.add_argument("--clearance", type=finite_float, default=None, metavar="METRES",
                    help="keep this far [m] from the scene near the grasped object (default: 3 sigma of the "
-                        "support plane's residuals, at least 3 mm; 0.01 without a plane)")  # fmt: skip
+                        "support plane's residuals or, without one, of the surfaces' noise near it; at least 3 mm)")  # fmt: skip
     p.add_argument("--resolution", type=finite_float, default=None,
                    help="height-map cell [m] (default: from the cloud, as place)")  # fmt: skip
     p.add_argument(
