@@ -278,3 +278,18 @@ def test_explain_answers_as_the_cli(client, files, monkeypatch):
     svc = post(client, "/explain", {"base": "0.2 0.6 1.05", "target": SCENE_TARGET})
     for key in ("exit_code", "map", "ik", "collisions", "motion", "verdict"):
         assert svc[key] == truth[key], key
+
+
+def test_explain_takes_stand_on_and_clearance_as_the_cli(client, files):
+    """``explain --stand-on any --clearance 0.02``: the service's fields answer what the CLI's options do."""
+    args = ("--cloud", str(files / "scene.ply"), "--base", "0.2 0.6 1.05", "--target", SCENE_TARGET)
+    truth = cli(files, "explain", *args, "--stand-on", "any", "--clearance", "0.02")
+    scene = upload(client, files / "scene.ply")
+    body = {"scene_id": scene, "base": "0.2 0.6 1.05", "target": SCENE_TARGET}
+    svc = post(client, "/explain", {**body, "stand_on": "any", "clearance": 0.02})
+    for key in ("exit_code", "error", "failures", "ik", "collisions", "motion", "verdict"):
+        assert svc[key] == truth[key], key
+    for bad in ({"stand_on": "table"}, {"clearance": -0.01}):
+        assert client.post("/explain", json={**body, **bad}).status_code == 422
+    refused = run_cli("explain", *args, "--stand-on", "table", "--map", str(files / "tiago.rmap"))
+    assert refused.returncode == 2 and "--stand-on" in refused.stderr

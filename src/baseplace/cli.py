@@ -174,7 +174,7 @@ def _explain(a: argparse.Namespace, progress: Progress) -> Any:
 
     from baseplace.placement.pipeline import PlaceSettings
 
-    settings = PlaceSettings(resolution=a.resolution, clearance=a.clearance)
+    settings = PlaceSettings(resolution=a.resolution, clearance=a.clearance, stand_on=a.stand_on)
     if a.no_motion_check:
         settings = replace(settings, motion=None)
     job = explain.ExplainJob(
@@ -427,6 +427,12 @@ def build_parser(chosen: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--clearance", type=finite_float, default=None, metavar="METRES",
                    help="keep this far [m] from the scene near the grasped object (default: 3 sigma of the "
                         "support plane's residuals or, without one, of the surfaces' noise near it; at least 3 mm)")  # fmt: skip
+    p.add_argument(
+        "--stand-on",
+        default="ground",
+        choices=["ground", "any"],
+        help="where the base may stand, as place's (default ground)",
+    )
     p.add_argument("--resolution", type=finite_float, default=None,
                    help="height-map cell [m] (default: from the cloud, as place)")  # fmt: skip
     p.add_argument(

@@ -166,6 +166,9 @@ class ExplainRequest(_Model):
     arm: str | None = Field(None, max_length=64, description="arm (default: the robot's default arm)")
     object: str = Field("auto", max_length=200, description='"auto", "none", "box x y z sx sy sz [yaw]" ...')
     resolution: float | None = Field(None, ge=0.005, le=1.0, description="height-map cell [m]")
+    clearance: float | None = Field(None, ge=0.0, le=0.1, allow_inf_nan=False,
+                                    description="keep this far [m] from the scene near the grasped object, as place's")  # fmt: skip
+    stand_on: Literal["ground", "any"] = Field("ground", description="where the base may stand, as place's")
     no_motion_check: bool = Field(False, description="skip the reaching-motion check, as place's")
     seed: int = SEED
     degrees: bool = DEGREES

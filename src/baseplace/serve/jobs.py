@@ -147,7 +147,7 @@ def explain(state: ServiceState, scene: Scene | None, req: dict[str, Any]) -> di
 
     def job() -> Report:
         r = in_radians("explain", req)
-        settings = PlaceSettings(resolution=r["resolution"])
+        settings = PlaceSettings(resolution=r["resolution"], clearance=r["clearance"], stand_on=r["stand_on"])
         if r["no_motion_check"]:
             settings = replace(settings, motion=None)
         robot = state.robot(r["robot"])
