@@ -571,8 +571,10 @@ def support_regions(
         return None
     if cache is None:
         return ground_regions(terrain, outline)
+    # keyed as the obstacle voxels are: the cache's terrain at this resolution (an id() of a terrain
+    # could be a collected one's, reused)
     return cache.shared(
-        ("ground regions", id(terrain), outline.tobytes()), lambda: ground_regions(terrain, outline)
+        ("ground regions", settings.resolution, outline.tobytes()), lambda: ground_regions(terrain, outline)
     )
 
 
