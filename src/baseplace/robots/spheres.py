@@ -481,6 +481,22 @@ def _place_one(j, local, F, out):
             out[a] = F[j, a, 0] * local[0] + F[j, a, 1] * local[1] + F[j, a, 2] * local[2] + F[j, a, 3]
 
 
+@nb.njit(cache=True, inline="always")
+def _place_once(k, i, stamp, joint, local, F, out):
+    """Place item k (a sphere or a geometry's bound) into ``out[k]`` for configuration i, unless it already is."""
+    if stamp[k] != i:
+        stamp[k] = i
+        _place_one(joint[k], local[k], F, out[k])
+
+
+@nb.njit(cache=True, inline="always")
+def _overlap(A, a, ra, B, b, rb):
+    """Whether the sphere (A[a], ra) overlaps the sphere (B[b], rb)."""
+    dx, dy, dz = A[a, 0] - B[b, 0], A[a, 1] - B[b, 1], A[a, 2] - B[b, 2]
+    r = ra + rb
+    return dx * dx + dy * dy + dz * dz < r * r
+
+
 @nb.njit(cache=True, parallel=True)
 def _colliding_batch(Q, placements, axes, kinds, s_joint, s_local, s_rad, g_joint, g_local, g_rad,
                      geom_pairs, cl_local, cl_rad, cl_pairs, cl_start, first_geom, first_start,
@@ -536,45 +552,27 @@ def _colliding_batch(Q, placements, axes, kinds, s_joint, s_local, s_rad, g_join
                 if cl_table[k] >= 0 and in_table[cl_table[k]]:
                     continue
                 ca, cb = cl_pairs[k, 0] + 1, cl_pairs[k, 1] + 1
-                dx, dy, dz = cc[ca, 0] - cc[cb, 0], cc[ca, 1] - cc[cb, 1], cc[ca, 2] - cc[cb, 2]
-                r = cl_rad[ca] + cl_rad[cb]
-                if dx * dx + dy * dy + dz * dz >= r * r:
+                if not _overlap(cc, ca, cl_rad[ca], cc, cb, cl_rad[cb]):
                     continue
                 for f in range(cl_start[k], cl_start[k + 1]):
                     a = first_geom[f]
-                    if g_placed[a] != i:
-                        g_placed[a] = i
-                        _place_one(g_joint[a], g_local[a], F, gc[a])
-                    dx, dy, dz = gc[a, 0] - cc[cb, 0], gc[a, 1] - cc[cb, 1], gc[a, 2] - cc[cb, 2]
-                    r = g_rad[a] + cl_rad[cb]
-                    if dx * dx + dy * dy + dz * dz >= r * r:
+                    _place_once(a, i, g_placed, g_joint, g_local, F, gc)
+                    if not _overlap(gc, a, g_rad[a], cc, cb, cl_rad[cb]):
                         continue
                     for p in range(first_start[f], first_start[f + 1]):
                         b = geom_pairs[p, 1]
-                        if g_placed[b] != i:
-                            g_placed[b] = i
-                            _place_one(g_joint[b], g_local[b], F, gc[b])
-                        dx, dy, dz = gc[a, 0] - gc[b, 0], gc[a, 1] - gc[b, 1], gc[a, 2] - gc[b, 2]
-                        r = g_rad[a] + g_rad[b]
-                        if dx * dx + dy * dy + dz * dz >= r * r:
+                        _place_once(b, i, g_placed, g_joint, g_local, F, gc)
+                        if not _overlap(gc, a, g_rad[a], gc, b, g_rad[b]):
                             continue
                         for e in range(pair_u_start[p], pair_u_start[p + 1]):
                             u = ent_u[e]
-                            if placed[u] != i:
-                                placed[u] = i
-                                _place_one(s_joint[u], s_local[u], F, sc[u])
-                            dx, dy, dz = sc[u, 0] - gc[b, 0], sc[u, 1] - gc[b, 1], sc[u, 2] - gc[b, 2]
-                            r = s_rad[u] + g_rad[b]
-                            if dx * dx + dy * dy + dz * dz >= r * r:
+                            _place_once(u, i, placed, s_joint, s_local, F, sc)
+                            if not _overlap(sc, u, s_rad[u], gc, b, g_rad[b]):
                                 continue
                             for w in range(ent_v_start[e], ent_v_start[e + 1]):
                                 v = ent_v[w]
-                                if placed[v] != i:
-                                    placed[v] = i
-                                    _place_one(s_joint[v], s_local[v], F, sc[v])
-                                dx, dy, dz = sc[u, 0] - sc[v, 0], sc[u, 1] - sc[v, 1], sc[u, 2] - sc[v, 2]
-                                r = s_rad[u] + s_rad[v]
-                                if dx * dx + dy * dy + dz * dz < r * r:
+                                _place_once(v, i, placed, s_joint, s_local, F, sc)
+                                if _overlap(sc, u, s_rad[u], sc, v, s_rad[v]):
                                     hit = True
                                     break
                             if hit:
