@@ -17,27 +17,7 @@ import numpy as np
 
 from baseplace.errors import InputError
 from baseplace.geometry.poses import BasePose
-from baseplace.jobs.inputs import (
-    CHECK_MARGIN,
-    PLOT_SUFFIXES,
-    CloudInput,
-    Progress,
-    ReachBound,
-    bag_stamp,
-    base_xyyaw,
-    check_in_reach,
-    check_object_yaw,
-    check_on_scene,
-    grid_bounds,
-    load_robot,
-    map_output,
-    map_timing,
-    occupancy_grid,
-    out_path,
-    parse_xyz,
-    world_cloud,
-    write_mcap,
-)
+from baseplace.jobs import inputs
 from baseplace.jobs.report import (
     CandidatesReport,
     NoResultError,
@@ -85,7 +65,7 @@ class CandidatesJob:
 
     object: str | Sequence[float]
     occupancy: OccupancyGrid | str | None = None
-    cloud: CloudInput = field(default_factory=CloudInput)
+    cloud: inputs.CloudInput = field(default_factory=inputs.CloudInput)
     robot_pose: str | Sequence[float] | None = None
     method: str = "radial"
     robot: Robot | str = DEFAULT_ROBOT
@@ -121,8 +101,10 @@ class CandidatesJob:
 
         Front ends call it before they build the settings, whose imports take seconds.
         """
-        out_path(self.cloud.fused_out, "--fused-out", (".bt",))
-        return out_path(self.png, "--png", PLOT_SUFFIXES), out_path(self.mcap, "--mcap", (".mcap",))
+        inputs.out_path(self.cloud.fused_out, "--fused-out", (".bt",))
+        return inputs.out_path(self.png, "--png", inputs.PLOT_SUFFIXES), inputs.out_path(
+            self.mcap, "--mcap", (".mcap",)
+        )
 
 
 def check_object(grid: Any, p_o: np.ndarray, reach: float) -> None:
@@ -144,7 +126,7 @@ def check_object(grid: Any, p_o: np.ndarray, reach: float) -> None:
         )
 
 
-def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> CandidatesReport:
+def candidates_job(job: CandidatesJob, progress: inputs.Progress | None = None) -> CandidatesReport:
     """Verified placement candidates for grasping at ``job.object``, best first.
 
     Raises:
@@ -165,26 +147,28 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
 
     t0 = time.perf_counter()
     robust = job.robustness or RobustnessSettings()
-    p_o = parse_xyz(job.object, "--object")
-    robot_pose = None if job.robot_pose is None else base_xyyaw(job.robot_pose, "--robot-pose")
-    check_object_yaw(job.object_shape, "--object-shape")
+    p_o = inputs.parse_xyz(job.object, "--object")
+    robot_pose = None if job.robot_pose is None else inputs.base_xyyaw(job.robot_pose, "--robot-pose")
+    inputs.check_object_yaw(job.object_shape, "--object-shape")
     shape = parse_grasped_object(job.object_shape, "--object-shape")
     obstacles = parse_obstacles(job.obstacles)
     check_clear_of(obstacles, p_o, ["--object"])
-    grid = occupancy_grid(job.occupancy, job.cloud.bag, job.cloud)
+    grid = inputs.occupancy_grid(job.occupancy, job.cloud.bag, job.cloud)
     if grid is None:
         raise InputError("give --occupancy MAP.yaml or --bag FILE --map-topic TOPIC")
-    robot = load_robot(job.robot)
+    robot = inputs.load_robot(job.robot)
     # before the map: an object no base on the grid brings within reach, a robot off the grid
     arm_name = job.arm
     if arm_name is None and not isinstance(job.map, str):  # else the map file's arm, not read yet: every arm
         arm_name = robot.spec.default_arm if job.map is None else job.map.info.arm
     standoff = grasp_standoff(robot, arm_name) if job.standoff is None else job.standoff
-    scene, bounds = "the occupancy grid's bounds", grid_bounds(grid)
-    check_in_reach(p_o[None], ["--object"], bounds, scene, ReachBound.of_robot(robot, arm_name), robot.name,
+    scene, bounds = "the occupancy grid's bounds", inputs.grid_bounds(grid)
+    inputs.check_in_reach(p_o[None], ["--object"], bounds, scene, inputs.ReachBound.of_robot(robot, arm_name), robot.name,
                    extra=abs(standoff))  # fmt: skip
     if robot_pose is not None:
-        check_on_scene(robot_pose, "--robot-pose", bounds, scene, CHECK_MARGIN + grid.resolution)
+        inputs.check_on_scene(
+            robot_pose, "--robot-pose", bounds, scene, inputs.CHECK_MARGIN + grid.resolution
+        )
     t_map = time.perf_counter()
     map_choice = resolve_map(robot, job.map, job.arm, progress)
     rmap, map_s = map_choice.rmap, time.perf_counter() - t_map
@@ -192,7 +176,7 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
     settings = RadialSettings.for_robot(robot, rmap)
     check_object(grid, p_o, settings.d_max)
     t_load = time.perf_counter()
-    points = world_cloud(job.cloud).points if job.cloud.given else None
+    points = inputs.world_cloud(job.cloud).points if job.cloud.given else None
     cache = job.cache if points is not None else None
     # only the hand may touch the object's own voxels (found at the object or given by its shape)
     grasped = shape if shape != "auto" else None
@@ -229,12 +213,12 @@ def candidates_job(job: CandidatesJob, progress: Progress | None = None) -> Cand
     if mcap is not None:
         T_c = [p.T_world_base for p in ranked]
         world = job.cloud.bag.world_frame if job.cloud.bag is not None else "map"
-        write_mcap(mcap, world, bag_stamp(job.cloud), candidates=T_c, placements=T_c[:1],
+        inputs.write_mcap(mcap, world, inputs.bag_stamp(job.cloud), candidates=T_c, placements=T_c[:1],
                    paths=[] if route is None else [route.poses])  # fmt: skip
         report.outputs["mcap"] = str(mcap)
     now = time.perf_counter()
-    report.outputs.update(map_output(map_choice))
-    report.timings_ms = {"load": (t_load - t0 - map_s) * 1e3, **map_timing(map_choice, map_s), "cloud": (t_search - t_load) * 1e3,
+    report.outputs.update(inputs.map_output(map_choice))
+    report.timings_ms = {"load": (t_load - t0 - map_s) * 1e3, **inputs.map_timing(map_choice, map_s), "cloud": (t_search - t_load) * 1e3,
                          **found.timings_ms, "navigation": (now - t_nav) * 1e3, "total": (now - t0) * 1e3}  # fmt: skip
     if not ranked:
         raise NoResultError(

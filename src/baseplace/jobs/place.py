@@ -15,28 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from baseplace.errors import InputError
-from baseplace.jobs.inputs import (
-    CHECK_MARGIN,
-    PLOT_SUFFIXES,
-    CloudInput,
-    Progress,
-    ReachBound,
-    bag_stamp,
-    base_xyyaw,
-    check_in_reach,
-    check_object_yaw,
-    check_on_scene,
-    grid_bounds,
-    load_robot,
-    map_output,
-    map_timing,
-    occupancy_grid,
-    out_path,
-    points_bounds,
-    target_pose,
-    world_cloud,
-    write_mcap,
-)
+from baseplace.jobs import inputs
 from baseplace.jobs.report import NoResultError, PlaceReport, RobotRef, placement_row
 from baseplace.robots.defaults import DEFAULT_ROBOT
 
@@ -85,7 +64,7 @@ class PlaceJob:
     targets: Sequence[str | Sequence[float]]
     robot: Robot | str = DEFAULT_ROBOT
     arm: str | None = None
-    cloud: CloudInput = field(default_factory=CloudInput)
+    cloud: inputs.CloudInput = field(default_factory=inputs.CloudInput)
     occupancy: OccupancyGrid | str | None = None
     map: ReachabilityMap | str | None = None
     settings: PlaceSettings | None = None
@@ -121,8 +100,10 @@ class PlaceJob:
 
         Front ends call it before they build the settings, whose imports take seconds.
         """
-        out_path(self.cloud.fused_out, "--fused-out", (".bt",))
-        return out_path(self.png, "--out", PLOT_SUFFIXES), out_path(self.mcap, "--mcap", (".mcap",))
+        inputs.out_path(self.cloud.fused_out, "--fused-out", (".bt",))
+        return inputs.out_path(self.png, "--out", inputs.PLOT_SUFFIXES), inputs.out_path(
+            self.mcap, "--mcap", (".mcap",)
+        )
 
 
 def pose_text(T: np.ndarray) -> str:
@@ -144,10 +125,10 @@ def _check_scene(
     """Refuse targets no support of the scene brings within the arm's reach, and a start off the scene.
 
     The scene's supports lie within the bounds of the cloud (and of the occupancy grid, floor at
-    z = 0); the arm's reach is :class:`ReachBound`'s, from the robot model alone.
+    z = 0); the arm's reach is :class:`~baseplace.jobs.inputs.ReachBound`'s, from the robot model alone.
     """
-    boxes = ([points_bounds(points)] if points is not None else []) + (
-        [grid_bounds(grid)] if grid is not None else []
+    boxes = ([inputs.points_bounds(points)] if points is not None else []) + (
+        [inputs.grid_bounds(grid)] if grid is not None else []
     )
     bounds = (np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0))
     scene = {1: "the cloud's bounds", 2: "the occupancy grid's bounds"}.get(
@@ -157,12 +138,16 @@ def _check_scene(
     if arm is None and not isinstance(job.map, str):  # else the map file's arm, not read yet: every arm
         arm = robot.spec.default_arm if job.map is None else job.map.info.arm
     labels = [f"target {k}" for k in range(len(targets))]
-    check_in_reach(targets[:, :3, 3], labels, bounds, scene, ReachBound.of_robot(robot, arm), robot.name)
+    inputs.check_in_reach(
+        targets[:, :3, 3], labels, bounds, scene, inputs.ReachBound.of_robot(robot, arm), robot.name
+    )
     if start is not None:
-        check_on_scene(start, "--start", bounds, scene, CHECK_MARGIN + max(resolution or 0.0, 0.05))
+        inputs.check_on_scene(
+            start, "--start", bounds, scene, inputs.CHECK_MARGIN + max(resolution or 0.0, 0.05)
+        )
 
 
-def place_job(job: PlaceJob, progress: Progress | None = None) -> PlaceReport:
+def place_job(job: PlaceJob, progress: inputs.Progress | None = None) -> PlaceReport:
     """Verified base placements for ``job.targets``.
 
     Raises:
@@ -189,21 +174,21 @@ def place_job(job: PlaceJob, progress: Progress | None = None) -> PlaceReport:
                          'or --grasp-point "x y z roll pitch yaw" (the point between the fingertips)')  # fmt: skip
     option, given = ("--grasp-point", job.grasp_points) if job.grasp_points else ("--target", job.targets)
     targets = np.stack(
-        [target_pose(t, option if len(given) == 1 else f"{option} {k}") for k, t in enumerate(given)]
+        [inputs.target_pose(t, option if len(given) == 1 else f"{option} {k}") for k, t in enumerate(given)]
     )
-    check_object_yaw(job.object, "--object")
+    inputs.check_object_yaw(job.object, "--object")
     grasped = parse_grasped_object(job.object)
     obstacles = parse_obstacles(job.obstacles)
     settings = job.settings or PlaceSettings()
-    start = None if job.start is None else base_xyyaw(job.start, "--start")
-    robot = load_robot(job.robot)
+    start = None if job.start is None else inputs.base_xyyaw(job.start, "--start")
+    robot = inputs.load_robot(job.robot)
     if job.grasp_points:  # T_world_tcp = T_world_grasp T_grasp_tcp
         targets = targets @ np.linalg.inv(robot.T_tcp_grasp(job.arm))
     if obstacles:  # an obstacle at a grasp point blocks it from every base pose: say so now
         grasp_points = (targets @ robot.T_tcp_grasp(job.arm))[:, :3, 3]
         check_clear_of(obstacles, grasp_points, [f"target {k}" for k in range(len(targets))])
-    cloud = world_cloud(job.cloud) if job.cloud.given else None
-    grid = occupancy_grid(job.occupancy, job.cloud.bag, job.cloud)
+    cloud = inputs.world_cloud(job.cloud) if job.cloud.given else None
+    grid = inputs.occupancy_grid(job.occupancy, job.cloud.bag, job.cloud)
     if cloud is None and grid is None:
         raise InputError(
             "give --cloud FILE, --occupancy MAP.yaml, or --bag FILE with --cloud-topic/--map-topic"
@@ -266,7 +251,7 @@ def place_job(job: PlaceJob, progress: Progress | None = None) -> PlaceReport:
     kept = result.placements if reached is None else reached.placements
     routes: list[Path | None] = [None] * len(kept) if reached is None else list(reached.paths)
     rows = [placement_row(p, path=route) for p, route in zip(kept, routes, strict=True)]
-    timings = {"load": (t_load - t0) * 1e3, **map_timing(chosen, t_map - t_load), **result.timings_ms}
+    timings = {"load": (t_load - t0) * 1e3, **inputs.map_timing(chosen, t_map - t_load), **result.timings_ms}
     timings.pop("total", None)
     if terrain is not None:  # computed here (read from the cache, or segmented and stored): its time here
         timings["segmentation"] = terrain.timings_ms.get("job", terrain.timings_ms["total"])
@@ -285,7 +270,7 @@ def place_job(job: PlaceJob, progress: Progress | None = None) -> PlaceReport:
         floor=job.floor, regions=len(result.terrain.segmentation.regions),
         clearance={"metres": round(result.clearance, 5), "derived": result.clearance_note},
     )  # fmt: skip
-    report.outputs.update(map_output(chosen))
+    report.outputs.update(inputs.map_output(chosen))
     if png is not None:
         from baseplace.terrain.polygons import footprint_outline
         from baseplace.viz.placement import plot_placement
@@ -299,7 +284,7 @@ def place_job(job: PlaceJob, progress: Progress | None = None) -> PlaceReport:
     if mcap is not None:
         T_kept = [p.T_world_base for p in kept]
         world = job.cloud.bag.world_frame if job.cloud.bag is not None else "map"
-        write_mcap(mcap, world, bag_stamp(job.cloud), result.terrain, placements=T_kept, candidates=T_kept,
+        inputs.write_mcap(mcap, world, inputs.bag_stamp(job.cloud), result.terrain, placements=T_kept, candidates=T_kept,
                    paths=[r.poses for r in routes if r is not None], targets=list(targets))  # fmt: skip
         report.outputs["mcap"] = str(mcap)
     report.timings_ms = {**timings, "total": (time.perf_counter() - t0) * 1e3}

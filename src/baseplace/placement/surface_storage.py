@@ -16,20 +16,10 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from baseplace import h5files
 from baseplace.errors import InputError
 from baseplace.files import atomic_hdf5
 from baseplace.guards import check_alloc
-from baseplace.h5files import (
-    CORRUPT_FILE_ERRORS,
-    attr_text,
-    digest,
-    read_array,
-    read_header,
-    read_text,
-    short_text,
-    write_header,
-    write_text,
-)
 from baseplace.placement.surface_map import SurfaceMap, parse_polygon
 
 FORMAT = "baseplace-surface-map"
@@ -51,11 +41,11 @@ def save_surface_map(smap: SurfaceMap, path: str | Path) -> int:
         "combine": smap.combine, "cone": smap.cone, "tcp_height": smap.tcp_height,
     }  # fmt: skip
     with atomic_hdf5(path, "surface map") as f:
-        write_header(f, FORMAT, FORMAT_VERSION)
-        meta_text = write_text(f, "meta", json.dumps(meta))
+        h5files.write_header(f, FORMAT, FORMAT_VERSION)
+        meta_text = h5files.write_text(f, "meta", json.dumps(meta))
         f.create_dataset("index", data=index, compression="gzip", shuffle=True)
         f.create_dataset("value", data=value, compression="gzip", shuffle=True)
-        f.attrs["sha256"] = short_text(digest(meta_text, index, value))
+        f.attrs["sha256"] = h5files.short_text(h5files.digest(meta_text, index, value))
     return path.stat().st_size
 
 
@@ -70,11 +60,11 @@ def load_surface_map(path: str | Path) -> SurfaceMap:
         raise InputError(f"surface map {path} does not exist")
     try:
         with h5py.File(path, "r") as f:
-            read_header(f, path, FORMAT, FORMAT_VERSION, "surface map", "rebuild it with surface-map")
-            meta_text = read_text(f, "meta")
-            index, value = read_array(f, "index", path), read_array(f, "value", path)
-            stored = attr_text(f.attrs, "sha256")
-        if digest(meta_text, index, value) != stored:
+            h5files.read_header(f, path, FORMAT, FORMAT_VERSION, "surface map", "rebuild it with surface-map")
+            meta_text = h5files.read_text(f, "meta")
+            index, value = h5files.read_array(f, "index", path), h5files.read_array(f, "value", path)
+            stored = h5files.attr_text(f.attrs, "sha256")
+        if h5files.digest(meta_text, index, value) != stored:
             raise InputError(f"cannot read surface map {path}: checksum mismatch, the file is corrupt")
         meta = json.loads(meta_text)
         shape = tuple(int(v) for v in meta["shape"])
@@ -114,7 +104,7 @@ def load_surface_map(path: str | Path) -> SurfaceMap:
         )  # fmt: skip
     except InputError:
         raise
-    except CORRUPT_FILE_ERRORS as exc:
+    except h5files.CORRUPT_FILE_ERRORS as exc:
         raise InputError(
             f"cannot read surface map {path}: truncated or corrupt ({type(exc).__name__})"
         ) from None

@@ -36,19 +36,9 @@ from typing import Any
 import h5py
 import numpy as np
 
+from baseplace import h5files
 from baseplace.errors import InputError
 from baseplace.files import OutputError, atomic_hdf5, skip_cache_entry
-from baseplace.h5files import (
-    CORRUPT_FILE_ERRORS,
-    attr_text,
-    digest,
-    read_array,
-    read_header,
-    read_text,
-    short_text,
-    write_header,
-    write_text,
-)
 from baseplace.reachability.rmap import ReachabilityMap
 from baseplace.reachability.sampling import CHUNK, MapAccumulator, PartialMap
 
@@ -84,7 +74,7 @@ def build_identity(acc: MapAccumulator) -> dict[str, Any]:
 
 
 def _digest(build: bytes, dropped: int, elapsed_s: float, arrays: list[np.ndarray]) -> str:
-    return digest(build + f"\n{dropped}\n{elapsed_s!r}\n".encode(), *arrays)
+    return h5files.digest(build + f"\n{dropped}\n{elapsed_s!r}\n".encode(), *arrays)
 
 
 def save_checkpoint(path: str | Path, acc: MapAccumulator, elapsed_s: float) -> None:
@@ -105,13 +95,13 @@ def save_checkpoint(path: str | Path, acc: MapAccumulator, elapsed_s: float) -> 
     if part.best is not None:
         arrays.append(part.best)
     with atomic_hdf5(path, "checkpoint") as f:
-        write_header(f, FORMAT, FORMAT_VERSION)
-        build_text = write_text(f, "build", build)
+        h5files.write_header(f, FORMAT, FORMAT_VERSION)
+        build_text = h5files.write_text(f, "build", build)
         f.attrs["dropped"] = part.dropped
         f.attrs["elapsed_s"] = elapsed_s
         for name, a in zip(("chunks", "cells", "counts", "best"), arrays, strict=False):
             f.create_dataset(name, data=a)
-        f.attrs["sha256"] = short_text(_digest(build_text, part.dropped, elapsed_s, arrays))
+        f.attrs["sha256"] = h5files.short_text(_digest(build_text, part.dropped, elapsed_s, arrays))
 
 
 def _mismatch(stored: dict[str, Any], current: dict[str, Any]) -> str | None:
@@ -144,20 +134,24 @@ def load_checkpoint(path: str | Path, acc: MapAccumulator) -> float:
     )
     try:
         with h5py.File(path, "r") as f:
-            read_header(f, path, FORMAT, FORMAT_VERSION, "build checkpoint", "delete it to start over")
-            build = read_text(f, "build")
+            h5files.read_header(
+                f, path, FORMAT, FORMAT_VERSION, "build checkpoint", "delete it to start over"
+            )
+            build = h5files.read_text(f, "build")
             dropped = int(f.attrs["dropped"])
             elapsed_s = float(f.attrs["elapsed_s"])
             arrays = [
-                read_array(f, name, path) for name in ("chunks", "cells", "counts", "best") if name in f
+                h5files.read_array(f, name, path)
+                for name in ("chunks", "cells", "counts", "best")
+                if name in f
             ]
-            stored = attr_text(f.attrs, "sha256")
+            stored = h5files.attr_text(f.attrs, "sha256")
         if _digest(build, dropped, elapsed_s, arrays) != stored or len(arrays) < 3:
             raise InputError(corrupt)
         identity = json.loads(build)
     except InputError:
         raise
-    except CORRUPT_FILE_ERRORS:
+    except h5files.CORRUPT_FILE_ERRORS:
         raise InputError(corrupt) from None
     difference = _mismatch(identity, build_identity(acc))
     if difference is not None:

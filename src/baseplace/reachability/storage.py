@@ -17,19 +17,9 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from baseplace import h5files
 from baseplace.errors import InputError
 from baseplace.files import atomic_hdf5
-from baseplace.h5files import (
-    CORRUPT_FILE_ERRORS,
-    attr_text,
-    digest,
-    read_array,
-    read_header,
-    read_text,
-    short_text,
-    write_header,
-    write_text,
-)
 from baseplace.reachability.grid import SE3Grid
 from baseplace.reachability.rmap import MapInfo, ReachabilityMap
 from baseplace.robots.model import Robot
@@ -48,7 +38,7 @@ def save_map(rmap: ReachabilityMap, path: str | Path, compress: bool = True) -> 
     packed = {"compression": "gzip", "compression_opts": 4, "shuffle": True} if compress else {}
     gzip = {"compression": "gzip"} if compress else {}  # the optional arrays: gzip's default level
     with atomic_hdf5(path, "map") as f:
-        write_header(f, FORMAT, FORMAT_VERSION)
+        h5files.write_header(f, FORMAT, FORMAT_VERSION)
         grid = rmap.grid
         grid_text = json.dumps(
             {
@@ -60,8 +50,8 @@ def save_map(rmap: ReachabilityMap, path: str | Path, compress: bool = True) -> 
             }
         )
         parts: list[np.ndarray | bytes] = [
-            write_text(f, "grid", grid_text),
-            write_text(f, "info", json.dumps(dataclasses.asdict(rmap.info))),
+            h5files.write_text(f, "grid", grid_text),
+            h5files.write_text(f, "info", json.dumps(dataclasses.asdict(rmap.info))),
             rmap.cells,
             rmap.counts,
         ]
@@ -73,7 +63,7 @@ def save_map(rmap: ReachabilityMap, path: str | Path, compress: bool = True) -> 
         if rmap.quality is not None:
             f.create_dataset("quality", data=rmap.quality, **gzip)
             parts.append(rmap.quality)
-        f.attrs["sha256"] = short_text(digest(*parts))
+        f.attrs["sha256"] = h5files.short_text(h5files.digest(*parts))
     return path.stat().st_size
 
 
@@ -85,7 +75,7 @@ def is_compressed(path: str | Path) -> bool:
                 return False  # absent, or a link that load_map refuses: never followed here
             cells = f["cells"]
             return isinstance(cells, h5py.Dataset) and cells.compression is not None
-    except CORRUPT_FILE_ERRORS:
+    except h5files.CORRUPT_FILE_ERRORS:
         return False
 
 
@@ -101,16 +91,18 @@ def load_map(path: str | Path, robot: Robot | None = None, arm: str | None = Non
         raise InputError(f"map file {path} does not exist")
     try:
         with h5py.File(path, "r") as f:
-            read_header(f, path, FORMAT, FORMAT_VERSION, "reachability map", "rebuild it with build-map")
-            grid_text, info_text = read_text(f, "grid"), read_text(f, "info")
+            h5files.read_header(
+                f, path, FORMAT, FORMAT_VERSION, "reachability map", "rebuild it with build-map"
+            )
+            grid_text, info_text = h5files.read_text(f, "grid"), h5files.read_text(f, "info")
             g = _grid(json.loads(grid_text), path)  # the grid's size is checked before the arrays are read
-            cells = read_array(f, "cells", path)
-            counts = read_array(f, "counts", path)
-            manip = read_array(f, "manipulability", path) if "manipulability" in f else None
-            quality = read_array(f, "quality", path) if "quality" in f else None
-            stored = attr_text(f.attrs, "sha256")
+            cells = h5files.read_array(f, "cells", path)
+            counts = h5files.read_array(f, "counts", path)
+            manip = h5files.read_array(f, "manipulability", path) if "manipulability" in f else None
+            quality = h5files.read_array(f, "quality", path) if "quality" in f else None
+            stored = h5files.attr_text(f.attrs, "sha256")
         arrays: list[np.ndarray] = [cells, counts] + [a for a in (manip, quality) if a is not None]
-        if digest(grid_text, info_text, *arrays) != stored:
+        if h5files.digest(grid_text, info_text, *arrays) != stored:
             raise InputError(f"cannot read map {path}: checksum mismatch, the file is corrupt")
         info_raw = json.loads(info_text)
         info_raw["joint_names"] = tuple(info_raw["joint_names"])
@@ -138,7 +130,7 @@ def load_map(path: str | Path, robot: Robot | None = None, arm: str | None = Non
         )
     except InputError:
         raise
-    except CORRUPT_FILE_ERRORS as exc:
+    except h5files.CORRUPT_FILE_ERRORS as exc:
         raise InputError(
             f"cannot read map {path}: the file is truncated or corrupt ({type(exc).__name__})"
         ) from None
