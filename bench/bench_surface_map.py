@@ -180,7 +180,9 @@ def main() -> None:
         t = time.perf_counter()
         drawn[discounted] = [sampler.sample(srng) for _ in range(n_samples)]
         t_sample[discounted] = time.perf_counter() - t
-    zero_rs = {d: sum(smap.reachability([s.x, s.y, s.yaw])[0] <= 0 for s in drawn[d]) for d in drawn}
+    zero_rs = {
+        d: sum(smap.reachability([s.pose.x, s.pose.y, s.pose.yaw])[0] <= 0 for s in drawn[d]) for d in drawn
+    }
     spread = {d: sample_spread(drawn[d]) for d in drawn}
     plot_sampling_comparison(smap, drawn[False], drawn[True], img_dir / "surface_sampling.png")
     plot_surface_map(smap, img_dir / "surface_map.png", drawn[True][:10],

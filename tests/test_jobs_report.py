@@ -8,9 +8,9 @@ import jsonschema
 import numpy as np
 import pytest
 
-from baseplace.geometry.poses import wrap_angle
-from baseplace.jobs import PoseRecord, result_schema
+from baseplace.geometry.poses import BasePose, wrap_angle
 from baseplace.jobs import report as rep
+from baseplace.jobs import result_schema
 
 REPORTS = [
     rep.PlaceReport, rep.CandidatesReport, rep.SurfaceMapReport, rep.SurfaceSamplesReport, rep.NavigateReport,
@@ -33,14 +33,14 @@ def test_pose_record_matches_rotation_oracle() -> None:
     from scipy.spatial.transform import Rotation
 
     for yaw in [5.328, -0.955, 3.0, -3.2]:
-        record = PoseRecord.from_xyyaw(1.0, -2.0, yaw, 0.3).to_json()
+        record = BasePose.from_xyyaw(1.0, -2.0, yaw, 0.3).to_json()
         R = Rotation.from_euler("z", yaw).as_matrix()
         np.testing.assert_allclose(np.asarray(record["base_pose"])[:3, :3], R, atol=1e-6)
         assert (
             record["yaw"] == pytest.approx(wrap_angle(yaw), abs=1e-4) and -math.pi < record["yaw"] <= math.pi
         )
         assert (record["x"], record["y"], record["z"]) == (1.0, -2.0, 0.3)
-    assert PoseRecord.from_xyyaw(0, 0, 5.328).to_json()["yaw"] == pytest.approx(5.328 - 2 * math.pi, abs=1e-4)
+    assert BasePose.from_xyyaw(0, 0, 5.328).to_json()["yaw"] == pytest.approx(5.328 - 2 * math.pi, abs=1e-4)
 
 
 @pytest.mark.parametrize("cls", REPORTS)
@@ -52,8 +52,8 @@ def test_every_kind_has_a_failure_shape_the_schema_accepts(cls: type[rep.Report]
 
 def test_schema_rejects_what_breaks_the_contract() -> None:
     good = rep.NavigateReport(
-        start=PoseRecord.from_xyyaw(0, 0, 5.328),
-        goal=PoseRecord.from_xyyaw(1, 0, 0),
+        start=BasePose.from_xyyaw(0, 0, 5.328),
+        goal=BasePose.from_xyyaw(1, 0, 0),
         poses=[[0, 0, 0], [1, 0, 0]],
     ).to_json()
     jsonschema.validate(good, result_schema())

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import math
+import typing
 
 import numpy as np
 import pytest
 
 from baseplace.geometry.poses import BasePose, pose_from_xyz_rpy
-from baseplace.placement.surface_sampling import SampledPose
+from baseplace.placement.surface_sampling import SurfaceSample
 from baseplace.placement.verify import Placement
 from baseplace.sim.scenes import SceneSettings, generate_scene
 from baseplace.terrain.io import Cloud
@@ -41,7 +42,8 @@ def test_every_base_pose_converts_to_base_pose(yaw):
     """Oracle: the pose the 4x4 was built from; headings compared on the circle."""
     T = pose_from_xyz_rpy([1.5, -0.25, 0.12, 0.0, 0.0, yaw])
     placed = Placement(T, 0, 0.5, [], ()).pose
-    sampled = SampledPose(1.5, -0.25, yaw, 0.5, 0.5).pose
+    sampled = BasePose.from_xyyaw(1.5, -0.25, yaw)
+    assert typing.get_type_hints(SurfaceSample)["pose"] is BasePose  # a surface sample holds one, is none
     for pose in (placed, sampled):
         assert isinstance(pose, BasePose)
         assert (pose.x, pose.y) == pytest.approx((1.5, -0.25))

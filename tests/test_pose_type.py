@@ -14,10 +14,10 @@ from baseplace.jobs import report as rep
 
 
 def test_reports_hold_base_poses_of_the_one_type():
-    """The report name of a base pose is BasePose itself, and the public API lists that one type."""
+    """Reports hold BasePose under its own name (the old alias PoseRecord is gone), and the API lists it."""
     import baseplace.jobs
 
-    assert baseplace.jobs.PoseRecord is BasePose
+    assert not hasattr(baseplace.jobs, "PoseRecord") and not hasattr(rep, "PoseRecord")
     assert "PoseRecord" not in baseplace.__all__ and "BasePose" in baseplace.__all__
     for cls, name in [(rep.NavigateReport, "start"), (rep.NavigateReport, "goal"),
                       (rep.CandidatesReport, "robot_pose"), (rep.DemoReport, "start")]:  # fmt: skip

@@ -159,8 +159,8 @@ def test_discounted_samples_spread_and_stay_reachable(pr2, table_map):
     spread = {}
     for discounted in (False, True):
         sampler = SurfaceSampler(table_map, pr2, candidates=20, discounted=discounted)
-        samples = np.array([[s.x, s.y] for s in (sampler.sample(rng) for _ in range(25))])
-        assert np.all(table_map.reachability(np.c_[samples, [s.yaw for s in sampler.history]]) > 0)
+        samples = np.array([[s.pose.x, s.pose.y] for s in (sampler.sample(rng) for _ in range(25))])
+        assert np.all(table_map.reachability(np.c_[samples, [s.pose.yaw for s in sampler.history]]) > 0)
         d = np.linalg.norm(samples[:, None] - samples[None], axis=-1)
         spread[discounted] = d[np.triu_indices(len(d), 1)].mean()
     assert spread[True] > 1.2 * spread[False]
@@ -183,8 +183,8 @@ def test_occupancy_limits_the_samples(pr2, table_map):
     rng = np.random.default_rng(2)
     for _ in range(10):
         s = sampler.sample(rng)
-        assert grid.value_at(np.array([[s.x, s.y]]))[0] == 0
-        assert grid.clearance(np.array([[s.x, s.y]]))[0] > pr2.spec.footprint_bounding_radius
+        assert grid.value_at(np.array([[s.pose.x, s.pose.y]]))[0] == 0
+        assert grid.clearance(np.array([[s.pose.x, s.pose.y]]))[0] > pr2.spec.footprint_bounding_radius
     with pytest.raises(InputError, match="leaves no free pose"):
         SurfaceSampler(table_map, pr2, _occupancy(None))
 
@@ -199,6 +199,11 @@ def test_nothing_found_when_every_draw_fails(pr2, table_map):
 def test_attachments(pr2, table_map):
     poses = grounding(table_map, np.random.default_rng(3), robot=pr2, candidates=10)
     first, second = next(poses), next(poses)
-    assert reachability(table_map, (first.x, first.y, first.yaw)) == pytest.approx(first.reachability)
-    assert math.hypot(first.x - second.x, first.y - second.y) > 0.1 or abs(first.yaw - second.yaw) > 0.3
+    assert reachability(table_map, (first.pose.x, first.pose.y, first.pose.yaw)) == pytest.approx(
+        first.reachability
+    )
+    assert (
+        math.hypot(first.pose.x - second.pose.x, first.pose.y - second.pose.y) > 0.1
+        or abs(first.pose.yaw - second.pose.yaw) > 0.3
+    )
     assert reachability(table_map, (0.7, 0.3, 0.0)) == 0.0  # standing in the table

@@ -5,8 +5,9 @@ import pytest
 from matplotlib.figure import Figure
 
 from baseplace.errors import InputError
+from baseplace.geometry.poses import BasePose
 from baseplace.placement.surface_map import build_surface_map
-from baseplace.placement.surface_sampling import SampledPose
+from baseplace.placement.surface_sampling import SurfaceSample
 from baseplace.reachability.build import BuildSettings, build_map
 from baseplace.viz.surface import plot_sampling_comparison, plot_surface_map, sample_array, sample_spread
 
@@ -36,7 +37,7 @@ def test_plot_surface_map_writes_a_png(small_map, poses, tmp_path):
     plain = tmp_path / "plain.png"
     plot_surface_map(small_map, plain)
     assert _is_png(plain)
-    samples = [SampledPose(float(x), float(y), float(t), 0.5, 0.5) for x, y, t in poses[:10]]
+    samples = [SurfaceSample(BasePose(float(x), float(y), float(t)), 0.5, 0.5) for x, y, t in poses[:10]]
     with_samples = tmp_path / "samples.png"
     plot_surface_map(small_map, with_samples, samples=samples, title="table")
     assert _is_png(with_samples)
@@ -74,5 +75,5 @@ def test_sample_spread():
     s = sample_spread(p)
     assert s["count"] == 3 and s["cells"] == 2 and s["cell_headings"] == 2
     assert s["mean_nn_m"] == pytest.approx((0.01 + 0.01 + 0.49) / 3)
-    as_samples = [SampledPose(x, y, t, 1.0, 1.0) for x, y, t in p]
+    as_samples = [SurfaceSample(BasePose(x, y, t), 1.0, 1.0) for x, y, t in p]
     np.testing.assert_array_equal(sample_array(as_samples), p)

@@ -14,7 +14,6 @@ from importlib import resources
 from typing import TYPE_CHECKING, Any
 
 from baseplace.jobs.report import SCHEMA_VERSION, NoResultError, Report, RobotRef
-from baseplace.jobs.report import PoseRecord as PoseRecord  # BasePose, by its old name in reports
 
 if TYPE_CHECKING:
     from baseplace.jobs.explain import ExplainJob, ExplainReport, explain_job

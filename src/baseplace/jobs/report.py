@@ -96,10 +96,6 @@ class RobotRef:
                 "tcp_frames": dict(self.tcp_frames)}  # fmt: skip
 
 
-PoseRecord = BasePose
-"""The name reports gave :class:`BasePose` before it was their pose type; kept for existing callers."""
-
-
 def placement_row(p: Placement, motion_cost: float | None = None, path: Path | None = None) -> dict[str, Any]:
     """One verified placement, from any method, as a result row: the pose fields plus its checks.
 

@@ -15,7 +15,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from baseplace.errors import InputError
-from baseplace.geometry.poses import BasePose
 from baseplace.jobs.inputs import (
     DEFAULT_MAP_SAMPLES,
     PLOT_SUFFIXES,
@@ -189,7 +188,7 @@ def surface_samples_job(job: SurfaceSamplesJob) -> SurfaceSamplesReport:
     sampler = SurfaceSampler(smap, robot, grid, job.candidates, discounted=job.discount)
     rng = np.random.default_rng(job.seed)
     samples = [sampler.sample(rng) for _ in range(job.n)]
-    poses = [{**BasePose.from_xyyaw(s.x, s.y, s.yaw).to_json(), "reachability": round(s.reachability, 4),
+    poses = [{**s.pose.to_json(), "reachability": round(s.reachability, 4),
               "score": round(s.score, 4)} for s in samples]  # fmt: skip
     occupancy = job.occupancy if isinstance(job.occupancy, str) else (job.bag.path if job.bag else None)
     arm = smap.arms[0] if len(smap.arms) == 1 else None

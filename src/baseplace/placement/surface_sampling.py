@@ -40,25 +40,18 @@ BATCH = 256
 
 
 @dataclass(frozen=True)
-class SampledPose:
-    """One sampled base pose.
+class SurfaceSample:
+    """One base pose drawn around a surface, with what chose it.
 
     Attributes:
-        x, y, yaw: the pose [m, m, rad], yaw in (-pi, pi].
+        pose: the base pose, yaw in (-pi, pi].
         reachability: R_S of the pose.
         score: R_S times the discount when it was chosen.
     """
 
-    x: float
-    y: float
-    yaw: float
+    pose: BasePose
     reachability: float
     score: float
-
-    @property
-    def pose(self) -> BasePose:
-        """The pose as the library's base-pose type."""
-        return BasePose(self.x, self.y, self.yaw)
 
 
 def discount(
@@ -119,7 +112,7 @@ class SurfaceSampler:
     candidates: int = 40
     discounted: bool = True
     max_draws: int = 20_000
-    history: list[SampledPose] = field(default_factory=list)
+    history: list[SurfaceSample] = field(default_factory=list)
     _environment: Environment | None = field(default=None, init=False, repr=False)
     _radius: float = field(default=0.0, init=False, repr=False)
 
@@ -152,7 +145,7 @@ class SurfaceSampler:
         T = BasePose(float(pose[0]), float(pose[1]), float(pose[2])).matrix()
         return self._environment.colliding(self.robot.q_reference, T)
 
-    def sample(self, rng: np.random.Generator) -> SampledPose:
+    def sample(self, rng: np.random.Generator) -> SurfaceSample:
         """The best of N valid candidates by discounted R_S; remembered for later discounts.
 
         Raises:
@@ -180,10 +173,16 @@ class SurfaceSampler:
             )
         cand = np.array(valid)
         rs = self.smap.reachability(cand).astype(float)
-        w = discount(cand, np.array([[p.x, p.y, p.yaw] for p in self.history])) if self.discounted else 1.0
+        w = (
+            discount(cand, np.array([[p.pose.x, p.pose.y, p.pose.yaw] for p in self.history]))
+            if self.discounted
+            else 1.0
+        )
         best = int(np.argmax(rs * w))
         score = float((rs * w if self.discounted else rs)[best])
         heading = float(wrap_angle(cand[best, 2]))  # (-pi, pi], as every base pose (navigate takes it)
-        out = SampledPose(float(cand[best, 0]), float(cand[best, 1]), heading, float(rs[best]), score)
+        out = SurfaceSample(
+            BasePose(float(cand[best, 0]), float(cand[best, 1]), heading), float(rs[best]), score
+        )
         self.history.append(out)
         return out

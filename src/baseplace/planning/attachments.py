@@ -15,7 +15,7 @@ Example::
     smap = load_surface_map("table.smap")
     poses = grounding(smap, np.random.default_rng(0), robot=Robot("pr2"))
     first, second = next(poses), next(poses)       # spread apart
-    assert reachability(smap, (first.x, first.y, first.yaw)) > 0
+    assert reachability(smap, (first.pose.x, first.pose.y, first.pose.yaw)) > 0
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from baseplace.placement.surface_map import SurfaceMap
-from baseplace.placement.surface_sampling import SampledPose, SurfaceSampler
+from baseplace.placement.surface_sampling import SurfaceSample, SurfaceSampler
 from baseplace.robots.model import Robot
 
 if TYPE_CHECKING:
@@ -45,7 +45,7 @@ def grounding(
     robot: Robot | None = None,
     occupancy: OccupancyGrid | None = None,
     candidates: int = 40,
-) -> Iterator[SampledPose]:
+) -> Iterator[SurfaceSample]:
     """Grounding attachment: an endless stream of good, spread-out poses for the surface.
 
     Every pose has R_S > 0, lies in the operational area given by ``occupancy`` and, with

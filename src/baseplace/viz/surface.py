@@ -27,10 +27,10 @@ from scipy.spatial import cKDTree
 
 from baseplace.files import atomic_write
 from baseplace.placement.surface_map import SurfaceMap
-from baseplace.placement.surface_sampling import SampledPose
+from baseplace.placement.surface_sampling import SurfaceSample
 
-Samples = Sequence[SampledPose] | ArrayLike
-"""Base poses: SampledPose objects or an (N, 3) array of (x, y, yaw)."""
+Samples = Sequence[SurfaceSample] | ArrayLike
+"""Base poses: SurfaceSample objects or an (N, 3) array of (x, y, yaw)."""
 ARROW = 0.09
 """Length [m] of a sample's heading arrow."""
 SPREAD_CELL = 0.1
@@ -41,13 +41,15 @@ def sample_array(samples: Samples) -> NDArray[np.float64]:
     """Samples as an (N, 3) array of (x, y, yaw); N may be 0.
 
     Args:
-        samples: SampledPose objects or an (N, 3) array-like of (x, y, yaw).
+        samples: SurfaceSample objects or an (N, 3) array-like of (x, y, yaw).
 
     Returns:
         (N, 3) float array.
     """
-    if isinstance(samples, Sequence) and len(samples) > 0 and isinstance(samples[0], SampledPose):
-        return np.array([[p.x, p.y, p.yaw] for p in samples if isinstance(p, SampledPose)], dtype=float)
+    if isinstance(samples, Sequence) and len(samples) > 0 and isinstance(samples[0], SurfaceSample):
+        return np.array(
+            [[s.pose.x, s.pose.y, s.pose.yaw] for s in samples if isinstance(s, SurfaceSample)], dtype=float
+        )
     arr = np.asarray(samples, dtype=float)
     return arr.reshape(-1, 3) if arr.size else np.zeros((0, 3))
 
@@ -56,7 +58,7 @@ def sample_spread(samples: Samples, cell: float = SPREAD_CELL) -> dict[str, floa
     """How spread out samples are, as drawn in the panel titles of :func:`plot_sampling_comparison`.
 
     Args:
-        samples: SampledPose objects or an (N, 3) array of (x, y, yaw).
+        samples: SurfaceSample objects or an (N, 3) array of (x, y, yaw).
         cell: cell size [m] for the distinct-cell count.
 
     Returns:
@@ -124,7 +126,7 @@ def plot_surface_map(
     Args:
         smap: the surface map.
         path: output PNG, written atomically.
-        samples: base poses drawn as small heading arrows (SampledPose objects or (N, 3) x, y, yaw).
+        samples: base poses drawn as small heading arrows (SurfaceSample objects or (N, 3) x, y, yaw).
         title: figure title; by default the robot, arms, surface height and resolution.
 
     Raises:
