@@ -91,7 +91,12 @@ the oracle's solution, free on the true scene) and every method tries the grasps
 first. Held-out seeds 11, 12, 13. v1-v3 cannot be re-run with this code: their results files stay
 as they were.
 
-Usage: python bench/bench_execution.py --protocol 4 --split heldout [--cells 12]
+Protocol v5 (issue 25): docs/protocols/execution_table_grid_v5.md. v4 with the robot's models
+the product builds (``baseplace candidates``: the scene near the bottle at sensor resolution, the
+plane it stands on exact, the clearance from the plane's noise) instead of the experiment's own
+voxels and slab. Held-out seeds 14, 15, 16.
+
+Usage: python bench/bench_execution.py --protocol 5 --split heldout [--cells 12]
 """
 
 from __future__ import annotations
@@ -106,7 +111,12 @@ from baseplace.placement.motion import MotionSettings
 from baseplace.placement.robustness import RobustnessSettings, wilson_interval
 from baseplace.reachability.build import BuildSettings, build_map
 from baseplace.robots.model import Robot
-from baseplace_experiments.execution_experiment import EXECUTION_METHODS, execution_trial, summarise_execution
+from baseplace_experiments.execution_experiment import (
+    EXECUTION_METHODS,
+    SUPPORT_MODELS,
+    execution_trial,
+    summarise_execution,
+)
 from baseplace_experiments.results import SeedSplit, fixed_protocol
 from baseplace_experiments.table_grid import RobotShapes
 from common import report
@@ -121,9 +131,14 @@ PROTOCOLS = {  # version: (where the robot's model of the bottle begins, seeds, 
         SeedSplit(dev=(0,), held_out=(11, 12, 13)),
         MotionSettings(time_limit=30.0, max_checks=500),
     ),
+    5: (
+        "support",  # not used by the product's models
+        SeedSplit(dev=(0,), held_out=(14, 15, 16)),
+        MotionSettings(time_limit=30.0, max_checks=500),
+    ),
 }
-SUPPORT_MODEL = {1: "voxels", 2: "voxels", 3: "slab", 4: "slab"}
-PROTOCOL_FILE = {4: "docs/protocols/execution_table_grid.md"}
+SUPPORT_MODEL = {1: "voxels", 2: "voxels", 3: "slab", 4: "slab", 5: "product"}
+PROTOCOL_FILE = {4: "docs/protocols/execution_table_grid.md", 5: "docs/protocols/execution_table_grid_v5.md"}
 """Protocols committed as files (v1-v3 were written in this docstring)."""
 BOOTSTRAP = 2000  # the robot's model of the table top around the bottle
 ROBUST = RobustnessSettings(samples=64, ik_solutions=1, pool=10)  # bench_robustness dev's choice
@@ -135,7 +150,7 @@ def main() -> None:
     parser.add_argument("--protocol", type=int, choices=tuple(PROTOCOLS), required=True)
     parser.add_argument("--split", choices=("dev", "heldout"), required=True)
     parser.add_argument("--cells", type=int, default=12, help="cells per seed (first N of the 3 x 4 grid)")
-    parser.add_argument("--support", choices=("voxels", "slab"), default=None,
+    parser.add_argument("--support", choices=SUPPORT_MODELS, default=None,
                         help="the table model instead of the protocol's (a control run; results file _control_<model>)")  # fmt: skip
     args = parser.parse_args()
     load_start = os.getloadavg()

@@ -219,3 +219,33 @@ def test_every_method_tries_the_grasps_in_one_order_nearest_first(tiago, shapes)
         planner = _RecordingPlanner(tiago, _far_voxels())
         assert oracle.execute(np.eye(4), grasps, planner, np.random.default_rng(0)) == "ok"
         np.testing.assert_allclose(planner.goals[0][1], near)
+
+
+def test_protocol_v5_gives_the_robot_the_products_scene_model(tiago):
+    """v5's robot models are those ``candidates`` builds from the same noisy cloud: the table plane
+    the bottle stands on exact, a clearance from its noise, the bottle found by the product (only
+    the hand may touch it); v4's ("slab") are 25 mm voxels with no plane and no clearance."""
+    from baseplace.placement.pipeline import object_checks
+    from baseplace.world.grasped_object import find_grasped_object
+    from baseplace_experiments.execution_experiment import robot_models, trial_scene
+    from baseplace_experiments.table_grid import TableGridSettings
+
+    s = TableGridSettings()
+    _, p_est, seen = trial_scene(0, (0, 0), s)
+    env, planner, slab = robot_models(tiago, "arm", seen, p_est, s, support="product")
+    product = object_checks(tiago, "arm", None, seen, find_grasped_object(seen, p_est), planner.settings)
+    assert slab is None
+    assert "support_plane" in env.obstacle_names and product.environment.obstacle_names == env.obstacle_names
+    assert 0.003 <= env.clearance == pytest.approx(product.environment.clearance)
+    assert planner.approach_environment is not None and planner.approach_environment.hand_ids
+    v4, _, _ = robot_models(tiago, "arm", seen, p_est, s, support="slab")
+    assert v4.clearance == 0.0 and v4.obstacle_names != env.obstacle_names
+
+    def finest(e):  # the finest cells [m] of the environment's octrees
+        return min(t.getResolution() for t in e.obstacle_trees)
+
+    assert finest(env) == pytest.approx(0.00125) and finest(v4) >= 0.005  # smooth surfaces at 1.25 mm
+    with pytest.raises(ValueError, match="voxels, slab, product"):
+        from baseplace_experiments.execution_experiment import execution_trial
+
+        execution_trial(tiago, None, None, 0, (0, 0), RobustnessSettings(), support="plane")  # type: ignore[arg-type]

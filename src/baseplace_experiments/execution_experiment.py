@@ -41,12 +41,14 @@ from baseplace.navigation.gridnav import GridNavigator
 from baseplace.placement.candidates import pickup, radial_search
 from baseplace.placement.irm_candidates import IrmSettings, irm_candidates
 from baseplace.placement.motion import MotionChecker, MotionSettings
+from baseplace.placement.pipeline import object_checks
 from baseplace.placement.robustness import BaseErrorModel, RobustnessScorer, RobustnessSettings, perturbed
 from baseplace.placement.verified import Placement
 from baseplace.reachability.rmap import ReachabilityMap
 from baseplace.robots.model import Robot
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import Environment
+from baseplace.world.grasped_object import find_grasped_object
 from baseplace.world.support_plane import (
     SupportSlab,
     cylinder_distance,
@@ -67,6 +69,8 @@ from baseplace_experiments.table_grid import (
 )
 
 EXECUTION_METHODS = ("baseline", "radial", "default", "robust")
+SUPPORT_MODELS = ("voxels", "slab", "product")
+"""The robot's models of the table top around the bottle, by protocol: v1-v2, v3-v4, v5."""
 
 
 def trial_scene(
@@ -97,12 +101,13 @@ def execution_trial(robot: Robot, rmap: ReachabilityMap, shapes: RobotShapes, se
     the table top around the bottle, "voxels" (protocols v1, v2) or "slab" (v3: the points of the
     plane the bottle stands on, fitted within :data:`~baseplace.world.support_plane.RADIUS` of the
     estimate's footprint, their voxels cut down to a thin slab where the fit is good, in every collision model
-    of the robot: verification, motion check, robustness score, execution planner).
+    of the robot: verification, motion check, robustness score, execution planner), or "product"
+    (v5: the models ``baseplace candidates`` builds, :func:`robot_models`).
     """
     if cut not in ("support", "estimate"):
         raise ValueError(f"cut must be 'support' or 'estimate', got {cut!r}")
-    if support not in ("voxels", "slab"):
-        raise ValueError(f"support must be 'voxels' or 'slab', got {support!r}")
+    if support not in SUPPORT_MODELS:
+        raise ValueError(f"support must be one of {', '.join(SUPPORT_MODELS)}, got {support!r}")
     s = s or TableGridSettings()
     p_true, p_est, seen = trial_scene(seed, cell, s)
     occupancy = table_occupancy(s)
@@ -175,11 +180,20 @@ def robot_models(robot: Robot, arm_name: str, seen: np.ndarray, p_est: np.ndarra
                  motion: MotionSettings | None = None) -> tuple[Environment, MotionChecker, SupportSlab | None]:  # fmt: skip
     """The robot's collision models of a trial's noisy cloud (P, 3): (verification, planner, slab).
 
-    The bottle (around the estimate ``p_est``) is cut out above ``cut`` ("support": the measured
-    support height; "estimate": the estimate's bottom) and only the hand may touch it in the
-    approach; ``support`` "slab" cuts the table's voxels around it down to the fitted plane
-    (:mod:`baseplace.world.support_plane`), "voxels" leaves them.
+    ``support`` "product": the models the product builds for ``baseplace candidates --cloud ...
+    --object-shape auto`` (:func:`~baseplace.placement.pipeline.object_checks`): the bottle found in
+    the cloud at the estimate ``p_est`` (:func:`~baseplace.world.grasped_object.find_grasped_object`),
+    the scene near it at sensor resolution, the plane it stands on exact, the clearance derived from
+    the plane's noise; ``cut`` is not used. Otherwise the bottle (around ``p_est``) is cut out above
+    ``cut`` ("support": the measured support height; "estimate": the estimate's bottom) and only the
+    hand may touch it in the approach; ``support`` "slab" cuts the table's voxels around it down to
+    the fitted plane (:mod:`baseplace.world.support_plane`), "voxels" leaves them.
     """
+    if support == "product":
+        checks = object_checks(robot, arm_name, None, seen, find_grasped_object(seen, p_est),
+                               motion or MotionSettings())  # fmt: skip
+        assert checks.motion is not None
+        return checks.environment, checks.motion, None
     arm = robot.arm(arm_name)
     mine = np.ones(len(seen), dtype=bool)
     bottom = support_height(seen, p_est, s) if cut == "support" else None
