@@ -131,3 +131,44 @@ def test_place_scores_ranks_and_filters_placements_by_robustness(tiago):
                 np.random.default_rng(1))  # fmt: skip
     assert all(p.robustness is not None and p.robustness.rate >= 0.99 for p in res.placements)
     assert res.failures["robustness"] + len(res.placements) >= 1
+
+
+def _stowed_tcp(robot, arm, T_base):
+    """Oracle: pinocchio FK of the TCP at the stowed configuration, in the world."""
+    from baseplace.placement.motion import stowed_configuration
+
+    data = robot.model.createData()
+    pin.framesForwardKinematics(
+        robot.model, data, arm.to_pinocchio(stowed_configuration(robot, arm), robot.q_reference)
+    )
+    base = data.oMf[robot.model.getFrameId(arm.base_frame)]
+    return (T_base @ (base.inverse() * data.oMf[robot.model.getFrameId(arm.tcp_frame)]).homogeneous)[:3, 3]
+
+
+def test_a_score_with_the_reaching_motion_counts_only_draws_the_arm_can_move_from(tiago):
+    """A block around the stowed hand leaves most grasp configurations free (the plain score stays
+    at 0.75 of 12 draws) but no motion can start (the score with the motion is 0); in a free scene the draws with a
+    motion are a subset of the plain ones, and most of them."""
+    from baseplace.placement.motion import MotionChecker
+
+    arm = tiago.arm()
+    target = pose_from_xyz_rpy(TARGET)
+    T_base = pose_from_xyz_rpy([-0.7, 0.0, 0.0, 0.0, 0.0, 0.0])
+    q_nominal = DampedLeastSquaresIK(arm).solve(np.linalg.inv(T_base) @ target, np.random.default_rng(0))
+    g = np.arange(-0.06, 0.061, 0.0125)
+    block = _stowed_tcp(tiago, arm, T_base) + np.stack(np.meshgrid(g, g, g), -1).reshape(-1, 3)
+    rates = {}
+    empty = VoxelMap(0.025, np.zeros((0, 3), dtype=np.int64))
+    for name, voxels in (("free", empty), ("blocked", VoxelMap.from_points(block, 0.025))):
+        env = Environment(tiago, voxels)
+        motion = MotionChecker(tiago, arm, env)
+        plain = RobustnessEstimator(arm, env, target[None], RobustnessSettings(samples=12))
+        moving = RobustnessEstimator(arm, env, target[None], RobustnessSettings(samples=12, motion=True),
+                                     motion=motion)  # fmt: skip
+        a, b = plain.successes(T_base, [q_nominal]), moving.successes(T_base, [q_nominal])
+        assert not np.any(b & ~a), name  # the motion only takes draws away
+        rates[name] = (a.mean(), b.mean())
+    assert rates["free"][0] >= 0.9 and rates["free"][1] >= 0.75, rates
+    assert rates["blocked"][0] >= 0.5 and rates["blocked"][1] == 0.0, rates
+    with pytest.raises(InputError, match="needs the motion check"):
+        RobustnessEstimator(arm, env, target[None], RobustnessSettings(samples=4, motion=True))

@@ -278,6 +278,9 @@ def _add_motion_and_robustness_arguments(p: argparse.ArgumentParser) -> None:
                    help="base-error draws scoring each placement (0: no score; default 64)")  # fmt: skip
     p.add_argument("--rank-by-robustness", action="store_true",
                    help="return the most robust placements first (default: the method's order)")  # fmt: skip
+    p.add_argument("--robustness-motion", action="store_true",
+                   help="a base-error draw counts only if the reaching motion from it exists too "
+                        "(one motion check per draw: about a second per draw)")  # fmt: skip
     p.add_argument("--min-robustness", type=float, default=0.0,
                    help="reject placements whose robustness is below this fraction (default 0)")  # fmt: skip
     p.add_argument("--error-model", default="gaussian", choices=["gaussian", "box"],

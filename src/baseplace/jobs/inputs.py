@@ -54,7 +54,7 @@ def motion_and_robustness(options: Mapping[str, Any]) -> tuple[Any, Any]:
 
     ``options``: ``no_motion_check``, ``robustness_samples``, ``error_model``, ``sigma_xy`` [m],
     ``sigma_yaw_deg``, ``xy_tolerance`` [m], ``yaw_tolerance`` [rad; None: the default], ``rank_by_robustness``,
-    ``min_robustness`` and ``seed`` (the CLI's parsed arguments, or a service request).
+    ``min_robustness``, ``robustness_motion`` and ``seed`` (the CLI's parsed arguments, or a service request).
 
     Returns:
         (MotionSettings, or None when the check is off; RobustnessSettings).
@@ -71,7 +71,9 @@ def motion_and_robustness(options: Mapping[str, Any]) -> tuple[Any, Any]:
                            o["xy_tolerance"], yaw_tolerance)  # fmt: skip
     robustness = RobustnessSettings(o["robustness_samples"], error,
                                     "robustness" if o["rank_by_robustness"] else "reachability",
-                                    o["min_robustness"], seed=o["seed"])  # fmt: skip
+                                    o["min_robustness"], seed=o["seed"], motion=o["robustness_motion"])  # fmt: skip
+    if robustness.motion and motion is None:  # before any work; the library checks it again
+        raise InputError("--robustness-motion needs the motion check: drop --no-motion-check")
     return motion, robustness
 
 

@@ -104,7 +104,7 @@ def search_around_object(
                                   checks.motion)  # fmt: skip
     t1 = time.perf_counter()
     if robustness.samples > 0:
-        scorer = RobustnessScorer(robot.arm(rmap.info.arm), checks.environment, robustness)
+        scorer = RobustnessScorer(robot.arm(rmap.info.arm), checks.environment, robustness, checks.motion)
         verified = [scorer.scored(p) for p in verified]
         rejected += [((p.pose.x, p.pose.y), "robustness") for p in verified if scorer.too_low(p)]
         verified = [p for p in verified if not scorer.too_low(p)]

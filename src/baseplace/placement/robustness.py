@@ -9,7 +9,10 @@ mobile manipulation", JAIR 2012), each verified placement is scored by its succe
 under that error: the fraction of base poses drawn from a :class:`BaseErrorModel` around it from
 which every target is still reachable (IK, seeded with the nominal configuration; with
 ``ik_solutions`` > 1, further solutions from random starts when that one collides) and the whole
-robot there is collision-free, with a Wilson score interval for the estimate.
+robot there is collision-free, with a Wilson score interval for the estimate. With
+``RobustnessSettings.motion`` a draw also needs the reaching motion from that pose (the
+placement's own :class:`~baseplace.placement.motion.MotionChecker`: stowed to pre-grasp, then the
+straight approach) to every target's configuration there.
 
 The error draws are fixed per estimator (common random numbers), so placements of one query are
 compared on the same draws; IK runs batched over the draws, and results are cached per drawn pose.
@@ -21,7 +24,7 @@ import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -33,6 +36,9 @@ from baseplace.placement.verified import Placement, Robustness, wilson_interval
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Arm
 from baseplace.world.environment import Environment
+
+if TYPE_CHECKING:
+    from baseplace.placement.motion import MotionChecker
 
 ERROR_DISTRIBUTIONS = ("gaussian", "box")
 
@@ -118,6 +124,10 @@ class RobustnessSettings:
             IK branch does not make the pose fail). 1: only the first.
         z: normal quantile of the confidence interval (1.96: 95 %).
         seed: seed of the error draws.
+        motion: a draw also needs the reaching motion from its pose to each target's configuration
+            there (the placement's motion check, so the query must run one). One motion check per
+            draw and target: about as many seconds per placement as there are draws on the table
+            grid (bench/bench_motion_verdicts.py), hence off by default.
     """
 
     samples: int = 64
@@ -129,6 +139,7 @@ class RobustnessSettings:
     ik_solutions: int = 1
     z: float = 1.96
     seed: int = 0
+    motion: bool = False
 
     def __post_init__(self) -> None:
         if self.rank not in ("reachability", "robustness"):
@@ -146,6 +157,15 @@ class RobustnessSettings:
             raise InputError(f"z must be > 0, got {self.z}")
 
 
+def _motion_of(settings: RobustnessSettings, motion: MotionChecker | None) -> MotionChecker | None:
+    """The motion check a score uses: ``motion`` when ``settings.motion`` asks for one, else None."""
+    if settings.motion and motion is None:
+        raise InputError(
+            "a robustness score with the reaching motion needs the motion check (drop --no-motion-check)"
+        )
+    return motion if settings.motion else None
+
+
 class RobustnessEstimator:
     """Scores base poses by the fraction of error draws that still reach every target.
 
@@ -155,6 +175,10 @@ class RobustnessEstimator:
         targets: (K, 4, 4) world TCP targets.
         settings: samples, error model, IK restarts, seed.
         resolution: drawn poses are cached on this grid ([m] in x, y; [rad] in yaw).
+        motion: the reaching-motion check; required when ``settings.motion`` is set, not used otherwise.
+
+    Raises:
+        InputError: ``settings.motion`` without a motion check.
     """
 
     def __init__(
@@ -164,11 +188,13 @@ class RobustnessEstimator:
         targets: ArrayLike,
         settings: RobustnessSettings | None = None,
         resolution: float = 1e-3,
+        motion: MotionChecker | None = None,
     ) -> None:
+        self.settings = settings or RobustnessSettings()
+        self.motion = _motion_of(self.settings, motion)
         self.arm = arm
         self.environment = environment
         self.targets = np.asarray(targets, dtype=float).reshape(-1, 4, 4)
-        self.settings = settings or RobustnessSettings()
         self.offsets = self.settings.error.sample(
             np.random.default_rng(self.settings.seed), self.settings.samples
         )
@@ -191,6 +217,9 @@ class RobustnessEstimator:
     ) -> NDArray[np.bool_]:
         """(S,) per error draw: every target reached by IK, and the robot there collision-free.
 
+        With a motion check, also the reaching motion to each target's configuration there, planned
+        with a seed per draw (the same draws and seeds for every placement of the estimator).
+
         Args:
             T_world_base: (4, 4) nominal base pose.
             q_seeds: per target, the nominal arm configuration (n,) that seeds the IK.
@@ -212,23 +241,27 @@ class RobustnessEstimator:
                 for j, row in enumerate(live.tolist()):
                     if j % 64 == 0:
                         deadline.check()
-                    ok[row] = bool(found[j]) and not self.environment.colliding_arm(
-                        self.arm, q[j], poses[todo[row]]
-                    )
-                    if not ok[row]:
-                        ok[row] = self._other_solution_free(T_base_tcp[j], poses[todo[row]])
+                    T_draw = poses[todo[row]]
+                    q_ok: FloatArray | None = q[j]
+                    if not found[j] or self.environment.colliding_arm(self.arm, q[j], T_draw):
+                        q_ok = self._other_solution(T_base_tcp[j], T_draw)
+                    if q_ok is not None and self.motion is not None:
+                        plan_seed = self.settings.seed + 1000 * todo[row] + k
+                        if self.motion.check(q_ok, T_draw, target, seed=plan_seed) is None:
+                            q_ok = None
+                    ok[row] = q_ok is not None
             for i, value in zip(todo, ok.tolist(), strict=True):
                 self._cache[keys[i]] = value
         return np.array([self._cache[k] for k in keys], dtype=bool)
 
-    def _other_solution_free(self, T_base_tcp: FloatArray, T_world_base: FloatArray) -> bool:
-        """Whether one of ``ik_solutions - 1`` IK solutions from random starts is collision-free."""
+    def _other_solution(self, T_base_tcp: FloatArray, T_world_base: FloatArray) -> FloatArray | None:
+        """The first of ``ik_solutions - 1`` IK solutions from random starts that is collision-free, or None."""
         arm = self.arm
         for q0 in self._rng.uniform(arm.lower, arm.upper, (self.settings.ik_solutions - 1, arm.n_joints)):
             q = self._ik_one.solve_from(T_base_tcp, q0[None])
             if q is not None and not self.environment.colliding_arm(arm, q, T_world_base):
-                return True
-        return False
+                return q
+        return None
 
     def score(self, T_world_base: ArrayLike, q_seeds: list[FloatArray] | None = None) -> Robustness:
         """The :class:`Robustness` of a base pose (4, 4)."""
@@ -253,12 +286,18 @@ class RobustnessScorer:
         arm: the arm.
         environment: the verification's whole-robot collision model.
         settings: samples, error model, IK restarts, seed, the minimum rate.
+        motion: the placements' reaching-motion check (used when ``settings.motion`` is set).
     """
 
     def __init__(
-        self, arm: Arm, environment: Environment, settings: RobustnessSettings | None = None
+        self,
+        arm: Arm,
+        environment: Environment,
+        settings: RobustnessSettings | None = None,
+        motion: MotionChecker | None = None,
     ) -> None:
         self.arm = arm
+        self.motion = _motion_of(settings or RobustnessSettings(), motion)
         self.environment = environment
         self.settings = settings or RobustnessSettings()
         self._estimators: dict[bytes, RobustnessEstimator] = {}
@@ -270,7 +309,7 @@ class RobustnessScorer:
         key = placement.targets.tobytes()
         if key not in self._estimators:
             self._estimators[key] = RobustnessEstimator(
-                self.arm, self.environment, placement.targets, self.settings
+                self.arm, self.environment, placement.targets, self.settings, motion=self.motion
             )
         return self._estimators[key].scored(placement)
 

@@ -52,17 +52,21 @@ MAX_PLACE_WORK = 20_000
 
 MAX_ROBUSTNESS_WORK = 16_384
 """targets x robustness samples x placements of one request (error draws checked by IK and collision)."""
+MOTION_DRAW_COST = 100
+"""A draw with ``robustness_motion`` counts as this many: a reaching-motion check costs about as much
+as 100 IK + collision checks (0.2-1 s on the table grid)."""
 
 MAX_SURFACE_CELLS = 4_000_000
 """Cells x orientations of one /surface-map (the polygon's bounding box at the resolution)."""
 
 
-def _robustness_work(targets: int, samples: int, placements: int) -> None:
-    work = targets * samples * placements
+def _robustness_work(targets: int, samples: int, placements: int, motion: bool) -> None:
+    work = targets * samples * placements * (MOTION_DRAW_COST if motion else 1)
     if work > MAX_ROBUSTNESS_WORK:
+        weight = f" x {MOTION_DRAW_COST} (robustness_motion)" if motion else ""
         raise ValueError(
-            f"targets x robustness_samples x placements = {work} is over the limit of {MAX_ROBUSTNESS_WORK} "
-            "for one request: fewer samples or placements"
+            f"targets x robustness_samples x placements{weight} = {work} is over the limit of "
+            f"{MAX_ROBUSTNESS_WORK} for one request: fewer samples or placements"
         )
 
 
@@ -73,6 +77,9 @@ class RobustnessFields(_Model):
     robustness_samples: int = Field(64, ge=0, le=1024, description="base-error draws per placement (0: none)")
     rank_by_robustness: bool = Field(False, description="most robust placements first")
     min_robustness: float = Field(0.0, ge=0.0, le=1.0, description="reject placements below this rate")
+    robustness_motion: bool = Field(
+        False, description="a draw counts only if the reaching motion from it exists too (slow)"
+    )
     error_model: Literal["gaussian", "box"] = "gaussian"
     sigma_xy: float = Field(0.03, ge=0.0, le=10.0, description="base position error sigma [m]")
     sigma_yaw_deg: float = Field(2.0, ge=0.0, le=180.0, description="base heading error sigma [deg]")
@@ -137,7 +144,7 @@ class PlaceRequest(RobustnessFields):
             raise ValueError(
                 f"targets x tries = {work} is over the limit of {MAX_PLACE_WORK} for one request: fewer tries"
             )
-        _robustness_work(targets, self.robustness_samples, self.placements)
+        _robustness_work(targets, self.robustness_samples, self.placements, self.robustness_motion)
         return self
 
     @property
@@ -148,7 +155,8 @@ class PlaceRequest(RobustnessFields):
         check each, about 2 ms on one core), for every target.
         """
         targets = len(self.targets) + len(self.grasp_points)
-        return targets * (self.tries + self.placements * self.robustness_samples)
+        draws = self.robustness_samples * (MOTION_DRAW_COST if self.robustness_motion else 1)
+        return targets * (self.tries + self.placements * draws)
 
 
 class ExplainRequest(_Model):
@@ -195,7 +203,7 @@ class CandidatesRequest(RobustnessFields):
 
     @model_validator(mode="after")
     def _work(self) -> CandidatesRequest:
-        _robustness_work(1, self.robustness_samples, 1)
+        _robustness_work(1, self.robustness_samples, 1, self.robustness_motion)
         return self
 
 
