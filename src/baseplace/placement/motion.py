@@ -9,8 +9,9 @@ check, run after the shared verification (:class:`~baseplace.placement.verify.Ve
    line is tried first; every state is checked with the same whole-robot collision model as the
    verification (:meth:`Environment.colliding_arm`), the grasped object included for every link;
 2. a straight approach from the pre-grasp, ``pregrasp_distance`` back along the TCP's approach
-   axis, to the grasp: the Cartesian line is followed in ``approach_step`` steps by IK seeded with
-   the previous step (walked backwards from the verified grasp configuration, so the motion ends in
+   axis, to the grasp: the Cartesian line is followed in ``approach_step`` steps (halved where a
+   step fails) by IK seeded with the previous step, an IK that uses the arm's redundancy to keep
+   off the joint limits rather than stall against them (walked backwards from the verified grasp configuration, so the motion ends in
    exactly that configuration) and the joint line between steps is checked. The pre-grasp distance
    can be derived from the hand (``pregrasp_distance=None``: :func:`hand_reach` +
    :data:`PREGRASP_MARGIN`, the open hand at the pre-grasp wholly behind the plane through the
@@ -345,7 +346,7 @@ class MotionChecker:
 
         First walks from the verified grasp configuration back along the approach axis, IK seeded
         with the last step, so that the motion ends in that configuration. When that fails (the
-        configuration sits against a joint limit the retreat needs), up to ``approach_restarts``
+        configuration's branch cannot follow the line within the limits), up to ``approach_restarts``
         other IK solutions of the pre-grasp are walked forward to the grasp instead; the motion
         then ends in another grasp configuration, checked the same way. A walk fails on an IK
         failure, a joint jump above ``max_joint_step`` or a collision.
