@@ -37,6 +37,10 @@ class IKSolver(Protocol):
         ...
 
 
+LIMIT_MARGIN = 0.1
+"""With a limit gain, a joint within this fraction of its range from a limit is pushed away from it."""
+
+
 @nb.njit(cache=True, inline="always")
 def _pose_and_jacobian(q, placements, axes, kinds, T_last, R, t, J):
     """TCP pose (R, t) and the 6 x n Jacobian (linear; angular), both in the base frame."""
@@ -87,9 +91,75 @@ def rotation_log(E, out):
             out[j] = a[j] / norm * angle
 
 
+@nb.njit(cache=True, inline="always")
+def _limit_aware_step(q, J, e, lam, lower, upper, continuous, limit_gain, saturate, dq):
+    """The DLS step ``dq`` (n,) that uses the redundancy to keep off the joint limits.
+
+    With ``saturate``, a joint the step would carry past a limit is stopped at it and dropped from
+    the Jacobian, and the step is solved again with the others taking over its share of the task
+    error (the saturation loop of Flacco, De Luca and Khatib's SNS, 2012, without task scaling):
+    plain clamping throws that share away, so the solver stalls against the limit. A bounded
+    (revolute or prismatic) joint within ``LIMIT_MARGIN`` of its range from a limit is pushed away
+    from it by up to ``limit_gain`` (times the range) per iteration, projected onto the null space
+    of the free joints' Jacobian, so the TCP stays put to first order.
+    """
+    n = q.shape[0]
+    Jw = J.copy()
+    ew = e.copy()
+    fixed = np.zeros(n, dtype=np.bool_)
+    for _ in range(n + 1):
+        A = Jw @ Jw.T
+        for a in range(6):
+            A[a, a] += lam
+        free_step = Jw.T @ np.linalg.solve(A, ew)
+        for j in range(n):
+            if not fixed[j]:
+                dq[j] = free_step[j]
+        if not saturate:
+            break
+        changed = False
+        for j in range(n):
+            if fixed[j] or continuous[j]:
+                continue
+            v = q[j] + dq[j]
+            if v > upper[j] or v < lower[j]:
+                fixed[j] = True
+                changed = True
+                dq[j] = (upper[j] if v > upper[j] else lower[j]) - q[j]
+                for a in range(6):
+                    ew[a] -= Jw[a, j] * dq[j]
+                    Jw[a, j] = 0.0
+        if not changed:
+            break
+    if limit_gain <= 0.0:
+        return
+    z = np.zeros(n)
+    for j in range(n):
+        if fixed[j] or continuous[j]:
+            continue
+        span = upper[j] - lower[j]
+        margin = LIMIT_MARGIN * span
+        below, above = q[j] - lower[j], upper[j] - q[j]
+        if below < margin:
+            z[j] = limit_gain * span * (margin - below) / margin
+        elif above < margin:
+            z[j] = -limit_gain * span * (margin - above) / margin
+    if not np.any(z != 0.0):
+        return
+    # the orthogonal projection onto the null space of Jw (the fixed joints' columns are 0):
+    # z - Jw^T (Jw Jw^T)^-1 Jw z, regularised only enough to stay solvable at a singularity
+    A = Jw @ Jw.T
+    for a in range(6):
+        A[a, a] += 1e-12
+    ranged = Jw.T @ np.linalg.solve(A, Jw @ z)
+    for j in range(n):
+        if not fixed[j]:
+            dq[j] += z[j] - ranged[j]
+
+
 @nb.njit(cache=True)
 def _solve_one(T_goal, seeds, placements, axes, kinds, T_last, lower, upper, continuous,
-               max_iter, tol_p, tol_r, damping, q_out):  # fmt: skip
+               max_iter, tol_p, tol_r, damping, q_out, limit_gain=0.0, saturate=False):  # fmt: skip
     n = seeds.shape[1]
     R = np.empty((3, 3))
     t = np.empty(3)
@@ -98,6 +168,7 @@ def _solve_one(T_goal, seeds, placements, axes, kinds, T_last, lower, upper, con
     E = np.empty((3, 3))
     w = np.empty(3)
     q = np.empty(n)
+    dq = np.empty(n)
     best = np.inf  # the least err_p + err_r seen: its configuration is q_out if no attempt converges
     for attempt in range(seeds.shape[0]):
         for j in range(n):
@@ -125,11 +196,14 @@ def _solve_one(T_goal, seeds, placements, axes, kinds, T_last, lower, upper, con
                 if err_p + err_r > 0.95 * checkpoint:
                     break
                 checkpoint = err_p + err_r
-            A = J @ J.T
             lam = damping * (1.0 + err_p + err_r)
-            for a in range(6):
-                A[a, a] += lam
-            dq = J.T @ np.linalg.solve(A, e)
+            if saturate or limit_gain > 0.0:
+                _limit_aware_step(q, J, e, lam, lower, upper, continuous, limit_gain, saturate, dq)
+            else:
+                A = J @ J.T
+                for a in range(6):
+                    A[a, a] += lam
+                dq = J.T @ np.linalg.solve(A, e)
             step = np.max(np.abs(dq))
             if step > 0.4:
                 dq *= 0.4 / step
@@ -143,10 +217,11 @@ def _solve_one(T_goal, seeds, placements, axes, kinds, T_last, lower, upper, con
 
 @nb.njit(cache=True, parallel=True)
 def _solve_batch(T_goals, seeds, placements, axes, kinds, T_last, lower, upper, continuous,
-                 max_iter, tol_p, tol_r, damping, q_out, attempts):  # fmt: skip
+                 max_iter, tol_p, tol_r, damping, q_out, attempts, limit_gain=0.0, saturate=False):  # fmt: skip
     for i in nb.prange(T_goals.shape[0]):
         attempts[i] = _solve_one(T_goals[i], seeds[i], placements, axes, kinds, T_last, lower,
-                                 upper, continuous, max_iter, tol_p, tol_r, damping, q_out[i])  # fmt: skip
+                                 upper, continuous, max_iter, tol_p, tol_r, damping, q_out[i],
+                                 limit_gain, saturate)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -180,6 +255,13 @@ class DampedLeastSquaresIK:
         tol_position: position tolerance [m].
         tol_rotation: orientation tolerance [rad].
         damping: Levenberg-Marquardt damping added to J J^T (scaled by the error).
+        saturate_limits: a joint that a step would carry past its limit is held at the limit and
+            the others take over its share of the step (see :func:`_limit_aware_step`); False:
+            the step is clamped, and the solver stalls where the pose needs a joint past a limit
+            but the arm's redundancy could do without it.
+        limit_gain: per iteration, a joint within :data:`LIMIT_MARGIN` of its range from a limit
+            moves away from it by up to this fraction of its range, in the null space of the
+            task (the TCP stays put to first order) [1]; 0: off.
     """
 
     arm: Arm
@@ -188,6 +270,8 @@ class DampedLeastSquaresIK:
     tol_position: float = 1e-4
     tol_rotation: float = 1e-3
     damping: float = 1e-4
+    saturate_limits: bool = False
+    limit_gain: float = 0.0
 
     def _seeds(self, rng: np.random.Generator, count: int, q_seed: ArrayLike | None) -> FloatArray:
         arm = self.arm
@@ -203,11 +287,13 @@ class DampedLeastSquaresIK:
         if len(T) == 1:  # one pose (a verification): no thread team to start and wait for
             attempts[0] = _solve_one(np.ascontiguousarray(T[0]), seeds[0], arm.placements, arm.axes, arm.kinds,
                                      arm.T_last_tcp, arm.lower, arm.upper, arm.continuous, self.max_iterations,
-                                     self.tol_position, self.tol_rotation, self.damping, q_out[0])  # fmt: skip
+                                     self.tol_position, self.tol_rotation, self.damping, q_out[0],
+                                     self.limit_gain, self.saturate_limits)  # fmt: skip
             return q_out, attempts
         _solve_batch(np.ascontiguousarray(T), seeds, arm.placements, arm.axes, arm.kinds,
                      arm.T_last_tcp, arm.lower, arm.upper, arm.continuous, self.max_iterations,
-                     self.tol_position, self.tol_rotation, self.damping, q_out, attempts)  # fmt: skip
+                     self.tol_position, self.tol_rotation, self.damping, q_out, attempts,
+                     self.limit_gain, self.saturate_limits)  # fmt: skip
         return q_out, attempts
 
     def solve(
@@ -256,7 +342,8 @@ class DampedLeastSquaresIK:
         q = np.zeros(arm.n_joints)
         attempt = _solve_one(T, S, arm.placements, arm.axes, arm.kinds, arm.T_last_tcp, arm.lower,
                              arm.upper, arm.continuous, self.max_iterations, self.tol_position,
-                             self.tol_rotation, self.damping, q)  # fmt: skip
+                             self.tol_rotation, self.damping, q, self.limit_gain,
+                             self.saturate_limits)  # fmt: skip
         return q if attempt >= 0 else None
 
     def solve_world(
