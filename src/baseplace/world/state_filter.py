@@ -32,7 +32,7 @@ from scipy.spatial import ConvexHull
 from baseplace.geometry.poses import FloatArray
 from baseplace.robots.model import Arm, Robot
 from baseplace.robots.spheres import _joint_frames, _place
-from baseplace.world.point_index import PointIndex
+from baseplace.world.point_index import PointIndex, _clear
 
 SLACK = 1e-6
 """Added [m] to every certified distance: rounding in coal's and this module's arithmetic."""
@@ -82,6 +82,14 @@ def _arm_centres(q, placements, axes, kinds, joint, local, out):
 
 
 @nb.njit(cache=True)
+def _transformed(C, T, out):
+    """Points C (G, 3) moved by the rigid transform T (4, 4), into ``out``."""
+    for k in range(C.shape[0]):
+        for a in range(3):
+            out[k, a] = T[a, 0] * C[k, 0] + T[a, 1] * C[k, 1] + T[a, 2] * C[k, 2] + T[a, 3]
+
+
+@nb.njit(cache=True)
 def _uncertified_pairs(C, radius, pairs, reach):
     """Indices of the sphere pairs (P, 2) of centres C whose distance is not above ``reach`` (P,) + radii."""
     out = np.empty(pairs.shape[0], dtype=np.int64)
@@ -120,26 +128,33 @@ class _Part:
         c, r = bounding_sphere(geometry)
         self.sphere = (T_world_part[:3, :3] @ c + T_world_part[:3, 3], r)
 
-    def finish(self) -> None:
+    def finish(self, radius: FloatArray) -> None:
+        """Fix the pairs; ``radius`` (G,): the robot geometries' bounding radii [m]."""
         self.robot_a = np.array(self.robot, dtype=np.int64)
         self.pair_a = np.array(self.pair, dtype=np.int64)
-        self.margin_a = np.array(self.margin, dtype=float)
+        self.reach = radius[self.robot_a] + np.array(self.margin, dtype=float) + SLACK
+        """(P,) how far [m] each pair's sphere centre must stay from the part."""
+        self._arrays = [
+            (index._arrays(), self.reach + half_diagonal) for index, half_diagonal in self.indexes
+        ]
+        self._free = np.empty(len(self.robot_a), dtype=np.bool_)
 
-    def uncertified(self, C_world: FloatArray, radius: FloatArray) -> NDArray[np.int64]:
-        """The pair indices of this part that the spheres (centres (G, 3) world, radii (G,)) do not clear."""
+    def uncertified(self, C_world: FloatArray) -> NDArray[np.int64]:
+        """The pair indices of this part that the bounding spheres (centres (G, 3), world frame) do not clear."""
         if len(self.robot_a) == 0:
             return self.pair_a
-        C, reach = C_world[self.robot_a], radius[self.robot_a] + self.margin_a + SLACK
-        if self.indexes:
+        C = C_world[self.robot_a]
+        if self._arrays:
             free = np.ones(len(C), dtype=bool)
-            for index, half_diagonal in self.indexes:
-                free &= index.clear(C, reach + half_diagonal)
+            for arrays, reach in self._arrays:
+                _clear(self._free, C, reach, *arrays)
+                free &= self._free
         elif self.planes is not None:
-            free = np.max(C @ self.planes[:, :3].T + self.planes[:, 3], axis=1) > reach
+            free = np.max(C @ self.planes[:, :3].T + self.planes[:, 3], axis=1) > self.reach
         else:
             assert self.sphere is not None
             centre, r = self.sphere
-            free = np.linalg.norm(C - centre, axis=1) > reach + r
+            free = np.linalg.norm(C - centre, axis=1) > self.reach + r
         return self.pair_a[~free]
 
 
@@ -223,12 +238,12 @@ class StateFilter:
             static.robot = [part.robot[n] for n in fixed]
             static.pair = [part.pair[n] for n in fixed]
             static.margin = [part.margin[n] for n in fixed]
-            static.finish()
+            static.finish(self.radius)
             keep = [n for n in range(len(part.robot)) if self._moving[part.robot[n]]]
             part.robot = [part.robot[n] for n in keep]
             part.pair = [part.pair[n] for n in keep]
             part.margin = [part.margin[n] for n in keep]
-            part.finish()
+            part.finish(self.radius)
             self._static_parts.append(static)
         self._self_pairs = np.zeros((0, 2), dtype=np.int64)
         self._self_index = np.zeros(0, dtype=np.int64)
@@ -247,6 +262,7 @@ class StateFilter:
         self._static_key: bytes | None = None
         self._static_hit = False
         self._centres = np.empty((n_robot, 3))
+        self._world = np.empty((n_robot, 3))
         self.coal_pairs = 0
         """Pairs handed to coal so far (scene and self), for measurements."""
 
@@ -263,16 +279,17 @@ class StateFilter:
         T = np.asarray(T_world_base, dtype=float)
         q_full = self.arm.to_pinocchio(q_arm, self.robot.q_reference)
         C = self.centres(q_arm)
-        T_world_armbase = T @ self._T_base_armbase
-        C_world = C @ T_world_armbase[:3, :3].T + T_world_armbase[:3, 3]
         key = T.tobytes()
         if key != self._static_key:
             self._static_key = key
-            todo = [p for part in self._static_parts for p in part.uncertified(C_world, self.radius)]
+            self._T_world_armbase = T @ self._T_base_armbase
+            _transformed(C, self._T_world_armbase, self._world)
+            todo = [p for part in self._static_parts for p in part.uncertified(self._world)]
             self._static_hit = self._scene_coal(todo, q_full, T)
         if self._static_hit:
             return True
-        todo = [p for part in self.parts for p in part.uncertified(C_world, self.radius)]
+        _transformed(C, self._T_world_armbase, self._world)
+        todo = [p for part in self.parts for p in part.uncertified(self._world)]
         if todo and self._scene_coal(todo, q_full, T):
             return True
         if self.self_check is None:
