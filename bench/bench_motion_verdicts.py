@@ -36,7 +36,15 @@ and what does one check cost?
   time inside its two parts, the obstacle check (``Environment._touches_obstacles``) and
   self-collision (``SelfCollision.colliding_arm``). One process, no pools.
 
+* Checkers (``--checkers``, default the three above): also ``product_500_exact``, the 500-check
+  product with every state checked by coal on every pair
+  (:meth:`~baseplace.world.environment.Environment.colliding_arm_exact`, the check before the
+  pre-filter of :mod:`baseplace.world.state_filter`), for a before/after on the same placements in one
+  process; and ``product_500_point``, the 500-check product with ``point_step=0.01`` (the Cartesian
+  edge bound, off by default). Without the reference, false "no motion" is not counted (None).
+
 Usage: python bench/bench_motion_verdicts.py [--seeds 0 1] [--cells 4] [--per-grasp 2]
+       [--checkers product_500 product_500_exact]
 """
 
 from __future__ import annotations
@@ -87,6 +95,14 @@ TRIES = 60
 PRODUCT = MotionSettings()
 PRODUCT_500 = MotionSettings(time_limit=30.0, max_checks=500)
 REFERENCE = MotionSettings(time_limit=100.0, max_checks=50_000, approach_restarts=40)
+CHECKERS: dict[str, tuple[MotionSettings, bool]] = {
+    "product": (PRODUCT, False),
+    "product_500": (PRODUCT_500, False),
+    "reference": (REFERENCE, False),
+    "product_500_exact": (PRODUCT_500, True),
+    "product_500_point": (dataclasses.replace(PRODUCT_500, point_step=0.01), False),
+}
+"""Per checker name: its settings, and whether every state goes to coal on every pair (the old check)."""
 RECHECK = 4
 """The reference path is re-checked at ``joint_resolution / RECHECK``."""
 
@@ -123,7 +139,18 @@ class Meter:
         return {"calls": dict(self.calls), "ms": {k: round(v * 1e3, 2) for k, v in self.seconds.items()}}
 
 
-def meter_environment(meter: Meter, env: Environment, stage: str) -> None:
+class ExactStates:
+    """An environment whose ``colliding_arm`` is its ``colliding_arm_exact`` (coal on every pair)."""
+
+    def __init__(self, env: Environment) -> None:
+        self._env = env
+        self.colliding_arm = env.colliding_arm_exact
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._env, name)
+
+
+def meter_environment(meter: Meter, env: Environment | ExactStates, stage: str) -> None:
     """Count ``env.colliding_arm`` as ``stage`` checks; time its obstacle and self-collision parts."""
     meter.wrap(env, "colliding_arm", f"states_{stage}")
     meter.wrap(env, "_touches_obstacles", "obstacles")
@@ -285,13 +312,21 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def figures(rows: list[dict[str, Any]]) -> dict[str, Any]:
-    feasible = sum(row["reference_valid"] for row in rows)
+    names = [name for name in CHECKERS if rows and name in rows[0]]
+    with_reference = "reference" in names
+    feasible = sum(row["reference_valid"] for row in rows) if with_reference else None
     out: dict[str, Any] = {"checks": len(rows), "reference_feasible": feasible}
-    for name in ("product", "product_500"):
+    for name in (n for n in names if n != "reference"):
         r = [row[name] for row in rows]
-        false_none = sum(1 for row in rows if not row[name]["found"] and row["reference_valid"])
-        low, high = wilson_interval(false_none, len(rows)) if rows else (0.0, 1.0)
-        low_f, high_f = wilson_interval(false_none, feasible) if feasible else (0.0, 1.0)
+        false_none = (
+            sum(1 for row in rows if not row[name]["found"] and row["reference_valid"])
+            if with_reference
+            else None
+        )
+        low, high = wilson_interval(false_none, len(rows)) if rows and false_none is not None else (0.0, 1.0)
+        low_f, high_f = (
+            wilson_interval(false_none, feasible) if feasible and false_none is not None else (0.0, 1.0)
+        )
         states = [sum(v for k, v in x["calls"].items() if k.startswith("states_")) for x in r]
         obstacle_ms = sum(x["ms"].get("obstacles", 0.0) for x in r)
         self_ms = sum(x["ms"].get("self_collision", 0.0) for x in r)
@@ -303,9 +338,11 @@ def figures(rows: list[dict[str, Any]]) -> dict[str, Any]:
         out[name] = {
             "found": sum(x["found"] for x in r),
             "false_no_motion": false_none,
-            "false_no_motion_rate": round(false_none / len(rows), 4) if rows else None,
+            "false_no_motion_rate": round(false_none / len(rows), 4) if rows and false_none is not None else None,
             "false_no_motion_ci95": [round(low, 4), round(high, 4)],
-            "false_no_motion_of_feasible": round(false_none / feasible, 4) if feasible else None,
+            "false_no_motion_of_feasible": (
+                round(false_none / feasible, 4) if feasible and false_none is not None else None
+            ),
             "false_no_motion_of_feasible_ci95": [round(low_f, 4), round(high_f, 4)],
             "found_touching_at_finer_recheck": sum(1 for x in r if x["found"] and x["recheck"]["colliding"]),
             "found_touching_true_scene": sum(1 for x in r if x["found"] and any(x["true_scene"].values())),
@@ -328,7 +365,11 @@ def figures(rows: list[dict[str, Any]]) -> dict[str, Any]:
             "ms_per_self_collision_check": round(self_ms / self_n, 3) if self_n else None,
             "share_in_state_checks": round(state_ms / total_ms, 3) if total_ms else None,
             "planned_by_rrt": sum(1 for x in r if x.get("rrt") is not None),
-        }
+            "state_ms": stats([sum(v for k, v in x["ms"].items() if k.startswith("states_")) / n
+                               for x, n in zip(r, states, strict=True) if n]),
+        }  # fmt: skip
+    if not with_reference:
+        return out
     ref = [row["reference"] for row in rows]
     out["reference"] = {
         "found": sum(x["found"] for x in ref),
@@ -353,6 +394,8 @@ def main() -> None:
     parser.add_argument("--per-grasp", type=int, default=PER_GRASP, help="verified base poses per grasp")
     parser.add_argument("--max-checks", type=int, default=None, help="stop after this many motion checks")
     parser.add_argument("--name", default="motion_verdicts_dev", help="results file bench/results/NAME.json")
+    parser.add_argument("--checkers", nargs="+", choices=list(CHECKERS), default=["product", "product_500", "reference"],
+                        help="which motion checkers run on each placement (module docstring)")  # fmt: skip
     args = parser.parse_args()
     held_out = {3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13}
     if held_out & set(args.seeds):
@@ -392,10 +435,16 @@ def main() -> None:
                                       PlaceSettings(), "auto", cache)  # fmt: skip
                 product = checks.verifier.motion
                 assert product is not None
-                transit, approach = product.environment, product.approach_environment
-                meter_environment(meter, transit, "transit")
-                if approach is not None:
-                    meter_environment(meter, approach, "approach")
+                models: dict[bool, tuple[Any, Any]] = {}
+                for exact in sorted({CHECKERS[name][1] for name in args.checkers}):
+                    transit, approach = product.environment, product.approach_environment
+                    if exact:
+                        transit = ExactStates(transit)
+                        approach = None if approach is None else ExactStates(approach)
+                    meter_environment(meter, transit, "transit")
+                    if approach is not None:
+                        meter_environment(meter, approach, "approach")
+                    models[exact] = (transit, approach)
                 for k, placement in enumerate(res.placements):
                     if args.max_checks is not None and len(rows) >= args.max_checks:
                         break
@@ -409,20 +458,21 @@ def main() -> None:
                         "T_world_base": np.round(T_base, 6).tolist(), "target": np.round(target, 6).tolist(),
                         "q_grasp": np.round(q, 6).tolist(),
                     }  # fmt: skip
-                    for name, settings in (("product", PRODUCT), ("product_500", PRODUCT_500),
-                                           ("reference", REFERENCE)):  # fmt: skip
-                        checker = MotionChecker(robot, arm, transit, approach, settings)
+                    for name in args.checkers:
+                        settings, exact = CHECKERS[name]
+                        checker = MotionChecker(robot, arm, *models[exact], settings)
                         row[name], motion = run_check(checker, meter, q, T_base, target, ompl_seed)
                         if motion is not None:
                             row[name]["recheck"] = recheck(checker, motion.path, motion.approach, T_base)
                             row[name]["true_scene"] = true_scene(oracle, motion.path, motion.approach, T_base)
                             row[name]["path"] = np.round(motion.path, 5).tolist()
                             row[name]["approach"] = np.round(motion.approach, 5).tolist()
-                    ref = row["reference"]
-                    row["reference_valid"] = ref["found"] and ref["recheck"]["colliding"] == 0
+                    if "reference" in row:
+                        ref = row["reference"]
+                        row["reference_valid"] = ref["found"] and ref["recheck"]["colliding"] == 0
                     rows.append(row)
                     print("  ", k, {n: (row[n]["found"], row[n]["wall_ms"], row[n].get("reason"))
-                                    for n in ("product", "product_500", "reference")}, flush=True)  # fmt: skip
+                                    for n in args.checkers}, flush=True)  # fmt: skip
     summary = summarise(rows)
     result = {
         "protocol": {
@@ -430,6 +480,8 @@ def main() -> None:
             "per_grasp": args.per_grasp, "side_lift_m": args.side_lift, "tries": TRIES, "scene": "table grid (execution_trial draws), floor at z = 0",
             "product": dataclasses.asdict(PRODUCT), "product_500": dataclasses.asdict(PRODUCT_500),
             "reference": dataclasses.asdict(REFERENCE), "recheck_resolution_divisor": RECHECK,
+            "checkers": {n: {**dataclasses.asdict(CHECKERS[n][0]), "every_pair_to_coal": CHECKERS[n][1]}
+                         for n in args.checkers},
             "split": "dev", "load_average": {"start": load_start, "end": os.getloadavg()},
             "wall_s": round(time.perf_counter() - t_run, 1),
         },
@@ -444,12 +496,14 @@ def main() -> None:
 
 def print_table(summary: dict[str, Any]) -> None:
     n = summary["checks"]
-    ref = summary["reference"]
+    ref = summary.get("reference")
     print(
         f"\n{n} motion checks; reference found {ref['found']} ({ref['found_and_rechecked_free']} re-checked free)"
+        if ref is not None
+        else f"\n{n} motion checks; no reference"
     )
     line: Callable[[str, dict[str, Any]], str] = lambda name, x: (  # noqa: E731
-        f"{name:12s} found {x['found']:3d}  false none {x['false_no_motion']} "
+        f"{name:18s} found {x['found']:3d}  false none {x['false_no_motion']} "
         f"({x['false_no_motion_rate']}, CI95 {x['false_no_motion_ci95']}; of feasible "
         f"{x['false_no_motion_of_feasible']}, CI95 {x['false_no_motion_of_feasible_ci95']})  "
         f"found touching at finer recheck {x['found_touching_at_finer_recheck']}, true scene "
@@ -458,7 +512,7 @@ def print_table(summary: dict[str, Any]) -> None:
         f"ms/state {x['ms_per_state_check']} (obstacles {x['ms_per_obstacle_check']}, "
         f"self {x['ms_per_self_collision_check']})"
     )
-    for name in ("product", "product_500"):
+    for name in (n for n in CHECKERS if n != "reference" and n in summary):
         print(line(name, summary[name]))
 
 

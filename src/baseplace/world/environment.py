@@ -41,6 +41,7 @@ from baseplace.world.sensor_resolution import (
     group_size,
     margin,
 )
+from baseplace.world.state_filter import StateFilter
 from baseplace.world.support_plane import fit_support_slab
 
 SUPPORT_DIST = 0.1
@@ -228,6 +229,9 @@ class Environment:
         ref = self.model.createData()
         pin.framesForwardKinematics(self.model, ref, robot.q_reference)
         self._T_root_base = ref.oMf[self.model.getFrameId(robot.spec.base_frame)]
+        self._n_robot = n_robot
+        self._placed: bytes | None = None  # the base pose the scene geometries were last placed for
+        self._filters: dict[str, StateFilter] = {}
 
     @property
     def env_id(self) -> int | None:
@@ -277,6 +281,9 @@ class Environment:
         T = np.asarray(T_world_base, dtype=float)
         if T.shape != (4, 4) or not np.all(np.isfinite(T)):
             raise InputError("base pose must be a finite (4, 4) matrix")
+        if T.tobytes() == self._placed:
+            return
+        self._placed = T.tobytes()
         T_root_world = self._T_root_base * pin.SE3(T).inverse()
         for gid in self.env_ids:
             T_world_env = self._T_world_env.get(gid)
@@ -292,11 +299,33 @@ class Environment:
     def colliding_arm(self, arm: Arm, q_arm: ArrayLike, T_world_base: ArrayLike) -> bool:
         """:meth:`colliding` for arm joint values (n,), other joints at their reference values.
 
+        Coal's verdict (:meth:`colliding_arm_exact`), with the pairs whose bounding spheres are
+        clear of each other left out (:class:`~baseplace.world.state_filter.StateFilter`): about
+        1.2 ms per state on TIAGo with every pair, mostly spent on pairs far apart.
+        """
+        T = np.asarray(T_world_base, dtype=float)
+        if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+            raise InputError("base pose must be a finite (4, 4) matrix")
+        return self.state_filter(arm).colliding(q_arm, T)
+
+    def state_filter(self, arm: Arm) -> StateFilter:
+        """The pre-filtered state check of ``arm`` (built on first use, kept)."""
+        if arm.name not in self._filters:
+            own = None
+            if self._self is not None:
+                own = (self._self.model, self._self.data, self._self.geom, self._self._arm_geometry_data(arm))
+            self._filters[arm.name] = StateFilter(
+                self.robot, arm, (self.model, self.data, self.geom, self.geom_data), self._n_robot,
+                {gid: T.homogeneous for gid, T in self._T_world_env.items()}, self._place_obstacles,
+                self._T_root_base, own,
+            )  # fmt: skip
+        return self._filters[arm.name]
+
+    def colliding_arm_exact(self, arm: Arm, q_arm: ArrayLike, T_world_base: ArrayLike) -> bool:
+        """:meth:`colliding_arm` with coal on every pair: the oracle of the pre-filtered check.
+
         Self-collision uses only the pairs the arm can move relative to each other (exact here,
-        since every other joint stays at its reference value). The obstacles are checked first:
-        the same answer, but in the reaching-motion check most colliding states touch an obstacle
-        (212 of 216 on six generated scenes), and that check costs about a quarter of the
-        self-collision check (TIAGo: 1076 mesh pairs, about 2 ms).
+        since every other joint stays at its reference value).
         """
         if self._touches_obstacles(arm.to_pinocchio(q_arm, self.robot.q_reference), T_world_base):
             return True
