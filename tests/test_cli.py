@@ -540,4 +540,8 @@ def test_candidates_reaching_motion_and_robustness_in_the_json(tiago_map_file):
     assert all("motion" not in c and "robustness" not in c for c in json.loads(proc.stdout)["candidates"])
     assert_one_line_error(run(*common, "--min-robustness", "1.5"), 2, "minimum robustness")
     assert_one_line_error(run(*common, "--error-model", "box", "--xy-tolerance", "0"), 2, "xy_tolerance")
-    assert_one_line_error(run(*common, "--robustness-motion", "--no-motion-check"), 2, "robustness-motion needs the motion check")
+    assert_one_line_error(
+        run(*common, "--robustness-motion", "--no-motion-check"),
+        2,
+        "robustness-motion needs the motion check",
+    )
