@@ -101,6 +101,7 @@ CHECKERS: dict[str, tuple[MotionSettings, bool]] = {
     "reference": (REFERENCE, False),
     "product_500_exact": (PRODUCT_500, True),
     "product_500_point": (dataclasses.replace(PRODUCT_500, point_step=0.01), False),
+    "product_point": (dataclasses.replace(PRODUCT, point_step=0.01), False),
 }
 """Per checker name: its settings, and whether every state goes to coal on every pair (the old check)."""
 RECHECK = 4
