@@ -153,3 +153,18 @@ def test_the_ransac_memory_stays_bounded_on_a_very_long_finger():
     tracemalloc.stop()
     assert keep.sum() == 18_000 and not keep[::10].any()
     assert peak < 20e6, f"{peak / 1e6:.0f} MB"
+
+
+def test_without_depth_finger3d_takes_the_box_a_short_line_enters_when_no_centre_is_near_it():
+    """A finger pointing away from the camera: 15 px long in the image, its line enters the target's box
+    near the tip, but the box's centre lies 60 deg off it: ``nearest`` finds nothing, ``first`` the box."""
+    L = np.zeros((21, 2))
+    L[[8, 7, 6, 5]] = [[100.0, 100.0], [95.0, 100.0], [90.0, 100.0], [85.0, 100.0]]
+    image_boxes = np.array([[[104.0, 96.0], [140.0, 190.0]]])
+    boxes_world = np.array([[[0.0, 0.0, 1.0], [0.1, 0.1, 1.1]]])
+    points = np.full((H, W, 3), np.nan)
+    line = image_ray(L, image_boxes, W, H)
+    assert nearest_box(line, image_boxes).hit is None and line.hit == 0  # the landed fallback: no object
+    ray, ray3 = select("finger3d", L, image_boxes, boxes_world, points, CAMERA, K, W, H)
+    assert ray3 is None and ray.hit == 0 and ray.length == pytest.approx(line.length)
+    assert select("nearest", L, image_boxes, boxes_world, points, CAMERA, K, W, H)[0].hit is None
