@@ -353,7 +353,7 @@ def _image_fallback(line: Ray, image_boxes: FloatArray) -> Ray:
     A finger without usable depth mostly points away from the camera, hidden behind the hand: its
     image is short (15-20 px), 2 px of landmark noise turn its line by 10 deg or more, and the
     target, near the fingertip in the image, has its centre beyond ``nearest``'s angle although
-    the line enters its box (5 of the 46 such development scenes, docs/protocols/pointing_v3.md).
+    the line enters its box (9 of the 105 such development scenes, docs/protocols/pointing_v3.md).
     """
     chosen = nearest_box(line, image_boxes)
     return chosen if chosen.hit is not None else line
