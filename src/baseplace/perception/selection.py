@@ -47,7 +47,7 @@ FINGER3D_MAX_ANGLE_DEG = 16.0
 Chosen on the 600 development scenes (docs/protocols/pointing_v3.md), with every target detected
 that the scene shows: of the 495 with a 3-D line and the target detected, the target's angle was
 at most 15.4 deg (99th percentile 10.6 deg); 12 deg (protocol v2) selected 588, 15 deg 589,
-16-25 deg 590 with no more wrong objects; 16 deg is the smallest angle of the plateau."""
+16-25 deg 592 with no more wrong objects; 16 deg is the smallest angle of the plateau."""
 
 
 @dataclass(frozen=True)
