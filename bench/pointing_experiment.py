@@ -1,4 +1,4 @@
-"""Seed 004's pointing selection on generated RGB-D scenes (issue 30); protocol: docs/protocols/pointing_v2.md.
+"""Seed 004's pointing selection on generated RGB-D scenes (issue 30); protocol: docs/protocols/pointing_v3.md.
 
 Usage: ``python bench/pointing_experiment.py --split dev|held-out [--results FILE.json] [--limit N]``.
 The results file records the protocol file's commit (its last commit before the run).
@@ -16,7 +16,7 @@ from baseplace_experiments.pointing_experiment import SEEDS, run_scene, summariz
 from baseplace_experiments.results import RunClock, fixed_protocol, write_results
 
 ROOT = Path(__file__).resolve().parents[1]
-PROTOCOL = "docs/protocols/pointing_v2.md"
+PROTOCOL = "docs/protocols/pointing_v3.md"
 
 
 def protocol_commit() -> str | None:

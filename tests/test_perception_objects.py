@@ -52,3 +52,19 @@ def test_a_frame_without_a_level_plane_has_no_support():
     points[..., 2] = points[..., 1] * 2  # a 63 deg slope
     with pytest.raises(NoSupportPlaneError, match="no support plane"):
         detect_objects(points)
+
+
+def test_the_table_plane_is_not_tilted_by_the_tables_front_face():
+    """Dev scene 96: the table's front face, seen below its near edge, tilted the refit plane a centimetre
+    down there; the near edge's top then rose above ``min_height`` and linked the two objects beside it."""
+    from baseplace.perception.objects import ObjectSettings, support_planes
+
+    scene = generate_pointing_scene(96)
+    top = scene.objects[0].centre[2] - scene.objects[0].size[2] / 2
+    points = _world(scene)
+    planes = support_planes(points[np.all(np.isfinite(points), axis=2)], ObjectSettings())
+    table = [p for p in planes if abs(p.height_at(np.array([[0.9, 0.0]]))[0] - top) < 0.05]
+    assert len(table) == 1
+    assert np.abs(table[0].height_at(table[0].hull) - top).max() < 0.003
+    found = detect_objects(points, hand_px=_hand_px(scene)).objects
+    assert len(found) == len(scene.objects) == 5

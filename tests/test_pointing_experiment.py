@@ -4,7 +4,14 @@ from __future__ import annotations
 
 import pytest
 
-from baseplace_experiments.pointing_experiment import HELD_OUT_V1, SEEDS, run_scene, summarize, wilson
+from baseplace_experiments.pointing_experiment import (
+    HELD_OUT_V1,
+    HELD_OUT_V2,
+    SEEDS,
+    run_scene,
+    summarize,
+    wilson,
+)
 
 
 def test_the_wilson_interval_against_known_values():
@@ -17,8 +24,9 @@ def test_dev_and_held_out_seeds_are_disjoint_and_large_enough():
     assert not set(SEEDS.dev) & set(SEEDS.held_out) and len(SEEDS.held_out) >= 200
 
 
-def test_protocol_v2_holds_out_scenes_that_v1_did_not_spend():
-    assert not set(SEEDS.held_out) & set(HELD_OUT_V1) and not set(SEEDS.dev) & set(HELD_OUT_V1)
+def test_protocol_v3_holds_out_scenes_that_v1_and_v2_did_not_spend():
+    for spent in (HELD_OUT_V1, HELD_OUT_V2):
+        assert not set(SEEDS.held_out) & set(spent) and not set(SEEDS.dev) & set(spent)
 
 
 def test_a_few_dev_scenes_select_the_target_within_2_cm():

@@ -484,7 +484,7 @@ def build_parser(chosen: str | None = None) -> argparse.ArgumentParser:
                    help="JSON of 21 MediaPipe hand landmarks (normalised x, y; relative z) instead of the hand model")  # fmt: skip
     p.add_argument("--selection", default="finger3d", choices=["finger3d", "first", "nearest"],
                    help="finger3d: the object at the smallest angle from the index finger's 3-D line from depth "
-                        "(within 12 deg; nearest without depth on the finger); first: the seed's, the first object "
+                        "(within 16 deg; without depth on the finger nearest, else first); first: the seed's, the first object "
                         "box the finger's image line enters; nearest: the object whose box centre lies at the "
                         "smallest angle from the image line (within 12 deg) (default finger3d)")  # fmt: skip
     p.add_argument("--occupancy", default=None, help="occupancy grid (map_server YAML): also where to stand")

@@ -1,7 +1,7 @@
 """Seed 004's pointing application on generated RGB-D scenes (issue 30's must-show).
 
-The protocol is docs/protocols/pointing_v2.md (v1: docs/protocols/pointing.md), committed before the
-held-out run; in short: each
+The protocol is docs/protocols/pointing_v3.md (v2: pointing_v2.md, v1: pointing.md), committed before
+the held-out run; in short: each
 seed's frame (:func:`~baseplace.sim.pointing_scenes.generate_pointing_scene`, default settings) is
 written to files as a camera would deliver it (RGB PNG, 16-bit depth PNG in millimetres, MediaPipe
 landmarks JSON, the camera's pose) and read back by the ``point`` job, exactly as
@@ -32,10 +32,12 @@ from baseplace.perception.selection import SELECTION_RULES
 from baseplace.sim.pointing_scenes import PointingSceneSettings, generate_pointing_scene, save_pointing_scene
 from baseplace_experiments.results import SeedSplit
 
-SEEDS = SeedSplit(dev=tuple(range(100)), held_out=tuple(range(20_000, 20_250)))
-"""100 development scenes to choose parameters; 250 held-out scenes for the report (protocol v2)."""
+SEEDS = SeedSplit(dev=tuple(range(600)), held_out=tuple(range(30_000, 30_250)))
+"""600 development scenes to choose parameters (v2's 0-99 and 100-599); 250 held-out scenes for the report (protocol v3)."""
 HELD_OUT_V1 = tuple(range(10_000, 10_250))
 """Protocol v1's held-out scenes, run once (docs/protocols/pointing.md): spent, never to be used again."""
+HELD_OUT_V2 = tuple(range(20_000, 20_250))
+"""Protocol v2's held-out scenes, run once (docs/protocols/pointing_v2.md): spent, never to be used again."""
 PRIMARY_RULE = "finger3d"
 """The rule the job runs with (the protocol's primary); the others are measured beside it."""
 POSITION_TOLERANCE = 0.02
@@ -174,4 +176,13 @@ def summarize(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
-__all__ = ["HELD_OUT_V1", "POSITION_TOLERANCE", "PRIMARY_RULE", "SEEDS", "run_scene", "summarize", "wilson"]
+__all__ = [
+    "HELD_OUT_V1",
+    "HELD_OUT_V2",
+    "POSITION_TOLERANCE",
+    "PRIMARY_RULE",
+    "SEEDS",
+    "run_scene",
+    "summarize",
+    "wilson",
+]

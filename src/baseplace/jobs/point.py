@@ -56,8 +56,8 @@ class PointJob:
         robot, arm, map, robot_pose, seed, motion, robustness: as the candidates job's.
         objects: how objects are cut out of the frame (None: defaults).
         selection: "finger3d" (the object whose centre lies at the smallest angle from the index
-            finger's 3-D line from depth, within 12 deg; "nearest" when the finger has no usable
-            depth), "first" (the seed's: the first image box the line enters) or "nearest" (the
+            finger's 3-D line from depth, within 16 deg; "nearest", else "first", when the finger
+            has no usable depth), "first" (the seed's: the first image box the line enters) or "nearest" (the
             object whose box centre lies at the smallest angle from the image line, within 12 deg).
         png: also write a picture here: the image with the hand, the line and the boxes; with a
             grid, the candidates from above (also on exit 3, what was found).
