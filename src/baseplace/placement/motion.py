@@ -24,7 +24,7 @@ check, run after the shared verification (:class:`~baseplace.placement.verify.Ve
 
 Every joint-space edge (the straight line, the shortcut, OMPL's edges, the joint lines between
 approach steps) is checked at states ``joint_resolution`` apart in joint space; with
-``point_step`` set (off by default: too slow until the edge check is compiled), also close
+``point_step`` set (the default, 1 cm), also close
 enough that no point of the robot moves more than ``point_step`` between two of them: a joint's change times its lever arm
 (:func:`lever_arms`, an upper bound at any configuration), summed over the joints, bounds how far
 any point of the links they move travels along the edge.
@@ -194,10 +194,12 @@ class MotionSettings:
             than this between two of them [m] (bounded by :func:`lever_arms`); a robot kept
             ``clearance`` from the scene at every checked state keeps ``clearance - point_step / 2``
             in between. At 0.05 rad alone a fingertip 1 m from the shoulder moves 5 cm between
-            checks. Default None (off): at 0.01 m the checker, a Python callback per state,
-            found 2 of 6 dev find-rate scenes instead of 3 and took 20 s instead of 1 s per
-            found scene (RRTConnect runs out of its time); the compiled edge check of issue 25
-            is what makes it affordable.
+            checks: without the bound (None) 5 of 54 motions found on the table-grid dev scenes
+            passed through the robot's own scene model between checked states, none with it
+            (bench/bench_motion_verdicts.py, ``motion_verdicts_point_dev.json``). Default 0.01:
+            since the state pre-filter (:mod:`baseplace.world.state_filter`) it costs about 5x
+            the check time (median 332 vs 69 ms there) and found the same 12 of 28 extra dev
+            find-rate scenes.
         time_limit: OMPL planning time for one joint path [s]; no path in it rejects the placement.
         max_checks: also stop planning after this many state validity checks (None: no such
             limit). A budget that does not depend on the machine's load, for experiments on a
@@ -211,7 +213,7 @@ class MotionSettings:
     approach_step: float = 0.01
     max_joint_step: float = 0.2
     joint_resolution: float = 0.05
-    point_step: float | None = None
+    point_step: float | None = 0.01
     time_limit: float = 1.0
     approach_restarts: int = 4
     q_start: tuple[float, ...] | None = None
