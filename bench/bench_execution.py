@@ -123,18 +123,26 @@ from common import report
 
 DRAWS = 5
 PROTOCOLS = {  # version: (where the robot's model of the bottle begins, seeds, the robot's planner)
-    1: ("estimate", SeedSplit(dev=(0,), held_out=(5, 6)), MotionSettings()),
-    2: ("support", SeedSplit(dev=(0,), held_out=(7, 8)), MotionSettings(time_limit=30.0, max_checks=500)),
-    3: ("support", SeedSplit(dev=(0,), held_out=(9, 10)), MotionSettings(time_limit=30.0, max_checks=500)),
+    1: ("estimate", SeedSplit(dev=(0,), held_out=(5, 6)), MotionSettings(point_step=None)),
+    2: (
+        "support",
+        SeedSplit(dev=(0,), held_out=(7, 8)),
+        MotionSettings(time_limit=30.0, max_checks=500, point_step=None),
+    ),
+    3: (
+        "support",
+        SeedSplit(dev=(0,), held_out=(9, 10)),
+        MotionSettings(time_limit=30.0, max_checks=500, point_step=None),
+    ),
     4: (
         "support",
         SeedSplit(dev=(0,), held_out=(11, 12, 13)),
-        MotionSettings(time_limit=30.0, max_checks=500),
+        MotionSettings(time_limit=30.0, max_checks=500, point_step=None),
     ),
     5: (
         "support",  # not used by the product's models
         SeedSplit(dev=(0,), held_out=(14, 15, 16)),
-        MotionSettings(time_limit=30.0, max_checks=500),
+        MotionSettings(time_limit=30.0, max_checks=500, point_step=None),  # v4's planner, as v4 ran it
     ),
 }
 SUPPORT_MODEL = {1: "voxels", 2: "voxels", 3: "slab", 4: "slab", 5: "product"}
