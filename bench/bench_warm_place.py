@@ -14,9 +14,9 @@ What one warm ``POST /place`` costs with the product's defaults (reaching-motion
 * Reported per setting (defaults; the seed-000 checks only, ``no_motion_check`` and
   ``robustness_samples 0``): the server's own time (``x-server-time-ms``) median and p90, the
   JSON's ``timings_ms`` (``request_to_placement``, ``motion``, ``robustness``) medians, and how
-  many queries found a placement. Compare two checkouts by running this script from each, back to
-  back on the same machine (``PYTHONPATH=<checkout>/src:<checkout>/bench``); the script records
-  its source commit.
+  many queries found a placement. Compare two library checkouts by running this script with each
+  first on ``PYTHONPATH`` (``PYTHONPATH=<checkout>/src:bench``), back to back on the same machine;
+  ``library`` records the commit that ran, ``provenance`` this script's.
 
 Usage: python bench/bench_warm_place.py [--queries 10] [--name warm_place]
 """
@@ -40,6 +40,7 @@ from baseplace_experiments.execution_experiment import trial_scene
 from baseplace_experiments.table_grid import TableGridSettings
 from bench_serve import UPLOAD, pct, start_server, wait_healthy
 from common import report
+from find_rate import library_commit
 
 SEEDS = (0, 1, 2)
 CELLS = ((0, 0), (2, 0))
@@ -111,6 +112,7 @@ def main() -> None:
                 "motion_ms_median": med("motion"), "robustness_ms_median": med("robustness")}  # fmt: skip
 
     result = {
+        "library": library_commit(),  # the baseplace that ran (the service too: the same PYTHONPATH)
         "scenes": f"table-grid dev seeds {list(SEEDS)}, cells {[list(c) for c in CELLS]}, 3 mm noise, floor at z = 0",
         "query": f"one side grasp (TableGridSettings.grasps index {GRASP}) at the estimate, service defaults",
         "service_start_s": started_s,
