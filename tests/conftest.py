@@ -56,6 +56,16 @@ def rng() -> np.random.Generator:
     return np.random.default_rng(2024)
 
 
+def tcp_by_pinocchio(robot: Robot, arm, q) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """Oracle: pinocchio FK of the arm's TCP (4, 4) in its base frame at arm joints q (n,), others at reference."""
+    import pinocchio as pin
+
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, arm.to_pinocchio(q, robot.q_reference))
+    base = data.oMf[robot.model.getFrameId(arm.base_frame)]
+    return (base.inverse() * data.oMf[robot.model.getFrameId(arm.tcp_frame)]).homogeneous
+
+
 def free_port() -> int:
     """A TCP port on the loopback interface that nothing listens on now."""
     with socket.socket() as s:

@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import pinocchio as pin
 import pytest
 
 from baseplace.geometry.poses import pose_from_xyz_rpy
@@ -13,19 +12,12 @@ from baseplace.placement.motion import MotionChecker, MotionSettings
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import Environment
+from conftest import tcp_by_pinocchio
 
 # A top-down grasp in front of TIAGo whose IK solution (from a seed near it) has the torso at its
 # top: the retreat upwards needs the torso past its limit unless the other joints take over.
 GRASP = [0.6447, -0.1792, 1.0617, 0.0, math.pi / 2, -3.0364]
 Q_NEAR = [0.35, 1.1895, 0.9142, -0.0329, 1.6058, 1.5447, -0.8796, 1.1271]
-
-
-def _tcp(robot, arm, q):
-    """Oracle: pinocchio FK of the TCP in the arm's base frame."""
-    data = robot.model.createData()
-    pin.framesForwardKinematics(robot.model, data, arm.to_pinocchio(q, robot.q_reference))
-    base = data.oMf[robot.model.getFrameId(arm.base_frame)]
-    return (base.inverse() * data.oMf[robot.model.getFrameId(arm.tcp_frame)]).homogeneous
 
 
 @pytest.fixture(scope="module")
@@ -57,7 +49,7 @@ def test_every_walk_configuration_lies_on_the_line_by_fk(tiago, torso_at_top):
     along = []
     for qk in steps:
         assert arm.within_limits(qk)
-        reached = _tcp(tiago, arm, qk)
+        reached = tcp_by_pinocchio(tiago, arm, qk)
         offset = T[:3, 3] - reached[:3, 3]  # from the TCP back to the grasp: along the axis
         s = float(offset @ axis)
         along.append(s)
@@ -79,13 +71,13 @@ def test_limit_aware_ik_solutions_reach_the_pose_by_fk(tiago, saturate, gain):
     rng = np.random.default_rng(7)
     solved = 0
     for q_true in arm.sample(rng, 20):
-        T = _tcp(tiago, arm, q_true)
+        T = tcp_by_pinocchio(tiago, arm, q_true)
         q = ik.solve(T, rng)
         if q is None:
             continue
         solved += 1
         assert arm.within_limits(q)
-        reached = _tcp(tiago, arm, q)
+        reached = tcp_by_pinocchio(tiago, arm, q)
         assert np.linalg.norm(reached[:3, 3] - T[:3, 3]) < ik.tol_position
         cos = 0.5 * (np.trace(T[:3, :3] @ reached[:3, :3].T) - 1.0)
         assert math.acos(min(1.0, cos)) < ik.tol_rotation

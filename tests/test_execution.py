@@ -14,6 +14,7 @@ from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import Environment
 from baseplace_experiments.execution import ExecutionOracle, ExecutionSettings
 from baseplace_experiments.table_grid import RobotShapes, TrueShape
+from conftest import tcp_by_pinocchio
 
 GRASP = pose_from_xyz_rpy([0.75, -0.15, 0.85, 0.0, 0.0, 0.0])  # side grasp in front of the base
 
@@ -30,20 +31,13 @@ def shapes(tiago):
     return RobotShapes(tiago)
 
 
-def _tcp(robot, arm, q):  # type: ignore[no-untyped-def]
-    data = robot.model.createData()
-    pin.framesForwardKinematics(robot.model, data, arm.to_pinocchio(q, robot.q_reference))
-    base = data.oMf[robot.model.getFrameId(arm.base_frame)]
-    return (base.inverse() * data.oMf[robot.model.getFrameId(arm.tcp_frame)]).homogeneous
-
-
 def test_oracle_solutions_reach_the_grasp_and_clear_a_low_table(tiago, shapes):
     table = _box("table", (0.6, -0.6, 0.0), (1.2, 0.6, 0.7))
     oracle = ExecutionOracle(shapes, [table], None, ExecutionSettings(ik_solutions=8))
     found = oracle.grasp_configurations(np.eye(4), GRASP, np.random.default_rng(0))
     assert found
     for q in found:  # pinocchio FK and a direct coal query, outside the oracle
-        np.testing.assert_allclose(_tcp(tiago, tiago.arm(), q), GRASP, atol=2e-3)
+        np.testing.assert_allclose(tcp_by_pinocchio(tiago, tiago.arm(), q), GRASP, atol=2e-3)
         assert shapes.touching(q, np.eye(4), [table]) is None
 
 
@@ -62,7 +56,7 @@ def test_oracle_path_check_sees_a_wall_between_two_free_configurations(tiago, sh
     free = ExecutionOracle(shapes, [], None)
     q = free.grasp_configurations(np.eye(4), GRASP, np.random.default_rng(0), limit=1)[0]
     # a thin wall just behind the grasp's hand, between the stowed arm and the grasp
-    p = _tcp(tiago, arm, q)[:3, 3]
+    p = tcp_by_pinocchio(tiago, arm, q)[:3, 3]
     wall = _box("wall", (p[0] - 0.25, -1.0, 0.0), (p[0] - 0.23, 1.0, 1.6))
     walled = ExecutionOracle(shapes, [wall], None)
     path = np.array([free.q_stowed, q])

@@ -14,6 +14,7 @@ from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.terrain.polygons import footprint_outline
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import Environment
+from conftest import tcp_by_pinocchio
 
 RES = 0.025
 TARGET = [0.75, -0.15, 0.85, 0.0, 0.0, 0.0]  # side grasp in front of the base, TCP x forward
@@ -21,14 +22,6 @@ TARGET = [0.75, -0.15, 0.85, 0.0, 0.0, 0.0]  # side grasp in front of the base, 
 
 def _empty() -> VoxelMap:
     return VoxelMap(RES, np.zeros((0, 3), dtype=np.int64))
-
-
-def _tcp(robot, arm, q):
-    """Oracle: pinocchio FK of the TCP in the base frame."""
-    data = robot.model.createData()
-    pin.framesForwardKinematics(robot.model, data, arm.to_pinocchio(q, robot.q_reference))
-    base = data.oMf[robot.model.getFrameId(arm.base_frame)]
-    return (base.inverse() * data.oMf[robot.model.getFrameId(arm.tcp_frame)]).homogeneous
 
 
 @pytest.fixture(scope="module")
@@ -98,7 +91,7 @@ def test_same_scene_without_the_wall_passes_with_a_valid_motion(tiago, wall_scen
     np.testing.assert_allclose(m.approach[-1], placement.joints[0])
     np.testing.assert_allclose(m.path[-1], m.approach[0])
     # Oracle: pinocchio FK. The approach runs straight along the TCP's x axis, ending on the grasp.
-    tcp = np.array([_tcp(tiago, arm, qa) for qa in m.approach])
+    tcp = np.array([tcp_by_pinocchio(tiago, arm, qa) for qa in m.approach])
     np.testing.assert_allclose(tcp[-1], target, atol=1e-3)
     back = (target[:3, 3] - tcp[:, :3, 3]) @ target[:3, 0]
     lateral = np.linalg.norm((target[:3, 3] - tcp[:, :3, 3]) - back[:, None] * target[:3, 0], axis=1)
@@ -151,7 +144,7 @@ def test_planned_and_shortened_path_is_free_by_an_independent_check(tiago):
     rng = np.random.default_rng(5)
     goal = None
     for q in arm.sample(rng, 2000):  # a free goal over the table whose line from stowed is blocked
-        p = _tcp(tiago, arm, q)[:3, 3]
+        p = tcp_by_pinocchio(tiago, arm, q)[:3, 3]
         if not (0.6 < p[0] < 0.9 and abs(p[1]) < 0.3 and 0.85 < p[2] < 1.0):
             continue
         if motion._free(q, np.eye(4)) and not motion._line_free(motion.q_start, q, np.eye(4)):

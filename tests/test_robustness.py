@@ -136,13 +136,9 @@ def test_place_scores_ranks_and_filters_placements_by_robustness(tiago):
 def _stowed_tcp(robot, arm, T_base):
     """Oracle: pinocchio FK of the TCP at the stowed configuration, in the world."""
     from baseplace.placement.motion import stowed_configuration
+    from conftest import tcp_by_pinocchio
 
-    data = robot.model.createData()
-    pin.framesForwardKinematics(
-        robot.model, data, arm.to_pinocchio(stowed_configuration(robot, arm), robot.q_reference)
-    )
-    base = data.oMf[robot.model.getFrameId(arm.base_frame)]
-    return (T_base @ (base.inverse() * data.oMf[robot.model.getFrameId(arm.tcp_frame)]).homogeneous)[:3, 3]
+    return (T_base @ tcp_by_pinocchio(robot, arm, stowed_configuration(robot, arm)))[:3, 3]
 
 
 def test_a_score_with_the_reaching_motion_counts_only_draws_the_arm_can_move_from(tiago):
