@@ -385,7 +385,7 @@ def run_inspect_task(
             t0 = time.perf_counter()
             sampled = next(generator)
             result.grounding_s += time.perf_counter() - t0
-            add_pose(BasePose(sampled.x, sampled.y, sampled.yaw))
+            add_pose(sampled.pose)
             continue
         replan = False
         for step in answer.plan.actions:
