@@ -278,9 +278,7 @@ class Environment:
         return self._touches_obstacles(q, T_world_base)
 
     def _place_obstacles(self, T_world_base: ArrayLike) -> None:
-        T = np.asarray(T_world_base, dtype=float)
-        if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-            raise InputError("base pose must be a finite (4, 4) matrix")
+        T = _base_pose(T_world_base)
         if T.tobytes() == self._placed:
             return
         self._placed = T.tobytes()
@@ -303,10 +301,7 @@ class Environment:
         clear of each other left out (:class:`~baseplace.world.state_filter.StateFilter`): about
         1.2 ms per state on TIAGo with every pair, mostly spent on pairs far apart.
         """
-        T = np.asarray(T_world_base, dtype=float)
-        if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-            raise InputError("base pose must be a finite (4, 4) matrix")
-        return self.state_filter(arm).colliding(q_arm, T)
+        return self.state_filter(arm).colliding(q_arm, _base_pose(T_world_base))
 
     def state_filter(self, arm: Arm) -> StateFilter:
         """The pre-filtered state check of ``arm`` (built on first use, kept)."""
@@ -353,6 +348,14 @@ class Environment:
 
     def _link(self, geometry_id: int) -> str:
         return str(self.model.frames[self.geom.geometryObjects[geometry_id].parentFrame].name)
+
+
+def _base_pose(T_world_base: ArrayLike) -> NDArray[np.float64]:
+    """The base pose as a (4, 4) float array; InputError unless it is one, finite."""
+    T = np.asarray(T_world_base, dtype=float)
+    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+        raise InputError("base pose must be a finite (4, 4) matrix")
+    return T
 
 
 class HandFilter:
