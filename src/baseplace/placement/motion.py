@@ -53,6 +53,7 @@ from baseplace.robots.model import Arm, Robot
 from baseplace.world.environment import GRASPED, Environment, HandFilter
 from baseplace.world.obstacles import Obstacle
 from baseplace.world.sensor_resolution import Group, group_size
+from baseplace.world.state_filter import hull_points
 
 PREGRASP_MARGIN = 0.02
 """How far [m] behind the plane through the grasp's TCP (normal: the approach axis) the open hand's
@@ -67,20 +68,6 @@ configurations with the torso at its top, 0.05 and more failed more often than n
 motion makes joint changes above ``max_joint_step``); the saturation does most of the work."""
 
 
-def _points(geometry: object) -> FloatArray:
-    """(k, 3) points whose convex hull holds the coal geometry, in its own frame.
-
-    A mesh's vertices, else the corners of its local bounding box.
-    """
-    vertices = getattr(geometry, "vertices", None)
-    if callable(vertices) and getattr(geometry, "num_vertices", False):
-        return np.asarray(vertices(), dtype=float).reshape(-1, 3)
-    geometry.computeLocalAABB()  # type: ignore[attr-defined]
-    box = geometry.aabb_local  # type: ignore[attr-defined]
-    lo, hi = np.asarray(box.min_, dtype=float), np.asarray(box.max_, dtype=float)
-    return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-
-
 def hand_reach(robot: Robot, arm: Arm, geom: object | None = None) -> float:
     """How far [m] the hand's collision geometry reaches ahead of the TCP along the approach axis.
 
@@ -91,7 +78,7 @@ def hand_reach(robot: Robot, arm: Arm, geom: object | None = None) -> float:
     """
     parts = HandFilter(robot, arm.name, geom).parts
     axis = approach_axis(arm)
-    reach = [float(np.max((_points(g) @ T[:3, :3].T + T[:3, 3]) @ axis)) for g, T in parts]
+    reach = [float(np.max((hull_points(g) @ T[:3, :3].T + T[:3, 3]) @ axis)) for g, T in parts]
     return max(reach, default=0.0)
 
 
@@ -111,7 +98,7 @@ def lever_arms(robot: Robot, arm: Arm, geom: object) -> FloatArray:
         if obj.parentJoint == 0:
             continue  # the world's obstacles
         M = obj.placement
-        p = _points(obj.geometry) @ np.asarray(M.rotation).T + np.asarray(M.translation)
+        p = hull_points(obj.geometry) @ np.asarray(M.rotation).T + np.asarray(M.translation)
         bound[obj.parentJoint] = max(bound[obj.parentJoint], float(np.max(np.linalg.norm(p, axis=1))))
     for k in range(model.njoints - 1, 0, -1):  # pinocchio numbers children after their parents
         offset = float(np.linalg.norm(model.jointPlacements[k].translation))

@@ -53,14 +53,23 @@ def bounding_sphere(geometry: coal.CollisionGeometry) -> tuple[FloatArray, float
         return np.zeros(3), float(np.linalg.norm(geometry.halfSide))
     if isinstance(geometry, coal.Cylinder):
         return np.zeros(3), math.hypot(float(geometry.radius), float(geometry.halfLength))
+    points = hull_points(geometry)  # for a bounding box's corners: its centre and half diagonal
+    centre = (points.min(axis=0) + points.max(axis=0)) / 2
+    return centre, float(np.max(np.linalg.norm(points - centre, axis=1)))
+
+
+def hull_points(geometry: coal.CollisionGeometry) -> FloatArray:
+    """(k, 3) points whose convex hull holds the geometry, in its own frame.
+
+    A mesh's or convex's vertices, else the corners of its local bounding box.
+    """
     vertices = _vertices(geometry)
-    if vertices is None:
-        geometry.computeLocalAABB()
-        box = geometry.aabb_local
-        lo, hi = np.asarray(box.min_, dtype=float), np.asarray(box.max_, dtype=float)
-        return (lo + hi) / 2, float(np.linalg.norm(hi - lo) / 2)
-    centre = (vertices.min(axis=0) + vertices.max(axis=0)) / 2
-    return centre, float(np.max(np.linalg.norm(vertices - centre, axis=1)))
+    if vertices is not None:
+        return vertices
+    geometry.computeLocalAABB()
+    box = geometry.aabb_local
+    lo, hi = np.asarray(box.min_, dtype=float), np.asarray(box.max_, dtype=float)
+    return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
 
 
 def _vertices(geometry: coal.CollisionGeometry) -> FloatArray | None:
@@ -128,6 +137,16 @@ class _Part:
         c, r = bounding_sphere(geometry)
         self.sphere = (T_world_part[:3, :3] @ c + T_world_part[:3, 3], r)
 
+    def subset(self, keep: list[int], radius: FloatArray) -> _Part:
+        """This part with only its pairs ``keep`` (indices into its pairs), finished (:meth:`finish`)."""
+        out = _Part.__new__(_Part)
+        out.indexes, out.planes, out.sphere = self.indexes, self.planes, self.sphere
+        out.robot = [self.robot[n] for n in keep]
+        out.pair = [self.pair[n] for n in keep]
+        out.margin = [self.margin[n] for n in keep]
+        out.finish(radius)
+        return out
+
     def finish(self, radius: FloatArray) -> None:
         """Fix the pairs; ``radius`` (G,): the robot geometries' bounding radii [m]."""
         self.robot_a = np.array(self.robot, dtype=np.int64)
@@ -191,7 +210,6 @@ class StateFilter:
         ref = model.createData()
         pin.forwardKinematics(model, ref, robot.q_reference)
         pin.updateFramePlacements(model, ref)
-        pin.updateGeometryPlacements(model, ref, geom, pin.GeometryData(geom))
         T_root_armbase = ref.oMf[model.getFrameId(arm.base_frame)]
         self._T_base_armbase = (T_root_base.inverse() * T_root_armbase).homogeneous
         armbase_inv = T_root_armbase.inverse()
@@ -215,8 +233,7 @@ class StateFilter:
         """(G, 3) its bounding sphere's centre in that joint's frame (or the arm's base frame) [m]."""
         self.radius = np.array(radius, dtype=float)
         """(G,) the bounding sphere's radius [m]."""
-        self._moving = self.joint >= 0
-        self.parts: list[_Part] = []
+        moving = self.joint >= 0
         by_gid: dict[int, _Part] = {}
         for i, pair in enumerate(geom.collisionPairs):
             if not gdata.activeCollisionPairs[i]:
@@ -225,26 +242,16 @@ class StateFilter:
             if gid not in by_gid:
                 T = T_world_part.get(gid, np.eye(4))
                 by_gid[gid] = _Part(geom.geometryObjects[gid].geometry, np.asarray(T, dtype=float))
-                self.parts.append(by_gid[gid])
             part = by_gid[gid]
             part.robot.append(k)
             part.pair.append(i)
             part.margin.append(float(gdata.collisionRequests[i].security_margin))
-        self._static_parts = []  # per part: its pairs with fixed geometries apart from the moving ones
-        for part in self.parts:
-            fixed = [n for n, k in enumerate(part.robot) if not self._moving[k]]
-            static = _Part.__new__(_Part)
-            static.indexes, static.planes, static.sphere = part.indexes, part.planes, part.sphere
-            static.robot = [part.robot[n] for n in fixed]
-            static.pair = [part.pair[n] for n in fixed]
-            static.margin = [part.margin[n] for n in fixed]
-            static.finish(self.radius)
-            keep = [n for n in range(len(part.robot)) if self._moving[part.robot[n]]]
-            part.robot = [part.robot[n] for n in keep]
-            part.pair = [part.pair[n] for n in keep]
-            part.margin = [part.margin[n] for n in keep]
-            part.finish(self.radius)
-            self._static_parts.append(static)
+        self.parts: list[_Part] = []  # per scene part: its pairs with geometries the arm moves
+        self._static_parts: list[_Part] = []  # and with those it does not (checked once per base pose)
+        for part in by_gid.values():
+            arm_moves = [bool(moving[k]) for k in part.robot]
+            self.parts.append(part.subset([n for n, m in enumerate(arm_moves) if m], self.radius))
+            self._static_parts.append(part.subset([n for n, m in enumerate(arm_moves) if not m], self.radius))
         self._self_pairs = np.zeros((0, 2), dtype=np.int64)
         self._self_index = np.zeros(0, dtype=np.int64)
         self._self_reach = np.zeros(0)
@@ -280,15 +287,16 @@ class StateFilter:
         q_full = self.arm.to_pinocchio(q_arm, self.robot.q_reference)
         C = self.centres(q_arm)
         key = T.tobytes()
-        if key != self._static_key:
+        new_pose = key != self._static_key
+        if new_pose:
             self._static_key = key
             self._T_world_armbase = T @ self._T_base_armbase
-            _transformed(C, self._T_world_armbase, self._world)
+        _transformed(C, self._T_world_armbase, self._world)
+        if new_pose:
             todo = [p for part in self._static_parts for p in part.uncertified(self._world)]
             self._static_hit = self._scene_coal(todo, q_full, T)
         if self._static_hit:
             return True
-        _transformed(C, self._T_world_armbase, self._world)
         todo = [p for part in self.parts for p in part.uncertified(self._world)]
         if todo and self._scene_coal(todo, q_full, T):
             return True
@@ -314,4 +322,4 @@ class StateFilter:
         return any(pin.computeCollision(geom, gdata, int(i)) for i in pairs)
 
 
-__all__ = ["SLACK", "StateFilter", "bounding_sphere"]
+__all__ = ["SLACK", "StateFilter", "bounding_sphere", "hull_points"]
