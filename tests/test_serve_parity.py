@@ -223,6 +223,10 @@ def test_navigate_in_degrees_as_the_cli(client, files):
             ("--target", SCENE_TARGET, "--start", "-3 -3 180"),
         ),
         ({"targets": [SCENE_TARGET], "start": "40 0 0"}, ("--target", SCENE_TARGET, "--start", "40 0 0")),
+        (
+            {"targets": [SCENE_TARGET], "robustness_motion": True, "no_motion_check": True},
+            ("--target", SCENE_TARGET, "--robustness-motion", "--no-motion-check"),
+        ),  # a robustness with the motion needs the motion check
     ],
 )
 def test_input_checks_refuse_as_the_cli_does(client, files, body, args):
