@@ -252,15 +252,21 @@ def tf_bag(path: Path, n: int, compress: bool = True) -> Path:
 
 
 def test_tf_recording_is_linear(tmp_path):
+    # Ten times the transforms must cost about ten times the time, not a hundred (a quadratic
+    # insert). The best of three reads per size, and a bound at the geometric middle of 10x and
+    # 100x (32x): one read at 20x was seen on a loaded CI machine (0.17 s vs 3.59 s).
     seconds, scenes = {}, {}
-    for n in (20_000, 200_000):
+    for n in (10_000, 100_000):
         path = tf_bag(tmp_path / f"tf{n}.bag", n)
-        t0 = time.perf_counter()
-        scenes[n] = read_bag(path, ["/points"])
-        seconds[n] = time.perf_counter() - t0
+        times = []
+        for _ in range(3):
+            t0 = time.perf_counter()
+            scenes[n] = read_bag(path, ["/points"])
+            times.append(time.perf_counter() - t0)
+        seconds[n] = min(times)
     assert path.stat().st_size < 12_000
-    print(f"tf recording: 20 k {seconds[20_000]:.2f} s, 200 k {seconds[200_000]:.2f} s")
-    assert seconds[200_000] < 20 * seconds[20_000], seconds
+    print(f"tf recording: 10 k {seconds[10_000]:.2f} s, 100 k {seconds[100_000]:.2f} s")
+    assert seconds[100_000] < 32 * seconds[10_000], seconds
     for n, scene in scenes.items():
         assert len(scene.clouds[0].points) == 100
         assert np.allclose(scene.tf.lookup("map", "cam", T0), np.eye(4))
