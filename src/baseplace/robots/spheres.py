@@ -240,7 +240,7 @@ class SphereModel:
             Qr = arm.sample(np.random.default_rng([19, 1, k]), CALIBRATION_CHUNK)
             C = np.empty((len(Qr), len(rad), 3))
             _sphere_centers(Qr, arm.placements, arm.axes, arm.kinds, s_joint_a, s_local_a, C)
-            _min_gap(C, near, rad, gap)
+            _min_gap(C, near, rad, gap, nb.get_num_threads())
         ok = {(int(i), int(j)) for i, j in near[gap < _REACH_MARGIN]}
         geom_pairs: list[tuple[int, int]] = []
         kept_pairs: list[tuple[int, int]] = []
@@ -634,14 +634,31 @@ def _sphere_centers(Q, placements, axes, kinds, s_joint, s_local, out):
 
 
 @nb.njit(cache=True, parallel=True)
-def _min_gap(C, pairs, rad, gap):
-    """Lower ``gap`` (P,) to the smallest surface distance of each sphere pair over centres C."""
-    for p in nb.prange(pairs.shape[0]):
-        u, v = pairs[p, 0], pairs[p, 1]
-        m = gap[p]
-        for i in range(C.shape[0]):
-            dx, dy, dz = C[i, u, 0] - C[i, v, 0], C[i, u, 1] - C[i, v, 1], C[i, u, 2] - C[i, v, 2]
-            d = math.sqrt(dx * dx + dy * dy + dz * dz) - rad[u] - rad[v]
-            if d < m:
-                m = d
-        gap[p] = m
+def _min_gap(C, pairs, rad, gap, n_threads):
+    """Lower ``gap`` (P,) to the smallest surface distance of each sphere pair over centres C.
+
+    Each of ``n_threads`` blocks of configurations keeps its own smallest squared centre
+    distances, so that one configuration's centres stay in cache while all pairs are measured (a
+    loop over pairs outside read C with a stride of a whole configuration, ~6 s per 16 k
+    configurations); the result is the same whatever the order, the square root being monotone.
+    """
+    n, n_pairs = C.shape[0], pairs.shape[0]
+    block = (n + n_threads - 1) // n_threads
+    local = np.full((n_threads, n_pairs), np.inf)
+    for t in nb.prange(n_threads):
+        m = local[t]
+        for i in range(t * block, min(n, (t + 1) * block)):
+            Ci = C[i]
+            for p in range(n_pairs):
+                u, v = pairs[p, 0], pairs[p, 1]
+                dx, dy, dz = Ci[u, 0] - Ci[v, 0], Ci[u, 1] - Ci[v, 1], Ci[u, 2] - Ci[v, 2]
+                d2 = dx * dx + dy * dy + dz * dz
+                if d2 < m[p]:
+                    m[p] = d2
+    for p in range(n_pairs):
+        d2 = local[0, p]
+        for t in range(1, n_threads):
+            d2 = min(d2, local[t, p])
+        d = math.sqrt(d2) - rad[pairs[p, 0]] - rad[pairs[p, 1]]
+        if d < gap[p]:
+            gap[p] = d
