@@ -143,18 +143,25 @@ def transit_environment(
     grasped: Group | None,
     shapes: Sequence[Obstacle] = (),
     clearance: float = 0.0,
+    plane_clearance: float | None = None,
 ) -> Environment | None:
     """The collision model of the transit to the pre-grasp, where nothing may be touched.
 
     ``groups`` and ``grasped`` are what the verification's :class:`Environment` was built from
     (:func:`~baseplace.world.environment.contact_groups`), its obstacles given by hand
-    (``shapes``) and its ``clearance`` [m]; here the grasped object is one more obstacle group,
-    checked against every link, the hand's included. None when there is no grasped object: the
+    (``shapes``), its ``clearance`` and ``plane_clearance`` [m]; here the grasped object is one more
+    obstacle group, checked against every link, the hand's included. None when there is no grasped object: the
     verification's environment already allows no contact.
     """
     if grasped is None or group_size(grasped) == 0:
         return None
-    return Environment(robot, {**groups, GRASPED: grasped}, shapes=shapes, clearance=clearance)
+    return Environment(
+        robot,
+        {**groups, GRASPED: grasped},
+        shapes=shapes,
+        clearance=clearance,
+        plane_clearance=plane_clearance,
+    )
 
 
 @dataclass(frozen=True)

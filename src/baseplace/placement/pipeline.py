@@ -48,7 +48,12 @@ from baseplace.world.environment import (
 )
 from baseplace.world.grasped_object import GraspedObject, find_grasped_object
 from baseplace.world.obstacles import Obstacle, obstacles_key
-from baseplace.world.sensor_resolution import Group, check_clearance, derived_clearance
+from baseplace.world.sensor_resolution import (
+    Group,
+    check_clearance,
+    derived_clearance,
+    derived_plane_clearance,
+)
 from baseplace.world.support_plane import RADIUS
 
 POSE_ONLY_CHECKS: dict[str, Any] = {"motion": None, "robustness": RobustnessSettings(samples=0)}
@@ -316,10 +321,11 @@ def scene_checks(
             # near it the cloud's points and the exact plane it stands on, kept at the clearance
             groups, object_voxels = contact_groups(terrain.voxels, voxels, obj, cache.points)
             kept = clearance_of(groups, s.clearance, cache.points, obj)
+            plane, kept = plane_clearance_of(groups, s.clearance, kept)
             hand = Environment(robot, groups, grasped=object_voxels, hand_arm=arm_name, shapes=obstacles,
-                               clearance=kept[0])  # fmt: skip
+                               clearance=kept[0], plane_clearance=plane)  # fmt: skip
             # on the way to the pre-grasp the hand may not touch it either
-            return hand, transit_environment(robot, groups, object_voxels, obstacles, kept[0]), kept
+            return hand, transit_environment(robot, groups, object_voxels, obstacles, kept[0], plane), kept
 
         env, transit, (clearance, clearance_note) = cache.per_object(
             ("environment", robot, arm_name, key, s.resolution, s.support_dist, object_key(obj),
@@ -366,6 +372,21 @@ def clearance_of(
     p = np.asarray(points, dtype=float).reshape(-1, 3)
     p = p[np.all(np.isfinite(p), axis=1)]
     return derived_clearance(None, p[grasped.footprint_distance(p[:, :2]) <= RADIUS])
+
+
+def plane_clearance_of(
+    groups: dict[str, Group], given: float | None, kept: tuple[float, str]
+) -> tuple[float | None, tuple[float, str]]:
+    """The clearance [m] from the exact support plane (None: ``kept``'s), and ``kept`` with it noted.
+
+    A given clearance holds for the plane too; a derived one is the plane's own
+    (:func:`~baseplace.world.sensor_resolution.derived_plane_clearance`).
+    """
+    plane = support_plane(groups)
+    if given is not None or plane is None:
+        return None, kept
+    metres, note = derived_plane_clearance(plane)
+    return metres, (kept[0], f"{kept[1]}; from {note}: {metres * 1e3:.1f} mm")
 
 
 @dataclass
@@ -421,8 +442,9 @@ def object_checks(
         kept = NO_FINE_SCENE
         if grasped is not None:
             kept = clearance_of(groups, clearance, np.zeros((0, 3)) if points is None else points, grasped)
+        plane, kept = plane_clearance_of(groups, clearance, kept)
         environment = Environment(robot, groups, grasped=object_voxels, hand_arm=hand_arm, shapes=obstacles,
-                                  clearance=kept[0])  # fmt: skip
+                                  clearance=kept[0], plane_clearance=plane)  # fmt: skip
         return environment, groups, object_voxels, kept[1]
 
     if cache is None:
@@ -435,7 +457,9 @@ def object_checks(
     checker = None
     if motion is not None:  # the way to the pre-grasp must avoid the object too
         arm = robot.arm(arm_name)
-        transit = transit_environment(robot, groups, object_voxels, obstacles, environment.clearance)
+        transit = transit_environment(
+            robot, groups, object_voxels, obstacles, environment.clearance, environment.plane_clearance
+        )
         checker = MotionChecker(robot, arm, environment if transit is None else transit,
                                 None if transit is None else environment, motion)  # fmt: skip
     return ObjectChecks(environment, checker, note)

@@ -167,6 +167,8 @@ class Environment:
             reported as its :attr:`~baseplace.world.obstacles.Obstacle.label` (``obstacle box#0``).
         clearance: the distance [m] to the parts at sensor resolution below which a link touches
             them (>= 0).
+        plane_clearance: the distance [m] to the exact support plane below which a link touches
+            it (:func:`~baseplace.world.sensor_resolution.derived_plane_clearance`); None: ``clearance``.
     """
 
     def __init__(
@@ -178,9 +180,12 @@ class Environment:
         hand_arm: str | None = None,
         shapes: Sequence[Obstacle] = (),
         clearance: float = 0.0,
+        plane_clearance: float | None = None,
     ) -> None:
         check_clearance(clearance)
+        check_clearance(plane_clearance)
         self.clearance = float(clearance)
+        self.plane_clearance = plane_clearance
         self.robot = robot
         self.model = robot.model
         self._self = _self_collision(robot) if self_collision else None
@@ -207,7 +212,7 @@ class Environment:
                 for k in range(n_robot):
                     if name != GRASPED or k not in self.hand_ids:
                         self.geom.addCollisionPair(pin.CollisionPair(k, gid))
-                        margins.append(margin(part, self.clearance))
+                        margins.append(margin(part, self.clearance, plane_clearance))
         self.shapes = tuple(shapes)
         self._T_world_env: dict[int, pin.SE3] = {}  # the shapes' poses; voxels are in the world frame
         for shape in self.shapes:

@@ -134,12 +134,15 @@ def group_size(group: Group) -> int:
     return sum(len(p) for p in group_parts(group))
 
 
-def margin(part: VoxelMap | SupportPlane, clearance: float) -> float:
+def margin(part: VoxelMap | SupportPlane, clearance: float, plane_clearance: float | None = None) -> float:
     """The distance [m] below which a link touches ``part`` (coal's security margin).
 
     The clearance plus :data:`SURFACE_ALLOWANCE` from the (denoised) point cells, the clearance from
-    the exact plane and other cells of at most :data:`MAX_FINE`, nothing from coarser voxels.
+    the other cells of at most :data:`MAX_FINE`, nothing from coarser voxels; from the exact plane
+    ``plane_clearance`` when given (:func:`derived_plane_clearance`), else the clearance.
     """
+    if isinstance(part, SupportPlane) and plane_clearance is not None:
+        return plane_clearance
     if isinstance(part, VoxelMap) and part.resolution <= FINE + 1e-12:
         return clearance + SURFACE_ALLOWANCE
     return clearance if is_fine(part) else 0.0
@@ -206,6 +209,27 @@ def derived_clearance(plane: SupportPlane | None, points: ArrayLike | None = Non
     floor = f", at least {MIN_CLEARANCE * 1e3:.0f} mm" if metres == MIN_CLEARANCE else ""
     return metres, (
         f"3 sigma of the support plane's residuals (sigma {sigma * 1e3:.1f} mm, {plane.slab.points} points{floor})"
+    )
+
+
+def derived_plane_clearance(plane: SupportPlane) -> tuple[float, str]:
+    """The default clearance [m] from the exact support plane, and how it was derived.
+
+    The plane is fitted to thousands of points: where its surface lies is known to its fit's
+    standard error, sigma / sqrt(points), not to one point's noise. Keeping 3 sigma of the points'
+    noise from it counted the noise that the fit had averaged away (bench/find_rate_refusals.py,
+    dev seeds 25000-25059: the fitted plane lay 0.0-0.5 mm above the true table top while the hand
+    was refused at 3.6 and 6.0 mm over it, the margin 9 mm). So :data:`CLEARANCE_SIGMAS` standard
+    errors, at least :data:`MIN_CLEARANCE` (a sensor's calibration error and a real top's unevenness,
+    well above the 0.5 mm measured bias of the fit).
+    """
+    sigma, n = plane.slab.sigma, max(plane.slab.points, 1)
+    error = sigma / math.sqrt(n)
+    metres = max(CLEARANCE_SIGMAS * error, MIN_CLEARANCE)
+    floor = f", at least {MIN_CLEARANCE * 1e3:.0f} mm" if metres == MIN_CLEARANCE else ""
+    return metres, (
+        f"the support plane: 3 standard errors of its fit (sigma {sigma * 1e3:.1f} mm / sqrt({n}) = "
+        f"{error * 1e3:.2f} mm{floor})"
     )
 
 
