@@ -18,7 +18,7 @@ from test_kinematics import pinocchio_fk
 COARSE = {
     "samples": 300_000,
     "seed": 5,
-    "voxel_size": 0.15,
+    "voxel_size": 0.2,
     "orientation_resolution": 1.6,
     "support_threshold": 0.0,
 }
