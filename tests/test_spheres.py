@@ -10,6 +10,12 @@ from baseplace.robots.model import Robot
 from baseplace.robots.spheres import SphereModel
 
 
+@pytest.fixture(scope="module")
+def tiago_spheres() -> SphereModel:
+    """TIAGo's sphere model with its joint-pair tables (built once: it calibrates on 131 k samples)."""
+    return SphereModel(Robot("tiago"))
+
+
 @pytest.mark.parametrize("name", ["tiago", "tiago_dual"])  # dual: the other arm at its reference
 def test_sphere_model_misses_few_coal_collisions(name: str) -> None:
     robot = Robot(name)
@@ -66,15 +72,14 @@ def _brute_force(robot: Robot, model: SphereModel, Q: np.ndarray, grow: float) -
     return out
 
 
-def test_kernel_is_the_sphere_verdict_up_to_the_table_slack() -> None:
+def test_kernel_is_the_sphere_verdict_up_to_the_table_slack(tiago_spheres: SphereModel) -> None:
     """Bounds only skip work and joint-pair tables only err towards colliding, by their slack.
 
     Every configuration whose spheres overlap is called colliding, and every one called
     colliding has spheres within the largest table slack of each other.
     """
-    robot = Robot("tiago")
-    arm = robot.arm()
-    model = SphereModel(robot)
+    model = tiago_spheres
+    robot, arm = model.robot, model.arm
     assert len(model.table_joints) > 0 and 0 < model.table_delta.max() <= 0.004
     Q = arm.sample(np.random.default_rng(31), 400)
     fast = model.colliding_arm(arm, Q)
@@ -85,11 +90,10 @@ def test_kernel_is_the_sphere_verdict_up_to_the_table_slack() -> None:
     assert not np.any(fast & ~grown)  # colliding only within the slack
 
 
-def test_configurations_beyond_the_tables_use_the_hierarchy() -> None:
+def test_configurations_beyond_the_tables_use_the_hierarchy(tiago_spheres: SphereModel) -> None:
     """Joint values outside the limits (no table covers them) get the exact sphere verdict."""
-    robot = Robot("tiago")
-    arm = robot.arm()
-    model = SphereModel(robot)
+    model = tiago_spheres
+    robot, arm = model.robot, model.arm
     push: set[int] = set()  # joints that put every table out of range, chosen greedily
     for J in model.table_joints:
         if not push & set(J[J >= 0].tolist()):
