@@ -15,6 +15,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError
@@ -28,7 +29,7 @@ from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Robot
 from baseplace.terrain.polygons import footprint_outline
 from baseplace.terrain.voxels import VoxelMap
-from baseplace.world.environment import Environment, HandFilter
+from baseplace.world.environment import GRASPED, Environment, HandFilter
 from baseplace.world.occupancy import OccupancyGrid
 
 
@@ -78,13 +79,33 @@ def hand_feasible(
 
     A grasp whose hand touches an obstacle fails the whole-robot check from every base pose
     (:class:`~baseplace.world.environment.HandFilter`); skipping it saves a verifier call per
-    base pose and loses nothing.
+    base pose and loses nothing. The hand is checked as the environment checks it: with each
+    obstacle's security margin (the clearance from the parts at sensor resolution), so a hand
+    the verifier would find touching a part is not "clear" here at zero margin.
     """
     obstacles = environment.obstacle_geometries  # the voxels and the obstacles given by hand
     if not obstacles:
         return np.ones(len(grasps), dtype=bool)
     hand = HandFilter(robot, arm_name, environment.geom)  # the environment's own meshes, not a second load
-    return np.array([hand.clear(g, obstacles) for g in grasps], dtype=bool)
+    margins = obstacle_margins(environment)
+    return np.array([hand.clear(g, obstacles, margins) for g in grasps], dtype=bool)
+
+
+def obstacle_margins(environment: Environment) -> list[float]:
+    """Per obstacle of ``environment.obstacle_geometries``, the security margin [m] its checks use.
+
+    Read from the environment's own collision requests (every robot geometry pairs with an
+    obstacle under the same margin), so the hand filter cannot drift from the verifier.
+    """
+    geom, requests = environment.geom, environment.geom_data.collisionRequests
+    out = []
+    for gid in environment.env_ids:
+        if geom.geometryObjects[gid].name == GRASPED:
+            continue
+        pair = geom.findCollisionPair(pin.CollisionPair(0, gid))
+        assert pair < len(geom.collisionPairs), "every robot geometry is paired with each obstacle"
+        out.append(float(requests[pair].security_margin))
+    return out
 
 
 @dataclass(frozen=True)
@@ -132,9 +153,11 @@ def irm_candidates(
     outside the footprint radius, times ``n_yaw`` headings, are scored by the best reachability
     of any grasp (``rmap.inverse``) whose hand alone is clear of the obstacles
     (:func:`hand_feasible`); poses whose footprint disc risks collision on the grid
-    (:func:`occupancy_risk`) are dropped. From the best score down, each pose's grasps are tried
-    in order of their value with the shared :class:`~baseplace.placement.verify.Verifier`, until
-    ``count`` poses passed or ``max_checks`` checks were spent.
+    (:func:`occupancy_risk`) are dropped. The (pose, grasp) pairs are checked with the shared
+    :class:`~baseplace.placement.verify.Verifier` positions before headings (:func:`search_order`):
+    each position's best pair first, ranked by its value (with ``motion``, the lower of the grasp's
+    and its pre-grasp's value), then each position's second best, until ``count`` poses passed or
+    ``max_checks`` checks were spent.
 
     Args:
         robot: the robot.
@@ -178,29 +201,68 @@ def irm_candidates(
         env = Environment(robot, VoxelMap(0.025, np.zeros((0, 3), dtype=np.int64)))
     values = np.stack([rmap.inverse(g, T) for g in G]) if len(T) else np.zeros((len(G), 0))
     values[~hand_feasible(robot, rmap.info.arm, G, env)] = 0.0
-    best = values.max(axis=0)
+    rank = (
+        values if motion is None or not len(T) else np.minimum(values, _pregrasp_values(rmap, G, T, motion))
+    )
 
     arm = robot.arm(rmap.info.arm)
     ik = DampedLeastSquaresIK(arm)
     outline = footprint_outline(robot.spec.footprint_radius, robot.spec.footprint_polygon)
     verifiers = [Verifier(arm, ik, env, g[None], {}, outline, motion=motion) for g in G]
     found: list[Placement] = []
+    placed: set[int] = set()
     checks = 0
-    for i in np.argsort(-best, kind="stable"):
-        if best[i] <= 0 or checks >= s.max_checks or len(found) >= s.count:
+    for k, i in search_order(values, rank, s.n_yaw):
+        if checks >= s.max_checks or len(found) >= s.count:
             break
-        if any(math.dist(poses[i, :2], c.xy) < s.separation for c in found):
+        if i in placed or any(math.dist(poses[i, :2], c.xy) < s.separation for c in found):
             continue
-        for k in np.argsort(-values[:, i], kind="stable"):
-            if values[k, i] <= 0 or checks >= s.max_checks:
-                break
-            checks += 1
-            placement = verifiers[k].check(Candidate(T[i], -1, float(values[k, i])), rng)
-            if placement is not None:
-                approach = ObjectApproach("irm", float(math.dist(poses[i, :2], p[:2])), -1, int(k))
-                found.append(dataclasses.replace(placement, approach=approach))
-                break
+        checks += 1
+        placement = verifiers[k].check(Candidate(T[i], -1, float(values[k, i])), rng)
+        if placement is not None:
+            placed.add(int(i))
+            approach = ObjectApproach("irm", float(math.dist(poses[i, :2], p[:2])), -1, int(k))
+            found.append(dataclasses.replace(placement, approach=approach))
+    found.sort(key=lambda c: -c.reachability)
     return found
+
+
+def search_order(values: NDArray[np.floating], rank: NDArray[np.floating], n_yaw: int) -> NDArray[np.int64]:
+    """The (grasp, pose) checks of the search, (C, 2), positions before headings.
+
+    ``values`` (K, N): each grasp's map value at each pose, poses grouped by position (``n_yaw``
+    headings each); ``rank`` (K, N): the value to order by (at most ``values``). Only pairs with a
+    value > 0 are checked. Each position's best (heading, grasp) pair comes first, positions by
+    that pair's rank; then each position's second best pair, and so on: a position blocked at
+    every heading (its footprint, an obstacle beside it, an approach out of reach) costs one check
+    per round, not the whole budget, and the positions the map ranks lower are reached.
+    """
+    k, i = np.nonzero(values > 0)
+    r = rank[k, i]
+    by_rank = np.lexsort((i, k, -r))  # ties: a stable, deterministic order
+    k, i, r = k[by_rank], i[by_rank], r[by_rank]
+    position = i // n_yaw
+    first = np.lexsort((np.arange(len(position)), position))  # by position, best rank first within it
+    turn = np.empty(len(position), dtype=np.int64)
+    starts = np.flatnonzero(np.r_[True, position[first][1:] != position[first][:-1]])
+    counts = np.diff(np.r_[starts, len(first)])
+    turn[first] = np.arange(len(first)) - np.repeat(starts, counts)
+    order = np.lexsort((np.arange(len(turn)), turn))  # round by round, by rank within a round
+    return np.stack([k[order], i[order]], axis=1)
+
+
+def _pregrasp_values(
+    rmap: ReachabilityMap, G: FloatArray, T: FloatArray, motion: MotionChecker
+) -> NDArray[np.floating]:
+    """(K, N) the map's value of each grasp's pre-grasp (where the approach starts) at each pose.
+
+    The reaching-motion check walks the hand back along its approach axis by
+    ``motion.pregrasp_distance``; a pose from which the map holds that pose unreachable mostly fails
+    there (an IK walk that ends out of reach), so the search tries it later, not never.
+    """
+    pre = G.copy()
+    pre[:, :3, 3] -= motion.pregrasp_distance * (G[:, :3, :3] @ motion.axis)
+    return np.stack([rmap.inverse(g, T) for g in pre])
 
 
 def grasp_standoff(robot: Robot, arm_name: str | None = None) -> float:

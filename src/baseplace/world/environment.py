@@ -399,22 +399,25 @@ class HandFilter:
         T_world_tcp: ArrayLike,
         obstacles: coal.CollisionGeometry
         | list[coal.CollisionGeometry | tuple[coal.CollisionGeometry, FloatArray]],
+        margins: Sequence[float] | None = None,
     ) -> bool:
         """True if no hand geometry at ``T_world_tcp`` (4, 4) touches ``obstacles``.
 
         Each obstacle is a geometry in the world frame (an OcTree) or (geometry, its world pose (4, 4)),
-        as :attr:`Environment.obstacle_geometries` lists them.
+        as :attr:`Environment.obstacle_geometries` lists them. ``margins``: per obstacle, the distance
+        [m] below which the hand touches it (coal's security margin; default 0).
         """
         T_tcp = np.asarray(T_world_tcp, dtype=float)
-        request = coal.CollisionRequest()
         items = obstacles if isinstance(obstacles, list) else [obstacles]
         placed = []
-        for item in items:
+        for item, metres in zip(items, [0.0] * len(items) if margins is None else margins, strict=True):
             geometry, T_world = item if isinstance(item, tuple) else (item, np.eye(4))
-            placed.append((geometry, coal.Transform3s(T_world[:3, :3], T_world[:3, 3])))
+            request = coal.CollisionRequest()
+            request.security_margin = float(metres)
+            placed.append((geometry, coal.Transform3s(T_world[:3, :3], T_world[:3, 3]), request))
         for geometry, T_tcp_geom in self.parts:
             T = T_tcp @ T_tcp_geom
-            for other, at in placed:
+            for other, at, request in placed:
                 result = coal.CollisionResult()
                 if coal.collide(geometry, coal.Transform3s(T[:3, :3], T[:3, 3]), other, at, request, result):
                     return False
