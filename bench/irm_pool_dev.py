@@ -127,6 +127,12 @@ def trial(robot: Robot, rmap: Any, seed: int, cell: tuple[int, int], s: TableGri
         "checks": len(checks),
         "distinct_positions_checked": len(positions),
         "check_outcomes": dict(Counter(failure_class(r) for r in checks).most_common()),
+        "check_s_by_verdict": {
+            v: round(sum(r["ms"] for r in checks if r["verdict"] == v) / 1e3, 3)
+            for v in sorted({r["verdict"] for r in checks})
+        },
+        "slowest_check_s": round(max((r["ms"] for r in checks), default=0.0) / 1e3, 3),
+        "ok_at_check": [n + 1 for n, r in enumerate(checks) if r["verdict"] == "ok"],
         "per_position": {k: dict(v) for k, v in per_position.items()},
         "radial": {
             "candidates": len(radial),
