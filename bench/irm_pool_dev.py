@@ -193,6 +193,36 @@ def why_not_reached(robot: Robot, rmap: Any, p_est: np.ndarray, grasps: np.ndarr
     }
 
 
+def classify(block: dict[str, Any]) -> list[dict[str, Any]]:
+    """Per trial with an empty pool: how its checks failed, and why each verified radial pose was not reached."""
+    out = []
+    for t in block["trials"]:
+        if t["found"]:
+            continue
+        why: Counter[str] = Counter()
+        for r in t["radial"]["verified_not_reached_by_irm"]:
+            if not r["in_ring"]:
+                why["not in the grid's ring"] += 1
+            elif r["footprint_risk"]:
+                why["footprint occupancy_risk"] += 1
+            elif r["best_score"] <= 0:
+                why["scored 0 (rmap.inverse x hand_feasible)"] += 1
+            elif r["checks_at_grid_position"] == 0:
+                ok = str(r["grid_pose_verifies"]).startswith("ok")
+                why[
+                    "budget: never checked, grid pose verifies"
+                    if ok
+                    else "budget: never checked, grid pose fails"
+                ] += 1
+            else:
+                why["checked there, failed"] += 1
+        out.append({"seed": t["seed"], "cell": t["cell"], "checks": t["checks"],
+                    "distinct_positions_checked": t["distinct_positions_checked"],
+                    "check_outcomes": t["check_outcomes"], "radial_verified": t["radial"]["verified"],
+                    "radial_not_reached_because": dict(why)})  # fmt: skip
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--label", required=True, help="the code version: before (main) or after (the fix)")
@@ -236,7 +266,9 @@ def main() -> None:
     old = json.loads(path.read_text()) if path.is_file() else {}
     labels = {k: v for k, v in old.get("labels", {}).items() if k != args.label}
     labels[args.label] = block
-    report(NAME, {"labels": labels}, seeds=SeedSplit(dev=DEV_SEEDS, held_out=HELD_OUT), split="dev",
+    classification = {label: classify(b) for label, b in labels.items()}
+    notes = {"notes": old["notes"]} if "notes" in old else {}  # what each label ran on, written by hand
+    report(NAME, {"labels": labels, "empty_pool_classification": classification, **notes}, seeds=SeedSplit(dev=DEV_SEEDS, held_out=HELD_OUT), split="dev",
            used_seeds=args.seeds)  # fmt: skip
 
 

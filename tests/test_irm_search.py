@@ -100,9 +100,8 @@ def test_the_search_order_visits_every_position_before_a_second_heading():
     values = rng.uniform(0.0, 1.0, (grasps, positions * n_yaw)) * (
         rng.uniform(size=(grasps, positions * n_yaw)) > 0.3
     )
-    rank = values * rng.uniform(0.5, 1.0, values.shape)
-    order = [tuple(map(int, row)) for row in search_order(values, rank, n_yaw)]
-    pairs = {p: sorted(((-rank[k, i], k, i) for k, i in zip(*np.nonzero(values > 0), strict=True) if i // n_yaw == p))
+    order = [tuple(map(int, row)) for row in search_order(values, n_yaw)]
+    pairs = {p: sorted(((-values[k, i], k, i) for k, i in zip(*np.nonzero(values > 0), strict=True) if i // n_yaw == p))
              for p in range(positions)}  # fmt: skip
     expected = []
     for turn in range(grasps * n_yaw):

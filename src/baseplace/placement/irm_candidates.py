@@ -155,9 +155,8 @@ def irm_candidates(
     (:func:`hand_feasible`); poses whose footprint disc risks collision on the grid
     (:func:`occupancy_risk`) are dropped. The (pose, grasp) pairs are checked with the shared
     :class:`~baseplace.placement.verify.Verifier` positions before headings (:func:`search_order`):
-    each position's best pair first, ranked by its value (with ``motion``, the lower of the grasp's
-    and its pre-grasp's value), then each position's second best, until ``count`` poses passed or
-    ``max_checks`` checks were spent.
+    each position's best pair first, ranked by its value, then each position's second best, until
+    ``count`` poses passed or ``max_checks`` checks were spent.
 
     Args:
         robot: the robot.
@@ -201,9 +200,6 @@ def irm_candidates(
         env = Environment(robot, VoxelMap(0.025, np.zeros((0, 3), dtype=np.int64)))
     values = np.stack([rmap.inverse(g, T) for g in G]) if len(T) else np.zeros((len(G), 0))
     values[~hand_feasible(robot, rmap.info.arm, G, env)] = 0.0
-    rank = (
-        values if motion is None or not len(T) else np.minimum(values, _pregrasp_values(rmap, G, T, motion))
-    )
 
     arm = robot.arm(rmap.info.arm)
     ik = DampedLeastSquaresIK(arm)
@@ -212,7 +208,7 @@ def irm_candidates(
     found: list[Placement] = []
     placed: set[int] = set()
     checks = 0
-    for k, i in search_order(values, rank, s.n_yaw):
+    for k, i in search_order(values, s.n_yaw):
         if checks >= s.max_checks or len(found) >= s.count:
             break
         if i in placed or any(math.dist(poses[i, :2], c.xy) < s.separation for c in found):
@@ -227,18 +223,18 @@ def irm_candidates(
     return found
 
 
-def search_order(values: NDArray[np.floating], rank: NDArray[np.floating], n_yaw: int) -> NDArray[np.int64]:
+def search_order(values: NDArray[np.floating], n_yaw: int) -> NDArray[np.int64]:
     """The (grasp, pose) checks of the search, (C, 2), positions before headings.
 
     ``values`` (K, N): each grasp's map value at each pose, poses grouped by position (``n_yaw``
-    headings each); ``rank`` (K, N): the value to order by (at most ``values``). Only pairs with a
-    value > 0 are checked. Each position's best (heading, grasp) pair comes first, positions by
-    that pair's rank; then each position's second best pair, and so on: a position blocked at
-    every heading (its footprint, an obstacle beside it, an approach out of reach) costs one check
-    per round, not the whole budget, and the positions the map ranks lower are reached.
+    headings each). Only pairs with a value > 0 are checked. Each position's best (heading, grasp)
+    pair comes first, positions by that pair's value; then each position's second best pair, and so
+    on: a position blocked at every heading (its footprint, an obstacle beside it, an arm that
+    cannot move there) costs one check per round, not the whole budget, and the positions the map
+    values lower are reached.
     """
     k, i = np.nonzero(values > 0)
-    r = rank[k, i]
+    r = values[k, i]
     by_rank = np.lexsort((i, k, -r))  # ties: a stable, deterministic order
     k, i, r = k[by_rank], i[by_rank], r[by_rank]
     position = i // n_yaw
@@ -249,20 +245,6 @@ def search_order(values: NDArray[np.floating], rank: NDArray[np.floating], n_yaw
     turn[first] = np.arange(len(first)) - np.repeat(starts, counts)
     order = np.lexsort((np.arange(len(turn)), turn))  # round by round, by rank within a round
     return np.stack([k[order], i[order]], axis=1)
-
-
-def _pregrasp_values(
-    rmap: ReachabilityMap, G: FloatArray, T: FloatArray, motion: MotionChecker
-) -> NDArray[np.floating]:
-    """(K, N) the map's value of each grasp's pre-grasp (where the approach starts) at each pose.
-
-    The reaching-motion check walks the hand back along its approach axis by
-    ``motion.pregrasp_distance``; a pose from which the map holds that pose unreachable mostly fails
-    there (an IK walk that ends out of reach), so the search tries it later, not never.
-    """
-    pre = G.copy()
-    pre[:, :3, 3] -= motion.pregrasp_distance * (G[:, :3, :3] @ motion.axis)
-    return np.stack([rmap.inverse(g, T) for g in pre])
 
 
 def grasp_standoff(robot: Robot, arm_name: str | None = None) -> float:
