@@ -144,9 +144,18 @@ PROTOCOLS = {  # version: (where the robot's model of the bottle begins, seeds, 
         SeedSplit(dev=(0,), held_out=(14, 15, 16)),
         MotionSettings(time_limit=30.0, max_checks=500, point_step=None),  # v4's planner, as v4 ran it
     ),
+    6: (
+        "support",  # not used by the product's models
+        SeedSplit(dev=(0,), held_out=(17, 18, 19)),
+        MotionSettings(time_limit=30.0, max_checks=500, point_step=None),  # v5's planner
+    ),
 }
-SUPPORT_MODEL = {1: "voxels", 2: "voxels", 3: "slab", 4: "slab", 5: "product"}
-PROTOCOL_FILE = {4: "docs/protocols/execution_table_grid.md", 5: "docs/protocols/execution_table_grid_v5.md"}
+SUPPORT_MODEL = {1: "voxels", 2: "voxels", 3: "slab", 4: "slab", 5: "product", 6: "product"}
+PROTOCOL_FILE = {
+    4: "docs/protocols/execution_table_grid.md",
+    5: "docs/protocols/execution_table_grid_v5.md",
+    6: "docs/protocols/execution_table_grid_v6.md",
+}
 """Protocols committed as files (v1-v3 were written in this docstring)."""
 BOOTSTRAP = 2000  # the robot's model of the table top around the bottle
 ROBUST = RobustnessSettings(samples=64, ik_solutions=1, pool=10)  # bench_robustness dev's choice
