@@ -21,13 +21,12 @@ import argparse
 import json
 import math
 import sys
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from baseplace.terrain.voxels import VoxelMap
-from baseplace.world.environment import contact_groups, support_plane
-from baseplace.world.grasped_object import GraspedObject
 from baseplace.world.sensor_resolution import (
     EDGE_CELL,
     FINE,
@@ -37,10 +36,9 @@ from baseplace.world.sensor_resolution import (
 )
 from baseplace_experiments.results import RunClock, write_results
 
-SIGMA = 0.003
-TOP = 0.75
-BOTTLE = (0.0, 0.0)
-RADIUS, HEIGHT = 0.035, 0.25
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from test_clearance_from_true_surface import HEIGHT, RADIUS, SIGMA, TOP, _box_points, noisy_scene
+
 BOX_HALF = 0.05
 PROBE = 0.005
 """Probe sphere radius [m] (a fingertip)."""
@@ -49,6 +47,7 @@ STEPS = np.arange(0.0, 0.040, 0.0002)
 
 
 def _cylinder_points(xy: tuple[float, float], step: float = 0.01) -> np.ndarray:
+    """A neighbour bottle's side, its rim row included (the tests' stops a row below), and top."""
     n = math.ceil(2 * math.pi * RADIUS / step)
     a, z = np.meshgrid(
         np.linspace(0, 2 * math.pi, n, endpoint=False), np.arange(TOP, TOP + HEIGHT + 1e-9, step)
@@ -61,29 +60,8 @@ def _cylinder_points(xy: tuple[float, float], step: float = 0.01) -> np.ndarray:
     return np.concatenate([side, top])
 
 
-def _box_points(centre: tuple[float, float], half: float, step: float = 0.01) -> np.ndarray:
-    g = np.arange(-half, half + 1e-9, step)
-    A, B = np.meshgrid(g, g)
-    z = np.arange(TOP, TOP + 2 * half + 1e-9, step)
-    S, Z = np.meshgrid(g, z)
-    parts = [np.c_[centre[0] + A.ravel(), centre[1] + B.ravel(), np.full(A.size, TOP + 2 * half)]]
-    for sgn in (-1, 1):
-        parts.append(np.c_[centre[0] + S.ravel(), np.full(S.size, centre[1] + sgn * half), Z.ravel()])
-        parts.append(np.c_[np.full(S.size, centre[0] + sgn * half), centre[1] + S.ravel(), Z.ravel()])
-    return np.unique(np.round(np.concatenate(parts), 9), axis=0)
-
-
 def _model(neighbour: np.ndarray, footprint: Any, seed: int) -> tuple[list[tuple[VoxelMap, float]], float]:
-    rng = np.random.default_rng(seed)
-    X, Y = np.meshgrid(np.arange(-0.4, 0.4, 0.01), np.arange(-0.4, 0.4, 0.01))
-    table = np.c_[X.ravel(), Y.ravel(), np.full(X.size, TOP)]
-    table = table[(np.hypot(X.ravel() - BOTTLE[0], Y.ravel() - BOTTLE[1]) > RADIUS) & ~footprint(table)]
-    clean = np.concatenate([table, _cylinder_points(BOTTLE), neighbour])
-    points = clean + rng.normal(0.0, SIGMA, clean.shape)
-    voxels = VoxelMap.from_points(points)
-    grasped = GraspedObject.cylinder([*BOTTLE, TOP + HEIGHT / 2], RADIUS, HEIGHT)
-    groups, _ = contact_groups(voxels, voxels, grasped, points)
-    plane = support_plane(groups)
+    groups, plane = noisy_scene(neighbour, footprint, seed)
     clearance, _ = derived_clearance(plane)
     parts = [(p, margin(p, clearance)) for g in groups.values() for p in group_parts(g)
              if isinstance(p, VoxelMap) and p.resolution <= EDGE_CELL + 1e-12 and len(p)]  # fmt: skip

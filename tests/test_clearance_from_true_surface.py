@@ -56,8 +56,10 @@ def _box_points(centre, half: float, step: float = 0.01) -> np.ndarray:
     return np.unique(np.round(np.concatenate(parts), 9), axis=0)
 
 
-def _model(neighbour: np.ndarray, footprint, seed: int):
-    """(parts: (geometry, security margin) as Environment checks them, clearance) of a noisy scene."""
+def noisy_scene(neighbour: np.ndarray, footprint, seed: int):
+    """(contact groups, the exact support plane or None) of the grasped bottle on a table beside
+    ``neighbour`` (its true surface points; ``footprint`` tells the table points it stands on), all
+    sampled every centimetre with :data:`SIGMA` of Gaussian noise (also bench/sensor_resolution_probes.py)."""
     rng = np.random.default_rng(seed)
     X, Y = np.meshgrid(np.arange(-0.4, 0.4, 0.01), np.arange(-0.4, 0.4, 0.01))
     table = np.c_[X.ravel(), Y.ravel(), np.full(X.size, TOP)]
@@ -67,7 +69,12 @@ def _model(neighbour: np.ndarray, footprint, seed: int):
     voxels = VoxelMap.from_points(points)
     grasped = GraspedObject.cylinder([*BOTTLE, TOP + HEIGHT / 2], RADIUS, HEIGHT)
     groups, _ = contact_groups(voxels, voxels, grasped, points)
-    plane = support_plane(groups)
+    return groups, support_plane(groups)
+
+
+def _model(neighbour: np.ndarray, footprint, seed: int):
+    """(parts: (geometry, security margin) as Environment checks them, clearance) of a noisy scene."""
+    groups, plane = noisy_scene(neighbour, footprint, seed)
     assert plane is not None
     clearance, _ = derived_clearance(plane)
     assert 2.5 * SIGMA <= clearance <= 3.5 * SIGMA  # 3 sigma of the plane's residuals
