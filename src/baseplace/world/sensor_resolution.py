@@ -229,7 +229,7 @@ def derived_plane_clearance(plane: SupportPlane) -> tuple[float, str]:
     floor = f", at least {MIN_CLEARANCE * 1e3:.0f} mm" if metres == MIN_CLEARANCE else ""
     return metres, (
         f"the support plane: 3 standard errors of its fit (sigma {sigma * 1e3:.1f} mm / sqrt({n}) = "
-        f"{error * 1e3:.2f} mm{floor})"
+        f"{error * 1e3:.3f} mm{floor})"
     )
 
 
