@@ -37,27 +37,21 @@ from baseplace.world.sensor_resolution import (
 from baseplace_experiments.results import RunClock, write_results
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from test_clearance_from_true_surface import HEIGHT, RADIUS, SIGMA, TOP, _box_points, noisy_scene
+from test_clearance_from_true_surface import (
+    HEIGHT,
+    RADIUS,
+    SIGMA,
+    TOP,
+    _box_points,
+    _cylinder_points,
+    noisy_scene,
+)
 
 BOX_HALF = 0.05
 PROBE = 0.005
 """Probe sphere radius [m] (a fingertip)."""
 SEEDS = (2511, 2512, 2513)
 STEPS = np.arange(0.0, 0.040, 0.0002)
-
-
-def _cylinder_points(xy: tuple[float, float], step: float = 0.01) -> np.ndarray:
-    """A neighbour bottle's side, its rim row included (the tests' stops a row below), and top."""
-    n = math.ceil(2 * math.pi * RADIUS / step)
-    a, z = np.meshgrid(
-        np.linspace(0, 2 * math.pi, n, endpoint=False), np.arange(TOP, TOP + HEIGHT + 1e-9, step)
-    )
-    side = np.c_[xy[0] + RADIUS * np.cos(a.ravel()), xy[1] + RADIUS * np.sin(a.ravel()), z.ravel()]
-    g = np.arange(-RADIUS, RADIUS + 1e-9, step)
-    X, Y = np.meshgrid(g, g)
-    inside = np.hypot(X, Y).ravel() <= RADIUS
-    top = np.c_[xy[0] + X.ravel()[inside], xy[1] + Y.ravel()[inside], np.full(inside.sum(), TOP + HEIGHT)]
-    return np.concatenate([side, top])
 
 
 def _model(neighbour: np.ndarray, footprint: Any, seed: int) -> tuple[list[tuple[VoxelMap, float]], float]:
@@ -149,7 +143,7 @@ def _sdf_box(p: np.ndarray, centre: tuple[float, float]) -> np.ndarray:
 def measure(name: str) -> dict[str, Any]:
     if name == "bottle":
         centre = (0.11, 0.0)
-        shape = _cylinder_points(centre)
+        shape = _cylinder_points(centre, rim_row=True)
         sdf, probes = _sdf_cylinder, bottle_probes(centre)
 
         def footprint(p: np.ndarray) -> np.ndarray:

@@ -32,9 +32,11 @@ RADIUS, HEIGHT = 0.035, 0.25
 PROBE = 0.04  # edge of the probe cube [m] (about a palm's corner)
 
 
-def _cylinder_points(xy, step: float = 0.01) -> np.ndarray:
+def _cylinder_points(xy, step: float = 0.01, rim_row: bool = False) -> np.ndarray:
+    """A bottle's side every ``step`` (up to a row below the rim, or the rim with ``rim_row``) and its top."""
     n = math.ceil(2 * math.pi * RADIUS / step)
-    a, z = np.meshgrid(np.linspace(0, 2 * math.pi, n, endpoint=False), np.arange(TOP, TOP + HEIGHT, step))
+    rows = np.arange(TOP, TOP + HEIGHT + (1e-9 if rim_row else 0.0), step)
+    a, z = np.meshgrid(np.linspace(0, 2 * math.pi, n, endpoint=False), rows)
     side = np.c_[xy[0] + RADIUS * np.cos(a.ravel()), xy[1] + RADIUS * np.sin(a.ravel()), z.ravel()]
     g = np.arange(-RADIUS, RADIUS + 1e-9, step)
     X, Y = np.meshgrid(g, g)
