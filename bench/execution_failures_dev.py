@@ -134,6 +134,10 @@ class Recorder:
                 row["contacts"] = [list(c) for c in planner.last_contacts]
                 blocked = planner._blocked
                 row["blocked"] = None if blocked is None else (np.array(blocked[0]), blocked[1])
+                if blocked is not None and blocked[1] == "transit":  # joint_path checks its two ends
+                    row["blocked_state"] = (
+                        "start" if np.array_equal(blocked[0], planner.q_start) else "pregrasp"
+                    )
                 if not refused:
                     limit = planner.settings.max_checks
                     row["transit"] = ("end_state_collides" if blocked is not None and blocked[1] == "transit"
@@ -262,7 +266,12 @@ def cause(row: dict[str, Any]) -> str:
     if row["outcome"] == "no_motion" and row["oracle_grasps_free"] == 0:
         return "no_motion: oracle finds no free grasp either"
     if row["outcome"] == "no_motion":
-        phases = Counter(m.get("transit", m.get("phase")) for m in row["motions"])
+        phases = Counter(
+            f"{m['transit']} ({m['blocked_state']})"
+            if "blocked_state" in m
+            else m.get("transit", m.get("phase"))
+            for m in row["motions"]
+        )
         return "no_motion: " + "+".join(f"{k} x{v}" for k, v in sorted(phases.items()))
     return row["outcome"]
 
