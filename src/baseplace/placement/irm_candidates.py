@@ -15,7 +15,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError
@@ -29,7 +28,7 @@ from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Robot
 from baseplace.terrain.polygons import footprint_outline
 from baseplace.terrain.voxels import VoxelMap
-from baseplace.world.environment import GRASPED, Environment, HandFilter
+from baseplace.world.environment import Environment, HandFilter
 from baseplace.world.occupancy import OccupancyGrid
 
 
@@ -87,25 +86,8 @@ def hand_feasible(
     if not obstacles:
         return np.ones(len(grasps), dtype=bool)
     hand = HandFilter(robot, arm_name, environment.geom)  # the environment's own meshes, not a second load
-    margins = obstacle_margins(environment)
+    margins = environment.obstacle_margins
     return np.array([hand.clear(g, obstacles, margins) for g in grasps], dtype=bool)
-
-
-def obstacle_margins(environment: Environment) -> list[float]:
-    """Per obstacle of ``environment.obstacle_geometries``, the security margin [m] its checks use.
-
-    Read from the environment's own collision requests (every robot geometry pairs with an
-    obstacle under the same margin), so the hand filter cannot drift from the verifier.
-    """
-    geom, requests = environment.geom, environment.geom_data.collisionRequests
-    out = []
-    for gid in environment.env_ids:
-        if geom.geometryObjects[gid].name == GRASPED:
-            continue
-        pair = geom.findCollisionPair(pin.CollisionPair(0, gid))
-        assert pair < len(geom.collisionPairs), "every robot geometry is paired with each obstacle"
-        out.append(float(requests[pair].security_margin))
-    return out
 
 
 @dataclass(frozen=True)

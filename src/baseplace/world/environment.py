@@ -198,6 +198,7 @@ class Environment:
         groups = dict(obstacles) if isinstance(obstacles, Mapping) else {"obstacle": obstacles}
         self.hand_ids = set(hand_geometry_ids(robot, self.geom, hand_arm)) if grasped is not None else set()
         self.env_ids: list[int] = []
+        self._margin: dict[int, float] = {}  # per scene geometry: the security margin of its pairs
         margins: list[float] = []  # per collision pair
         for name, group in [*groups.items(), (GRASPED, grasped)]:
             for part in () if group is None else group_parts(group):
@@ -209,10 +210,11 @@ class Environment:
                     geometry = coal.makeOctree(np.ascontiguousarray(part.centres), part.resolution)
                 gid = self.geom.addGeometryObject(pin.GeometryObject(name, 0, pin.SE3.Identity(), geometry))
                 self.env_ids.append(gid)
+                self._margin[gid] = margin(part, self.clearance, plane_clearance)
                 for k in range(n_robot):
                     if name != GRASPED or k not in self.hand_ids:
                         self.geom.addCollisionPair(pin.CollisionPair(k, gid))
-                        margins.append(margin(part, self.clearance, plane_clearance))
+                        margins.append(self._margin[gid])
         self.shapes = tuple(shapes)
         self._T_world_env: dict[int, pin.SE3] = {}  # the shapes' poses; voxels are in the world frame
         for shape in self.shapes:
@@ -220,6 +222,7 @@ class Environment:
             gid = self.geom.addGeometryObject(obj)
             self.env_ids.append(gid)
             self._T_world_env[gid] = pin.SE3(np.asarray(shape.T_world_obstacle, dtype=float))
+            self._margin[gid] = 0.0  # exact shapes keep no margin
             for k in range(n_robot):
                 self.geom.addCollisionPair(pin.CollisionPair(k, gid))
                 margins.append(0.0)
@@ -263,6 +266,11 @@ class Environment:
             if obj.name != GRASPED:
                 out.append((obj.geometry, self._T_world_env.get(g, pin.SE3.Identity()).homogeneous))
         return out
+
+    @property
+    def obstacle_margins(self) -> list[float]:
+        """Per obstacle of :attr:`obstacle_geometries`, the distance [m] below which a link touches it."""
+        return [self._margin[g] for g in self.env_ids if self.geom.geometryObjects[g].name != GRASPED]
 
     @property
     def obstacle_tree(self) -> coal.OcTree | None:
