@@ -17,9 +17,10 @@ from baseplace.world.support_plane import SUPPORT_PLANE
 from test_sensor_resolution import _cloud, _hand_links, _table, grasp_scene  # noqa: F401 (a fixture)
 
 
-def _hand_on_plane(tiago, scene, gap: float, clearance: float | None = None) -> tuple[set[str], float]:
+def _hand_on_plane(tiago, scene, gap: float, clearance: float | None = None) -> tuple[set[str], float, str]:
     """The hand links ``place``'s checks find touching the support plane with the hand ``gap`` [m]
-    over the true table top (checked by the oracle), and the oracle's lowest hand distance."""
+    over the true table top (checked by the oracle), the oracle's lowest hand distance, and the
+    checks' clearance note."""
     oracle, q_full, point, top16, y = scene
     top = top16 + (0.016 - gap)  # the fixture's table lies 16 mm under the hand: raise it
     lowest = min(d for link, d in oracle.distances(q_full, np.eye(4), _table(top)).items()
@@ -27,35 +28,28 @@ def _hand_on_plane(tiago, scene, gap: float, clearance: float | None = None) -> 
     cloud = _cloud(point, top, y, np.random.default_rng(7))
     obj = find_grasped_object(cloud, point)
     assert obj is not None
-    env = object_checks(tiago, "arm", None, cloud, obj, None, clearance=clearance).environment
+    checks = object_checks(tiago, "arm", None, cloud, obj, None, clearance=clearance)
     arm = tiago.arm()
-    contacts = env.contacts_arm(arm, arm.from_pinocchio(q_full), np.eye(4))
-    return {link for link, what in contacts if what == SUPPORT_PLANE and link in _hand_links(tiago)}, lowest
-
-
-def _scene_args(scene):
-    _, _, point, top, y = scene
-    return point, top, y
+    contacts = checks.environment.contacts_arm(arm, arm.from_pinocchio(q_full), np.eye(4))
+    touched = {link for link, what in contacts if what == SUPPORT_PLANE and link in _hand_links(tiago)}
+    return touched, lowest, checks.clearance_note
 
 
 def test_a_finger_6mm_over_a_noisy_table_does_not_touch_the_plane(tiago, grasp_scene):  # noqa: F811
-    touched, lowest = _hand_on_plane(tiago, grasp_scene, 0.006)
+    touched, lowest, note = _hand_on_plane(tiago, grasp_scene, 0.006)
     assert lowest == pytest.approx(0.006, abs=3e-4)
     assert touched == set()
-    checks = object_checks(tiago, "arm", None, _cloud(*_scene_args(grasp_scene), np.random.default_rng(7)),
-                           find_grasped_object(_cloud(*_scene_args(grasp_scene), np.random.default_rng(7)),
-                                               grasp_scene[2]), None)  # fmt: skip
-    assert "the support plane: 3 standard errors" in checks.clearance_note
+    assert "the support plane: 3 standard errors" in note
 
 
 def test_a_finger_1mm_over_or_into_the_table_touches_the_plane(tiago, grasp_scene):  # noqa: F811
     for gap in (0.001, -0.005):
-        touched, lowest = _hand_on_plane(tiago, grasp_scene, gap)
+        touched, lowest, _ = _hand_on_plane(tiago, grasp_scene, gap)
         # coal's distance of penetrating meshes is no depth: only its sign is checked there
         assert lowest == pytest.approx(gap, abs=3e-4) if gap > 0 else lowest < 0
         assert "hand_little_flex_3_link" in touched
 
 
 def test_a_given_clearance_holds_for_the_plane(tiago, grasp_scene):  # noqa: F811
-    touched, _ = _hand_on_plane(tiago, grasp_scene, 0.006, clearance=0.009)
+    touched, _, _ = _hand_on_plane(tiago, grasp_scene, 0.006, clearance=0.009)
     assert "hand_little_flex_3_link" in touched
