@@ -240,6 +240,12 @@ def cmd_experiment_osrm(args: argparse.Namespace) -> int:
     from baseplace_experiments.results import RunClock, fixed_protocol
 
     clock = RunClock()
+    if args.protocol == 2:
+        return _experiment_osrm_v2(args, clock)
+    if args.scenes is None:
+        args.scenes = 10
+    if args.grasps is None:
+        args.grasps = 50
     if args.scenes < 1 or args.grasps < 1:
         raise InputError(f"--scenes and --grasps must be >= 1, got {args.scenes} and {args.grasps}")
     out, results_path = out_path(args.out, "--out", PLOT_SUFFIXES), _results_path(args.results)
@@ -282,6 +288,73 @@ def cmd_experiment_osrm(args: argparse.Namespace) -> int:
     lines.append(f"seed {seed} ({result['seed_role']}), {clock.seconds:.0f} s")
     result = _write_results(results_path, result, clock, lines, seeds=SEEDS, split=split, used_seeds=[seed],
                             protocol=(osrm_experiment.__doc__ or "").strip(), protocol_file=protocol_file)  # fmt: skip
+    _emit(args, result, "\n".join(lines))
+    return 0
+
+
+def _experiment_osrm_v2(args: argparse.Namespace, clock: Any) -> int:
+    """Protocol v2 of Tables I and II (docs/protocols/osrm_v2.md): several seeds, intervals, allowed grasps."""
+    from baseplace.reachability.storage import load_map
+    from baseplace.robots.model import Robot
+    from baseplace_experiments import osrm_v2
+    from baseplace_experiments.osrm_experiment import SCENE_CLASSES
+    from baseplace_experiments.results import fixed_protocol
+
+    scenes = osrm_v2.SCENES if args.scenes is None else args.scenes
+    grasps = osrm_v2.GRASPS if args.grasps is None else args.grasps
+    if args.seeds is not None:
+        seeds = list(args.seeds)
+        if set(seeds) & set(osrm_v2.SEEDS.held_out) and seeds != list(osrm_v2.SEEDS.held_out):
+            raise InputError(
+                f"held-out seeds {list(osrm_v2.SEEDS.held_out)} run only all together: use --split held-out"
+            )
+        split = (
+            "held-out"
+            if seeds == list(osrm_v2.SEEDS.held_out)
+            else "dev"
+            if seeds == list(osrm_v2.SEEDS.dev)
+            else None
+        )
+    else:
+        split = args.split or "dev"
+        seeds = list(osrm_v2.SEEDS.seeds(split))
+    if split == "held-out":
+        osrm_v2.held_out_settings_check(scenes, grasps, args.tries)
+        if args.flat_only:
+            raise InputError("a held-out protocol-v2 run covers every class: drop --flat-only")
+    results_path = _results_path(args.results)
+    v1 = None
+    if args.beside is not None:
+        try:
+            v1 = json.loads(Path(args.beside).read_text())
+        except (OSError, ValueError) as exc:
+            raise InputError(f"--beside {args.beside}: not a readable results file ({exc})") from None
+    protocol_file = fixed_protocol(osrm_v2.PROTOCOL_FILE, split)
+    robot = Robot(args.robot)
+    rmap = load_map(args.map, robot) if args.map else _default_map(args, robot)
+    classes = SCENE_CLASSES if not args.flat_only else SCENE_CLASSES[:1]
+    with _bars(args) as bars:
+        bar = bars.counter("osrm experiment v2", scenes * len(classes) * len(seeds), "scenes")
+        result = osrm_v2.run_osrm_v2(robot, rmap, seeds, scenes, grasps, args.tries, classes, bar)
+    if v1 is not None:
+        result = osrm_v2.with_v1(result, v1)
+    result["seed_role"] = split or "other"
+
+    def ci(v: Any) -> str:
+        return "-" if v is None else f"{v[0]:.0f}-{v[1]:.0f}"
+
+    lines = [f"{'scene':<16} {'strategy':<8} {'counted':>7} {'allowed':>7} {'N=1':>5} {'N=100':>6} {'95% CI':>8} "
+             f"{'allowed N=100':>13} {'95% CI':>8} {'paper':>6} {'v1':>6}"]  # fmt: skip
+    for r in result["rows"]:
+        v1_rate = None if r.get("v1") is None else r["v1"]["success_rate"]
+        lines.append(f"{r['scene']:<16} {r['strategy']:<8} {r['counted_grasps']:>7} {r['allowed_grasps']:>7} "
+                     f"{_cell(r['success_counted_N1'], '.1f'):>5} {_cell(r['success_counted_N100'], '.1f'):>6} "
+                     f"{ci(r['ci95_counted_N100']):>8} {_cell(r['success_allowed_N100'], '.1f'):>13} "
+                     f"{ci(r['ci95_allowed_N100']):>8} {_cell(r['paper_success_rate'], '.1f'):>6} "
+                     f"{_cell(v1_rate, '.1f'):>6}")  # fmt: skip
+    lines.append(f"seeds {seeds} ({result['seed_role']}), {clock.seconds:.0f} s")
+    result = _write_results(results_path, result, clock, lines, seeds=osrm_v2.SEEDS, split=split, used_seeds=seeds,
+                            protocol=(osrm_v2.__doc__ or "").strip(), protocol_file=protocol_file)  # fmt: skip
     _emit(args, result, "\n".join(lines))
     return 0
 
@@ -366,9 +439,24 @@ def add_experiment_commands(sub: Any) -> None:
                 "may touch the grasped object.")  # fmt: skip
     p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
     p.add_argument("--map", default=None, help="reachability map (default: the cached default map)")
-    p.add_argument("--scenes", type=int, default=10, help="scenes per class (default 10)")
-    p.add_argument("--grasps", type=int, default=50, help="grasp candidates per scene (default 50)")
+    p.add_argument("--protocol", type=int, choices=(1, 2), default=1,
+                   help="1: one seed, as before; 2: docs/protocols/osrm_v2.md (three seeds, intervals, allowed grasps)")  # fmt: skip
+    p.add_argument("--scenes", type=int, default=None,
+                   help="scenes per class (protocol 1, default 10) or per seed and class (protocol 2, default 7)")  # fmt: skip
+    p.add_argument("--grasps", type=int, default=None,
+                   help="grasp candidates per scene (default: protocol 1 50, protocol 2 its fixed count)")  # fmt: skip
     p.add_argument("--tries", type=int, default=100, help="N: candidates per query (default 100)")
+    p.add_argument("--split", choices=("dev", "held-out"), default=None,
+                   help="protocol 2's seed set: dev (default) or held-out (the reported tables)")  # fmt: skip
+    p.add_argument(
+        "--seeds",
+        type=_int_list,
+        default=None,
+        help="protocol 2: seeds, comma-separated (default: the split's)",
+    )
+    p.add_argument(
+        "--beside", default=None, help="protocol 2: a protocol-1 results file whose rows go beside"
+    )
     p.add_argument("--flat-only", action="store_true", help="Table I only")
     p.add_argument("--dev", action="store_true", help="run on the development seed (for choosing parameters)")
     p.add_argument("--results", default=None,

@@ -35,12 +35,14 @@ from typing import Any
 import coal
 import numpy as np
 import shapely
+from numpy.typing import NDArray
 from shapely.geometry import Polygon
 
 from baseplace.errors import BaseplaceError
 from baseplace.geometry.poses import FloatArray, invert_transforms, pose_from_xyz_rpy
 from baseplace.geometry.surface_poses import plane_base_poses
 from baseplace.placement.pipeline import POSE_ONLY_CHECKS, PlaceSettings, place
+from baseplace.placement.verified import Placement
 from baseplace.reachability.rmap import ReachabilityMap
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Robot
@@ -49,6 +51,7 @@ from baseplace.terrain.pipeline import Terrain, terrain_from_points
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import HandFilter
 from baseplace.world.grasped_object import GraspedObject
+from baseplace_experiments.allowed_grasps import AllowedGrasps, Contact, scene_solids
 from baseplace_experiments.results import SeedSplit
 
 SCENE_CLASSES = (
@@ -199,6 +202,7 @@ class _Tally:
     tries_to_success: list[int] = field(default_factory=list)
     on_incline: int = 0
     touched: Counter[str] = field(default_factory=Counter)
+    touched_true_scene: Counter[str] = field(default_factory=Counter)
 
     def merge(self, other: _Tally) -> None:
         """Add another scene's tally to this one."""
@@ -211,6 +215,7 @@ class _Tally:
         self.tries_to_success += other.tries_to_success
         self.on_incline += other.on_incline
         self.touched.update(other.touched)
+        self.touched_true_scene.update(other.touched_true_scene)
 
 
 @dataclass(frozen=True)
@@ -230,7 +235,23 @@ class GroundTruth:
     def reachable(self, robot: Robot, rmap: ReachabilityMap, scene: Scene, grasp: FloatArray,
                   rng: np.random.Generator) -> bool:  # fmt: skip
         """True if IK reaches ``grasp`` from some valid base pose (closest poses first)."""
-        arm = robot.arm(rmap.info.arm)
+        ik = DampedLeastSquaresIK(robot.arm(rmap.info.arm), restarts=self.restarts)
+        T_world_base, _ = self.base_poses(robot, rmap, scene, grasp)
+        step = 24 * self.orientations
+        for start in range(0, len(T_world_base), step):
+            _, ok = ik.solve_batch(invert_transforms(T_world_base[start : start + step]) @ grasp, rng)
+            if ok.any():
+                return True
+        return False
+
+    def base_poses(self, robot: Robot, rmap: ReachabilityMap, scene: Scene,
+                   grasp: FloatArray) -> tuple[FloatArray, NDArray[np.int64]]:  # fmt: skip
+        """The valid base poses within the map's reach of ``grasp`` (4, 4), closest positions first.
+
+        Returns:
+            (P, 4, 4) world base poses on the true surfaces (each position with its
+            ``orientations`` headings in a row) and (P,) the id of the plane each stands on.
+        """
         reach = rmap.horizontal_reach
         g = np.arange(-reach, reach + 1e-9, self.grid)
         X, Y = np.meshgrid(grasp[0, 3] + g, grasp[1, 3] + g)
@@ -255,21 +276,13 @@ class GroundTruth:
                 if scene.box is not None:
                     ok &= shapely.distance(Polygon(scene.box.polygon), points[sel]) > radius
             valid[np.flatnonzero(sel)[ok]] = True
-        ik = DampedLeastSquaresIK(arm, restarts=self.restarts)
         gammas = np.arange(self.orientations) * (2 * math.pi / self.orientations)
-        for start in range(0, int(valid.sum()), 24):
-            chunk = xy[valid][start : start + 24]
-            chunk_ids = ids[valid][start : start + 24]
-            poses = []
-            for (x, y), pid in zip(chunk, chunk_ids, strict=True):
-                plane = scene.planes[int(pid)]
-                poses.append(plane_base_poses(np.full(len(gammas), x), np.full(len(gammas), y), gammas,
-                                              plane.normal, plane.d))  # fmt: skip
-            T = invert_transforms(np.concatenate(poses)) @ grasp
-            _, ok = ik.solve_batch(T, rng)
-            if ok.any():
-                return True
-        return False
+        poses = [np.zeros((0, 4, 4))]
+        for (x, y), pid in zip(xy[valid], ids[valid], strict=True):
+            plane = scene.planes[int(pid)]
+            poses.append(plane_base_poses(np.full(len(gammas), x), np.full(len(gammas), y), gammas,
+                                          plane.normal, plane.d))  # fmt: skip
+        return np.concatenate(poses), np.repeat(ids[valid], len(gammas)).astype(np.int64)
 
 
 @dataclass(frozen=True)
@@ -355,12 +368,15 @@ def _moved(obj: SceneObject, old: Box, new: Box, dz: float) -> SceneObject:
 
 def osrm_scene(
     robot: Robot | str, rmap: ReachabilityMap, class_index: int, k: int, s: ExperimentSettings,
-    classes: tuple[tuple[str, int], ...] = SCENE_CLASSES,
+    classes: tuple[tuple[str, int], ...] = SCENE_CLASSES, oracle: AllowedGrasps | None = None,
 ) -> SceneOutcome:  # fmt: skip
     """One scene of the experiment: grasp candidates, reachable grasps and tallies per strategy.
 
     Deterministic in (seed, class_index, k), so scenes can run anywhere (``robot`` may be given by
-    name or robot-file path, for dask workers).
+    name or robot-file path, for dask workers). With ``oracle`` (protocol v2), every counted grasp
+    is also asked whether the true geometry allows it at the oracle's clearance (its own generator,
+    so the queries draw as without it), the queries keep the same clearance, and each verified
+    placement's joints are checked on the true shapes with no margin.
     """
     robot = Robot(robot) if isinstance(robot, str) else robot
     stats = {name: _Tally() for name in strategies_for(classes[class_index][1])}
@@ -369,15 +385,27 @@ def osrm_scene(
     grasps, objects, turned_down = grasp_candidates(scene, rng, s.grasps_per_scene, hand=hand)
     truth = GroundTruth()
     reachable = 0
+    records: list[GraspRecord] = []
+    clearance = None if oracle is None else oracle.clearance
+    touch = None if oracle is None else AllowedGrasps(oracle.shapes, 0.0, oracle.grasp_depth, 1)
     for grasp, obj in zip(grasps, objects, strict=True):
         if not truth.reachable(robot, rmap, scene, grasp, rng):
             continue
         reachable += 1
+        index = _object_index(scene, obj)
+        allowed = None
+        if oracle is not None:
+            T_poses, under = truth.base_poses(robot, rmap, scene, grasp)
+            allowed = oracle.allowed(scene, grasp, index, T_poses, under,
+                                     np.random.default_rng([s.seed, class_index, k, reachable, 99]))  # fmt: skip
+        record = GraspRecord(allowed, {})
+        records.append(record)
         for name, st in stats.items():
             st.n += 1
+            record.tries[name] = None
             try:  # stand_on "any": seed 000 counts a placement on every planar region, raised ones too
                 res = place(robot, rmap, points, grasp, PlaceSettings(strategy=name, tries=s.tries, stand_on="any",
-                                                                      **POSE_ONLY_CHECKS),
+                                                                      clearance=clearance, **POSE_ONLY_CHECKS),
                             np.random.default_rng([s.seed, class_index, k, reachable, len(name)]), terrain=terrain,
                             grasped=obj)  # fmt: skip
             except BaseplaceError as exc:  # e.g. no region in reach: a failure of that query
@@ -392,9 +420,28 @@ def osrm_scene(
                 st.ok += 1
                 st.t_s.append(res.timings_ms["request_to_placement"])
                 st.tries_to_success.append(res.tries)
+                record.tries[name] = res.tries
                 T = res.placements[0].T_world_base
                 st.on_incline += int(scene.surface_id(T[None, :2, 3])[0] >= 1)
-    return SceneOutcome(len(grasps), reachable, turned_down, terrain.timings_ms["total"], stats)
+                if touch is not None:
+                    contact = _placement_contact(touch, scene, index, res.placements[0])
+                    if contact is not None:
+                        st.touched_true_scene[str(contact)] += 1
+    return SceneOutcome(len(grasps), reachable, turned_down, terrain.timings_ms["total"], stats, records)
+
+
+def _object_index(scene: Scene, obj: GraspedObject) -> int:
+    """Index in ``scene.objects`` of the object whose true shape ``obj`` is."""
+    return int(np.argmin([np.linalg.norm(np.asarray(o.center) - obj.center) for o in scene.objects]))
+
+
+def _placement_contact(
+    touch: AllowedGrasps, scene: Scene, index: int, placement: Placement
+) -> Contact | None:
+    """What a verified placement's robot (its base pose and first joints) touches on the true scene, or None."""
+    T_world_base = placement.T_world_base
+    return touch.touching(placement.joints[0], T_world_base,
+                          *scene_solids(scene, index, int(scene.surface_id(T_world_base[None, :2, 3])[0]), touch.grasp_depth))  # fmt: skip
 
 
 @dataclass
@@ -407,6 +454,7 @@ class SceneOutcome:
         turned_down: draws the planner turned down (open hand in a true solid).
         segmentation_ms: the scene's segmentation time [ms] (once per scene, not in t_a).
         stats: per strategy, the tally of the queries.
+        records: per counted grasp, in order, whether the oracle allows it and each strategy's try.
     """
 
     grasps: int
@@ -414,6 +462,20 @@ class SceneOutcome:
     turned_down: int
     segmentation_ms: float
     stats: dict[str, _Tally]
+    records: list[GraspRecord] = field(default_factory=list)
+
+
+@dataclass
+class GraspRecord:
+    """One counted grasp of a scene.
+
+    Attributes:
+        allowed: whether the true geometry allows it at the clearance (None: not asked, protocol v1).
+        tries: per strategy, the try at which the first placement was verified (None: none found).
+    """
+
+    allowed: bool | None
+    tries: dict[str, int | None]
 
 
 def run_osrm_experiment(
