@@ -58,3 +58,17 @@ def test_the_clearance_is_kept_from_every_solid(tiago):
     low = T_world_base.copy()
     low[2, 3] = -0.05
     assert AllowedGrasps(shapes, clearance=0.0).touching(q, low, *scene_solids(_scene(), 0, 0)) is None
+
+
+def test_a_held_out_v2_run_with_other_counts_or_mixed_seeds_is_refused_before_any_work():
+    import subprocess
+    import sys
+
+    def run(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, "-m", "baseplace.cli", "experiment", "osrm", "--protocol", "2", *args],
+                              capture_output=True, text=True, timeout=60)  # fmt: skip
+
+    r = run("--split", "held-out", "--grasps", "5")
+    assert r.returncode == 2 and "uses --scenes 7 --grasps 3 --tries 100" in r.stderr
+    r = run("--seeds", "1000,4101")
+    assert r.returncode == 2 and "held-out seeds" in r.stderr
