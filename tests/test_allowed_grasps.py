@@ -72,3 +72,47 @@ def test_a_held_out_v2_run_with_other_counts_or_mixed_seeds_is_refused_before_an
     assert r.returncode == 2 and "uses --scenes 7 --grasps 3 --tries 100" in r.stderr
     r = run("--seeds", "1000,4101")
     assert r.returncode == 2 and "held-out seeds" in r.stderr
+
+
+def test_planner_v2_moves_a_draw_that_buries_the_palm_back_to_contact(tiago):
+    import coal
+    import pinocchio as pin
+
+    from baseplace_experiments.allowed_grasps import GRASP_DEPTH, ContactApproach, object_solid
+
+    bottle = SceneObject("cylinder", (1.0, 0.0, 0.6), 0.0, (0.06, 0.06, 0.2))
+    scene = _scene(bottle)
+    # v1's draw: top-down, tilted 10 deg, grasp point 3 cm below the top, the TCP 0.151 m behind it
+    T = pose_from_xyz_rpy([0.0, 0.0, 0.0, 0.4, math.pi / 2 - math.radians(10), 0.2])
+    T[:3, 3] = np.array([1.0, 0.0, 0.7 - 0.03]) - 0.151 * T[:3, 0]
+
+    # the rigid hand placed independently: pinocchio at the reference configuration, moved to the TCP
+    shapes = RobotShapes(tiago)
+    model, data = shapes.model, shapes.model.createData()
+    pin.framesForwardKinematics(model, data, tiago.q_reference)
+    gdata = pin.GeometryData(shapes.geom)
+    pin.updateGeometryPlacements(model, data, shapes.geom, gdata, tiago.q_reference)
+    T_tcp_world = data.oMf[model.getFrameId(shapes.arm.tcp_frame)].inverse().homogeneous
+    rigid = [o for o in shapes.geom.geometryObjects
+             if o.name.startswith(("arm_tool_link", "wrist_ft", "hand_palm_link"))]  # fmt: skip
+    assert len(rigid) == 4
+
+    def distance(T_world_tcp, solid):  # the rigid hand's distance [m] to a solid (negative: inside)
+        out = []
+        for o in rigid:
+            k = shapes.geom.getGeometryId(o.name)
+            P = T_world_tcp @ T_tcp_world @ gdata.oMg[k].homogeneous
+            out.append(coal.distance(o.geometry, coal.Transform3s(P[:3, :3], P[:3, 3]), solid.geometry,
+                                     solid.transform(), coal.DistanceRequest(), coal.DistanceResult()))  # fmt: skip
+        return min(out)
+
+    inner = object_solid(bottle, "inner", GRASP_DEPTH)
+    assert distance(T, inner) <= 0.0  # the draw buries the palm more than 5 mm
+    moved = ContactApproach(AllowedGrasps(shapes), scene)(T, 1)
+    assert moved is not None
+    T_moved, standoff = moved
+    assert 0.0 < standoff < 0.15
+    np.testing.assert_allclose(T_moved[:3, 3], T[:3, 3] - standoff * T[:3, 0], atol=1e-12)
+    np.testing.assert_allclose(T_moved[:3, :3], T[:3, :3])
+    assert distance(T_moved, inner) > 0.0  # at most 5 mm into the bottle
+    assert distance(T_moved, object_solid(bottle, "bottle")) < 0.001  # and touching it (within 1 mm)

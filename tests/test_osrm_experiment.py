@@ -147,3 +147,44 @@ def test_experiment_scenes_on_a_two_worker_cluster_match_a_local_run(tiago, tiag
     for a, b in zip(local["rows"], remote["rows"], strict=True):
         for key in ("strategy", "grasps", "reachable_grasps", "success_rate", "failures"):
             assert a[key] == b[key], key
+
+
+def test_the_oracle_keeps_the_clearance_the_queries_report_and_a_disagreement_fails_loudly():
+    from baseplace.world.sensor_resolution import MIN_CLEARANCE
+    from baseplace_experiments.osrm_experiment import query_clearance
+
+    assert query_clearance({"MR": 0.004, "ORM": 0.004}) == (0.004, True)
+    assert query_clearance({}) == (MIN_CLEARANCE, False)  # no query returned: 3 mm, marked
+    with pytest.raises(RuntimeError, match="different clearances"):
+        query_clearance({"MR": 0.004, "ORM": 0.003})
+
+
+def test_planner_v2_moves_v1s_own_draws_back_to_contact(tiago):
+    """Planner v2 takes v1's draws (the same generator use) and moves each back along its approach axis."""
+    from baseplace.world.environment import HandFilter
+    from baseplace_experiments.allowed_grasps import AllowedGrasps, ContactApproach
+    from baseplace_experiments.table_grid import RobotShapes
+
+    settings = SceneSettings(n_planes=0, box_elevation=0.5, box_height=0.12, object_height=(0.15, 0.25))
+    scene = generate_scene(settings, np.random.default_rng(5))
+    hand = HandFilter(tiago)
+    v1, _, _ = grasp_candidates(scene, np.random.default_rng(6), 4)
+    approach = ContactApproach(AllowedGrasps(RobotShapes(tiago)), scene)
+    standoffs: list[float] = []
+    v2, objects, _ = grasp_candidates(
+        scene, np.random.default_rng(6), 4, approach=approach, standoffs=standoffs
+    )
+    assert len(standoffs) == len(v2) == 4
+    assert all(0.005 < d < 0.15 for d in standoffs)  # every v1 draw buries the palm: each is moved back
+    # with no hand check both take the same draws: v2's grasp is v1's moved back by its standoff
+    for a, b, d in zip(v1, v2, standoffs, strict=True):
+        np.testing.assert_allclose(b[:3, 3], a[:3, 3] - d * a[:3, 0], atol=1e-12)
+    centres = np.array([o.center for o in scene.objects])
+    for g, obj in zip(v2, objects, strict=True):
+        i = int(np.argmin(np.linalg.norm(centres - obj.center, axis=1)))
+        closer = g.copy()
+        closer[:3, 3] += 0.002 * g[:3, 0]  # 2 mm further along the approach
+        assert not approach.meets(g, i) and approach.meets(closer, i)  # contact, within the bisection's step
+    # with the hand's check the kept draws still clear every other true solid
+    kept, _, turned_down = grasp_candidates(scene, np.random.default_rng(6), 4, hand=hand, approach=approach)
+    assert len(kept) == 4 and turned_down >= 0

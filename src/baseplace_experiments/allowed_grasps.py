@@ -24,6 +24,7 @@ base, arm and hand,
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -163,6 +164,22 @@ class AllowedGrasps:
         self._margin = coal.CollisionRequest()
         self._margin.security_margin = clearance
         self._touch = coal.CollisionRequest()
+        # the rigid hand's geometries with their poses (4, 4) in the TCP frame (they move with it)
+        T_ref_tcp = ref.oMf[model.getFrameId(shapes.arm.tcp_frame)].inverse()
+        gdata = pin.GeometryData(shapes.geom)
+        pin.updateGeometryPlacements(model, ref, shapes.geom, gdata, shapes.robot.q_reference)
+        self.rigid_parts = [(shapes.geom.geometryObjects[k].geometry, (T_ref_tcp * gdata.oMg[k]).homogeneous)
+                            for k in sorted(self.rigid_hand)]  # fmt: skip
+
+    def with_clearance(self, clearance: float) -> AllowedGrasps:
+        """This oracle keeping ``clearance`` [m] instead (the same robot model, IK and grasp depth)."""
+        if not (math.isfinite(clearance) and clearance >= 0):
+            raise InputError(f"clearance must be a finite distance >= 0 [m], got {clearance}")
+        other = copy.copy(self)
+        other.clearance = clearance
+        other._margin = coal.CollisionRequest()
+        other._margin.security_margin = clearance
+        return other
 
     def touching(self, q_arm: ArrayLike, T_world_base: ArrayLike, obstacles: Sequence[TrueShape],
                  supports: Sequence[TrueShape], grasped: TrueShape, grasped_inner: TrueShape) -> Contact | None:  # fmt: skip
@@ -224,7 +241,75 @@ class AllowedGrasps:
         return False
 
 
+APPROACH_LIMIT = 0.15
+"""How far [m] planner v2 moves a draw back along its approach axis at most (then it is turned down)."""
+APPROACH_TOLERANCE = 0.0005
+"""The bisection's resolution [m] on the standoff: the rigid hand ends within it of the object's surface."""
+
+
+class ContactApproach:
+    """Grasp planner v2's approach: a draw moved back along its approach axis until the palm meets the object.
+
+    A top-down draw of v1's planner puts its grasp point 1-3 cm below the object's top; TIAGo's TCP
+    sits about at the palm's face, so the rigid hand (the oracle's: tool link, wrist sensor, palm)
+    is buried in the object. Planner v2 moves each draw back along its approach (x) axis by the
+    smallest standoff in [0, ``limit``] at which the rigid hand does not meet the grasped object's
+    true shape (coal, no margin; bisection to ``tolerance``): the hand approaches until its palm
+    touches the object, a contact grasp whose depth (0) leaves the oracle's grasp depth for IK error.
+    A draw the rigid hand already clears keeps standoff 0; one still in the object ``limit`` back is
+    turned down. Only the true shapes are used, never the method's cloud or voxels.
+
+    Args:
+        oracle: gives the rigid hand (:attr:`AllowedGrasps.rigid_parts`).
+        scene: the true scene; the grasped object is ``scene.objects[i]`` of each call.
+        limit: [m] the largest standoff.
+        tolerance: [m] the bisection's resolution.
+    """
+
+    def __init__(self, oracle: AllowedGrasps, scene: Scene, limit: float = APPROACH_LIMIT,
+                 tolerance: float = APPROACH_TOLERANCE) -> None:  # fmt: skip
+        if not (0 < tolerance < limit):
+            raise InputError(f"need 0 < tolerance < limit, got {tolerance}, {limit}")
+        self.parts = oracle.rigid_parts
+        self.solids = [object_solid(o, f"object {i}") for i, o in enumerate(scene.objects)]
+        self.limit = limit
+        self.tolerance = tolerance
+        self.calls = 0
+        """coal collision calls made so far (for the protocol's cost)."""
+
+    def meets(self, T_world_tcp: FloatArray, i: int) -> bool:
+        """True if the rigid hand at ``T_world_tcp`` (4, 4) meets object ``i``'s true shape (no margin)."""
+        solid = self.solids[i]
+        for geometry, T_tcp_geom in self.parts:
+            T = T_world_tcp @ T_tcp_geom
+            self.calls += 1
+            if coal.collide(geometry, coal.Transform3s(T[:3, :3], T[:3, 3]), solid.geometry, solid.transform(),
+                            coal.CollisionRequest(), coal.CollisionResult()):  # fmt: skip
+                return True
+        return False
+
+    def __call__(self, T_world_tcp: FloatArray, i: int) -> tuple[FloatArray, float] | None:
+        """The draw (4, 4) on object ``i`` moved back to contact, and its standoff [m]; None: turned down."""
+
+        def back(d: float) -> FloatArray:
+            T = np.array(T_world_tcp, dtype=float)
+            T[:3, 3] -= d * T[:3, 0]
+            return T
+
+        if not self.meets(back(0.0), i):
+            return back(0.0), 0.0
+        if self.meets(back(self.limit), i):
+            return None
+        lo, hi = 0.0, self.limit  # meets at lo, clear at hi
+        while hi - lo > self.tolerance:
+            mid = (lo + hi) / 2
+            lo, hi = (mid, hi) if self.meets(back(mid), i) else (lo, mid)
+        return back(hi), hi
+
+
 __all__ = [
+    "APPROACH_LIMIT",
+    "APPROACH_TOLERANCE",
     "CLEARANCE",
     "ENVELOPES",
     "FLOOR",
@@ -232,6 +317,7 @@ __all__ = [
     "SOLUTIONS",
     "AllowedGrasps",
     "Contact",
+    "ContactApproach",
     "object_solid",
     "plane_solid",
     "scene_solids",

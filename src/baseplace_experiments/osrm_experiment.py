@@ -29,6 +29,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -51,7 +52,8 @@ from baseplace.terrain.pipeline import Terrain, terrain_from_points
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import HandFilter
 from baseplace.world.grasped_object import GraspedObject
-from baseplace_experiments.allowed_grasps import AllowedGrasps, Contact, scene_solids
+from baseplace.world.sensor_resolution import MIN_CLEARANCE
+from baseplace_experiments.allowed_grasps import AllowedGrasps, Contact, ContactApproach, scene_solids
 from baseplace_experiments.results import SeedSplit
 
 SCENE_CLASSES = (
@@ -89,6 +91,8 @@ def grasp_candidates(
     tool_offset: float = 0.151,
     hand: HandFilter | None = None,
     max_draws: int = 60,
+    approach: Callable[[FloatArray, int], tuple[FloatArray, float] | None] | None = None,
+    standoffs: list[float] | None = None,
 ) -> tuple[FloatArray, list[GraspedObject], int]:
     """Top-down grasps on the scene's objects: approach tilted up to 20 deg, random roll about it.
 
@@ -98,6 +102,9 @@ def grasp_candidates(
     grasp planner that knows the true shapes: a draw whose open hand intersects a true solid other
     than the grasped object (the tray's pedestal, bottom and walls, the other objects) is no grasp
     and is drawn again, at most ``max_draws`` draws per grasp. It never sees the placement's voxels.
+    ``approach`` (planner v2, protocol v2 only): each draw, before the hand's check, is replaced by
+    ``approach(T, i)``'s pose (moved back along its approach axis) or turned down when it returns
+    None; each kept grasp's standoff [m] is appended to ``standoffs``. Without it, v1 exactly.
 
     Returns:
         (K, 4, 4) grasps, K <= count; per grasp the grasped object (its true shape, which only the
@@ -124,6 +131,13 @@ def grasp_candidates(
         roll, heading = rng.uniform(-math.pi, math.pi, 2)
         T = pose_from_xyz_rpy([0.0, 0.0, 0.0, roll, math.pi / 2 - tilt, heading])
         T[:3, 3] = grip - tool_offset * T[:3, 0]  # back off along the approach axis
+        standoff = 0.0
+        if approach is not None:
+            moved = approach(T, i)
+            if moved is None:
+                turned_down += 1
+                continue
+            T, standoff = moved
         if hand is not None and _hand_touches(
             hand, T, [p for name, p in solids.items() if name != f"object{i}"]
         ):
@@ -131,6 +145,8 @@ def grasp_candidates(
             continue
         grasps.append(T)
         objects.append(objects_of[i])
+        if standoffs is not None:
+            standoffs.append(standoff)
     return (np.stack(grasps) if grasps else np.zeros((0, 4, 4))), objects, turned_down
 
 
@@ -373,44 +389,45 @@ def osrm_scene(
     """One scene of the experiment: grasp candidates, reachable grasps and tallies per strategy.
 
     Deterministic in (seed, class_index, k), so scenes can run anywhere (``robot`` may be given by
-    name or robot-file path, for dask workers). With ``oracle`` (protocol v2), every counted grasp
-    is also asked whether the true geometry allows it at the oracle's clearance (its own generator,
-    so the queries draw as without it), the queries keep the same clearance, and each verified
-    placement's joints are checked on the true shapes with no margin.
+    name or robot-file path, for dask workers). With ``oracle`` (protocol v2), the grasps come from
+    planner v2 (:class:`~baseplace_experiments.allowed_grasps.ContactApproach`: each draw moved back
+    until the palm meets the object), every counted grasp is also asked whether the true geometry
+    allows it at the clearance the method's queries on it report (:func:`query_clearance`; the
+    oracle's own generator, so the queries draw as without it, and nothing of the oracle reaches
+    the method), and each verified placement's joints are checked on the true shapes with no margin.
+    The queries run at the method's default settings in both protocols.
     """
     robot = Robot(robot) if isinstance(robot, str) else robot
     stats = {name: _Tally() for name in strategies_for(classes[class_index][1])}
     rng, scene, points, terrain = experiment_scene(s, class_index, k, classes)
     hand = HandFilter(robot, rmap.info.arm)
-    grasps, objects, turned_down = grasp_candidates(scene, rng, s.grasps_per_scene, hand=hand)
+    approach = None if oracle is None else ContactApproach(oracle, scene)
+    standoffs: list[float] | None = None if oracle is None else []
+    grasps, objects, turned_down = grasp_candidates(scene, rng, s.grasps_per_scene, hand=hand, approach=approach,
+                                                    standoffs=standoffs)  # fmt: skip
     truth = GroundTruth()
     reachable = 0
     records: list[GraspRecord] = []
-    clearance = None if oracle is None else oracle.clearance
     touch = None if oracle is None else AllowedGrasps(oracle.shapes, 0.0, oracle.grasp_depth, 1)
     for grasp, obj in zip(grasps, objects, strict=True):
         if not truth.reachable(robot, rmap, scene, grasp, rng):
             continue
         reachable += 1
         index = _object_index(scene, obj)
-        allowed = None
-        if oracle is not None:
-            T_poses, under = truth.base_poses(robot, rmap, scene, grasp)
-            allowed = oracle.allowed(scene, grasp, index, T_poses, under,
-                                     np.random.default_rng([s.seed, class_index, k, reachable, 99]))  # fmt: skip
-        record = GraspRecord(allowed, {})
+        record = GraspRecord(None, {})
         records.append(record)
         for name, st in stats.items():
             st.n += 1
             record.tries[name] = None
             try:  # stand_on "any": seed 000 counts a placement on every planar region, raised ones too
                 res = place(robot, rmap, points, grasp, PlaceSettings(strategy=name, tries=s.tries, stand_on="any",
-                                                                      clearance=clearance, **POSE_ONLY_CHECKS),
+                                                                      **POSE_ONLY_CHECKS),
                             np.random.default_rng([s.seed, class_index, k, reachable, len(name)]), terrain=terrain,
                             grasped=obj)  # fmt: skip
             except BaseplaceError as exc:  # e.g. no region in reach: a failure of that query
                 st.failures[type(exc).__name__] += 1
                 continue
+            record.clearances[name] = res.clearance
             st.t_rm.append(res.timings_ms["osrm"])
             st.t_a.append(res.timings_ms["request_to_placement"])
             st.failures.update(res.failures)
@@ -427,7 +444,27 @@ def osrm_scene(
                     contact = _placement_contact(touch, scene, index, res.placements[0])
                     if contact is not None:
                         st.touched_true_scene[str(contact)] += 1
-    return SceneOutcome(len(grasps), reachable, turned_down, terrain.timings_ms["total"], stats, records)
+        if oracle is not None:  # after the queries: the clearance they report; nothing goes back to them
+            record.clearance, record.clearance_from_method = query_clearance(record.clearances)
+            T_poses, under = truth.base_poses(robot, rmap, scene, grasp)
+            oracle_rng = np.random.default_rng([s.seed, class_index, k, reachable, 99])
+            record.allowed = oracle.with_clearance(record.clearance).allowed(scene, grasp, index, T_poses, under,
+                                                                             oracle_rng)  # fmt: skip
+    return SceneOutcome(len(grasps), reachable, turned_down, terrain.timings_ms["total"], stats, records,
+                        standoffs or [])  # fmt: skip
+
+
+def query_clearance(clearances: dict[str, float]) -> tuple[float, bool]:
+    """The clearance [m] the oracle keeps for one grasp: the one every query on it reported.
+
+    Returns (clearance, True) when the queries reported one; (``MIN_CLEARANCE``, False) when none
+    returned a result (each raised). Raises RuntimeError when the queries on one grasp report
+    different clearances: the grasp's allowed set would depend on the strategy.
+    """
+    values = set(clearances.values())
+    if len(values) > 1:
+        raise RuntimeError(f"the queries on one grasp report different clearances: {clearances}")
+    return (values.pop(), True) if values else (MIN_CLEARANCE, False)
 
 
 def _object_index(scene: Scene, obj: GraspedObject) -> int:
@@ -455,6 +492,7 @@ class SceneOutcome:
         segmentation_ms: the scene's segmentation time [ms] (once per scene, not in t_a).
         stats: per strategy, the tally of the queries.
         records: per counted grasp, in order, whether the oracle allows it and each strategy's try.
+        standoffs: per grasp, how far [m] planner v2 moved its draw back (protocol v2; empty in v1).
     """
 
     grasps: int
@@ -463,6 +501,7 @@ class SceneOutcome:
     segmentation_ms: float
     stats: dict[str, _Tally]
     records: list[GraspRecord] = field(default_factory=list)
+    standoffs: list[float] = field(default_factory=list)
 
 
 @dataclass
@@ -472,10 +511,16 @@ class GraspRecord:
     Attributes:
         allowed: whether the true geometry allows it at the clearance (None: not asked, protocol v1).
         tries: per strategy, the try at which the first placement was verified (None: none found).
+        clearances: per strategy, the clearance [m] its query reported (absent: the query raised).
+        clearance: the clearance [m] the oracle kept (protocol v2; see :func:`query_clearance`).
+        clearance_from_method: whether ``clearance`` is the queries' (False: no query returned).
     """
 
     allowed: bool | None
     tries: dict[str, int | None]
+    clearances: dict[str, float] = field(default_factory=dict)
+    clearance: float | None = None
+    clearance_from_method: bool = False
 
 
 def run_osrm_experiment(
