@@ -1,7 +1,7 @@
 """Protocol v2 of seed 000's Tables I and II (issue 27): several seeds, intervals, the allowed grasps.
 
 The protocol is docs/protocols/osrm_v2.md, committed before the held-out run. What changes from v1
-(:mod:`baseplace_experiments.osrm_experiment`, whose scenes, grasp planner, ground truth and queries
+(:mod:`baseplace_experiments.osrm_experiment`, whose scenes, grasp draws, ground truth and queries
 are reused unchanged):
 
 * Three seeds per split (:data:`SEEDS`), :data:`SCENES` scenes per seed and class: 21 per class.
