@@ -27,17 +27,21 @@ import numba as nb
 import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial import ConvexHull
+from scipy.spatial import ConvexHull, QhullError
 
 from baseplace.geometry.poses import FloatArray
 from baseplace.robots.model import Arm, Robot
 from baseplace.robots.spheres import _joint_frames, _place
-from baseplace.world.point_index import PointIndex, _clear
+from baseplace.world.point_index import PointIndex, _clear, _lower_bound, _within
 
 SLACK = 1e-6
 """Added [m] to every certified distance: rounding in coal's and this module's arithmetic."""
 HASH_CELL = 0.05
 """Cell edge [m] of the box-centre hashes (about a link sphere's radius)."""
+COVER_SPHERES = 16
+"""At most this many spheres cover one robot geometry (:func:`sphere_cover`)."""
+COVER_RADIUS = 0.03
+"""A cover's pieces are cut no further once their sphere's radius is within this [m]."""
 
 
 def bounding_sphere(geometry: coal.CollisionGeometry) -> tuple[FloatArray, float]:
@@ -72,6 +76,59 @@ def hull_points(geometry: coal.CollisionGeometry) -> FloatArray:
     return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
 
 
+def sphere_cover(geometry: coal.CollisionGeometry) -> tuple[FloatArray, FloatArray]:
+    """Spheres (centres (K, 3), radii (K,)) in the geometry's frame whose union holds the whole geometry.
+
+    The convex hull of :func:`hull_points`, cut in halves by planes across its longest principal
+    axis, the piece with the largest sphere first, until :data:`COVER_SPHERES` pieces or every
+    sphere within :data:`COVER_RADIUS`. A piece of a convex polytope cut by a plane is the hull
+    of its vertices on that side and the points where its edges cross the plane, so the sphere
+    around those points holds the piece. One sphere (the :func:`bounding_sphere`) for a flat
+    geometry.
+    """
+    centre, radius = bounding_sphere(geometry)
+    one = (centre[None], np.array([radius]))
+    pieces = [_ball(hull_points(geometry))]
+    while len(pieces) < COVER_SPHERES:
+        k = max(range(len(pieces)), key=lambda i: pieces[i][2])
+        V, _, r = pieces[k]
+        halves = _halves(V) if r > COVER_RADIUS else None
+        if halves is None:
+            break
+        pieces[k : k + 1] = [_ball(h) for h in halves]
+    if len(pieces) == 1:
+        return one
+    return np.array([c for _, c, _ in pieces]), np.array([r for _, _, r in pieces])
+
+
+def _ball(V: FloatArray) -> tuple[FloatArray, FloatArray, float]:
+    """The points (k, 3), the centre of their bounding box and the farthest point's distance from it (+ SLACK)."""
+    c = (V.min(axis=0) + V.max(axis=0)) / 2
+    return V, c, float(np.max(np.linalg.norm(V - c, axis=1))) + SLACK
+
+
+def _halves(V: FloatArray) -> tuple[FloatArray, FloatArray] | None:
+    """The vertex sets of the hull of V (k, 3) cut in two across its longest principal axis, or None if flat."""
+    try:
+        hull = ConvexHull(V)
+    except (QhullError, ValueError):  # flat or too few points: no 3-D hull to cut
+        return None
+    _, _, axes = np.linalg.svd(V - V.mean(axis=0), full_matrices=False)
+    t = V @ axes[0]
+    cut = (t.min() + t.max()) / 2
+    tri = hull.simplices
+    edges = np.unique(
+        np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [0, 2]]]), axis=1), axis=0
+    )
+    ta, tb = t[edges[:, 0]], t[edges[:, 1]]
+    cross = (np.minimum(ta, tb) < cut) & (np.maximum(ta, tb) > cut)
+    w = ((cut - ta[cross]) / (tb[cross] - ta[cross]))[:, None]
+    on_cut = V[edges[cross, 0]] * (1 - w) + V[edges[cross, 1]] * w
+    vertices = V[hull.vertices]
+    tv = t[hull.vertices]
+    return np.concatenate([vertices[tv <= cut], on_cut]), np.concatenate([vertices[tv >= cut], on_cut])
+
+
 def _vertices(geometry: coal.CollisionGeometry) -> FloatArray | None:
     """(k, 3) the vertices of a mesh or convex in its frame, or None for other shapes."""
     if isinstance(geometry, coal.BVHModelBase) and geometry.num_vertices:
@@ -99,18 +156,158 @@ def _transformed(C, T, out):
 
 
 @nb.njit(cache=True)
-def _uncertified_pairs(C, radius, pairs, reach):
-    """Indices of the sphere pairs (P, 2) of centres C whose distance is not above ``reach`` (P,) + radii."""
-    out = np.empty(pairs.shape[0], dtype=np.int64)
-    n = 0
-    for p in range(pairs.shape[0]):
-        a, b = pairs[p, 0], pairs[p, 1]
-        dx, dy, dz = C[a, 0] - C[b, 0], C[a, 1] - C[b, 1], C[a, 2] - C[b, 2]
-        r = radius[a] + radius[b] + reach[p]
-        if dx * dx + dy * dy + dz * dz <= r * r:
-            out[n] = p
-            n += 1
-    return out[:n]
+def _points_rows(out_i, r0, r1, rows, reach, W, radius, Ws, sub_start, sub_radius, joint, Wj, group_radius,
+                 points, keys, starts, lo, hi, cell, dims, field, field_lo, field_h):  # fmt: skip
+    """Scene rows r0..r1 (sorted by arm joint) against one part's box centres: ``out_i[p]`` True where not certified.
+
+    The box centres are a :class:`PointIndex`'s arrays; ``reach`` holds the boxes' half diagonal.
+    The geometries an arm joint moves are certified together when the sphere around them all
+    (``Wj``, ``group_radius``) is clear by the index's distance bound; else a geometry with a
+    cover by its bounding sphere's distance bound alone or every cover sphere's exact query,
+    one without by its bounding sphere's exact query.
+    """
+    group, group_clear = -2, False
+    if len(points) == 0:
+        out_i[r0:r1] = False
+        return False
+    any_row = False
+    for p in range(r0, r1):
+        g = rows[p]
+        if joint[g] != group:
+            group = joint[g]
+            group_clear = (
+                _lower_bound(Wj[group], lo, hi, field, field_lo, field_h) > group_radius[group] + reach[p]
+            )
+        if group_clear:
+            out_i[p] = False
+            continue
+        covered = sub_start[g + 1] - sub_start[g] > 1
+        r = radius[g] + reach[p]
+        touch = _lower_bound(W[g], lo, hi, field, field_lo, field_h) <= r
+        if touch and not covered:
+            touch = _within(W[g], r, True, points, keys, starts, lo, cell, dims) >= 0.0
+        elif touch:
+            touch = False
+            for s in range(sub_start[g], sub_start[g + 1]):
+                r = sub_radius[s] + reach[p]
+                if _lower_bound(Ws[s], lo, hi, field, field_lo, field_h) <= r and (
+                    _within(Ws[s], r, True, points, keys, starts, lo, cell, dims) >= 0.0
+                ):
+                    touch = True
+                    break
+        out_i[p] = touch
+        any_row |= touch
+    return any_row
+
+
+@nb.njit(cache=True, inline="always")
+def _shape_touches(c, r, kind, a, b, planes, balls):
+    """Whether the sphere (c (3,), r) is not certified clear of a convex part or a bounding ball.
+
+    Kind 1: the hull planes a..b (inside <= 0); kind 2: the ball ``balls[a]`` (centre, radius).
+    """
+    if kind == 1:
+        best = -np.inf
+        for h in range(a, b):
+            best = max(best, planes[h, 0] * c[0] + planes[h, 1] * c[1] + planes[h, 2] * c[2] + planes[h, 3])
+        return not best > r
+    dx, dy, dz = c[0] - balls[a, 0], c[1] - balls[a, 1], c[2] - balls[a, 2]
+    return not math.sqrt(dx * dx + dy * dy + dz * dz) > r + balls[a, 3]
+
+
+@nb.njit(cache=True)
+def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_start, sub_joint, sub_local,
+                        sub_radius, group_local, group_radius, T, scene_rows, scene_reach, parts, offs, all_points, all_keys, all_starts,
+                        all_fields, geo, ints, halves, planes, balls, self_pairs, self_reach, out):  # fmt: skip
+    """Per state Q[i] (n,), which pairs its spheres do not certify free: ``out[i, p]`` (m, P + S) bool.
+
+    The whole-edge check of issue 25 item 3: every state's spheres placed and tested in one call.
+    Scene pairs ``p < P``: robot geometry ``scene_rows[p]``, grouped by scene part (``parts[q]``:
+    kind, a, b, and the part's rows r0..r1; kind 0: box centres in the point index q packed by
+    :func:`_packed` (``offs`` .. ``ints``),
+    boxes ``halves[q]`` a half diagonal across (:func:`_points_rows`); kind 1, 2: :func:`_shape_touches`),
+    certified when the geometry's bounding sphere or every sphere of its cover (``sub_*``) is
+    clear by ``scene_reach[p]``; then the self pairs (S, 2), certified when the bounding spheres
+    or every pair of cover spheres are farther apart than ``self_reach`` plus their radii.
+    Returns how many states have any pair left.
+    """
+    G, K, J = joint.shape[0], sub_joint.shape[0], group_local.shape[0]
+    F = np.empty((Q.shape[1], 3, 4))
+    group_joint = np.arange(J)
+    Cj, Wj = np.empty((J, 3)), np.empty((J, 3))
+    R, t = np.empty((3, 3)), np.empty(3)
+    Cg, Cs = np.empty((G, 3)), np.empty((K, 3))
+    W, Ws = np.empty((G, 3)), np.empty((K, 3))
+    P = scene_rows.shape[0]
+    reach = np.empty(P)
+    for q in range(parts.shape[0]):
+        reach[parts[q, 3] : parts[q, 4]] = scene_reach[parts[q, 3] : parts[q, 4]] + halves[q] * (
+            parts[q, 0] == 0
+        )
+    count = 0
+    for i in range(Q.shape[0]):
+        _joint_frames(Q[i], placements, axes, kinds, F, R, t)
+        _place(joint, local, F, Cg)
+        _place(sub_joint, sub_local, F, Cs)
+        _transformed(Cg, T, W)
+        _transformed(Cs, T, Ws)
+        _place(group_joint, group_local, F, Cj)
+        _transformed(Cj, T, Wj)
+        out_i = out[i]
+        any_pair = False
+        for q in range(parts.shape[0]):
+            kind, a, b, r0, r1 = parts[q, 0], parts[q, 1], parts[q, 2], parts[q, 3], parts[q, 4]
+            if kind == 0:
+                pts = all_points[offs[q, 0] : offs[q + 1, 0]]
+                keys = all_keys[offs[q, 1] : offs[q + 1, 1]]
+                starts = all_starts[offs[q, 2] : offs[q + 1, 2]]
+                field = all_fields[offs[q, 3] : offs[q + 1, 3]].reshape((ints[q, 3], ints[q, 4], ints[q, 5]))
+                lo, hi, cell, field_lo, field_h = (
+                    geo[q, 0:3],
+                    geo[q, 3:6],
+                    geo[q, 6],
+                    geo[q, 7:10],
+                    geo[q, 10],
+                )
+                dims = ints[q, 0:3]
+                any_pair |= _points_rows(out_i, r0, r1, scene_rows, reach, W, radius, Ws, sub_start, sub_radius,
+                                         joint, Wj, group_radius, pts, keys, starts, lo, hi, cell, dims, field,
+                                         field_lo, field_h)  # fmt: skip
+                continue
+            for p in range(r0, r1):
+                g = scene_rows[p]
+                touch = _shape_touches(W[g], radius[g] + reach[p], kind, a, b, planes, balls)
+                if touch and sub_start[g + 1] - sub_start[g] > 1:
+                    touch = False
+                    for s in range(sub_start[g], sub_start[g + 1]):
+                        if _shape_touches(Ws[s], sub_radius[s] + reach[p], kind, a, b, planes, balls):
+                            touch = True
+                            break
+                out_i[p] = touch
+                any_pair |= touch
+        for p in range(self_pairs.shape[0]):
+            g, h = self_pairs[p, 0], self_pairs[p, 1]
+            touch = _near(Cg, g, Cg, h, radius[g] + radius[h] + self_reach[p])
+            if touch:
+                touch = False
+                for s in range(sub_start[g], sub_start[g + 1]):
+                    for u in range(sub_start[h], sub_start[h + 1]):
+                        if _near(Cs, s, Cs, u, sub_radius[s] + sub_radius[u] + self_reach[p]):
+                            touch = True
+                            break
+                    if touch:
+                        break
+            out_i[P + p] = touch
+            any_pair |= touch
+        count += any_pair
+    return count
+
+
+@nb.njit(cache=True, inline="always")
+def _near(A, a, B, b, reach):
+    """Whether A[a] and B[b] are not farther apart than ``reach``."""
+    dx, dy, dz = A[a, 0] - B[b, 0], A[a, 1] - B[b, 1], A[a, 2] - B[b, 2]
+    return dx * dx + dy * dy + dz * dz <= reach * reach
 
 
 class _Part:
@@ -177,6 +374,43 @@ class _Part:
         return self.pair_a[~free]
 
 
+def _group_spheres(
+    joint: NDArray[np.int64], local: FloatArray, radius: FloatArray, n: int
+) -> tuple[FloatArray, FloatArray]:
+    """Per arm joint j < n, a sphere around the spheres (``local``, ``radius``) of the geometries with ``joint == j``."""
+    centres, radii = np.zeros((n, 3)), np.zeros(n)
+    for j in range(n):
+        C, r = local[joint == j], radius[joint == j]
+        if len(r):
+            centres[j] = ((C - r[:, None]).min(axis=0) + (C + r[:, None]).max(axis=0)) / 2
+            radii[j] = float(np.max(np.linalg.norm(C - centres[j], axis=1) + r)) + SLACK
+    return centres, radii
+
+
+def _packed(indexes: list[PointIndex]) -> tuple[NDArray[np.generic], ...]:
+    """Point indexes as a few flat arrays for :func:`_uncertified_states`.
+
+    Per index q, ``offs[q]`` .. ``offs[q + 1]`` (Q + 1, 4) are where its points, cell keys, cell
+    starts and distance field lie in the concatenated arrays; ``geo`` (Q, 11): lo, hi, cell,
+    field_lo, field_h; ``ints`` (Q, 6): dims, the field's shape.
+    """
+    sizes = [(ix.n_points, len(ix.cell_keys), len(ix.cell_starts), ix.field.size) for ix in indexes]
+    offs = np.zeros((len(indexes) + 1, 4), dtype=np.int64)
+    offs[1:] = np.cumsum(np.array(sizes, dtype=np.int64).reshape(-1, 4), axis=0)
+    cat = lambda arrays, empty: np.ascontiguousarray(np.concatenate([empty, *arrays]))  # noqa: E731
+    return (
+        offs,
+        cat([ix.points for ix in indexes], np.zeros((0, 3))),
+        cat([ix.cell_keys for ix in indexes], np.zeros(0, dtype=np.int64)),
+        cat([ix.cell_starts for ix in indexes], np.zeros(0, dtype=np.int64)),
+        cat([ix.field.ravel() for ix in indexes], np.zeros(0, dtype=np.float32)),
+        np.array(
+            [[*ix.lo, *ix.hi, ix.cell, *ix.field_lo, ix.field_h] for ix in indexes], dtype=float
+        ).reshape(-1, 11),
+        np.array([[*ix.dims, *ix.field.shape] for ix in indexes], dtype=np.int64).reshape(-1, 6),
+    )
+
+
 class StateFilter:
     """Whether the robot, its arm at joint values, touches the scene or itself: coal's verdict, pre-filtered.
 
@@ -215,6 +449,7 @@ class StateFilter:
         armbase_inv = T_root_armbase.inverse()
         arm_ids = [model.getJointId(j) for j in arm.joint_names]
         joint, local, radius = [], [], []
+        sub_start, sub_joint, sub_local, sub_radius = [0], [], [], []  # the spheres covering each geometry
         gref = pin.GeometryData(geom)
         pin.updateGeometryPlacements(model, ref, geom, gref)
         for k in range(n_robot):
@@ -227,12 +462,28 @@ class StateFilter:
             joint.append(j)
             local.append(T.rotation @ c + T.translation)
             radius.append(r)
+            cover_c, cover_r = sphere_cover(obj.geometry)
+            sub_start.append(sub_start[-1] + len(cover_r))
+            sub_joint += [j] * len(cover_r)
+            sub_local += list(cover_c @ T.rotation.T + T.translation)
+            sub_radius += list(cover_r)
         self.joint = np.array(joint, dtype=np.int64)
         """(G,) per robot geometry the arm joint that moves it, -1 for none."""
         self.local = np.array(local, dtype=float).reshape(-1, 3)
         """(G, 3) its bounding sphere's centre in that joint's frame (or the arm's base frame) [m]."""
         self.radius = np.array(radius, dtype=float)
         """(G,) the bounding sphere's radius [m]."""
+        self._cover = (
+            np.array(sub_start, dtype=np.int64),
+            np.array(sub_joint, dtype=np.int64),
+            np.array(sub_local, dtype=float).reshape(-1, 3),
+            np.array(sub_radius, dtype=float),
+        )
+        """Per robot geometry g, the spheres of its :func:`sphere_cover` (starts (G + 1,), joints,
+        centres in the joint's frame, radii) [m]."""
+        self._groups = _group_spheres(self.joint, self.local, self.radius, arm.n_joints)
+        """Per arm joint, a sphere (centres (n, 3) in its frame, radii (n,)) around the bounding
+        spheres of every geometry it moves, with no other arm joint between."""
         moving = self.joint >= 0
         by_gid: dict[int, _Part] = {}
         for i, pair in enumerate(geom.collisionPairs):
@@ -266,12 +517,57 @@ class StateFilter:
             self._self_reach = np.array(
                 [sdata.collisionRequests[i].security_margin + SLACK for i in active], dtype=float
             )
+        self._kernel_scene()
         self._static_key: bytes | None = None
         self._static_hit = False
         self._centres = np.empty((n_robot, 3))
         self._world = np.empty((n_robot, 3))
         self.coal_pairs = 0
         """Pairs handed to coal so far (scene and self), for measurements."""
+        self.coal_states = 0
+        """States whose spheres left a pair to coal so far, for measurements."""
+
+    def _kernel_scene(self) -> None:
+        """The moving pairs and scene parts as the arrays of :func:`_uncertified_states`.
+
+        A part's box centres of every size go into one index, the largest box's half diagonal
+        taken for all (coal's octrees here hold boxes of one size).
+        """
+        rows: list[int] = []
+        reach: list[float] = []
+        pair_ids: list[int] = []
+        parts: list[list[int]] = []
+        indexes, halves, planes, balls = [], [], [np.zeros((0, 4))], [np.zeros((0, 4))]
+        n_planes = n_balls = 0
+        for part in self.parts:
+            parts.append([0, 0, 0, len(rows), len(rows) + len(part.robot_a)])
+            order = np.argsort(self.joint[part.robot_a], kind="stable")  # a joint's geometries together
+            rows += list(part.robot_a[order])
+            reach += [part.margin[k] + SLACK for k in order]
+            pair_ids += list(part.pair_a[order])
+            index, half = PointIndex(np.zeros((0, 3)), HASH_CELL, 0.0), 0.0
+            if part.indexes:
+                if len(part.indexes) == 1:
+                    index, half = part.indexes[0]
+                else:
+                    index = PointIndex(np.concatenate([ix.points for ix, _ in part.indexes]), HASH_CELL)
+                    half = max(h for _, h in part.indexes)
+            elif part.planes is not None:
+                parts[-1][:3] = [1, n_planes, n_planes + len(part.planes)]
+                planes.append(part.planes)
+                n_planes += len(part.planes)
+            else:
+                assert part.sphere is not None
+                parts[-1][:3] = [2, n_balls, n_balls + 1]
+                balls.append(np.append(part.sphere[0], part.sphere[1])[None])
+                n_balls += 1
+            indexes.append(index)
+            halves.append(half)
+        self._scene_rows = np.array(rows, dtype=np.int64)
+        self._scene_row_reach = np.array(reach, dtype=float)
+        self._scene_row_pair = np.array(pair_ids, dtype=np.int64)
+        self._scene_parts = (np.array(parts, dtype=np.int64).reshape(-1, 5), *_packed(indexes),
+                             np.array([*halves, 0.0], dtype=float), np.concatenate(planes), np.concatenate(balls))  # fmt: skip
 
     def centres(self, q_arm: ArrayLike) -> FloatArray:
         """(G, 3) the bounding spheres' centres in the arm's base frame at arm joint values (n,) [m]."""
@@ -282,34 +578,58 @@ class StateFilter:
 
     def colliding(self, q_arm: ArrayLike, T_world_base: ArrayLike) -> bool:
         """Coal's verdict for arm joint values (n,) at base pose (4, 4): the robot touches the scene or itself."""
-        q_arm = np.asarray(q_arm, dtype=float)
+        return self.first_colliding(np.asarray(q_arm, dtype=float)[None], T_world_base) == 0
+
+    def first_colliding(self, Q_arm: ArrayLike, T_world_base: ArrayLike) -> int:
+        """The index of the first of the states Q_arm (m, n) that touches the scene or itself, or -1.
+
+        Coal's verdict on each state, in order: one compiled call certifies the pairs of every
+        state by spheres (:func:`_uncertified_states`); only the states with pairs left over go
+        to coal, and only with those pairs.
+        """
+        Q = np.ascontiguousarray(np.atleast_2d(np.asarray(Q_arm, dtype=float)))
         T = np.asarray(T_world_base, dtype=float)
-        q_full = self.arm.to_pinocchio(q_arm, self.robot.q_reference)
-        C = self.centres(q_arm)
         key = T.tobytes()
-        new_pose = key != self._static_key
-        if new_pose:
+        if key != self._static_key:
             self._static_key = key
             self._T_world_armbase = T @ self._T_base_armbase
-        _transformed(C, self._T_world_armbase, self._world)
-        if new_pose:
+            _transformed(self.centres(Q[0]), self._T_world_armbase, self._world)
             todo = [p for part in self._static_parts for p in part.uncertified(self._world)]
-            self._static_hit = self._scene_coal(todo, q_full, T)
+            self._static_hit = self._scene_coal(todo, self._full(Q[0]), T)
         if self._static_hit:
-            return True
-        todo = [p for part in self.parts for p in part.uncertified(self._world)]
-        if todo and self._scene_coal(todo, q_full, T):
-            return True
-        if self.self_check is None:
-            return False
-        near = _uncertified_pairs(C, self.radius, self._self_pairs, self._self_reach)
-        if len(near) == 0:
-            return False
+            return 0
+        a = self.arm
+        P = len(self._scene_rows)
+        out = np.empty((len(Q), P + len(self._self_pairs)), dtype=np.bool_)
+        count = _uncertified_states(  # type: ignore[call-arg]
+            Q, a.placements, a.axes, a.kinds, self.joint, self.local, self.radius, *self._cover, *self._groups,
+            self._T_world_armbase, self._scene_rows, self._scene_row_reach, *self._scene_parts,
+            self._self_pairs, self._self_reach, out,
+        )  # fmt: skip
+        if count == 0:
+            return -1
+        for i in np.flatnonzero(out.any(axis=1)):
+            self.coal_states += 1
+            rows = np.flatnonzero(out[i])
+            q_full = self._full(Q[i])
+            scene = self._scene_row_pair[rows[rows < P]]
+            if len(scene) and self._scene_coal(list(scene), q_full, T):
+                return int(i)
+            own = self._self_index[rows[rows >= P] - P]
+            if len(own) and self._self_coal(own, q_full):
+                return int(i)
+        return -1
+
+    def _full(self, q_arm: FloatArray) -> FloatArray:
+        return self.arm.to_pinocchio(q_arm, self.robot.q_reference)
+
+    def _self_coal(self, pairs: NDArray[np.int64], q_full: FloatArray) -> bool:
+        assert self.self_check is not None
         model, data, geom, gdata = self.self_check
         pin.forwardKinematics(model, data, q_full)
         pin.updateGeometryPlacements(model, data, geom, gdata)
-        self.coal_pairs += len(near)
-        return any(pin.computeCollision(geom, gdata, int(i)) for i in self._self_index[near])
+        self.coal_pairs += len(pairs)
+        return any(pin.computeCollision(geom, gdata, int(i)) for i in pairs)
 
     def _scene_coal(self, pairs: list[int], q_full: FloatArray, T_world_base: FloatArray) -> bool:
         if not pairs:
@@ -322,4 +642,4 @@ class StateFilter:
         return any(pin.computeCollision(geom, gdata, int(i)) for i in pairs)
 
 
-__all__ = ["SLACK", "StateFilter", "bounding_sphere", "hull_points"]
+__all__ = ["SLACK", "StateFilter", "bounding_sphere", "hull_points", "sphere_cover"]
