@@ -21,6 +21,7 @@ checked against the scene once per base pose and the answer kept.
 from __future__ import annotations
 
 import math
+import weakref
 
 import coal
 import numba as nb
@@ -40,6 +41,14 @@ HASH_CELL = 0.05
 """Cell edge [m] of the box-centre hashes (about a link sphere's radius)."""
 COVER_SPHERES = 16
 """At most this many spheres cover one robot geometry (:func:`sphere_cover`)."""
+TABLE_SLACK = 0.003
+"""Self pairs' distance tables: a grid step per joint such that no point moves more than this [m]
+between a configuration and its nearest node (:func:`_distance_table`)."""
+TABLE_NODES = 4000
+"""At most this many nodes in one self pair's distance table (the steps are widened to fit)."""
+TABLE_HARD = 0.1
+"""A self pair gets a distance table when its spheres leave it to coal in this share of random
+configurations."""
 COVER_RADIUS = 0.03
 """A cover's pieces are cut no further once their sphere's radius is within this [m]."""
 
@@ -218,7 +227,8 @@ def _shape_touches(c, r, kind, a, b, planes, balls):
 @nb.njit(cache=True)
 def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_start, sub_joint, sub_local,
                         sub_radius, group_local, group_radius, T, scene_rows, scene_reach, parts, offs, all_points, all_keys, all_starts,
-                        all_fields, geo, ints, halves, planes, balls, self_pairs, self_reach, out):  # fmt: skip
+                        all_fields, geo, ints, halves, planes, balls, self_pairs, self_reach, self_table,
+                        tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off, tab_cert, start, out):  # fmt: skip
     """Per state Q[i] (n,), which pairs its spheres do not certify free: ``out[i, p]`` (m, P + S) bool.
 
     The whole-edge check of issue 25 item 3: every state's spheres placed and tested in one call.
@@ -228,8 +238,10 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
     boxes ``halves[q]`` a half diagonal across (:func:`_points_rows`); kind 1, 2: :func:`_shape_touches`),
     certified when the geometry's bounding sphere or every sphere of its cover (``sub_*``) is
     clear by ``scene_reach[p]``; then the self pairs (S, 2), certified when the bounding spheres
-    or every pair of cover spheres are farther apart than ``self_reach`` plus their radii.
-    Returns how many states have any pair left.
+    or every pair of cover spheres are farther apart than ``self_reach`` plus their radii, or the
+    pair's distance table (``self_table[p]`` >= 0, :func:`_table_clear`) clears it.
+    Goes from state ``start`` and stops at the first state with any pair left (coal decides it,
+    then the call goes on from the next): returns its index, or -1 when every state is certified.
     """
     G, K, J = joint.shape[0], sub_joint.shape[0], group_local.shape[0]
     F = np.empty((Q.shape[1], 3, 4))
@@ -244,8 +256,7 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
         reach[parts[q, 3] : parts[q, 4]] = scene_reach[parts[q, 3] : parts[q, 4]] + halves[q] * (
             parts[q, 0] == 0
         )
-    count = 0
-    for i in range(Q.shape[0]):
+    for i in range(start, Q.shape[0]):
         _joint_frames(Q[i], placements, axes, kinds, F, R, t)
         _place(joint, local, F, Cg)
         _place(sub_joint, sub_local, F, Cs)
@@ -288,6 +299,9 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
         for p in range(self_pairs.shape[0]):
             g, h = self_pairs[p, 0], self_pairs[p, 1]
             touch = _near(Cg, g, Cg, h, radius[g] + radius[h] + self_reach[p])
+            if touch and self_table[p] >= 0:
+                touch = not _table_clear(Q[i], self_table[p], tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off,
+                                         tab_cert)  # fmt: skip
             if touch:
                 touch = False
                 for s in range(sub_start[g], sub_start[g + 1]):
@@ -299,8 +313,27 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
                         break
             out_i[P + p] = touch
             any_pair |= touch
-        count += any_pair
-    return count
+        if any_pair:
+            return i
+    return -1
+
+
+@nb.njit(cache=True, inline="always")
+def _table_clear(q, t, tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off, tab_cert):
+    """Whether self pair table t certifies arm state q (n,) free (:func:`_distance_table`).
+
+    Coal's distance at the nearest grid node, less how far the two geometries can have moved
+    relative to each other since (lever arm times joint change, per joint), is above the margin.
+    """
+    index, slack = 0, 0.0
+    for d in range(2):
+        j = tab_joint[t, d]
+        if j < 0:
+            continue
+        u = min(max(round((q[j] - tab_lo[t, d]) / tab_step[t, d]), 0), tab_n[t, d] - 1)
+        slack += tab_rho[t, d] * abs(q[j] - (tab_lo[t, d] + u * tab_step[t, d]))
+        index = index * tab_n[t, d] + u
+    return tab_cert[tab_off[t] + index] > slack
 
 
 @nb.njit(cache=True, inline="always")
@@ -372,6 +405,118 @@ class _Part:
             centre, r = self.sphere
             free = np.linalg.norm(C - centre, axis=1) > self.reach + r
         return self.pair_a[~free]
+
+
+_TABLES: weakref.WeakKeyDictionary[Robot, dict[tuple[str, bytes, bytes], tuple[NDArray[np.generic], ...]]] = (
+    weakref.WeakKeyDictionary()
+)
+"""Per robot, the packed self pair tables of :meth:`StateFilter._self_tables` (they hold no reference to it)."""
+
+
+_COVERS: weakref.WeakKeyDictionary[Robot, dict[int, list[tuple[FloatArray, FloatArray]]]] = (
+    weakref.WeakKeyDictionary()
+)
+"""Per robot, the :func:`sphere_cover` of each of its first n collision geometries (by n)."""
+
+
+_Table = tuple[list[int], FloatArray, FloatArray, list[int], FloatArray, FloatArray]
+"""A self pair's distance table: joints, lower, step, nodes per joint, lever arms, values (:func:`_distance_table`)."""
+
+
+def _distance_table(
+    robot: Robot,
+    arm: Arm,
+    self_check: tuple[pin.Model, pin.Data, pin.GeometryModel, pin.GeometryData],
+    pair: int,
+    reach: float,
+) -> _Table | None:
+    """Coal's distance between one self pair's convex hulls on a grid over the arm joints that move them apart.
+
+    The hulls hold the geometries, so their distance is a lower bound of the geometries'.
+
+    Only for a pair whose relative pose one or two revolute arm joints change (every other joint
+    stays at its reference value, or moves both geometries alike). Per joint i, ``rho[i]`` bounds
+    how far a point of the geometry it moves travels per radian relative to the other: its
+    farthest hull point from the joint's origin, plus, for the upstream of two joints moving the
+    same geometry, the distance between their origins (both invariant under the joints). At a
+    configuration q the distance is at least the nearest node's less ``sum(rho * |q - node|)``.
+    Returns (joints, lower, step, nodes per joint, rho, distance - ``reach`` per node (row-major)),
+    or None.
+    """
+    model, data, geom, _ = self_check
+    objects = geom.geometryObjects
+    first, second = int(geom.collisionPairs[pair].first), int(geom.collisionPairs[pair].second)
+    ids = [model.getJointId(name) for name in arm.joint_names]
+    supports = {k: set(model.supports[objects[k].parentJoint]) for k in (first, second)}
+    joints = [i for i, j in enumerate(ids) if (j in supports[first]) != (j in supports[second])]
+    if not 1 <= len(joints) <= 2 or any(arm.kinds[i] != 0 for i in joints):
+        return None
+    ref = model.createData()
+    pin.forwardKinematics(model, ref, robot.q_reference)
+    gref = pin.GeometryData(geom)
+    pin.updateGeometryPlacements(model, ref, geom, gref)
+    rho = []
+    for i in joints:
+        moved = first if ids[i] in supports[first] else second
+        M = gref.oMg[moved]
+        P = hull_points(objects[moved].geometry) @ M.rotation.T + M.translation
+        below = [k for k in joints if k > i and ids[k] in supports[moved]]  # the other joint, downstream
+        pivot = ids[below[0]] if below else ids[i]
+        o, o_i = ref.oMi[pivot].translation, ref.oMi[ids[i]].translation
+        rho.append(float(np.max(np.linalg.norm(P - o, axis=1)) + np.linalg.norm(o - o_i)))
+    lo, hi = arm.lower[joints], arm.upper[joints]
+    nodes = np.maximum(np.ceil((hi - lo) * np.array(rho) / (2 * TABLE_SLACK)), 1).astype(int) + 1
+    while np.prod(nodes) > TABLE_NODES:
+        nodes = np.maximum(np.ceil(nodes / 1.25), 2).astype(int)
+    step = (hi - lo) / (nodes - 1)
+    try:
+        hulls = [_convex(hull_points(objects[k].geometry)) for k in (first, second)]
+    except Exception:  # qhull refuses a flat geometry: no table, coal decides
+        return None
+    parents = [(objects[k].parentJoint, objects[k].placement) for k in (first, second)]
+    q = np.clip(arm.from_pinocchio(robot.q_reference), arm.lower, arm.upper)
+    request, result, identity = coal.DistanceRequest(), coal.DistanceResult(), coal.Transform3s()
+    cert = []
+    for u in np.ndindex(*nodes):
+        q[joints] = lo + np.array(u) * step
+        pin.forwardKinematics(model, data, arm.to_pinocchio(q, robot.q_reference))
+        (j1, M1), (j2, M2) = parents
+        M = (data.oMi[j1] * M1).actInv(data.oMi[j2] * M2)  # the second geometry in the first's frame
+        result.clear()
+        d = coal.distance(
+            hulls[0], identity, hulls[1], coal.Transform3s(M.rotation, M.translation), request, result
+        )
+        cert.append(d - reach)
+    return joints, lo, step, list(nodes), np.array(rho), np.array(cert)
+
+
+def _convex(points: FloatArray) -> coal.ConvexBase:
+    """Coal's convex hull of points (k, 3): it holds the geometry they are the :func:`hull_points` of."""
+    vertices = coal.StdVec_Vec3s()
+    for v in points:
+        vertices.append(np.asarray(v, dtype=float))
+    return coal.Convex.convexHull(vertices, False, "")
+
+
+def _no_tables(n_pairs: int) -> tuple[NDArray[np.generic], ...]:
+    return _pack_tables(n_pairs, {})
+
+
+def _pack_tables(n_pairs: int, tables: dict[int, _Table]) -> tuple[NDArray[np.generic], ...]:
+    """Per self pair its table's index or -1, and the tables' (T, 2) joints, lower, step, nodes, rho, offsets, values."""
+    which = np.full(n_pairs, -1, dtype=np.int64)
+    T = len(tables)
+    joint, count = np.full((T, 2), -1, dtype=np.int64), np.ones((T, 2), dtype=np.int64)
+    lo, step, rho = np.zeros((T, 2)), np.ones((T, 2)), np.zeros((T, 2))
+    offs, values = [0], []
+    for t, (p, (joints, lower, steps, nodes, levers, cert)) in enumerate(sorted(tables.items())):
+        which[p] = t
+        k = len(joints)
+        joint[t, :k], lo[t, :k], step[t, :k], count[t, :k], rho[t, :k] = joints, lower, steps, nodes, levers
+        offs.append(offs[-1] + len(cert))
+        values.append(cert)
+    flat = np.concatenate(values) if values else np.zeros(0)
+    return which, joint, lo, step, count, rho, np.array(offs, dtype=np.int64), flat
 
 
 def _group_spheres(
@@ -450,6 +595,10 @@ class StateFilter:
         arm_ids = [model.getJointId(j) for j in arm.joint_names]
         joint, local, radius = [], [], []
         sub_start, sub_joint, sub_local, sub_radius = [0], [], [], []  # the spheres covering each geometry
+        kept = _COVERS.setdefault(robot, {})
+        if n_robot not in kept:  # the robot's geometries come first in every scene model
+            kept[n_robot] = [sphere_cover(geom.geometryObjects[k].geometry) for k in range(n_robot)]
+        covers = kept[n_robot]
         gref = pin.GeometryData(geom)
         pin.updateGeometryPlacements(model, ref, geom, gref)
         for k in range(n_robot):
@@ -462,7 +611,7 @@ class StateFilter:
             joint.append(j)
             local.append(T.rotation @ c + T.translation)
             radius.append(r)
-            cover_c, cover_r = sphere_cover(obj.geometry)
+            cover_c, cover_r = covers[k]
             sub_start.append(sub_start[-1] + len(cover_r))
             sub_joint += [j] * len(cover_r)
             sub_local += list(cover_c @ T.rotation.T + T.translation)
@@ -518,6 +667,9 @@ class StateFilter:
                 [sdata.collisionRequests[i].security_margin + SLACK for i in active], dtype=float
             )
         self._kernel_scene()
+        self._tables = _no_tables(len(self._self_pairs))
+        if self_check is not None and len(self._self_pairs):
+            self._tables = self._self_tables()
         self._static_key: bytes | None = None
         self._static_hit = False
         self._centres = np.empty((n_robot, 3))
@@ -569,6 +721,39 @@ class StateFilter:
         self._scene_parts = (np.array(parts, dtype=np.int64).reshape(-1, 5), *_packed(indexes),
                              np.array([*halves, 0.0], dtype=float), np.concatenate(planes), np.concatenate(balls))  # fmt: skip
 
+    def _self_tables(self) -> tuple[NDArray[np.generic], ...]:
+        """Distance tables for the self pairs the spheres leave to coal often, packed for the kernel.
+
+        Hard pairs: left to coal in at least :data:`TABLE_HARD` of 200 random configurations
+        (pairs of links that nearly touch near a shared joint: their spheres always overlap).
+        Kept per robot and arm (:data:`_TABLES`).
+        """
+        key = (self.arm.name, self._self_pairs.tobytes(), self._self_reach.tobytes())
+        kept = _TABLES.setdefault(self.robot, {})
+        if key not in kept:
+            a = self.arm
+            Q = np.ascontiguousarray(a.sample(np.random.default_rng(0), 200))
+            none = _no_tables(len(self._self_pairs))
+            out = np.empty((len(Q), len(self._self_pairs)), dtype=np.bool_)
+            i = -1
+            while i < len(Q):  # every state's rows (a call stops at each state with any left)
+                i = _uncertified_states(  # type: ignore[call-arg]
+                    Q, a.placements, a.axes, a.kinds, self.joint, self.local, self.radius, *self._cover,
+                    *self._groups, np.eye(4), self._scene_rows[:0].copy(), self._scene_row_reach[:0].copy(),
+                    self._scene_parts[0][:0].copy(), *self._scene_parts[1:], self._self_pairs, self._self_reach,
+                    *none, i + 1, out,
+                )  # fmt: skip
+                i = len(Q) if i < 0 else i
+            tables = {}
+            assert self.self_check is not None
+            for p in np.flatnonzero(out.mean(axis=0) >= TABLE_HARD):
+                table = _distance_table(self.robot, a, self.self_check, int(self._self_index[p]),
+                                        float(self._self_reach[p]))  # fmt: skip
+                if table is not None:
+                    tables[int(p)] = table
+            kept[key] = _pack_tables(len(self._self_pairs), tables)
+        return kept[key]
+
     def centres(self, q_arm: ArrayLike) -> FloatArray:
         """(G, 3) the bounding spheres' centres in the arm's base frame at arm joint values (n,) [m]."""
         q = np.ascontiguousarray(q_arm, dtype=float)
@@ -583,9 +768,9 @@ class StateFilter:
     def first_colliding(self, Q_arm: ArrayLike, T_world_base: ArrayLike) -> int:
         """The index of the first of the states Q_arm (m, n) that touches the scene or itself, or -1.
 
-        Coal's verdict on each state, in order: one compiled call certifies the pairs of every
-        state by spheres (:func:`_uncertified_states`); only the states with pairs left over go
-        to coal, and only with those pairs.
+        Coal's verdict on each state, in order: one compiled call certifies the states' pairs by
+        spheres (:func:`_uncertified_states`) up to the first state with pairs left over; only
+        that state goes to coal, with only those pairs, and the call goes on after it.
         """
         Q = np.ascontiguousarray(np.atleast_2d(np.asarray(Q_arm, dtype=float)))
         T = np.asarray(T_world_base, dtype=float)
@@ -601,14 +786,15 @@ class StateFilter:
         a = self.arm
         P = len(self._scene_rows)
         out = np.empty((len(Q), P + len(self._self_pairs)), dtype=np.bool_)
-        count = _uncertified_states(  # type: ignore[call-arg]
-            Q, a.placements, a.axes, a.kinds, self.joint, self.local, self.radius, *self._cover, *self._groups,
-            self._T_world_armbase, self._scene_rows, self._scene_row_reach, *self._scene_parts,
-            self._self_pairs, self._self_reach, out,
-        )  # fmt: skip
-        if count == 0:
-            return -1
-        for i in np.flatnonzero(out.any(axis=1)):
+        i = -1
+        while True:
+            i = _uncertified_states(  # type: ignore[call-arg]
+                Q, a.placements, a.axes, a.kinds, self.joint, self.local, self.radius, *self._cover, *self._groups,
+                self._T_world_armbase, self._scene_rows, self._scene_row_reach, *self._scene_parts,
+                self._self_pairs, self._self_reach, *self._tables, i + 1, out,
+            )  # fmt: skip
+            if i < 0:
+                return -1
             self.coal_states += 1
             rows = np.flatnonzero(out[i])
             q_full = self._full(Q[i])
@@ -618,7 +804,6 @@ class StateFilter:
             own = self._self_index[rows[rows >= P] - P]
             if len(own) and self._self_coal(own, q_full):
                 return int(i)
-        return -1
 
     def _full(self, q_arm: FloatArray) -> FloatArray:
         return self.arm.to_pinocchio(q_arm, self.robot.q_reference)
