@@ -21,7 +21,7 @@ from baseplace.placement.scene_cache import SceneCache
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.spheres import _joint_frames
 from baseplace.world.environment import Environment
-from baseplace.world.state_filter import hull_points, sphere_cover
+from baseplace.world.state_filter import _table_clear, hull_points, sphere_cover
 from baseplace_experiments.execution_experiment import trial_scene
 from baseplace_experiments.table_grid import TableGridSettings
 
@@ -147,3 +147,25 @@ def test_sphere_covers_hold_their_geometry(tiago):
             got = got @ T_root_armbase[:3, :3].T + T_root_armbase[:3, 3]
             np.testing.assert_allclose(got, want, atol=1e-9)
             np.testing.assert_array_equal(radii[starts[k] : starts[k + 1]], r)
+
+
+def test_self_distance_tables_never_clear_a_pair_closer_than_its_margin(tiago):
+    """Where a self pair's distance table certifies a configuration, coal's distance between the meshes is above the margin."""
+    env = Environment(tiago, {})
+    arm = tiago.arm()
+    filt = env.state_filter(arm)
+    which, *tables = filt._tables
+    assert (which >= 0).sum() >= 3  # the links that nearly touch at the shoulder and the wrist
+    model, data, geom, gdata = filt.self_check
+    rng = np.random.default_rng(8)
+    cleared = 0
+    for q in arm.sample(rng, 300):
+        pin.forwardKinematics(model, data, arm.to_pinocchio(q, tiago.q_reference))
+        pin.updateGeometryPlacements(model, data, geom, gdata)
+        for p in np.flatnonzero(which >= 0):
+            if _table_clear(q, which[p], *tables):
+                cleared += 1
+                pair = int(filt._self_index[p])
+                distance = pin.computeDistance(geom, gdata, pair).min_distance
+                assert distance > gdata.collisionRequests[pair].security_margin
+    assert cleared > 300  # the tables do certify

@@ -32,7 +32,7 @@ from scipy.spatial import ConvexHull, QhullError
 
 from baseplace.geometry.poses import FloatArray
 from baseplace.robots.model import Arm, Robot
-from baseplace.robots.spheres import _joint_frames, _place
+from baseplace.robots.spheres import _joint_frames, _place, _place_one
 from baseplace.world.point_index import PointIndex, _clear, _lower_bound, _within
 
 SLACK = 1e-6
@@ -166,7 +166,7 @@ def _transformed(C, T, out):
 
 @nb.njit(cache=True)
 def _points_rows(out_i, r0, r1, rows, reach, W, radius, Ws, sub_start, sub_radius, joint, Wj, group_radius,
-                 points, keys, starts, lo, hi, cell, dims, field, field_lo, field_h):  # fmt: skip
+                 i, stamp, sub_joint, sub_local, F, T, Cs, points, keys, starts, lo, hi, cell, dims, field, field_lo, field_h):  # fmt: skip
     """Scene rows r0..r1 (sorted by arm joint) against one part's box centres: ``out_i[p]`` True where not certified.
 
     The box centres are a :class:`PointIndex`'s arrays; ``reach`` holds the boxes' half diagonal.
@@ -197,6 +197,7 @@ def _points_rows(out_i, r0, r1, rows, reach, W, radius, Ws, sub_start, sub_radiu
             touch = _within(W[g], r, True, points, keys, starts, lo, cell, dims) >= 0.0
         elif touch:
             touch = False
+            _cover_placed(g, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws)
             for s in range(sub_start[g], sub_start[g + 1]):
                 r = sub_radius[s] + reach[p]
                 if _lower_bound(Ws[s], lo, hi, field, field_lo, field_h) <= r and (
@@ -250,6 +251,7 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
     R, t = np.empty((3, 3)), np.empty(3)
     Cg, Cs = np.empty((G, 3)), np.empty((K, 3))
     W, Ws = np.empty((G, 3)), np.empty((K, 3))
+    stamp = np.full(G, -1)  # the state each geometry's cover spheres were last placed for
     P = scene_rows.shape[0]
     reach = np.empty(P)
     for q in range(parts.shape[0]):
@@ -259,9 +261,7 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
     for i in range(start, Q.shape[0]):
         _joint_frames(Q[i], placements, axes, kinds, F, R, t)
         _place(joint, local, F, Cg)
-        _place(sub_joint, sub_local, F, Cs)
         _transformed(Cg, T, W)
-        _transformed(Cs, T, Ws)
         _place(group_joint, group_local, F, Cj)
         _transformed(Cj, T, Wj)
         out_i = out[i]
@@ -282,7 +282,7 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
                 )
                 dims = ints[q, 0:3]
                 any_pair |= _points_rows(out_i, r0, r1, scene_rows, reach, W, radius, Ws, sub_start, sub_radius,
-                                         joint, Wj, group_radius, pts, keys, starts, lo, hi, cell, dims, field,
+                                         joint, Wj, group_radius, i, stamp, sub_joint, sub_local, F, T, Cs, pts, keys, starts, lo, hi, cell, dims, field,
                                          field_lo, field_h)  # fmt: skip
                 continue
             for p in range(r0, r1):
@@ -290,6 +290,7 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
                 touch = _shape_touches(W[g], radius[g] + reach[p], kind, a, b, planes, balls)
                 if touch and sub_start[g + 1] - sub_start[g] > 1:
                     touch = False
+                    _cover_placed(g, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws)
                     for s in range(sub_start[g], sub_start[g + 1]):
                         if _shape_touches(Ws[s], sub_radius[s] + reach[p], kind, a, b, planes, balls):
                             touch = True
@@ -304,6 +305,8 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
                                          tab_cert)  # fmt: skip
             if touch:
                 touch = False
+                _cover_placed(g, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws)
+                _cover_placed(h, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws)
                 for s in range(sub_start[g], sub_start[g + 1]):
                     for u in range(sub_start[h], sub_start[h + 1]):
                         if _near(Cs, s, Cs, u, sub_radius[s] + sub_radius[u] + self_reach[p]):
@@ -316,6 +319,18 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
         if any_pair:
             return i
     return -1
+
+
+@nb.njit(cache=True, inline="always")
+def _cover_placed(g, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws):
+    """Place geometry g's cover spheres for state i (arm frame ``Cs``, world ``Ws``) unless they are."""
+    if stamp[g] == i:
+        return
+    stamp[g] = i
+    for s in range(sub_start[g], sub_start[g + 1]):
+        _place_one(sub_joint[s], sub_local[s], F, Cs[s])
+        for a in range(3):
+            Ws[s, a] = T[a, 0] * Cs[s, 0] + T[a, 1] * Cs[s, 1] + T[a, 2] * Cs[s, 2] + T[a, 3]
 
 
 @nb.njit(cache=True, inline="always")
