@@ -32,8 +32,10 @@ and what does one check cost?
   restarts included), ``approach_collision``, ``pregrasp_collision`` / ``transit_start_collision``
   (an end of the transit collides in the transit model, where nothing may be touched),
   ``no_rrt_path`` (RRTConnect ran out of its budget).
-* Timing: wall time of ``check``; calls of ``Environment.colliding_arm`` (state checks) and the
-  time inside its two parts, the obstacle check (``Environment._touches_obstacles``) and
+* Timing: wall time of ``check``; the transit states checked (``MotionChecker.state_checks``, the
+  ``max_checks`` budget), calls of ``Environment.colliding_arm`` (one state) and
+  ``Environment.first_colliding_arm`` (a whole joint line, one compiled call) and the time in them;
+  before the whole-line check, the time inside ``colliding_arm``'s two parts, the obstacle check (``Environment._touches_obstacles``) and
   self-collision (``SelfCollision.colliding_arm``). One process, no pools.
 
 * Checkers (``--checkers``, default the three above): also ``product_500_exact``, the 500-check
@@ -147,13 +149,18 @@ class ExactStates:
         self._env = env
         self.colliding_arm = env.colliding_arm_exact
 
+    def first_colliding_arm(self, arm: Any, Q: FloatArray, T_world_base: FloatArray) -> int:
+        """The whole-line check, state by state with coal on every pair."""
+        return next((i for i, q in enumerate(Q) if self._env.colliding_arm_exact(arm, q, T_world_base)), -1)
+
     def __getattr__(self, name: str) -> Any:
         return getattr(self._env, name)
 
 
 def meter_environment(meter: Meter, env: Environment | ExactStates, stage: str) -> None:
-    """Count ``env.colliding_arm`` as ``stage`` checks; time its obstacle and self-collision parts."""
+    """Count ``env.colliding_arm`` as ``stage`` checks and its whole-line checks as ``stage`` edges; time them."""
     meter.wrap(env, "colliding_arm", f"states_{stage}")
+    meter.wrap(env, "first_colliding_arm", f"edges_{stage}")
     meter.wrap(env, "_touches_obstacles", "obstacles")
     if env._self is not None:
         meter.wrap(env._self, "colliding_arm", "self_collision")
@@ -223,6 +230,7 @@ def run_check(
     motion = checker.check(q, T_base, target, seed=seed)
     wall = time.perf_counter() - t
     out: dict[str, Any] = {"found": motion is not None, "wall_ms": round(wall * 1e3, 2),
+                           "state_checks": checker.state_checks,
                            "approach_ms": round(rec.approach_s * 1e3, 2), "rrt_ms": round(rec.rrt_s * 1e3, 2),
                            **meter.snapshot()}  # fmt: skip
     if motion is None:
@@ -328,14 +336,16 @@ def figures(rows: list[dict[str, Any]]) -> dict[str, Any]:
         low_f, high_f = (
             wilson_interval(false_none, feasible) if feasible and false_none is not None else (0.0, 1.0)
         )
-        states = [sum(v for k, v in x["calls"].items() if k.startswith("states_")) for x in r]
+        states = [
+            x.get("state_checks", sum(v for k, v in x["calls"].items() if k.startswith("states_"))) for x in r
+        ]
         obstacle_ms = sum(x["ms"].get("obstacles", 0.0) for x in r)
         self_ms = sum(x["ms"].get("self_collision", 0.0) for x in r)
         obstacle_n = sum(x["calls"].get("obstacles", 0) for x in r)
         self_n = sum(x["calls"].get("self_collision", 0) for x in r)
         total_states = sum(states)
         total_ms = sum(x["wall_ms"] for x in r)
-        state_ms = sum(sum(v for k, v in x["ms"].items() if k.startswith("states_")) for x in r)
+        state_ms = sum(sum(v for k, v in x["ms"].items() if k.startswith(("states_", "edges_"))) for x in r)
         out[name] = {
             "found": sum(x["found"] for x in r),
             "false_no_motion": false_none,
@@ -366,7 +376,7 @@ def figures(rows: list[dict[str, Any]]) -> dict[str, Any]:
             "ms_per_self_collision_check": round(self_ms / self_n, 3) if self_n else None,
             "share_in_state_checks": round(state_ms / total_ms, 3) if total_ms else None,
             "planned_by_rrt": sum(1 for x in r if x.get("rrt") is not None),
-            "state_ms": stats([sum(v for k, v in x["ms"].items() if k.startswith("states_")) / n
+            "state_ms": stats([sum(v for k, v in x["ms"].items() if k.startswith(("states_", "edges_"))) / n
                                for x, n in zip(r, states, strict=True) if n]),
         }  # fmt: skip
     if not with_reference:

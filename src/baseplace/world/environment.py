@@ -316,6 +316,13 @@ class Environment:
         """
         return self.state_filter(arm).colliding(q_arm, _base_pose(T_world_base))
 
+    def first_colliding_arm(self, arm: Arm, Q_arm: ArrayLike, T_world_base: ArrayLike) -> int:
+        """The index of the first of the arm states Q_arm (m, n) for which :meth:`colliding_arm` is True, or -1.
+
+        Every state's spheres in one compiled call (:meth:`StateFilter.first_colliding`).
+        """
+        return self.state_filter(arm).first_colliding(Q_arm, _base_pose(T_world_base))
+
     def state_filter(self, arm: Arm) -> StateFilter:
         """The pre-filtered state check of ``arm`` (built on first use, kept)."""
         if arm.name not in self._filters:

@@ -21,23 +21,36 @@ checked against the scene once per base pose and the answer kept.
 from __future__ import annotations
 
 import math
+import weakref
 
 import coal
 import numba as nb
 import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial import ConvexHull
+from scipy.spatial import ConvexHull, QhullError
 
 from baseplace.geometry.poses import FloatArray
 from baseplace.robots.model import Arm, Robot
-from baseplace.robots.spheres import _joint_frames, _place
-from baseplace.world.point_index import PointIndex, _clear
+from baseplace.robots.spheres import _joint_frames, _place, _place_one
+from baseplace.world.point_index import PointIndex, _clear, _lower_bound, _within
 
 SLACK = 1e-6
 """Added [m] to every certified distance: rounding in coal's and this module's arithmetic."""
 HASH_CELL = 0.05
 """Cell edge [m] of the box-centre hashes (about a link sphere's radius)."""
+COVER_SPHERES = 16
+"""At most this many spheres cover one robot geometry (:func:`sphere_cover`)."""
+TABLE_SLACK = 0.003
+"""Self pairs' distance tables: a grid step per joint such that no point moves more than this [m]
+between a configuration and its nearest node (:func:`_distance_table`)."""
+TABLE_NODES = 4000
+"""At most this many nodes in one self pair's distance table (the steps are widened to fit)."""
+TABLE_HARD = 0.1
+"""A self pair gets a distance table when its spheres leave it to coal in this share of random
+configurations."""
+COVER_RADIUS = 0.03
+"""A cover's pieces are cut no further once their sphere's radius is within this [m]."""
 
 
 def bounding_sphere(geometry: coal.CollisionGeometry) -> tuple[FloatArray, float]:
@@ -72,6 +85,59 @@ def hull_points(geometry: coal.CollisionGeometry) -> FloatArray:
     return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
 
 
+def sphere_cover(geometry: coal.CollisionGeometry) -> tuple[FloatArray, FloatArray]:
+    """Spheres (centres (K, 3), radii (K,)) in the geometry's frame whose union holds the whole geometry.
+
+    The convex hull of :func:`hull_points`, cut in halves by planes across its longest principal
+    axis, the piece with the largest sphere first, until :data:`COVER_SPHERES` pieces or every
+    sphere within :data:`COVER_RADIUS`. A piece of a convex polytope cut by a plane is the hull
+    of its vertices on that side and the points where its edges cross the plane, so the sphere
+    around those points holds the piece. One sphere (the :func:`bounding_sphere`) for a flat
+    geometry.
+    """
+    centre, radius = bounding_sphere(geometry)
+    one = (centre[None], np.array([radius]))
+    pieces = [_ball(hull_points(geometry))]
+    while len(pieces) < COVER_SPHERES:
+        k = max(range(len(pieces)), key=lambda i: pieces[i][2])
+        V, _, r = pieces[k]
+        halves = _halves(V) if r > COVER_RADIUS else None
+        if halves is None:
+            break
+        pieces[k : k + 1] = [_ball(h) for h in halves]
+    if len(pieces) == 1:
+        return one
+    return np.array([c for _, c, _ in pieces]), np.array([r for _, _, r in pieces])
+
+
+def _ball(V: FloatArray) -> tuple[FloatArray, FloatArray, float]:
+    """The points (k, 3), the centre of their bounding box and the farthest point's distance from it (+ SLACK)."""
+    c = (V.min(axis=0) + V.max(axis=0)) / 2
+    return V, c, float(np.max(np.linalg.norm(V - c, axis=1))) + SLACK
+
+
+def _halves(V: FloatArray) -> tuple[FloatArray, FloatArray] | None:
+    """The vertex sets of the hull of V (k, 3) cut in two across its longest principal axis, or None if flat."""
+    try:
+        hull = ConvexHull(V)
+    except (QhullError, ValueError):  # flat or too few points: no 3-D hull to cut
+        return None
+    _, _, axes = np.linalg.svd(V - V.mean(axis=0), full_matrices=False)
+    t = V @ axes[0]
+    cut = (t.min() + t.max()) / 2
+    tri = hull.simplices
+    edges = np.unique(
+        np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [0, 2]]]), axis=1), axis=0
+    )
+    ta, tb = t[edges[:, 0]], t[edges[:, 1]]
+    cross = (np.minimum(ta, tb) < cut) & (np.maximum(ta, tb) > cut)
+    w = ((cut - ta[cross]) / (tb[cross] - ta[cross]))[:, None]
+    on_cut = V[edges[cross, 0]] * (1 - w) + V[edges[cross, 1]] * w
+    vertices = V[hull.vertices]
+    tv = t[hull.vertices]
+    return np.concatenate([vertices[tv <= cut], on_cut]), np.concatenate([vertices[tv >= cut], on_cut])
+
+
 def _vertices(geometry: coal.CollisionGeometry) -> FloatArray | None:
     """(k, 3) the vertices of a mesh or convex in its frame, or None for other shapes."""
     if isinstance(geometry, coal.BVHModelBase) and geometry.num_vertices:
@@ -99,18 +165,197 @@ def _transformed(C, T, out):
 
 
 @nb.njit(cache=True)
-def _uncertified_pairs(C, radius, pairs, reach):
-    """Indices of the sphere pairs (P, 2) of centres C whose distance is not above ``reach`` (P,) + radii."""
-    out = np.empty(pairs.shape[0], dtype=np.int64)
-    n = 0
-    for p in range(pairs.shape[0]):
-        a, b = pairs[p, 0], pairs[p, 1]
-        dx, dy, dz = C[a, 0] - C[b, 0], C[a, 1] - C[b, 1], C[a, 2] - C[b, 2]
-        r = radius[a] + radius[b] + reach[p]
-        if dx * dx + dy * dy + dz * dz <= r * r:
-            out[n] = p
-            n += 1
-    return out[:n]
+def _points_rows(out_i, r0, r1, rows, reach, W, radius, Ws, sub_start, sub_radius, joint, Wj, group_radius,
+                 i, stamp, sub_joint, sub_local, F, T, Cs, points, keys, starts, lo, hi, cell, dims, field, field_lo, field_h):  # fmt: skip
+    """Scene rows r0..r1 (sorted by arm joint) against one part's box centres: ``out_i[p]`` True where not certified.
+
+    The box centres are a :class:`PointIndex`'s arrays; ``reach`` holds the boxes' half diagonal.
+    The geometries an arm joint moves are certified together when the sphere around them all
+    (``Wj``, ``group_radius``) is clear by the index's distance bound; else a geometry with a
+    cover by its bounding sphere's distance bound alone or every cover sphere's exact query,
+    one without by its bounding sphere's exact query.
+    """
+    group, group_clear = -2, False
+    if len(points) == 0:
+        out_i[r0:r1] = False
+        return False
+    any_row = False
+    for p in range(r0, r1):
+        g = rows[p]
+        if joint[g] != group:
+            group = joint[g]
+            group_clear = (
+                _lower_bound(Wj[group], lo, hi, field, field_lo, field_h) > group_radius[group] + reach[p]
+            )
+        if group_clear:
+            out_i[p] = False
+            continue
+        covered = sub_start[g + 1] - sub_start[g] > 1
+        r = radius[g] + reach[p]
+        touch = _lower_bound(W[g], lo, hi, field, field_lo, field_h) <= r
+        if touch and not covered:
+            touch = _within(W[g], r, True, points, keys, starts, lo, cell, dims) >= 0.0
+        elif touch:
+            touch = False
+            _cover_placed(g, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws)
+            for s in range(sub_start[g], sub_start[g + 1]):
+                r = sub_radius[s] + reach[p]
+                if _lower_bound(Ws[s], lo, hi, field, field_lo, field_h) <= r and (
+                    _within(Ws[s], r, True, points, keys, starts, lo, cell, dims) >= 0.0
+                ):
+                    touch = True
+                    break
+        out_i[p] = touch
+        any_row |= touch
+    return any_row
+
+
+@nb.njit(cache=True, inline="always")
+def _shape_touches(c, r, kind, a, b, planes, balls):
+    """Whether the sphere (c (3,), r) is not certified clear of a convex part or a bounding ball.
+
+    Kind 1: the hull planes a..b (inside <= 0); kind 2: the ball ``balls[a]`` (centre, radius).
+    """
+    if kind == 1:
+        best = -np.inf
+        for h in range(a, b):
+            best = max(best, planes[h, 0] * c[0] + planes[h, 1] * c[1] + planes[h, 2] * c[2] + planes[h, 3])
+        return not best > r
+    dx, dy, dz = c[0] - balls[a, 0], c[1] - balls[a, 1], c[2] - balls[a, 2]
+    return not math.sqrt(dx * dx + dy * dy + dz * dz) > r + balls[a, 3]
+
+
+@nb.njit(cache=True)
+def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_start, sub_joint, sub_local,
+                        sub_radius, group_local, group_radius, T, scene_rows, scene_reach, parts, offs, all_points, all_keys, all_starts,
+                        all_fields, geo, ints, halves, planes, balls, self_pairs, self_reach, self_table,
+                        tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off, tab_cert, start, out):  # fmt: skip
+    """Per state Q[i] (n,), which pairs its spheres do not certify free: ``out[i, p]`` (m, P + S) bool.
+
+    The whole-edge check of issue 25 item 3: every state's spheres placed and tested in one call.
+    Scene pairs ``p < P``: robot geometry ``scene_rows[p]``, grouped by scene part (``parts[q]``:
+    kind, a, b, and the part's rows r0..r1; kind 0: box centres in the point index q packed by
+    :func:`_packed` (``offs`` .. ``ints``),
+    boxes ``halves[q]`` a half diagonal across (:func:`_points_rows`); kind 1, 2: :func:`_shape_touches`),
+    certified when the geometry's bounding sphere or every sphere of its cover (``sub_*``) is
+    clear by ``scene_reach[p]``; then the self pairs (S, 2), certified when the bounding spheres
+    or every pair of cover spheres are farther apart than ``self_reach`` plus their radii, or the
+    pair's distance table (``self_table[p]`` >= 0, :func:`_table_clear`) clears it.
+    Goes from state ``start`` and stops at the first state with any pair left (coal decides it,
+    then the call goes on from the next): returns its index, or -1 when every state is certified.
+    """
+    G, K, J = joint.shape[0], sub_joint.shape[0], group_local.shape[0]
+    F = np.empty((Q.shape[1], 3, 4))
+    group_joint = np.arange(J)
+    Cj, Wj = np.empty((J, 3)), np.empty((J, 3))
+    R, t = np.empty((3, 3)), np.empty(3)
+    Cg, Cs = np.empty((G, 3)), np.empty((K, 3))
+    W, Ws = np.empty((G, 3)), np.empty((K, 3))
+    stamp = np.full(G, -1)  # the state each geometry's cover spheres were last placed for
+    P = scene_rows.shape[0]
+    reach = np.empty(P)
+    for q in range(parts.shape[0]):
+        reach[parts[q, 3] : parts[q, 4]] = scene_reach[parts[q, 3] : parts[q, 4]] + halves[q] * (
+            parts[q, 0] == 0
+        )
+    for i in range(start, Q.shape[0]):
+        _joint_frames(Q[i], placements, axes, kinds, F, R, t)
+        _place(joint, local, F, Cg)
+        _transformed(Cg, T, W)
+        _place(group_joint, group_local, F, Cj)
+        _transformed(Cj, T, Wj)
+        out_i = out[i]
+        any_pair = False
+        for q in range(parts.shape[0]):
+            kind, a, b, r0, r1 = parts[q, 0], parts[q, 1], parts[q, 2], parts[q, 3], parts[q, 4]
+            if kind == 0:
+                pts = all_points[offs[q, 0] : offs[q + 1, 0]]
+                keys = all_keys[offs[q, 1] : offs[q + 1, 1]]
+                starts = all_starts[offs[q, 2] : offs[q + 1, 2]]
+                field = all_fields[offs[q, 3] : offs[q + 1, 3]].reshape((ints[q, 3], ints[q, 4], ints[q, 5]))
+                lo, hi, cell, field_lo, field_h = (
+                    geo[q, 0:3],
+                    geo[q, 3:6],
+                    geo[q, 6],
+                    geo[q, 7:10],
+                    geo[q, 10],
+                )
+                dims = ints[q, 0:3]
+                any_pair |= _points_rows(out_i, r0, r1, scene_rows, reach, W, radius, Ws, sub_start, sub_radius,
+                                         joint, Wj, group_radius, i, stamp, sub_joint, sub_local, F, T, Cs, pts, keys, starts, lo, hi, cell, dims, field,
+                                         field_lo, field_h)  # fmt: skip
+                continue
+            for p in range(r0, r1):
+                g = scene_rows[p]
+                touch = _shape_touches(W[g], radius[g] + reach[p], kind, a, b, planes, balls)
+                if touch and sub_start[g + 1] - sub_start[g] > 1:
+                    touch = False
+                    _cover_placed(g, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws)
+                    for s in range(sub_start[g], sub_start[g + 1]):
+                        if _shape_touches(Ws[s], sub_radius[s] + reach[p], kind, a, b, planes, balls):
+                            touch = True
+                            break
+                out_i[p] = touch
+                any_pair |= touch
+        for p in range(self_pairs.shape[0]):
+            g, h = self_pairs[p, 0], self_pairs[p, 1]
+            touch = _near(Cg, g, Cg, h, radius[g] + radius[h] + self_reach[p])
+            if touch and self_table[p] >= 0:
+                touch = not _table_clear(Q[i], self_table[p], tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off,
+                                         tab_cert)  # fmt: skip
+            if touch:
+                touch = False
+                _cover_placed(g, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws)
+                _cover_placed(h, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws)
+                for s in range(sub_start[g], sub_start[g + 1]):
+                    for u in range(sub_start[h], sub_start[h + 1]):
+                        if _near(Cs, s, Cs, u, sub_radius[s] + sub_radius[u] + self_reach[p]):
+                            touch = True
+                            break
+                    if touch:
+                        break
+            out_i[P + p] = touch
+            any_pair |= touch
+        if any_pair:
+            return i
+    return -1
+
+
+@nb.njit(cache=True, inline="always")
+def _cover_placed(g, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws):
+    """Place geometry g's cover spheres for state i (arm frame ``Cs``, world ``Ws``) unless they are."""
+    if stamp[g] == i:
+        return
+    stamp[g] = i
+    for s in range(sub_start[g], sub_start[g + 1]):
+        _place_one(sub_joint[s], sub_local[s], F, Cs[s])
+        for a in range(3):
+            Ws[s, a] = T[a, 0] * Cs[s, 0] + T[a, 1] * Cs[s, 1] + T[a, 2] * Cs[s, 2] + T[a, 3]
+
+
+@nb.njit(cache=True, inline="always")
+def _table_clear(q, t, tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off, tab_cert):
+    """Whether self pair table t certifies arm state q (n,) free (:func:`_distance_table`).
+
+    Coal's distance at the nearest grid node, less how far the two geometries can have moved
+    relative to each other since (lever arm times joint change, per joint), is above the margin.
+    """
+    index, slack = 0, 0.0
+    for d in range(2):
+        j = tab_joint[t, d]
+        if j < 0:
+            continue
+        u = min(max(round((q[j] - tab_lo[t, d]) / tab_step[t, d]), 0), tab_n[t, d] - 1)
+        slack += tab_rho[t, d] * abs(q[j] - (tab_lo[t, d] + u * tab_step[t, d]))
+        index = index * tab_n[t, d] + u
+    return tab_cert[tab_off[t] + index] > slack
+
+
+@nb.njit(cache=True, inline="always")
+def _near(A, a, B, b, reach):
+    """Whether A[a] and B[b] are not farther apart than ``reach``."""
+    dx, dy, dz = A[a, 0] - B[b, 0], A[a, 1] - B[b, 1], A[a, 2] - B[b, 2]
+    return dx * dx + dy * dy + dz * dz <= reach * reach
 
 
 class _Part:
@@ -177,6 +422,155 @@ class _Part:
         return self.pair_a[~free]
 
 
+_TABLES: weakref.WeakKeyDictionary[Robot, dict[tuple[str, bytes, bytes], tuple[NDArray[np.generic], ...]]] = (
+    weakref.WeakKeyDictionary()
+)
+"""Per robot, the packed self pair tables of :meth:`StateFilter._self_tables` (they hold no reference to it)."""
+
+
+_COVERS: weakref.WeakKeyDictionary[Robot, dict[int, list[tuple[FloatArray, FloatArray]]]] = (
+    weakref.WeakKeyDictionary()
+)
+"""Per robot, the :func:`sphere_cover` of each of its first n collision geometries (by n)."""
+
+
+_Table = tuple[list[int], FloatArray, FloatArray, list[int], FloatArray, FloatArray]
+"""A self pair's distance table: joints, lower, step, nodes per joint, lever arms, values (:func:`_distance_table`)."""
+
+
+def _distance_table(
+    robot: Robot,
+    arm: Arm,
+    self_check: tuple[pin.Model, pin.Data, pin.GeometryModel, pin.GeometryData],
+    pair: int,
+    reach: float,
+) -> _Table | None:
+    """Coal's distance between one self pair's convex hulls on a grid over the arm joints that move them apart.
+
+    The hulls hold the geometries, so their distance is a lower bound of the geometries'.
+
+    Only for a pair whose relative pose one or two revolute arm joints change (every other joint
+    stays at its reference value, or moves both geometries alike). Per joint i, ``rho[i]`` bounds
+    how far a point of the geometry it moves travels per radian relative to the other: its
+    farthest hull point from the joint's origin, plus, for the upstream of two joints moving the
+    same geometry, the distance between their origins (both invariant under the joints). At a
+    configuration q the distance is at least the nearest node's less ``sum(rho * |q - node|)``.
+    Returns (joints, lower, step, nodes per joint, rho, distance - ``reach`` per node (row-major)),
+    or None.
+    """
+    model, data, geom, _ = self_check
+    objects = geom.geometryObjects
+    first, second = int(geom.collisionPairs[pair].first), int(geom.collisionPairs[pair].second)
+    ids = [model.getJointId(name) for name in arm.joint_names]
+    supports = {k: set(model.supports[objects[k].parentJoint]) for k in (first, second)}
+    joints = [i for i, j in enumerate(ids) if (j in supports[first]) != (j in supports[second])]
+    if not 1 <= len(joints) <= 2 or any(arm.kinds[i] != 0 for i in joints):
+        return None
+    ref = model.createData()
+    pin.forwardKinematics(model, ref, robot.q_reference)
+    gref = pin.GeometryData(geom)
+    pin.updateGeometryPlacements(model, ref, geom, gref)
+    rho = []
+    for i in joints:
+        moved = first if ids[i] in supports[first] else second
+        M = gref.oMg[moved]
+        P = hull_points(objects[moved].geometry) @ M.rotation.T + M.translation
+        below = [k for k in joints if k > i and ids[k] in supports[moved]]  # the other joint, downstream
+        pivot = ids[below[0]] if below else ids[i]
+        o, o_i = ref.oMi[pivot].translation, ref.oMi[ids[i]].translation
+        rho.append(float(np.max(np.linalg.norm(P - o, axis=1)) + np.linalg.norm(o - o_i)))
+    lo, hi = arm.lower[joints], arm.upper[joints]
+    nodes = np.maximum(np.ceil((hi - lo) * np.array(rho) / (2 * TABLE_SLACK)), 1).astype(int) + 1
+    while np.prod(nodes) > TABLE_NODES:
+        nodes = np.maximum(np.ceil(nodes / 1.25), 2).astype(int)
+    step = (hi - lo) / (nodes - 1)
+    try:
+        hulls = [_convex(hull_points(objects[k].geometry)) for k in (first, second)]
+    except Exception:  # qhull refuses a flat geometry: no table, coal decides
+        return None
+    parents = [(objects[k].parentJoint, objects[k].placement) for k in (first, second)]
+    q = np.clip(arm.from_pinocchio(robot.q_reference), arm.lower, arm.upper)
+    request, result, identity = coal.DistanceRequest(), coal.DistanceResult(), coal.Transform3s()
+    cert = []
+    for u in np.ndindex(*nodes):
+        q[joints] = lo + np.array(u) * step
+        pin.forwardKinematics(model, data, arm.to_pinocchio(q, robot.q_reference))
+        (j1, M1), (j2, M2) = parents
+        M = (data.oMi[j1] * M1).actInv(data.oMi[j2] * M2)  # the second geometry in the first's frame
+        result.clear()
+        d = coal.distance(
+            hulls[0], identity, hulls[1], coal.Transform3s(M.rotation, M.translation), request, result
+        )
+        cert.append(d - reach)
+    return joints, lo, step, list(nodes), np.array(rho), np.array(cert)
+
+
+def _convex(points: FloatArray) -> coal.ConvexBase:
+    """Coal's convex hull of points (k, 3): it holds the geometry they are the :func:`hull_points` of."""
+    vertices = coal.StdVec_Vec3s()
+    for v in points:
+        vertices.append(np.asarray(v, dtype=float))
+    return coal.Convex.convexHull(vertices, False, "")
+
+
+def _no_tables(n_pairs: int) -> tuple[NDArray[np.generic], ...]:
+    return _pack_tables(n_pairs, {})
+
+
+def _pack_tables(n_pairs: int, tables: dict[int, _Table]) -> tuple[NDArray[np.generic], ...]:
+    """Per self pair its table's index or -1, and the tables' (T, 2) joints, lower, step, nodes, rho, offsets, values."""
+    which = np.full(n_pairs, -1, dtype=np.int64)
+    T = len(tables)
+    joint, count = np.full((T, 2), -1, dtype=np.int64), np.ones((T, 2), dtype=np.int64)
+    lo, step, rho = np.zeros((T, 2)), np.ones((T, 2)), np.zeros((T, 2))
+    offs, values = [0], []
+    for t, (p, (joints, lower, steps, nodes, levers, cert)) in enumerate(sorted(tables.items())):
+        which[p] = t
+        k = len(joints)
+        joint[t, :k], lo[t, :k], step[t, :k], count[t, :k], rho[t, :k] = joints, lower, steps, nodes, levers
+        offs.append(offs[-1] + len(cert))
+        values.append(cert)
+    flat = np.concatenate(values) if values else np.zeros(0)
+    return which, joint, lo, step, count, rho, np.array(offs, dtype=np.int64), flat
+
+
+def _group_spheres(
+    joint: NDArray[np.int64], local: FloatArray, radius: FloatArray, n: int
+) -> tuple[FloatArray, FloatArray]:
+    """Per arm joint j < n, a sphere around the spheres (``local``, ``radius``) of the geometries with ``joint == j``."""
+    centres, radii = np.zeros((n, 3)), np.zeros(n)
+    for j in range(n):
+        C, r = local[joint == j], radius[joint == j]
+        if len(r):
+            centres[j] = ((C - r[:, None]).min(axis=0) + (C + r[:, None]).max(axis=0)) / 2
+            radii[j] = float(np.max(np.linalg.norm(C - centres[j], axis=1) + r)) + SLACK
+    return centres, radii
+
+
+def _packed(indexes: list[PointIndex]) -> tuple[NDArray[np.generic], ...]:
+    """Point indexes as a few flat arrays for :func:`_uncertified_states`.
+
+    Per index q, ``offs[q]`` .. ``offs[q + 1]`` (Q + 1, 4) are where its points, cell keys, cell
+    starts and distance field lie in the concatenated arrays; ``geo`` (Q, 11): lo, hi, cell,
+    field_lo, field_h; ``ints`` (Q, 6): dims, the field's shape.
+    """
+    sizes = [(ix.n_points, len(ix.cell_keys), len(ix.cell_starts), ix.field.size) for ix in indexes]
+    offs = np.zeros((len(indexes) + 1, 4), dtype=np.int64)
+    offs[1:] = np.cumsum(np.array(sizes, dtype=np.int64).reshape(-1, 4), axis=0)
+    cat = lambda arrays, empty: np.ascontiguousarray(np.concatenate([empty, *arrays]))  # noqa: E731
+    return (
+        offs,
+        cat([ix.points for ix in indexes], np.zeros((0, 3))),
+        cat([ix.cell_keys for ix in indexes], np.zeros(0, dtype=np.int64)),
+        cat([ix.cell_starts for ix in indexes], np.zeros(0, dtype=np.int64)),
+        cat([ix.field.ravel() for ix in indexes], np.zeros(0, dtype=np.float32)),
+        np.array(
+            [[*ix.lo, *ix.hi, ix.cell, *ix.field_lo, ix.field_h] for ix in indexes], dtype=float
+        ).reshape(-1, 11),
+        np.array([[*ix.dims, *ix.field.shape] for ix in indexes], dtype=np.int64).reshape(-1, 6),
+    )
+
+
 class StateFilter:
     """Whether the robot, its arm at joint values, touches the scene or itself: coal's verdict, pre-filtered.
 
@@ -215,6 +609,11 @@ class StateFilter:
         armbase_inv = T_root_armbase.inverse()
         arm_ids = [model.getJointId(j) for j in arm.joint_names]
         joint, local, radius = [], [], []
+        sub_start, sub_joint, sub_local, sub_radius = [0], [], [], []  # the spheres covering each geometry
+        kept = _COVERS.setdefault(robot, {})
+        if n_robot not in kept:  # the robot's geometries come first in every scene model
+            kept[n_robot] = [sphere_cover(geom.geometryObjects[k].geometry) for k in range(n_robot)]
+        covers = kept[n_robot]
         gref = pin.GeometryData(geom)
         pin.updateGeometryPlacements(model, ref, geom, gref)
         for k in range(n_robot):
@@ -227,12 +626,28 @@ class StateFilter:
             joint.append(j)
             local.append(T.rotation @ c + T.translation)
             radius.append(r)
+            cover_c, cover_r = covers[k]
+            sub_start.append(sub_start[-1] + len(cover_r))
+            sub_joint += [j] * len(cover_r)
+            sub_local += list(cover_c @ T.rotation.T + T.translation)
+            sub_radius += list(cover_r)
         self.joint = np.array(joint, dtype=np.int64)
         """(G,) per robot geometry the arm joint that moves it, -1 for none."""
         self.local = np.array(local, dtype=float).reshape(-1, 3)
         """(G, 3) its bounding sphere's centre in that joint's frame (or the arm's base frame) [m]."""
         self.radius = np.array(radius, dtype=float)
         """(G,) the bounding sphere's radius [m]."""
+        self._cover = (
+            np.array(sub_start, dtype=np.int64),
+            np.array(sub_joint, dtype=np.int64),
+            np.array(sub_local, dtype=float).reshape(-1, 3),
+            np.array(sub_radius, dtype=float),
+        )
+        """Per robot geometry g, the spheres of its :func:`sphere_cover` (starts (G + 1,), joints,
+        centres in the joint's frame, radii) [m]."""
+        self._groups = _group_spheres(self.joint, self.local, self.radius, arm.n_joints)
+        """Per arm joint, a sphere (centres (n, 3) in its frame, radii (n,)) around the bounding
+        spheres of every geometry it moves, with no other arm joint between."""
         moving = self.joint >= 0
         by_gid: dict[int, _Part] = {}
         for i, pair in enumerate(geom.collisionPairs):
@@ -266,12 +681,93 @@ class StateFilter:
             self._self_reach = np.array(
                 [sdata.collisionRequests[i].security_margin + SLACK for i in active], dtype=float
             )
+        self._kernel_scene()
+        self._tables = _no_tables(len(self._self_pairs))
+        if self_check is not None and len(self._self_pairs):
+            self._tables = self._self_tables()
         self._static_key: bytes | None = None
         self._static_hit = False
         self._centres = np.empty((n_robot, 3))
         self._world = np.empty((n_robot, 3))
         self.coal_pairs = 0
         """Pairs handed to coal so far (scene and self), for measurements."""
+        self.coal_states = 0
+        """States whose spheres left a pair to coal so far, for measurements."""
+
+    def _kernel_scene(self) -> None:
+        """The moving pairs and scene parts as the arrays of :func:`_uncertified_states`.
+
+        A part's box centres of every size go into one index, the largest box's half diagonal
+        taken for all (coal's octrees here hold boxes of one size).
+        """
+        rows: list[int] = []
+        reach: list[float] = []
+        pair_ids: list[int] = []
+        parts: list[list[int]] = []
+        indexes, halves, planes, balls = [], [], [np.zeros((0, 4))], [np.zeros((0, 4))]
+        n_planes = n_balls = 0
+        for part in self.parts:
+            parts.append([0, 0, 0, len(rows), len(rows) + len(part.robot_a)])
+            order = np.argsort(self.joint[part.robot_a], kind="stable")  # a joint's geometries together
+            rows += list(part.robot_a[order])
+            reach += [part.margin[k] + SLACK for k in order]
+            pair_ids += list(part.pair_a[order])
+            index, half = PointIndex(np.zeros((0, 3)), HASH_CELL, 0.0), 0.0
+            if part.indexes:
+                if len(part.indexes) == 1:
+                    index, half = part.indexes[0]
+                else:
+                    index = PointIndex(np.concatenate([ix.points for ix, _ in part.indexes]), HASH_CELL)
+                    half = max(h for _, h in part.indexes)
+            elif part.planes is not None:
+                parts[-1][:3] = [1, n_planes, n_planes + len(part.planes)]
+                planes.append(part.planes)
+                n_planes += len(part.planes)
+            else:
+                assert part.sphere is not None
+                parts[-1][:3] = [2, n_balls, n_balls + 1]
+                balls.append(np.append(part.sphere[0], part.sphere[1])[None])
+                n_balls += 1
+            indexes.append(index)
+            halves.append(half)
+        self._scene_rows = np.array(rows, dtype=np.int64)
+        self._scene_row_reach = np.array(reach, dtype=float)
+        self._scene_row_pair = np.array(pair_ids, dtype=np.int64)
+        self._scene_parts = (np.array(parts, dtype=np.int64).reshape(-1, 5), *_packed(indexes),
+                             np.array([*halves, 0.0], dtype=float), np.concatenate(planes), np.concatenate(balls))  # fmt: skip
+
+    def _self_tables(self) -> tuple[NDArray[np.generic], ...]:
+        """Distance tables for the self pairs the spheres leave to coal often, packed for the kernel.
+
+        Hard pairs: left to coal in at least :data:`TABLE_HARD` of 200 random configurations
+        (pairs of links that nearly touch near a shared joint: their spheres always overlap).
+        Kept per robot and arm (:data:`_TABLES`).
+        """
+        key = (self.arm.name, self._self_pairs.tobytes(), self._self_reach.tobytes())
+        kept = _TABLES.setdefault(self.robot, {})
+        if key not in kept:
+            a = self.arm
+            Q = np.ascontiguousarray(a.sample(np.random.default_rng(0), 200))
+            none = _no_tables(len(self._self_pairs))
+            out = np.empty((len(Q), len(self._self_pairs)), dtype=np.bool_)
+            i = -1
+            while i < len(Q):  # every state's rows (a call stops at each state with any left)
+                i = _uncertified_states(  # type: ignore[call-arg]
+                    Q, a.placements, a.axes, a.kinds, self.joint, self.local, self.radius, *self._cover,
+                    *self._groups, np.eye(4), self._scene_rows[:0].copy(), self._scene_row_reach[:0].copy(),
+                    self._scene_parts[0][:0].copy(), *self._scene_parts[1:], self._self_pairs, self._self_reach,
+                    *none, i + 1, out,
+                )  # fmt: skip
+                i = len(Q) if i < 0 else i
+            tables = {}
+            assert self.self_check is not None
+            for p in np.flatnonzero(out.mean(axis=0) >= TABLE_HARD):
+                table = _distance_table(self.robot, a, self.self_check, int(self._self_index[p]),
+                                        float(self._self_reach[p]))  # fmt: skip
+                if table is not None:
+                    tables[int(p)] = table
+            kept[key] = _pack_tables(len(self._self_pairs), tables)
+        return kept[key]
 
     def centres(self, q_arm: ArrayLike) -> FloatArray:
         """(G, 3) the bounding spheres' centres in the arm's base frame at arm joint values (n,) [m]."""
@@ -282,34 +778,58 @@ class StateFilter:
 
     def colliding(self, q_arm: ArrayLike, T_world_base: ArrayLike) -> bool:
         """Coal's verdict for arm joint values (n,) at base pose (4, 4): the robot touches the scene or itself."""
-        q_arm = np.asarray(q_arm, dtype=float)
+        return self.first_colliding(np.asarray(q_arm, dtype=float)[None], T_world_base) == 0
+
+    def first_colliding(self, Q_arm: ArrayLike, T_world_base: ArrayLike) -> int:
+        """The index of the first of the states Q_arm (m, n) that touches the scene or itself, or -1.
+
+        Coal's verdict on each state, in order: one compiled call certifies the states' pairs by
+        spheres (:func:`_uncertified_states`) up to the first state with pairs left over; only
+        that state goes to coal, with only those pairs, and the call goes on after it.
+        """
+        Q = np.ascontiguousarray(np.atleast_2d(np.asarray(Q_arm, dtype=float)))
         T = np.asarray(T_world_base, dtype=float)
-        q_full = self.arm.to_pinocchio(q_arm, self.robot.q_reference)
-        C = self.centres(q_arm)
         key = T.tobytes()
-        new_pose = key != self._static_key
-        if new_pose:
+        if key != self._static_key:
             self._static_key = key
             self._T_world_armbase = T @ self._T_base_armbase
-        _transformed(C, self._T_world_armbase, self._world)
-        if new_pose:
+            _transformed(self.centres(Q[0]), self._T_world_armbase, self._world)
             todo = [p for part in self._static_parts for p in part.uncertified(self._world)]
-            self._static_hit = self._scene_coal(todo, q_full, T)
+            self._static_hit = self._scene_coal(todo, self._full(Q[0]), T)
         if self._static_hit:
-            return True
-        todo = [p for part in self.parts for p in part.uncertified(self._world)]
-        if todo and self._scene_coal(todo, q_full, T):
-            return True
-        if self.self_check is None:
-            return False
-        near = _uncertified_pairs(C, self.radius, self._self_pairs, self._self_reach)
-        if len(near) == 0:
-            return False
+            return 0
+        a = self.arm
+        P = len(self._scene_rows)
+        out = np.empty((len(Q), P + len(self._self_pairs)), dtype=np.bool_)
+        i = -1
+        while True:
+            i = _uncertified_states(  # type: ignore[call-arg]
+                Q, a.placements, a.axes, a.kinds, self.joint, self.local, self.radius, *self._cover, *self._groups,
+                self._T_world_armbase, self._scene_rows, self._scene_row_reach, *self._scene_parts,
+                self._self_pairs, self._self_reach, *self._tables, i + 1, out,
+            )  # fmt: skip
+            if i < 0:
+                return -1
+            self.coal_states += 1
+            rows = np.flatnonzero(out[i])
+            q_full = self._full(Q[i])
+            scene = self._scene_row_pair[rows[rows < P]]
+            if len(scene) and self._scene_coal(list(scene), q_full, T):
+                return int(i)
+            own = self._self_index[rows[rows >= P] - P]
+            if len(own) and self._self_coal(own, q_full):
+                return int(i)
+
+    def _full(self, q_arm: FloatArray) -> FloatArray:
+        return self.arm.to_pinocchio(q_arm, self.robot.q_reference)
+
+    def _self_coal(self, pairs: NDArray[np.int64], q_full: FloatArray) -> bool:
+        assert self.self_check is not None
         model, data, geom, gdata = self.self_check
         pin.forwardKinematics(model, data, q_full)
         pin.updateGeometryPlacements(model, data, geom, gdata)
-        self.coal_pairs += len(near)
-        return any(pin.computeCollision(geom, gdata, int(i)) for i in self._self_index[near])
+        self.coal_pairs += len(pairs)
+        return any(pin.computeCollision(geom, gdata, int(i)) for i in pairs)
 
     def _scene_coal(self, pairs: list[int], q_full: FloatArray, T_world_base: FloatArray) -> bool:
         if not pairs:
@@ -322,4 +842,4 @@ class StateFilter:
         return any(pin.computeCollision(geom, gdata, int(i)) for i in pairs)
 
 
-__all__ = ["SLACK", "StateFilter", "bounding_sphere", "hull_points"]
+__all__ = ["SLACK", "StateFilter", "bounding_sphere", "hull_points", "sphere_cover"]

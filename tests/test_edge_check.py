@@ -1,0 +1,171 @@
+"""The whole-edge check (issue 25 item 3): one compiled call per joint line, coal's verdict on every state.
+
+:meth:`Environment.first_colliding_arm` certifies the states of a line by spheres in one numba call
+(:func:`~baseplace.world.state_filter._uncertified_states`) and hands only what the spheres leave to
+coal. The oracle is coal on every pair of every state (:meth:`Environment.colliding_arm_exact`), on
+lines in a noisy table scene (the table grid's clouds): the first state it finds touching must be
+the first coal finds, and a line it passes must have no state coal finds touching.
+"""
+
+from __future__ import annotations
+
+import coal
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from baseplace.geometry.poses import pose_from_xyz_rpy
+from baseplace.placement.motion import MotionChecker, MotionSettings, bisection_order
+from baseplace.placement.pipeline import PlaceSettings, scene_checks, with_floor
+from baseplace.placement.scene_cache import SceneCache
+from baseplace.robots.ik import DampedLeastSquaresIK
+from baseplace.robots.spheres import _joint_frames
+from baseplace.world.environment import Environment
+from baseplace.world.state_filter import _table_clear, hull_points, sphere_cover
+from baseplace_experiments.execution_experiment import trial_scene
+from baseplace_experiments.table_grid import TableGridSettings
+
+
+@pytest.fixture(scope="module")
+def table_lines(tiago):
+    """(transit model, approach model, base pose, lines (L, 2, n)): lines near and through a noisy table."""
+    s = TableGridSettings()
+    _, p_est, seen = trial_scene(2, (2, 0), s)
+    points = with_floor(seen, 0.0)
+    cache = SceneCache(points)
+    target = s.grasps(p_est, s.method_top_below)[2]
+    target[2, 3] += 0.04
+    arm = tiago.arm()
+    checks = scene_checks(
+        tiago, arm.name, points, cache.terrain(None), target[None], PlaceSettings(), "auto", cache
+    )
+    motion = checks.verifier.motion
+    assert motion is not None and motion.approach_environment is not None
+    T_base = pose_from_xyz_rpy([*(target[:2, 3] + (0.05, -0.6)), 0.0, 0.0, 0.0, 1.57])
+    rng = np.random.default_rng(11)
+    q_grasp = DampedLeastSquaresIK(arm, restarts=20).solve(np.linalg.inv(T_base) @ target, rng)
+    assert q_grasp is not None
+    starts = np.vstack([q_grasp + rng.normal(0.0, 0.15, (140, arm.n_joints)), arm.sample(rng, 20)])
+    ends = starts + rng.normal(0.0, 0.3, starts.shape)
+    lines = np.clip(np.stack([starts, ends], axis=1), arm.lower, arm.upper)
+    return motion.environment, motion.approach_environment, T_base, lines
+
+
+def test_edge_verdicts_are_coals_on_a_noisy_table(tiago, table_lines):
+    transit, approach, T_base, lines = table_lines
+    arm = tiago.arm()
+    n = 24
+    fractions = np.array(bisection_order(n), dtype=float) / n
+    blocked = free = coal_blocked_only = 0
+    for env in (transit, approach):
+        for a, b in lines:
+            Q = a + np.outer(fractions, b - a)
+            first = env.first_colliding_arm(arm, Q, T_base)
+            exact = [env.colliding_arm_exact(arm, q, T_base) for q in Q]
+            expected = exact.index(True) if True in exact else -1
+            # never "free" where coal finds a state touching, never "blocked" where coal finds none
+            assert first == expected, f"edge check says state {first}, coal {expected}, line {a} -> {b}"
+            blocked += first >= 0
+            free += first < 0
+            coal_blocked_only += first >= 0 and not exact[first]
+    print(
+        f"{blocked} lines blocked, {free} free, {coal_blocked_only} blocked where coal finds no state touching"
+    )
+    assert coal_blocked_only == 0
+    assert blocked > 30 and free > 30  # both verdicts, on lines into the table and beside it
+    assert transit.state_filter(arm).coal_states > 0  # states at contact reach coal
+
+
+def test_motion_checker_blocks_where_a_state_by_state_check_does(tiago, table_lines):
+    """MotionChecker._blocking (whole lines) returns the state the landed one-state-at-a-time loop returned."""
+    transit, approach, T_base, lines = table_lines
+    arm = tiago.arm()
+    checker = MotionChecker(tiago, arm, transit, approach, MotionSettings())
+    for a, b in lines[:60]:
+        n = checker.edge_states(a, b)
+        before = checker.state_checks
+        expected, checked = None, 0
+        for k in bisection_order(n):  # the landed loop, with coal on every pair
+            checked += 1
+            q = a + (b - a) * (k / n)
+            if transit.colliding_arm_exact(arm, q, T_base):
+                expected = q
+                break
+        got = checker._blocking(a, b, T_base, transit)
+        assert (got is None) == (expected is None)
+        if got is not None:
+            np.testing.assert_array_equal(got, expected)
+        assert checker.state_checks - before == checked  # the max_checks budget counts as before
+
+
+def _surface_points(geometry):
+    """(k, 3) points whose hull is the geometry (a mesh's vertices, a box's corners), or a primitive's rims."""
+    if isinstance(geometry, coal.Cylinder):
+        t = np.linspace(0.0, 2 * np.pi, 64, endpoint=False)
+        ring = np.c_[geometry.radius * np.cos(t), geometry.radius * np.sin(t)]
+        return np.vstack([np.c_[ring, np.full(64, z)] for z in (-geometry.halfLength, geometry.halfLength)])
+    if isinstance(geometry, coal.Sphere):
+        d = np.random.default_rng(0).normal(size=(200, 3))
+        return geometry.radius * d / np.linalg.norm(d, axis=1, keepdims=True)
+    return hull_points(geometry)
+
+
+def test_sphere_covers_hold_their_geometry(tiago):
+    """Every point of every TIAGo collision geometry's hull lies in a sphere of its cover, at any configuration."""
+    env = Environment(tiago, {}, self_collision=False)
+    geom = env.geom
+    rng = np.random.default_rng(5)
+    split = 0
+    for obj in geom.geometryObjects:
+        C, r = sphere_cover(obj.geometry)
+        P = _surface_points(obj.geometry)
+        w = rng.dirichlet(np.ones(len(P)) * 0.3, size=400)  # points inside the hull, many near its faces
+        inside = np.vstack([P, w @ P, *[(P[i] + P[j]) / 2 for i, j in rng.integers(len(P), size=(400, 2))]])
+        gap = (np.linalg.norm(inside[:, None] - C[None], axis=2) - r).min(axis=1).max()
+        assert gap <= 1e-9, f"{obj.name}: a point lies {gap} m outside its cover"
+        split += len(r) > 1
+    assert split > 10  # the arm's links and the hand's box are covered by several spheres
+    # placed by the filter's kinematics, the cover spheres stay where pinocchio puts the geometry
+    arm = tiago.arm()
+    filt = env.state_filter(arm)
+    starts, joints, local, radii = filt._cover
+    model, data, gdata = tiago.model, tiago.model.createData(), pin.GeometryData(geom)
+    T_root_armbase = filt._T_base_armbase  # base == root at the reference configuration's base frame
+    covers = [sphere_cover(obj.geometry) for obj in geom.geometryObjects]
+    for q in arm.sample(rng, 20):
+        pin.updateGeometryPlacements(model, data, geom, gdata, arm.to_pinocchio(q, tiago.q_reference))
+        F = np.empty((arm.n_joints, 3, 4))
+        _joint_frames(q, arm.placements, arm.axes, arm.kinds, F, np.empty((3, 3)), np.empty(3))
+        for k in range(len(starts) - 1):
+            if joints[starts[k]] < 0:
+                continue
+            C_local, r = covers[k]
+            M = env._T_root_base.inverse() * gdata.oMg[k]  # geometry in the base frame
+            want = C_local @ M.rotation.T + M.translation
+            j = joints[starts[k]]
+            got = local[starts[k] : starts[k + 1]] @ F[j, :, :3].T + F[j, :, 3]
+            got = got @ T_root_armbase[:3, :3].T + T_root_armbase[:3, 3]
+            np.testing.assert_allclose(got, want, atol=1e-9)
+            np.testing.assert_array_equal(radii[starts[k] : starts[k + 1]], r)
+
+
+def test_self_distance_tables_never_clear_a_pair_closer_than_its_margin(tiago):
+    """Where a self pair's distance table certifies a configuration, coal's distance between the meshes is above the margin."""
+    env = Environment(tiago, {})
+    arm = tiago.arm()
+    filt = env.state_filter(arm)
+    which, *tables = filt._tables
+    assert (which >= 0).sum() >= 3  # the links that nearly touch at the shoulder and the wrist
+    model, data, geom, gdata = filt.self_check
+    rng = np.random.default_rng(8)
+    cleared = 0
+    for q in arm.sample(rng, 300):
+        pin.forwardKinematics(model, data, arm.to_pinocchio(q, tiago.q_reference))
+        pin.updateGeometryPlacements(model, data, geom, gdata)
+        for p in np.flatnonzero(which >= 0):
+            if _table_clear(q, which[p], *tables):
+                cleared += 1
+                pair = int(filt._self_index[p])
+                distance = pin.computeDistance(geom, gdata, pair).min_distance
+                assert distance > gdata.collisionRequests[pair].security_margin
+    assert cleared > 300  # the tables do certify
