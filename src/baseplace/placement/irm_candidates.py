@@ -27,7 +27,7 @@ from baseplace.geometry.poses import (
 )
 from baseplace.placement.candidates import RadialCandidate, _object, occupancy_risk
 from baseplace.placement.motion import MotionChecker
-from baseplace.placement.robustness import BaseErrorModel
+from baseplace.placement.robustness import BaseErrorModel, perturbed
 from baseplace.placement.verified import Candidate, ObjectApproach, Placement
 from baseplace.placement.verify import Verifier
 from baseplace.reachability.rmap import ReachabilityMap
@@ -113,8 +113,10 @@ class IrmSettings:
             ``error`` (:func:`reach_margin`): a (pose, grasp) pair is verified only when the arm
             still reaches the grasp, clear of the obstacles, from the pose moved that margin
             straight away from it (:func:`keeps_reach_margin`); pairs
-            without the margin are verified only when no pair keeps it. 0: no margin. 2 was chosen
-            on the table-grid execution dev seeds 0-2 (docs/placement.md).
+            without the margin are verified only when no pair keeps it. With a reaching-motion
+            check, the stowed arm must also be clear at the poses this far from it
+            (:func:`stowed_clear_under_error`). 0: neither. 1 was chosen over 2 on the
+            table-grid execution dev seeds 0-2 (docs/placement.md).
         error: the base's navigation error the margin is taken from (the robustness score's
             default, :class:`~baseplace.placement.robustness.BaseErrorModel`: 3 cm, 2 deg).
     """
@@ -125,7 +127,7 @@ class IrmSettings:
     max_checks: int = 300
     separation: float = 0.2
     unknown_is_risk: bool = True
-    reach_sigmas: float = 2.0
+    reach_sigmas: float = 1.0
     error: BaseErrorModel = field(default_factory=BaseErrorModel)
 
     def __post_init__(self) -> None:
@@ -145,7 +147,7 @@ def reach_margin(lever: ArrayLike, error: BaseErrorModel, sigmas: float) -> Floa
     arm about the base's z axis and moves a TCP ``lever`` [m] away (horizontally) by ``lever``
     times the heading error, counted here as if it were along that line too (the arm's reach
     boundary is not a circle about the base origin). The two are independent:
-    ``sigmas * hypot(sigma_xy, lever * sigma_yaw)``; 2 sigma at TIAGo's 0.8 m: 8.2 cm.
+    ``sigmas * hypot(sigma_xy, lever * sigma_yaw)``; 1 sigma at TIAGo's 0.8 m: 4.1 cm.
     """
     L = np.asarray(lever, dtype=float)
     return sigmas * np.hypot(error.sigma_xy, L * error.sigma_yaw)
@@ -158,6 +160,32 @@ def reach_margin_json(settings: IrmSettings) -> dict[str, object]:
             "at_lever_0.8_m": round(float(reach_margin(0.8, e, settings.reach_sigmas)), 4),
             "rule": "sigmas * hypot(sigma_xy, lever * sigma_yaw) [m], lever: base -> TCP distance; a pose is "
                     "kept when the grasp is still reached, collision-free, from it moved that far away (if any pose is)"}  # fmt: skip
+
+
+def stowed_clear_under_error(
+    motion: MotionChecker,
+    T_world_base: FloatArray,
+    T_world_tcp: FloatArray,
+    error: BaseErrorModel,
+    sigmas: float,
+) -> bool:
+    """Whether the motion's start configuration is clear of its transit model at the base poses a navigation error reaches.
+
+    Six poses, ``sigmas`` standard deviations of ``error`` from the base pose (4, 4): moved
+    ``sigmas * sigma_xy`` towards the TCP target (4, 4) or to either side of that line, each turned
+    by ``+- sigmas * sigma_yaw``. The reaching motion starts from the stowed arm wherever the base
+    stopped; a pose where it is refused there leaves the robot without a motion.
+    """
+    toward = T_world_tcp[:2, 3] - T_world_base[:2, 3]
+    length = float(np.hypot(toward[0], toward[1]))
+    toward = toward / length if length > 1e-9 else np.array([1.0, 0.0])
+    side = np.array([-toward[1], toward[0]])
+    step, turn = sigmas * error.sigma_xy, sigmas * error.sigma_yaw
+    offsets = [(*(step * d), a) for d in (toward, side, -side) for a in (turn, -turn)]
+    return not any(
+        motion.environment.colliding_arm(motion.arm, motion.q_start, T)
+        for T in perturbed(T_world_base, np.array(offsets))
+    )
 
 
 def keeps_reach_margin(
@@ -275,7 +303,10 @@ def irm_candidates(
             if margin:
                 lever = float(np.hypot(*(G[k, :2, 3] - poses[i, :2])))
                 needed = float(reach_margin(lever, s.error, s.reach_sigmas))
-                if not keeps_reach_margin(ik, env, T[i], G[k], needed, margin_rng):
+                kept = keeps_reach_margin(ik, env, T[i], G[k], needed, margin_rng)
+                if kept and motion is not None:
+                    kept = stowed_clear_under_error(motion, T[i], G[k], s.error, s.reach_sigmas)
+                if not kept:
                     if len(short) >= s.max_checks:
                         return
                     short.append(np.array([k, i]))
