@@ -147,3 +147,17 @@ def test_a_pose_whose_stowed_arm_meets_the_table_after_a_navigation_error_is_ref
     assert not stowed_clear_under_error(near, T_base, target, BaseErrorModel(), 2.0)
     far = MotionChecker(tiago, arm, _table_ahead(tiago, 0.40))
     assert stowed_clear_under_error(far, T_base, target, BaseErrorModel(), 2.0)
+
+
+def test_the_candidates_json_states_the_margin(tiago, tiago_map):
+    from baseplace.jobs.candidates import CandidatesJob, candidates_job
+    from conftest import SHARED
+
+    job = CandidatesJob(object="-1.025 -0.775 0.6", occupancy=str(SHARED / "maps" / "tb3_sandbox.yaml"),
+                        method="irm", robot=tiago, map=tiago_map)  # fmt: skip
+    margin = candidates_job(job).settings["reach_margin"]
+    assert margin["sigmas"] == K and margin["sigma_xy"] == 0.03
+    assert margin["at_lever_0.8_m"] == pytest.approx(_margin(0.8), abs=1e-4)
+    assert (
+        candidates_job(CandidatesJob(**{**job.__dict__, "method": "radial"})).settings["reach_margin"] is None
+    )
