@@ -8,7 +8,9 @@ its estimate, the noisy cloud). Four ways to choose the base pose, all from what
 * ``baseline``: seed 004's predefined pose at the table's short edge;
 * ``radial``: seed 004's Algorithms 1 and 2 (radial candidates, pickup by motion cost);
 * ``default``: baseplace's default, the IRM-verified candidates with the reaching-motion check on
-  (as ``baseplace candidates``), fed to the same pickup loop;
+  (as ``baseplace candidates``, ``IrmSettings()``: with the reach margin against
+  the default base error, :func:`~baseplace.placement.irm_candidates.reach_margin`, after protocol v6), fed to the
+  same pickup loop;
 * ``robust``: the same verified candidates ranked by robustness to base error
   (:class:`~baseplace.placement.robustness.RobustnessSettings` as chosen in
   ``bench/bench_robustness.py``'s development run), the most robust one the grid planner reaches.

@@ -12,15 +12,22 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError
-from baseplace.geometry.poses import BasePose, FloatArray, pose_from_xyz_rpy, rotation_taking
+from baseplace.geometry.poses import (
+    BasePose,
+    FloatArray,
+    invert_transforms,
+    pose_from_xyz_rpy,
+    rotation_taking,
+)
 from baseplace.placement.candidates import RadialCandidate, _object, occupancy_risk
 from baseplace.placement.motion import MotionChecker
+from baseplace.placement.robustness import BaseErrorModel, perturbed
 from baseplace.placement.verified import Candidate, ObjectApproach, Placement
 from baseplace.placement.verify import Verifier
 from baseplace.reachability.rmap import ReachabilityMap
@@ -102,6 +109,16 @@ class IrmSettings:
         separation: returned candidates are at least this far apart [m], so that one blocked
             approach does not take all of them.
         unknown_is_risk: unknown grid cells count as occupied (as :class:`RadialSettings`).
+        reach_sigmas: the reach margin against the navigation error, in standard deviations of
+            ``error`` (:func:`reach_margin`): a (pose, grasp) pair is verified only when the arm
+            still reaches the grasp, clear of the obstacles, from the pose moved that margin
+            straight away from it (:func:`keeps_reach_margin`); pairs
+            without the margin are verified only when no pair keeps it. With a reaching-motion
+            check, the stowed arm must also be clear at the poses this far from it
+            (:func:`stowed_clear_under_error`). 0: neither. 1 was chosen over 2 on the
+            table-grid execution dev seeds 0-2 (docs/placement.md).
+        error: the base's navigation error the margin is taken from (the robustness score's
+            default, :class:`~baseplace.placement.robustness.BaseErrorModel`: 3 cm, 2 deg).
     """
 
     resolution: float = 0.05
@@ -110,12 +127,90 @@ class IrmSettings:
     max_checks: int = 300
     separation: float = 0.2
     unknown_is_risk: bool = True
+    reach_sigmas: float = 1.0
+    error: BaseErrorModel = field(default_factory=BaseErrorModel)
 
     def __post_init__(self) -> None:
         if not (self.resolution > 0 and self.n_yaw >= 1 and self.count >= 1 and self.max_checks >= 1):
             raise InputError("need resolution > 0 m and n_yaw, count, max_checks >= 1")
         if not self.separation >= 0:
             raise InputError(f"separation must be >= 0 m, got {self.separation}")
+        if not (math.isfinite(self.reach_sigmas) and self.reach_sigmas >= 0):
+            raise InputError(f"reach_sigmas must be a finite number >= 0, got {self.reach_sigmas}")
+
+
+def reach_margin(lever: ArrayLike, error: BaseErrorModel, sigmas: float) -> FloatArray:
+    """How much further [m] than its nominal pose the base may stop from a grasp, (N,) per lever (N,) [m].
+
+    ``sigmas`` standard deviations of the grasp's displacement relative to the base under
+    ``error``: the offset along the base -> grasp line has ``sigma_xy``; a heading error rotates the
+    arm about the base's z axis and moves a TCP ``lever`` [m] away (horizontally) by ``lever``
+    times the heading error, counted here as if it were along that line too (the arm's reach
+    boundary is not a circle about the base origin). The two are independent:
+    ``sigmas * hypot(sigma_xy, lever * sigma_yaw)``; 1 sigma at TIAGo's 0.8 m: 4.1 cm.
+    """
+    L = np.asarray(lever, dtype=float)
+    return sigmas * np.hypot(error.sigma_xy, L * error.sigma_yaw)
+
+
+def reach_margin_json(settings: IrmSettings) -> dict[str, object]:
+    """How the search's reach margin is derived, for a report (the ``candidates`` JSON's ``settings``)."""
+    e = settings.error
+    return {"sigmas": settings.reach_sigmas, "sigma_xy": e.sigma_xy, "sigma_yaw": round(e.sigma_yaw, 6),
+            "at_lever_0.8_m": round(float(reach_margin(0.8, e, settings.reach_sigmas)), 4),
+            "rule": "sigmas * hypot(sigma_xy, lever * sigma_yaw) [m], lever: base -> TCP distance; a pose is "
+                    "kept when the grasp is still reached, collision-free, from it moved that far away (if any pose is)"}  # fmt: skip
+
+
+def stowed_clear_under_error(
+    motion: MotionChecker,
+    T_world_base: FloatArray,
+    T_world_tcp: FloatArray,
+    error: BaseErrorModel,
+    sigmas: float,
+) -> bool:
+    """Whether the motion's start configuration is clear of its transit model at the base poses a navigation error reaches.
+
+    Six poses, ``sigmas`` standard deviations of ``error`` from the base pose (4, 4): moved
+    ``sigmas * sigma_xy`` towards the TCP target (4, 4) or to either side of that line, each turned
+    by ``+- sigmas * sigma_yaw``. The reaching motion starts from the stowed arm wherever the base
+    stopped; a pose where it is refused there leaves the robot without a motion.
+    """
+    toward = T_world_tcp[:2, 3] - T_world_base[:2, 3]
+    length = float(np.hypot(toward[0], toward[1]))
+    toward = toward / length if length > 1e-9 else np.array([1.0, 0.0])
+    side = np.array([-toward[1], toward[0]])
+    step, turn = sigmas * error.sigma_xy, sigmas * error.sigma_yaw
+    offsets = [(*(step * d), a) for d in (toward, side, -side) for a in (turn, -turn)]
+    return not any(
+        motion.environment.colliding_arm(motion.arm, motion.q_start, T)
+        for T in perturbed(T_world_base, np.array(offsets))
+    )
+
+
+def keeps_reach_margin(
+    ik: DampedLeastSquaresIK,
+    environment: Environment,
+    T_world_base: FloatArray,
+    T_world_tcp: FloatArray,
+    margin: float,
+    rng: np.random.Generator,
+) -> bool:
+    """Whether ``ik`` reaches the TCP target (4, 4) from the base pose (4, 4) moved ``margin`` [m] away from it.
+
+    The move is horizontal, along the line from the target's position to the base's, heading kept:
+    the direction in which a navigation error takes the grasp out of reach first. The arm there
+    must be clear of ``environment`` too (a reach that only a colliding configuration gives is
+    none). A base right under its target has no such direction: True.
+    """
+    away = T_world_base[:2, 3] - T_world_tcp[:2, 3]
+    length = float(np.hypot(away[0], away[1]))
+    if length < 1e-9:
+        return True
+    T = T_world_base.copy()
+    T[:2, 3] += margin * away / length
+    q = ik.solve(invert_transforms(T) @ T_world_tcp, rng)
+    return q is not None and not environment.colliding_arm(ik.arm, q, T)
 
 
 def irm_candidates(
@@ -138,7 +233,12 @@ def irm_candidates(
     (:func:`occupancy_risk`) are dropped. The (pose, grasp) pairs are checked with the shared
     :class:`~baseplace.placement.verify.Verifier` positions before headings (:func:`search_order`):
     each position's best pair first, ranked by its value, then each position's second best, until
-    ``count`` poses passed or ``max_checks`` checks were spent.
+    ``count`` poses passed or ``max_checks`` checks were spent. With ``reach_sigmas`` > 0 a pair
+    is verified only when it keeps the reach margin (:func:`keeps_reach_margin`,
+    :func:`reach_margin` of the base -> TCP distance): a navigation error of that size still
+    leaves the grasp in reach. The pairs without the margin (at most ``max_checks`` of them are
+    looked at, an IK call each) are verified in the same order only when no pair with the margin
+    passed: a grasp reachable only from the nominal pose is still better than none.
 
     Args:
         robot: the robot.
@@ -190,17 +290,37 @@ def irm_candidates(
     found: list[Placement] = []
     placed: set[int] = set()
     checks = 0
-    for k, i in search_order(values, s.n_yaw):
-        if checks >= s.max_checks or len(found) >= s.count:
-            break
-        if i in placed or any(math.dist(poses[i, :2], c.xy) < s.separation for c in found):
-            continue
-        checks += 1
-        placement = verifiers[k].check(Candidate(T[i], -1, float(values[k, i])), rng)
-        if placement is not None:
-            placed.add(int(i))
-            approach = ObjectApproach("irm", float(math.dist(poses[i, :2], p[:2])), -1, int(k))
-            found.append(dataclasses.replace(placement, approach=approach))
+    short: list[NDArray[np.int64]] = []  # the pairs without the reach margin, in search order
+    margin_rng = rng.spawn(1)[0]  # the margin's IK restarts leave the verification's draws as they were
+
+    def verify(pairs: Sequence[NDArray[np.int64]] | NDArray[np.int64], margin: bool) -> None:
+        nonlocal checks
+        for k, i in pairs:
+            if checks >= s.max_checks or len(found) >= s.count:
+                return
+            if i in placed or any(math.dist(poses[i, :2], c.xy) < s.separation for c in found):
+                continue
+            if margin:
+                lever = float(np.hypot(*(G[k, :2, 3] - poses[i, :2])))
+                needed = float(reach_margin(lever, s.error, s.reach_sigmas))
+                kept = keeps_reach_margin(ik, env, T[i], G[k], needed, margin_rng)
+                if kept and motion is not None:
+                    kept = stowed_clear_under_error(motion, T[i], G[k], s.error, s.reach_sigmas)
+                if not kept:
+                    if len(short) >= s.max_checks:
+                        return
+                    short.append(np.array([k, i]))
+                    continue
+            checks += 1
+            placement = verifiers[k].check(Candidate(T[i], -1, float(values[k, i])), rng)
+            if placement is not None:
+                placed.add(int(i))
+                approach = ObjectApproach("irm", float(math.dist(poses[i, :2], p[:2])), -1, int(k))
+                found.append(dataclasses.replace(placement, approach=approach))
+
+    verify(search_order(values, s.n_yaw), margin=s.reach_sigmas > 0)
+    if not found:  # no pose keeps the margin: those that reach the grasp from where they stand
+        verify(short, margin=False)
     found.sort(key=lambda c: -c.reachability)
     return found
 
