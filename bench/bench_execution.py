@@ -149,12 +149,18 @@ PROTOCOLS = {  # version: (where the robot's model of the bottle begins, seeds, 
         SeedSplit(dev=(0,), held_out=(17, 18, 19)),
         MotionSettings(time_limit=30.0, max_checks=500, point_step=None),  # v5's planner
     ),
+    7: (
+        "support",  # not used by the product's models
+        SeedSplit(dev=(0,), held_out=(20, 21, 22)),
+        MotionSettings(time_limit=30.0, max_checks=500, point_step=None),  # v5's and v6's planner
+    ),
 }
-SUPPORT_MODEL = {1: "voxels", 2: "voxels", 3: "slab", 4: "slab", 5: "product", 6: "product"}
+SUPPORT_MODEL = {1: "voxels", 2: "voxels", 3: "slab", 4: "slab", 5: "product", 6: "product", 7: "product"}
 PROTOCOL_FILE = {
     4: "docs/protocols/execution_table_grid.md",
     5: "docs/protocols/execution_table_grid_v5.md",
     6: "docs/protocols/execution_table_grid_v6.md",
+    7: "docs/protocols/execution_table_grid_v7.md",
 }
 """Protocols committed as files (v1-v3 were written in this docstring)."""
 BOOTSTRAP = 2000  # the robot's model of the table top around the bottle
