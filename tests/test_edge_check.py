@@ -169,3 +169,39 @@ def test_self_distance_tables_never_clear_a_pair_closer_than_its_margin(tiago):
                 distance = pin.computeDistance(geom, gdata, pair).min_distance
                 assert distance > gdata.collisionRequests[pair].security_margin
     assert cleared > 300  # the tables do certify
+
+
+def test_contacts_are_coals_on_every_pair(tiago, table_lines):
+    """contacts_arm asks coal only about the pairs the spheres leave: the same contacts as coal on every pair.
+
+    On states of the lines into and beside the table, self-collisions of random states included, in
+    both models (the approach's lets the hand touch the grasped object).
+    """
+    transit, approach, T_base, lines = table_lines
+    arm = tiago.arm()
+    states = np.concatenate([lines[:, 0], lines[:, 1], lines.mean(axis=1)])[::3]
+    kinds = set()
+    for env in (transit, approach):
+        for q in states:
+            contacts = env.contacts_arm(arm, q, T_base)
+            assert contacts == _contacts_on_every_pair(env, arm, q, T_base), f"state {q}"
+            kinds |= {"self" if what.startswith("self: ") else "scene" for _, what in contacts}
+    assert kinds == {"self", "scene"}  # both kinds of contact met
+
+
+def _contacts_on_every_pair(env, arm, q, T_base):
+    """Every (link, what) pair coal finds touching, on fresh data with the scene placed for ``T_base``."""
+    geom = env.geom.copy()
+    T_root_world = env._T_root_base * pin.SE3(np.asarray(T_base)).inverse()
+    for gid in env.env_ids:
+        geom.geometryObjects[gid].placement = T_root_world * env._T_world_env.get(gid, pin.SE3.Identity())
+    gdata = pin.GeometryData(geom)
+    for request, own in zip(gdata.collisionRequests, env.geom_data.collisionRequests, strict=True):
+        request.security_margin = own.security_margin
+    q_full = arm.to_pinocchio(q, env.robot.q_reference)
+    pin.computeCollisions(env.model, env.model.createData(), geom, gdata, q_full, False)
+    out = {(a, f"self: {b}") for a, b in env._self.colliding_pairs(q_full, arm)}
+    for pair, result in zip(geom.collisionPairs, gdata.collisionResults, strict=True):
+        if result.isCollision():
+            out.add((env._link(pair.first), geom.geometryObjects[pair.second].name))
+    return sorted(out)
