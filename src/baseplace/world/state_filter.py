@@ -258,10 +258,13 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
     near_h = np.empty(K, dtype=np.bool_)
     P = scene_rows.shape[0]
     reach = np.empty(P)
+    part_reach = np.zeros(parts.shape[0])  # the largest of each part's rows
     for q in range(parts.shape[0]):
         reach[parts[q, 3] : parts[q, 4]] = scene_reach[parts[q, 3] : parts[q, 4]] + halves[q] * (
             parts[q, 0] == 0
         )
+        for p in range(parts[q, 3], parts[q, 4]):
+            part_reach[q] = max(part_reach[q], reach[p])
     for i in range(start, Q.shape[0]):
         _joint_frames(Q[i], placements, axes, kinds, F, R, t)
         _place(joint, local, F, Cg)
@@ -289,8 +292,16 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
                                          joint, Wj, group_radius, i, stamp, sub_joint, sub_local, F, T, Cs, pts, keys, starts, lo, hi, cell, dims, field,
                                          field_lo, field_h)  # fmt: skip
                 continue
+            group, group_clear = -2, False
             for p in range(r0, r1):
                 g = scene_rows[p]
+                if joint[g] != group:  # the rows of one arm joint together: its group sphere first
+                    group = joint[g]
+                    group_clear = not _shape_touches(Wj[group], group_radius[group] + part_reach[q], kind, a, b,
+                                                     planes, balls)  # fmt: skip
+                if group_clear:
+                    out_i[p] = False
+                    continue
                 touch = _shape_touches(W[g], radius[g] + reach[p], kind, a, b, planes, balls)
                 if touch and sub_start[g + 1] - sub_start[g] > 1:
                     touch = False
