@@ -15,13 +15,13 @@ import pinocchio as pin
 import pytest
 
 from baseplace.geometry.poses import pose_from_xyz_rpy
-from baseplace.placement.motion import MotionChecker, MotionSettings, bisection_order
+from baseplace.placement.motion import MotionChecker, MotionSettings, bisection_order, stowed_configuration
 from baseplace.placement.pipeline import PlaceSettings, scene_checks, with_floor
 from baseplace.placement.scene_cache import SceneCache
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.spheres import _joint_frames
 from baseplace.world.environment import Environment
-from baseplace.world.state_filter import _table_clear, hull_points, sphere_cover
+from baseplace.world.state_filter import _table_clear, _uncertified_states, hull_points, sphere_cover
 from baseplace_experiments.execution_experiment import trial_scene
 from baseplace_experiments.table_grid import TableGridSettings
 
@@ -169,3 +169,73 @@ def test_self_distance_tables_never_clear_a_pair_closer_than_its_margin(tiago):
                 distance = pin.computeDistance(geom, gdata, pair).min_distance
                 assert distance > gdata.collisionRequests[pair].security_margin
     assert cleared > 300  # the tables do certify
+
+
+def test_contacts_are_coals_on_every_pair(tiago, table_lines):
+    """contacts_arm asks coal only about the pairs the spheres leave: the same contacts as coal on every pair.
+
+    On states of the lines into and beside the table, self-collisions of random states included, in
+    both models (the approach's lets the hand touch the grasped object).
+    """
+    transit, approach, T_base, lines = table_lines
+    arm = tiago.arm()
+    states = np.concatenate([lines[:, 0], lines[:, 1], lines.mean(axis=1)])[::3]
+    kinds = set()
+    for env in (transit, approach):
+        for q in states:
+            contacts = env.contacts_arm(arm, q, T_base)
+            assert contacts == _contacts_on_every_pair(env, arm, q, T_base), f"state {q}"
+            kinds |= {"self" if what.startswith("self: ") else "scene" for _, what in contacts}
+    assert kinds == {"self", "scene"}  # both kinds of contact met
+
+
+def _contacts_on_every_pair(env, arm, q, T_base):
+    """Every (link, what) pair coal finds touching, on fresh data with the scene placed for ``T_base``."""
+    geom = env.geom.copy()
+    T_root_world = env._T_root_base * pin.SE3(np.asarray(T_base)).inverse()
+    for gid in env.env_ids:
+        geom.geometryObjects[gid].placement = T_root_world * env._T_world_env.get(gid, pin.SE3.Identity())
+    gdata = pin.GeometryData(geom)
+    for request, own in zip(gdata.collisionRequests, env.geom_data.collisionRequests, strict=True):
+        request.security_margin = own.security_margin
+    q_full = arm.to_pinocchio(q, env.robot.q_reference)
+    pin.computeCollisions(env.model, env.model.createData(), geom, gdata, q_full, False)
+    out = {(a, f"self: {b}") for a, b in env._self.colliding_pairs(q_full, arm)}
+    for pair, result in zip(geom.collisionPairs, gdata.collisionResults, strict=True):
+        if result.isCollision():
+            out.add((env._link(pair.first), geom.geometryObjects[pair.second].name))
+    return sorted(out)
+
+
+def test_every_self_pair_the_spheres_certify_is_free_by_coal(tiago):
+    """Self pairs certified by a run's group sphere, by cover pieces near the other geometry, or by a table: coal agrees.
+
+    At random arm states and states around the stowed configuration (the arm beside the torso),
+    every self pair the compiled call leaves out is one coal finds free.
+    """
+    arm = tiago.arm()
+    env = Environment(tiago, {})
+    filt = env.state_filter(arm)
+    rng = np.random.default_rng(3)
+    q0 = stowed_configuration(tiago, arm)
+    states = np.vstack(
+        [arm.sample(rng, 40), np.clip(q0 + rng.normal(0.0, 0.15, (40, arm.n_joints)), arm.lower, arm.upper)]
+    )
+    model, data, geom, gdata = filt.self_check
+    robot_args, scene_and_self = filt._kernel_args
+    P = len(filt._scene_rows)
+    certified = 0
+    for q in states:
+        out = np.empty((1, P + len(filt._self_pairs)), dtype=np.bool_)
+        q1 = np.ascontiguousarray(q[None])
+        i = _uncertified_states(q1, *robot_args, np.eye(4), *scene_and_self, 0, out)
+        left = out[0, P:] if i == 0 else np.zeros(len(filt._self_pairs), dtype=bool)
+        pin.forwardKinematics(model, data, filt._full(q))
+        pin.updateGeometryPlacements(model, data, geom, gdata)
+        for p in np.flatnonzero(~left):
+            pair = int(filt._self_index[p])
+            assert not pin.computeCollision(geom, gdata, pair), (
+                f"pair {pair} certified free, coal: touching at {q}"
+            )
+        certified += int((~left).sum())
+    assert certified > 0.9 * len(states) * len(filt._self_pairs)

@@ -351,19 +351,21 @@ class Environment:
 
         What is an obstacle group's name, :data:`GRASPED` (a link other than the hand touching the
         grasped object) or "self: <link>" (self-collision). Empty when :meth:`colliding_arm` is False.
+        Coal's contacts, asked only for the pairs the state filter's spheres do not certify free
+        (:meth:`StateFilter.touching`).
         """
-        q = arm.to_pinocchio(q_arm, self.robot.q_reference)
+        scene, own = self.state_filter(arm).touching(q_arm, _base_pose(T_world_base))
         out: list[tuple[str, str]] = []
         if self._self is not None:
-            for a, b in self._self.colliding_pairs(q, arm):
-                out.append((a, f"self: {b}"))
-        if self.env_ids:
-            self._place_obstacles(T_world_base)
-            pin.computeCollisions(self.model, self.data, self.geom, self.geom_data, q, False)
-            objects = self.geom.geometryObjects
-            for pair, res in zip(self.geom.collisionPairs, self.geom_data.collisionResults, strict=True):
-                if res.isCollision():
-                    out.append((self._link(pair.first), objects[pair.second].name))
+            frames, parts = self._self.model.frames, self._self.geom.geometryObjects
+            for i in own:
+                pair = self._self.geom.collisionPairs[i]
+                first, second = (frames[parts[k].parentFrame].name for k in (pair.first, pair.second))
+                out.append((str(first), f"self: {second}"))
+        objects = self.geom.geometryObjects
+        for i in scene:
+            pair = self.geom.collisionPairs[i]
+            out.append((self._link(pair.first), objects[pair.second].name))
         return sorted(set(out))
 
     def _link(self, geometry_id: int) -> str:

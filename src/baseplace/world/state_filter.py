@@ -228,7 +228,7 @@ def _shape_touches(c, r, kind, a, b, planes, balls):
 @nb.njit(cache=True)
 def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_start, sub_joint, sub_local,
                         sub_radius, group_local, group_radius, T, scene_rows, scene_reach, parts, offs, all_points, all_keys, all_starts,
-                        all_fields, geo, ints, halves, planes, balls, self_pairs, self_reach, self_table,
+                        all_fields, geo, ints, halves, planes, balls, self_pairs, self_reach, self_runs, run_reach, self_table,
                         tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off, tab_cert, start, out):  # fmt: skip
     """Per state Q[i] (n,), which pairs its spheres do not certify free: ``out[i, p]`` (m, P + S) bool.
 
@@ -239,8 +239,11 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
     boxes ``halves[q]`` a half diagonal across (:func:`_points_rows`); kind 1, 2: :func:`_shape_touches`),
     certified when the geometry's bounding sphere or every sphere of its cover (``sub_*``) is
     clear by ``scene_reach[p]``; then the self pairs (S, 2), certified when the bounding spheres
-    or every pair of cover spheres are farther apart than ``self_reach`` plus their radii, or the
-    pair's distance table (``self_table[p]`` >= 0, :func:`_table_clear`) clears it.
+    or their covers (:func:`_covers_near`) are farther apart than ``self_reach`` plus their radii, or
+    the pair's distance table (``self_table[p]`` >= 0, :func:`_table_clear`) clears it. The self
+    pairs come in runs of one geometry g against the geometries that one arm joint j moves
+    (``self_runs`` (R, 4): g, j, the run's pairs r0..r1): a run is certified at once when g's
+    bounding sphere is farther from j's group sphere than ``run_reach`` plus their radii.
     Goes from state ``start`` and stops at the first state with any pair left (coal decides it,
     then the call goes on from the next): returns its index, or -1 when every state is certified.
     """
@@ -252,12 +255,16 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
     Cg, Cs = np.empty((G, 3)), np.empty((K, 3))
     W, Ws = np.empty((G, 3)), np.empty((K, 3))
     stamp = np.full(G, -1)  # the state each geometry's cover spheres were last placed for
+    near_h = np.empty(K, dtype=np.bool_)
     P = scene_rows.shape[0]
     reach = np.empty(P)
+    part_reach = np.zeros(parts.shape[0])  # the largest of each part's rows
     for q in range(parts.shape[0]):
         reach[parts[q, 3] : parts[q, 4]] = scene_reach[parts[q, 3] : parts[q, 4]] + halves[q] * (
             parts[q, 0] == 0
         )
+        for p in range(parts[q, 3], parts[q, 4]):
+            part_reach[q] = max(part_reach[q], reach[p])
     for i in range(start, Q.shape[0]):
         _joint_frames(Q[i], placements, axes, kinds, F, R, t)
         _place(joint, local, F, Cg)
@@ -285,8 +292,16 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
                                          joint, Wj, group_radius, i, stamp, sub_joint, sub_local, F, T, Cs, pts, keys, starts, lo, hi, cell, dims, field,
                                          field_lo, field_h)  # fmt: skip
                 continue
+            group, group_clear = -2, False
             for p in range(r0, r1):
                 g = scene_rows[p]
+                if joint[g] != group:  # the rows of one arm joint together: its group sphere first
+                    group = joint[g]
+                    group_clear = not _shape_touches(Wj[group], group_radius[group] + part_reach[q], kind, a, b,
+                                                     planes, balls)  # fmt: skip
+                if group_clear:
+                    out_i[p] = False
+                    continue
                 touch = _shape_touches(W[g], radius[g] + reach[p], kind, a, b, planes, balls)
                 if touch and sub_start[g + 1] - sub_start[g] > 1:
                     touch = False
@@ -297,28 +312,53 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
                             break
                 out_i[p] = touch
                 any_pair |= touch
-        for p in range(self_pairs.shape[0]):
-            g, h = self_pairs[p, 0], self_pairs[p, 1]
-            touch = _near(Cg, g, Cg, h, radius[g] + radius[h] + self_reach[p])
-            if touch and self_table[p] >= 0:
-                touch = not _table_clear(Q[i], self_table[p], tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off,
-                                         tab_cert)  # fmt: skip
-            if touch:
-                touch = False
-                _cover_placed(g, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws)
-                _cover_placed(h, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws)
-                for s in range(sub_start[g], sub_start[g + 1]):
-                    for u in range(sub_start[h], sub_start[h + 1]):
-                        if _near(Cs, s, Cs, u, sub_radius[s] + sub_radius[u] + self_reach[p]):
-                            touch = True
-                            break
-                    if touch:
-                        break
-            out_i[P + p] = touch
-            any_pair |= touch
+        for run in range(self_runs.shape[0]):
+            g, j, r0, r1 = self_runs[run, 0], self_runs[run, 1], self_runs[run, 2], self_runs[run, 3]
+            if not _near(Cg, g, Cj, j, radius[g] + group_radius[j] + run_reach[run]):
+                out_i[P + r0 : P + r1] = False
+                continue
+            for p in range(r0, r1):
+                g, h = self_pairs[p, 0], self_pairs[p, 1]
+                touch = _near(Cg, g, Cg, h, radius[g] + radius[h] + self_reach[p])
+                if touch and self_table[p] >= 0:
+                    touch = not _table_clear(Q[i], self_table[p], tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off,
+                                             tab_cert)  # fmt: skip
+                if touch:
+                    touch = _covers_near(g, h, i, self_reach[p], Cg, radius, stamp, sub_start, sub_joint, sub_local,
+                                         sub_radius, F, T, Cs, Ws, near_h)  # fmt: skip
+                out_i[P + p] = touch
+                any_pair |= touch
         if any_pair:
             return i
     return -1
+
+
+@nb.njit(cache=True)
+def _covers_near(
+    g, h, i, reach, Cg, radius, stamp, sub_start, sub_joint, sub_local, sub_radius, F, T, Cs, Ws, near_h
+):
+    """Whether self pair (g, h) at state i is not certified by its covers: True when some piece may be within ``reach``.
+
+    Geometry g is the union of its cover's pieces, each in its sphere, and so is h. A piece of g
+    is clear of a piece of h when g's piece's sphere is clear of h's bounding sphere, or h's
+    piece's sphere is clear of g's bounding sphere, or the two pieces' spheres are clear of each
+    other; only the pairs of pieces near the other geometry's bounding sphere are compared.
+    """
+    _cover_placed(g, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws)
+    _cover_placed(h, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws)
+    any_h = False
+    for u in range(sub_start[h], sub_start[h + 1]):
+        near_h[u] = _near(Cs, u, Cg, g, sub_radius[u] + radius[g] + reach)
+        any_h |= near_h[u]
+    if not any_h:
+        return False
+    for s in range(sub_start[g], sub_start[g + 1]):
+        if not _near(Cs, s, Cg, h, sub_radius[s] + radius[h] + reach):
+            continue
+        for u in range(sub_start[h], sub_start[h + 1]):
+            if near_h[u] and _near(Cs, s, Cs, u, sub_radius[s] + sub_radius[u] + reach):
+                return True
+    return False
 
 
 @nb.njit(cache=True, inline="always")
@@ -681,10 +721,21 @@ class StateFilter:
             self._self_reach = np.array(
                 [sdata.collisionRequests[i].security_margin + SLACK for i in active], dtype=float
             )
+            # each pair as (the geometry nearer the arm's base, the other), in runs of (geometry, the other's joint)
+            pairs = self._self_pairs
+            swap = self.joint[pairs[:, 0]] > self.joint[pairs[:, 1]]
+            pairs[swap] = pairs[swap][:, ::-1]
+            order = np.lexsort((self.joint[pairs[:, 1]], pairs[:, 0]))
+            self._self_pairs, self._self_index = pairs[order], self._self_index[order]
+            self._self_reach = self._self_reach[order]
+        self._self_runs = self._runs()
         self._kernel_scene()
         self._tables = _no_tables(len(self._self_pairs))
         if self_check is not None and len(self._self_pairs):
             self._tables = self._self_tables()
+        self._args: tuple[tuple[object, ...], tuple[object, ...]] | None = None
+        self._q_reference = np.array(robot.q_reference, dtype=float)
+        self._one_value = np.array(arm.q_index, dtype=np.int64) if all(w == 1 for w in arm.q_width) else None
         self._static_key: bytes | None = None
         self._static_hit = False
         self._centres = np.empty((n_robot, 3))
@@ -693,6 +744,23 @@ class StateFilter:
         """Pairs handed to coal so far (scene and self), for measurements."""
         self.coal_states = 0
         """States whose spheres left a pair to coal so far, for measurements."""
+
+    def _runs(self) -> tuple[NDArray[np.int64], FloatArray]:
+        """The self pairs' runs of :func:`_uncertified_states`: (R, 4) geometry, joint, pairs r0..r1; (R,) largest reach.
+
+        A run whose geometries no arm joint moves (joint -1: no group sphere) is never certified
+        at once (reach infinite): its pairs are tested one by one.
+        """
+        g, j = self._self_pairs[:, 0], self.joint[self._self_pairs[:, 1]]
+        starts = [p for p in range(len(g)) if p == 0 or (g[p], j[p]) != (g[p - 1], j[p - 1])]
+        ends = [*starts[1:], len(g)][: len(starts)]
+        runs = np.array(
+            [[g[a], max(j[a], 0), a, b] for a, b in zip(starts, ends, strict=True)], dtype=np.int64
+        )
+        reach = [
+            self._self_reach[a:b].max() if j[a] >= 0 else np.inf for a, b in zip(starts, ends, strict=True)
+        ]
+        return runs.reshape(-1, 4), np.array(reach, dtype=float)
 
     def _kernel_scene(self) -> None:
         """The moving pairs and scene parts as the arrays of :func:`_uncertified_states`.
@@ -755,7 +823,7 @@ class StateFilter:
                 i = _uncertified_states(  # type: ignore[call-arg]
                     Q, a.placements, a.axes, a.kinds, self.joint, self.local, self.radius, *self._cover,
                     *self._groups, np.eye(4), self._scene_rows[:0].copy(), self._scene_row_reach[:0].copy(),
-                    self._scene_parts[0][:0].copy(), *self._scene_parts[1:], self._self_pairs, self._self_reach,
+                    self._scene_parts[0][:0].copy(), *self._scene_parts[1:], self._self_pairs, self._self_reach, *self._self_runs,
                     *none, i + 1, out,
                 )  # fmt: skip
                 i = len(Q) if i < 0 else i
@@ -798,30 +866,82 @@ class StateFilter:
             self._static_hit = self._scene_coal(todo, self._full(Q[0]), T)
         if self._static_hit:
             return 0
-        a = self.arm
         P = len(self._scene_rows)
         out = np.empty((len(Q), P + len(self._self_pairs)), dtype=np.bool_)
+        robot, scene_and_self = self._kernel_args
         i = -1
         while True:
-            i = _uncertified_states(  # type: ignore[call-arg]
-                Q, a.placements, a.axes, a.kinds, self.joint, self.local, self.radius, *self._cover, *self._groups,
-                self._T_world_armbase, self._scene_rows, self._scene_row_reach, *self._scene_parts,
-                self._self_pairs, self._self_reach, *self._tables, i + 1, out,
-            )  # fmt: skip
+            i = _uncertified_states(Q, *robot, self._T_world_armbase, *scene_and_self, i + 1, out)  # type: ignore[call-arg]
             if i < 0:
                 return -1
             self.coal_states += 1
-            rows = np.flatnonzero(out[i])
             q_full = self._full(Q[i])
-            scene = self._scene_row_pair[rows[rows < P]]
-            if len(scene) and self._scene_coal(list(scene), q_full, T):
+            scene = self._scene_row_pair[np.flatnonzero(out[i, :P])]
+            if len(scene) and self._scene_coal(scene.tolist(), q_full, T):
                 return int(i)
-            own = self._self_index[rows[rows >= P] - P]
+            own = self._self_index[np.flatnonzero(out[i, P:])]
             if len(own) and self._self_coal(own, q_full):
                 return int(i)
 
+    def touching(self, q_arm: ArrayLike, T_world_base: ArrayLike) -> tuple[list[int], list[int]]:
+        """Every pair coal finds touching at arm joint values (n,) and base pose (4, 4).
+
+        The scene model's collision pair indices and the self model's, as coal on every active
+        pair finds them: the pairs the spheres certify free (:func:`_uncertified_states`) cannot
+        touch, so only the others are asked. For reports (which links touch what).
+        """
+        q = np.ascontiguousarray(np.asarray(q_arm, dtype=float))
+        T = np.asarray(T_world_base, dtype=float)
+        T_world_armbase = T @ self._T_base_armbase
+        world = np.empty_like(self._world)
+        _transformed(self.centres(q), T_world_armbase, world)
+        scene = [int(p) for part in self._static_parts for p in part.uncertified(world)]
+        P = len(self._scene_rows)
+        out = np.empty((1, P + len(self._self_pairs)), dtype=np.bool_)
+        a = self.arm
+        i = _uncertified_states(  # type: ignore[call-arg]
+            q[None], a.placements, a.axes, a.kinds, self.joint, self.local, self.radius, *self._cover, *self._groups,
+            T_world_armbase, self._scene_rows, self._scene_row_reach, *self._scene_parts,
+            self._self_pairs, self._self_reach, *self._self_runs, *self._tables, 0, out,
+        )  # fmt: skip
+        rows = np.flatnonzero(out[0]) if i == 0 else np.zeros(0, dtype=np.int64)
+        scene += [int(p) for p in self._scene_row_pair[rows[rows < P]]]
+        own = [int(p) for p in self._self_index[rows[rows >= P] - P]]
+        q_full = self._full(q)
+        touching_scene: list[int] = []
+        if scene:
+            model, data, geom, gdata = self.scene
+            self._place_scene(T)  # type: ignore[operator]
+            pin.forwardKinematics(model, data, q_full)
+            pin.updateGeometryPlacements(model, data, geom, gdata)
+            touching_scene = [p for p in sorted(set(scene)) if pin.computeCollision(geom, gdata, p)]
+        touching_self: list[int] = []
+        if own:
+            assert self.self_check is not None
+            model, data, geom, gdata = self.self_check
+            pin.forwardKinematics(model, data, q_full)
+            pin.updateGeometryPlacements(model, data, geom, gdata)
+            touching_self = [p for p in own if pin.computeCollision(geom, gdata, p)]
+        return touching_scene, touching_self
+
+    @property
+    def _kernel_args(self) -> tuple[tuple[object, ...], tuple[object, ...]]:
+        """The arguments of :func:`_uncertified_states` before and after the base pose, gathered once."""
+        if self._args is None:
+            a = self.arm
+            self._args = (
+                (a.placements, a.axes, a.kinds, self.joint, self.local, self.radius, *self._cover, *self._groups),
+                (self._scene_rows, self._scene_row_reach, *self._scene_parts, self._self_pairs, self._self_reach,
+                 *self._self_runs, *self._tables),
+            )  # fmt: skip
+        return self._args
+
     def _full(self, q_arm: FloatArray) -> FloatArray:
-        return self.arm.to_pinocchio(q_arm, self.robot.q_reference)
+        if self._one_value is None:  # every arm joint one pinocchio value: a plain copy and assignment
+            return self.arm.to_pinocchio(q_arm, self.robot.q_reference)
+        q = self._q_reference.copy()
+        q[self._one_value] = q_arm
+        return q
 
     def _self_coal(self, pairs: NDArray[np.int64], q_full: FloatArray) -> bool:
         assert self.self_check is not None
@@ -829,7 +949,7 @@ class StateFilter:
         pin.forwardKinematics(model, data, q_full)
         pin.updateGeometryPlacements(model, data, geom, gdata)
         self.coal_pairs += len(pairs)
-        return any(pin.computeCollision(geom, gdata, int(i)) for i in pairs)
+        return any(pin.computeCollision(geom, gdata, i) for i in pairs.tolist())
 
     def _scene_coal(self, pairs: list[int], q_full: FloatArray, T_world_base: FloatArray) -> bool:
         if not pairs:
