@@ -24,6 +24,7 @@ from baseplace.world.environment import Environment
 from baseplace.world.state_filter import _table_clear, _uncertified_states, hull_points, sphere_cover
 from baseplace_experiments.execution_experiment import trial_scene
 from baseplace_experiments.table_grid import TableGridSettings
+from test_state_filter import _contacts_oracle  # every pair by pinocchio on fresh data
 
 
 @pytest.fixture(scope="module")
@@ -184,27 +185,9 @@ def test_contacts_are_coals_on_every_pair(tiago, table_lines):
     for env in (transit, approach):
         for q in states:
             contacts = env.contacts_arm(arm, q, T_base)
-            assert contacts == _contacts_on_every_pair(env, arm, q, T_base), f"state {q}"
+            assert contacts == _contacts_oracle(env, arm, q, T_base), f"state {q}"
             kinds |= {"self" if what.startswith("self: ") else "scene" for _, what in contacts}
     assert kinds == {"self", "scene"}  # both kinds of contact met
-
-
-def _contacts_on_every_pair(env, arm, q, T_base):
-    """Every (link, what) pair coal finds touching, on fresh data with the scene placed for ``T_base``."""
-    geom = env.geom.copy()
-    T_root_world = env._T_root_base * pin.SE3(np.asarray(T_base)).inverse()
-    for gid in env.env_ids:
-        geom.geometryObjects[gid].placement = T_root_world * env._T_world_env.get(gid, pin.SE3.Identity())
-    gdata = pin.GeometryData(geom)
-    for request, own in zip(gdata.collisionRequests, env.geom_data.collisionRequests, strict=True):
-        request.security_margin = own.security_margin
-    q_full = arm.to_pinocchio(q, env.robot.q_reference)
-    pin.computeCollisions(env.model, env.model.createData(), geom, gdata, q_full, False)
-    out = {(a, f"self: {b}") for a, b in env._self.colliding_pairs(q_full, arm)}
-    for pair, result in zip(geom.collisionPairs, gdata.collisionResults, strict=True):
-        if result.isCollision():
-            out.add((env._link(pair.first), geom.geometryObjects[pair.second].name))
-    return sorted(out)
 
 
 def test_every_self_pair_the_spheres_certify_is_free_by_coal(tiago):
