@@ -30,8 +30,13 @@ from fastapi.testclient import TestClient
 
 from test_serve import TARGET, UP, make_app, npy_bytes
 
-HEAVY = {"targets": [TARGET] * 16, "tries": 1000, "placements": 1, "robustness_samples": 1024,
-         "min_robustness": 1.0}
+HEAVY = {
+    "targets": [TARGET] * 16,
+    "tries": 1000,
+    "placements": 1,
+    "robustness_samples": 1024,
+    "min_robustness": 1.0,
+}
 """A schema-valid /place that computes for many seconds: only a perfect robustness rate is kept, so it
 scores candidate after candidate (without ``min_robustness`` the faster motion check answers it in
 about 2 s, inside the tests' 3 s timeouts)."""
