@@ -9,7 +9,6 @@ the first coal finds, and a line it passes must have no state coal finds touchin
 
 from __future__ import annotations
 
-import coal
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -21,10 +20,13 @@ from baseplace.placement.scene_cache import SceneCache
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.spheres import _joint_frames
 from baseplace.world.environment import Environment
-from baseplace.world.state_filter import _table_clear, _uncertified_states, hull_points, sphere_cover
+from baseplace.world.state_filter import _table_clear, _uncertified_states, sphere_cover
 from baseplace_experiments.execution_experiment import trial_scene
 from baseplace_experiments.table_grid import TableGridSettings
-from test_state_filter import _contacts_oracle  # every pair by pinocchio on fresh data
+from test_state_filter import (  # the coal oracle; a geometry's extreme points
+    _contacts_oracle,
+    _surface_points,
+)
 
 
 @pytest.fixture(scope="module")
@@ -97,18 +99,6 @@ def test_motion_checker_blocks_where_a_state_by_state_check_does(tiago, table_li
         if got is not None:
             np.testing.assert_array_equal(got, expected)
         assert checker.state_checks - before == checked  # the max_checks budget counts as before
-
-
-def _surface_points(geometry):
-    """(k, 3) points whose hull is the geometry (a mesh's vertices, a box's corners), or a primitive's rims."""
-    if isinstance(geometry, coal.Cylinder):
-        t = np.linspace(0.0, 2 * np.pi, 64, endpoint=False)
-        ring = np.c_[geometry.radius * np.cos(t), geometry.radius * np.sin(t)]
-        return np.vstack([np.c_[ring, np.full(64, z)] for z in (-geometry.halfLength, geometry.halfLength)])
-    if isinstance(geometry, coal.Sphere):
-        d = np.random.default_rng(0).normal(size=(200, 3))
-        return geometry.radius * d / np.linalg.norm(d, axis=1, keepdims=True)
-    return hull_points(geometry)
 
 
 def test_sphere_covers_hold_their_geometry(tiago):
