@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 import weakref
+from collections.abc import Iterable, Iterator
 
 import coal
 import numba as nb
@@ -898,30 +899,14 @@ class StateFilter:
         scene = [int(p) for part in self._static_parts for p in part.uncertified(world)]
         P = len(self._scene_rows)
         out = np.empty((1, P + len(self._self_pairs)), dtype=np.bool_)
-        a = self.arm
-        i = _uncertified_states(  # type: ignore[call-arg]
-            q[None], a.placements, a.axes, a.kinds, self.joint, self.local, self.radius, *self._cover, *self._groups,
-            T_world_armbase, self._scene_rows, self._scene_row_reach, *self._scene_parts,
-            self._self_pairs, self._self_reach, *self._self_runs, *self._tables, 0, out,
-        )  # fmt: skip
+        robot, scene_and_self = self._kernel_args
+        i = _uncertified_states(q[None], *robot, T_world_armbase, *scene_and_self, 0, out)  # type: ignore[call-arg]
         rows = np.flatnonzero(out[0]) if i == 0 else np.zeros(0, dtype=np.int64)
         scene += [int(p) for p in self._scene_row_pair[rows[rows < P]]]
         own = [int(p) for p in self._self_index[rows[rows >= P] - P]]
         q_full = self._full(q)
-        touching_scene: list[int] = []
-        if scene:
-            model, data, geom, gdata = self.scene
-            self._place_scene(T)  # type: ignore[operator]
-            pin.forwardKinematics(model, data, q_full)
-            pin.updateGeometryPlacements(model, data, geom, gdata)
-            touching_scene = [p for p in sorted(set(scene)) if pin.computeCollision(geom, gdata, p)]
-        touching_self: list[int] = []
-        if own:
-            assert self.self_check is not None
-            model, data, geom, gdata = self.self_check
-            pin.forwardKinematics(model, data, q_full)
-            pin.updateGeometryPlacements(model, data, geom, gdata)
-            touching_self = [p for p in own if pin.computeCollision(geom, gdata, p)]
+        touching_scene = list(self._scene_touching(sorted(set(scene)), q_full, T)) if scene else []
+        touching_self = list(self._self_touching(own, q_full)) if own else []
         return touching_scene, touching_self
 
     @property
@@ -943,23 +928,39 @@ class StateFilter:
         q[self._one_value] = q_arm
         return q
 
-    def _self_coal(self, pairs: NDArray[np.int64], q_full: FloatArray) -> bool:
+    def _self_touching(self, pairs: Iterable[int], q_full: FloatArray) -> Iterator[int]:
+        """The self pairs (indices) that coal finds touching at the full configuration, lazily."""
         assert self.self_check is not None
-        model, data, geom, gdata = self.self_check
-        pin.forwardKinematics(model, data, q_full)
-        pin.updateGeometryPlacements(model, data, geom, gdata)
+        return _touching(self.self_check, pairs, q_full)
+
+    def _scene_touching(
+        self, pairs: Iterable[int], q_full: FloatArray, T_world_base: FloatArray
+    ) -> Iterator[int]:
+        """The scene pairs (indices) that coal finds touching at the full configuration and base pose, lazily."""
+        self._place_scene(T_world_base)  # type: ignore[operator]
+        return _touching(self.scene, pairs, q_full)
+
+    def _self_coal(self, pairs: NDArray[np.int64], q_full: FloatArray) -> bool:
         self.coal_pairs += len(pairs)
-        return any(pin.computeCollision(geom, gdata, i) for i in pairs.tolist())
+        return next(self._self_touching(pairs.tolist(), q_full), None) is not None
 
     def _scene_coal(self, pairs: list[int], q_full: FloatArray, T_world_base: FloatArray) -> bool:
         if not pairs:
             return False
-        model, data, geom, gdata = self.scene
-        self._place_scene(T_world_base)  # type: ignore[operator]
-        pin.forwardKinematics(model, data, q_full)
-        pin.updateGeometryPlacements(model, data, geom, gdata)
         self.coal_pairs += len(pairs)
-        return any(pin.computeCollision(geom, gdata, int(i)) for i in pairs)
+        return next(self._scene_touching(pairs, q_full, T_world_base), None) is not None
+
+
+def _touching(
+    check: tuple[pin.Model, pin.Data, pin.GeometryModel, pin.GeometryData],
+    pairs: Iterable[int],
+    q_full: FloatArray,
+) -> Iterator[int]:
+    """The collision pairs (indices) of ``check``'s geometry that touch at ``q_full``; posed once, then lazily."""
+    model, data, geom, gdata = check
+    pin.forwardKinematics(model, data, q_full)
+    pin.updateGeometryPlacements(model, data, geom, gdata)
+    return (int(i) for i in pairs if pin.computeCollision(geom, gdata, int(i)))
 
 
 __all__ = ["SLACK", "StateFilter", "bounding_sphere", "hull_points", "sphere_cover"]
