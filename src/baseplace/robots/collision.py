@@ -197,14 +197,16 @@ class SelfCollision:
         q = np.asarray(q_full, dtype=float)
         geom_data = self._arm_geometry_data(arm) if arm is not None else self.geom_data
         pin.computeCollisions(self.model, self.data, self.geom, geom_data, q, False)
-        objects, frames = self.geom.geometryObjects, self.model.frames
         return [
-            (str(frames[objects[p.first].parentFrame].name), str(frames[objects[p.second].parentFrame].name))
-            for k, (p, res) in enumerate(
-                zip(self.geom.collisionPairs, geom_data.collisionResults, strict=True)
-            )
+            self.pair_links(k)
+            for k, res in enumerate(geom_data.collisionResults)
             if geom_data.activeCollisionPairs[k] and res.isCollision()
         ]
+
+    def pair_links(self, pair: int) -> tuple[str, str]:
+        """The names of the two links (frames) whose geometries collision pair ``pair`` (index) joins."""
+        p, objects, frames = self.geom.collisionPairs[pair], self.geom.geometryObjects, self.model.frames
+        return str(frames[objects[p.first].parentFrame].name), str(frames[objects[p.second].parentFrame].name)
 
     def contacts(self, q_full: ArrayLike) -> list[Contact]:
         """Every active pair that touches at the full pinocchio configuration, with its depth.

@@ -357,11 +357,9 @@ class Environment:
         scene, own = self.state_filter(arm).touching(q_arm, _base_pose(T_world_base))
         out: list[tuple[str, str]] = []
         if self._self is not None:
-            frames, parts = self._self.model.frames, self._self.geom.geometryObjects
             for i in own:
-                pair = self._self.geom.collisionPairs[i]
-                first, second = (frames[parts[k].parentFrame].name for k in (pair.first, pair.second))
-                out.append((str(first), f"self: {second}"))
+                first, second = self._self.pair_links(i)
+                out.append((first, f"self: {second}"))
         objects = self.geom.geometryObjects
         for i in scene:
             pair = self.geom.collisionPairs[i]
