@@ -157,7 +157,7 @@ def link_clearance(shapes: RobotShapes, link: str, q: Any, T_world_base: Any, wi
     q_full = shapes.arm.to_pinocchio(q, shapes.robot.q_reference)
     pin.framesForwardKinematics(shapes.model, shapes.data, q_full)
     pin.updateGeometryPlacements(shapes.model, shapes.data, shapes.geom, shapes.geom_data, q_full)
-    T_world_root = np.asarray(T_world_base, dtype=float) @ shapes._T_base_root
+    T_world_root = np.asarray(T_world_base, dtype=float) @ shapes.T_base_root
     targets = list(oracle.scene) + ([oracle.grasped] if with_bottle and oracle.grasped is not None else [])
     best = float("inf")
     for k, obj in enumerate(shapes.geom.geometryObjects):

@@ -159,8 +159,6 @@ class AllowedGrasps:
                            and not shapes.geom.geometryObjects[k].name.startswith(ENVELOPES)}  # fmt: skip
         ref = model.createData()
         pin.framesForwardKinematics(model, ref, shapes.robot.q_reference)
-        base = ref.oMf[model.getFrameId(shapes.robot.spec.base_frame)]
-        self._T_base_root = base.inverse().homogeneous
         self._margin = coal.CollisionRequest()
         self._margin.security_margin = clearance
         self._touch = coal.CollisionRequest()
@@ -194,7 +192,7 @@ class AllowedGrasps:
         if s.self_collision.colliding_arm(s.arm, np.asarray(q_arm, dtype=float))[0]:
             return Contact("self", "self")
         pin.updateGeometryPlacements(s.model, s.data, s.geom, s.geom_data, q)
-        T_world_root = np.asarray(T_world_base, dtype=float) @ self._T_base_root
+        T_world_root = np.asarray(T_world_base, dtype=float) @ s.T_base_root
         for k, obj in enumerate(s.geom.geometryObjects):
             T = T_world_root @ s.geom_data.oMg[k].homogeneous
             T_geom = coal.Transform3s(T[:3, :3], T[:3, 3])

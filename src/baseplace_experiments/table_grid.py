@@ -351,7 +351,8 @@ class RobotShapes:
                      if last in set(self.model.supports[obj.parentJoint])}  # fmt: skip
         ref = self.model.createData()
         pin.framesForwardKinematics(self.model, ref, robot.q_reference)
-        self._T_base_root = ref.oMf[self.model.getFrameId(robot.spec.base_frame)].inverse().homogeneous
+        self.T_base_root = ref.oMf[self.model.getFrameId(robot.spec.base_frame)].inverse().homogeneous
+        """The robot's root frame in its base frame (4, 4), at the reference configuration."""
 
     def touching(self, q_arm: ArrayLike, T_world_base: ArrayLike, shapes: Sequence[TrueShape],
                  grasped: TrueShape | None = None) -> str | None:  # fmt: skip
@@ -364,7 +365,7 @@ class RobotShapes:
         if self.self_collision.colliding_arm(self.arm, q_arm)[0]:
             return "self"
         pin.updateGeometryPlacements(self.model, self.data, self.geom, self.geom_data, q)
-        T_world_root = np.asarray(T_world_base, dtype=float) @ self._T_base_root
+        T_world_root = np.asarray(T_world_base, dtype=float) @ self.T_base_root
         request = coal.CollisionRequest()
         targets = [(shape, shape.transform()) for shape in shapes]
         held = None if grasped is None else (grasped, grasped.transform())
