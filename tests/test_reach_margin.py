@@ -161,3 +161,27 @@ def test_the_candidates_json_states_the_margin(tiago, tiago_map):
     assert (
         candidates_job(CandidatesJob(**{**job.__dict__, "method": "radial"})).settings["reach_margin"] is None
     )
+
+
+def test_the_search_and_its_json_take_the_margin_from_the_jobs_own_error_model(tiago, tiago_map, monkeypatch):
+    """A job that states a wider navigation error (``--sigma-xy``, ``--sigma-yaw-deg``) gets a wider margin."""
+    import baseplace.placement.object_search as object_search
+    from baseplace.jobs.candidates import CandidatesJob, candidates_job
+    from conftest import SHARED
+
+    seen: list[IrmSettings] = []
+    real = object_search.irm_candidates
+
+    def spy(*args, **kwargs):
+        seen.append(args[6])  # the search's settings, as object_search passes them
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(object_search, "irm_candidates", spy)
+    wide = BaseErrorModel(sigma_xy=0.06, sigma_yaw=math.radians(4.0))
+    job = CandidatesJob(object="-1.025 -0.775 0.6", occupancy=str(SHARED / "maps" / "tb3_sandbox.yaml"),
+                        method="irm", robot=tiago, map=tiago_map,
+                        robustness=RobustnessSettings(samples=0, error=wide))  # fmt: skip
+    margin = candidates_job(job).settings["reach_margin"]
+    assert margin["sigma_xy"] == 0.06
+    assert margin["at_lever_0.8_m"] == pytest.approx(_margin(0.8, 0.06, 4.0), abs=1e-4)
+    assert seen and all(s.error == wide for s in seen)

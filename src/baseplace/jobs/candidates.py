@@ -137,7 +137,12 @@ def candidates_job(job: CandidatesJob, progress: inputs.Progress | None = None) 
         raise InputError(f"unknown method {job.method!r}; valid: irm, radial")
     png, mcap = job.check_outputs()  # outputs first: before the imports and any work
     from baseplace.placement.candidates import RadialSettings
-    from baseplace.placement.irm_candidates import IrmSettings, grasp_poses, grasp_standoff, reach_margin_json
+    from baseplace.placement.irm_candidates import (
+        grasp_poses,
+        grasp_standoff,
+        irm_settings_for,
+        reach_margin_json,
+    )
     from baseplace.placement.object_search import search_around_object
     from baseplace.placement.pipeline import object_checks
     from baseplace.placement.robustness import RobustnessSettings
@@ -202,7 +207,7 @@ def candidates_job(job: CandidatesJob, progress: inputs.Progress | None = None) 
                       "allowed": grasped.to_json() if isinstance(grasped, GraspedObject) else None},
         settings={"r_r": settings.r_r, "d_min": settings.d_min, "d_max": round(settings.d_max, 4),
                   "theta": round(settings.theta, 5), "k_obs": settings.k_obs, "grasp_standoff": standoff,
-                  "reach_margin": reach_margin_json(IrmSettings()) if job.method == "irm" else None},
+                  "reach_margin": reach_margin_json(irm_settings_for(robust)) if job.method == "irm" else None},
         clearance={"metres": round(checks.environment.clearance, 5), "derived": checks.clearance_note},
     )  # fmt: skip
     if png is not None:

@@ -27,7 +27,7 @@ from baseplace.geometry.poses import (
 )
 from baseplace.placement.candidates import RadialCandidate, _object, occupancy_risk
 from baseplace.placement.motion import MotionChecker
-from baseplace.placement.robustness import BaseErrorModel, perturbed
+from baseplace.placement.robustness import BaseErrorModel, RobustnessSettings, perturbed
 from baseplace.placement.verified import Candidate, ObjectApproach, Placement
 from baseplace.placement.verify import Verifier
 from baseplace.reachability.rmap import ReachabilityMap
@@ -117,8 +117,9 @@ class IrmSettings:
             check, the stowed arm must also be clear at the poses this far from it
             (:func:`stowed_clear_under_error`). 0: neither. 1 was chosen over 2 on the
             table-grid execution dev seeds 0-2 (docs/placement.md).
-        error: the base's navigation error the margin is taken from (the robustness score's
-            default, :class:`~baseplace.placement.robustness.BaseErrorModel`: 3 cm, 2 deg).
+        error: the base's navigation error the margin is taken from (default
+            :class:`~baseplace.placement.robustness.BaseErrorModel`: 3 cm, 2 deg; a job's search
+            takes its robustness score's own error model, :func:`irm_settings_for`).
     """
 
     resolution: float = 0.05
@@ -137,6 +138,11 @@ class IrmSettings:
             raise InputError(f"separation must be >= 0 m, got {self.separation}")
         if not (math.isfinite(self.reach_sigmas) and self.reach_sigmas >= 0):
             raise InputError(f"reach_sigmas must be a finite number >= 0, got {self.reach_sigmas}")
+
+
+def irm_settings_for(robustness: RobustnessSettings) -> IrmSettings:
+    """The search's default settings with the reach margin taken from a job's own base error model."""
+    return IrmSettings(error=robustness.error)
 
 
 def reach_margin(lever: ArrayLike, error: BaseErrorModel, sigmas: float) -> FloatArray:

@@ -19,7 +19,7 @@ from baseplace.geometry.poses import BasePose, FloatArray
 from baseplace.navigation.gridnav import GridNavigator
 from baseplace.navigation.path import Path
 from baseplace.placement.candidates import RadialSettings, motion_costs, pickup, radial_search
-from baseplace.placement.irm_candidates import IrmSettings, irm_candidates, verify_candidates
+from baseplace.placement.irm_candidates import irm_candidates, irm_settings_for, verify_candidates
 from baseplace.placement.pipeline import ObjectChecks
 from baseplace.placement.robustness import RobustnessScorer, RobustnessSettings, rank_by_robustness
 from baseplace.placement.verified import Placement
@@ -100,7 +100,7 @@ def search_around_object(
         )
         rejected += [((c.pose.x, c.pose.y), why) for c, why in failed]
     else:
-        verified = irm_candidates(robot, rmap, p_o, grasps, checks.environment, grid, IrmSettings(), rng,
+        verified = irm_candidates(robot, rmap, p_o, grasps, checks.environment, grid, irm_settings_for(robustness), rng,
                                   checks.motion)  # fmt: skip
     t1 = time.perf_counter()
     if robustness.samples > 0:
