@@ -127,9 +127,12 @@ def _check_scene(
     The scene's supports lie within the bounds of the cloud (and of the occupancy grid, floor at
     z = 0); the arm's reach is :class:`~baseplace.jobs.inputs.ReachBound`'s, from the robot model alone.
     """
-    boxes = ([inputs.points_bounds(points)] if points is not None else []) + (
-        [inputs.grid_bounds(grid)] if grid is not None else []
-    )
+    cache = job.cache if job.floor is None else None  # with a floor added here the points are not its cloud
+    boxes = []
+    if points is not None:  # a scene's cache found its cloud's bounds once
+        boxes.append(cache.bounds if cache is not None else inputs.points_bounds(points))
+    if grid is not None:
+        boxes.append(inputs.grid_bounds(grid))
     bounds = (np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0))
     scene = {1: "the cloud's bounds", 2: "the occupancy grid's bounds"}.get(
         (points is not None) + 2 * (grid is not None), "the bounds of the cloud and the occupancy grid"

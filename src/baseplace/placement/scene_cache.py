@@ -29,7 +29,8 @@ from baseplace.world.grasped_object import GraspedObject
 T = TypeVar("T")
 
 OBJECT_ENVIRONMENTS = 8
-"""Collision environments kept per scene for distinct grasped objects (least recently used go)."""
+"""Collision environments kept per scene for distinct grasped objects, and objects found per grasp
+point (least recently used go)."""
 
 NEAR_GRASP_MARGIN = 0.05
 """Margin [m] of the cloud window in which :meth:`SceneCache.grasped_object` seeks the object, beyond
@@ -64,6 +65,8 @@ class SceneCache:
         self._raw = np.asarray(points, dtype=float).reshape(-1, 3)
         self._points: FloatArray | None = None
         self._index: tuple[FloatArray, Any, Any, float, int, Any] | None = None
+        self._bounds: tuple[FloatArray, FloatArray] | None = None
+        self._found: OrderedDict[bytes, GraspedObject | None] = OrderedDict()
         self._terrains: dict[float | None, Terrain] = {}
         if terrain is not None:
             self._terrains[resolution] = terrain
@@ -82,6 +85,25 @@ class SceneCache:
             if len(self._points) == 0:
                 raise InputError("the cloud has no finite points")
         return self._points
+
+    @property
+    def bounds(self) -> tuple[FloatArray, FloatArray]:
+        """Lower and upper corners (3,) of the finite points [m], found once."""
+        if self._bounds is None:
+            if not np.isfinite(self._raw).all(axis=1).any():  # the jobs' message for a cloud without any
+                raise InputError("the cloud holds no finite points")
+            self._bounds = (self.points.min(axis=0), self.points.max(axis=0))
+        return self._bounds
+
+    def prepare(self) -> None:
+        """Build now what every query reads whatever its target: the bounds and the grid of :meth:`points_near`.
+
+        A service calls it on a scene's upload, so that no query pays it. A cloud without a finite
+        point is left to the query, which refuses it.
+        """
+        if np.isfinite(self._raw).all(axis=1).any():
+            self.bounds  # noqa: B018  found now, not in a query
+            self.points_near(self.points[0], 0.0)
 
     def terrain(self, resolution: float | None = None) -> Terrain:
         """The segmentation at this height-map cell [m] (None: chosen from the cloud), made once."""
@@ -130,13 +152,25 @@ class SceneCache:
         Sought in the window of the cloud it reads: the points within ``max_size + link`` of the
         grasp point (horizontally) and within ``voxel_size`` of the cluster's box, plus
         :data:`NEAR_GRASP_MARGIN`; the same object as in the whole cloud, its points in the order
-        of :meth:`points_near`.
+        of :meth:`points_near`. What a grasp point found is kept (the last
+        :data:`OBJECT_ENVIRONMENTS` points): the next query at the same point reads it.
         """
         from baseplace.world.grasped_object import AutoSettings, find_grasped_object
 
+        point = np.asarray(grasp_point, dtype=np.float64).reshape(-1)
+        key = point.tobytes()
+        with self._lock:
+            if key in self._found:
+                self._found.move_to_end(key)
+                return self._found[key]
         a = AutoSettings()
         near = a.max_size + a.link + a.voxel_size + NEAR_GRASP_MARGIN
-        return find_grasped_object(self.points_near(grasp_point, near), grasp_point, a)
+        found = find_grasped_object(self.points_near(point, near), point, a)
+        with self._lock:
+            self._found[key] = found
+            while len(self._found) > OBJECT_ENVIRONMENTS:
+                self._found.popitem(last=False)
+        return found
 
     def shared(self, key: Hashable, make: Callable[[], T]) -> T:
         """The value for ``key``, made by ``make()`` on first use and kept for the scene's life.

@@ -340,6 +340,7 @@ class ServiceState:
             upload.unlink()
             _save_npy(folder / "cloud.npy", points)
             cache = SceneCache(points)
+            cache.prepare()  # the cloud's bounds and near-point grid: no query builds them
             scene = Scene(
                 scene_id, folder, cache, len(points), f"upload.{fmt}", obstacles=tuple(obstacles or ())
             )

@@ -1,0 +1,86 @@
+"""Warm queries do only per-query work (issue 25): what depends on the scene alone is made once.
+
+Counted, not timed: the calls of the per-scene functions over two ``place`` queries that share a
+scene's cache, as the service runs them (:func:`baseplace.jobs.place.place_job` with the scene's
+:class:`~baseplace.placement.scene_cache.SceneCache`).
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from typing import Any
+
+import numpy as np
+import pytest
+
+from baseplace.geometry.poses import matrix_to_rpy
+from baseplace.jobs import inputs
+from baseplace.jobs.place import PlaceJob, place_job
+from baseplace.jobs.report import NoResultError
+from baseplace.placement.pipeline import PlaceSettings
+from baseplace.placement.robustness import RobustnessSettings
+from baseplace.placement.scene_cache import SceneCache
+from baseplace.world import grasped_object
+from test_grasped_object import THROUGH_B, A, cloud, tray_scene
+
+
+def _counted(monkeypatch: pytest.MonkeyPatch, module: Any, name: str, calls: Counter[str]) -> None:
+    real = getattr(module, name)
+
+    def counting(*args: Any, **kwargs: Any) -> Any:
+        calls[name] += 1
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(module, name, counting)
+
+
+def _query(tiago: Any, tiago_map: Any, points: np.ndarray, cache: SceneCache, seed: int) -> dict[str, Any]:
+    target = " ".join(f"{v:.6f}" for v in (*THROUGH_B[:3, 3], *matrix_to_rpy(THROUGH_B[:3, :3])))
+    settings = PlaceSettings(tries=5, motion=None, robustness=RobustnessSettings(samples=0))
+    job = PlaceJob([target], tiago, cloud=inputs.CloudInput(points=points), map=tiago_map, settings=settings,
+                   seed=seed, cache=cache)  # fmt: skip
+    try:
+        return place_job(job).to_json()
+    except NoResultError as exc:  # found or not, the scene's work is the same
+        return exc.report.to_json()
+
+
+def test_two_queries_in_one_scene_find_the_grasped_object_and_the_bounds_once(tiago, tiago_map, monkeypatch):
+    points = cloud(tray_scene(A))
+    cache = SceneCache(points)
+    calls: Counter[str] = Counter()
+    _counted(monkeypatch, grasped_object, "find_grasped_object", calls)
+    _counted(monkeypatch, inputs, "points_bounds", calls)
+    first = _query(tiago, tiago_map, points, cache, 0)
+    second = _query(tiago, tiago_map, points, cache, 1)
+    assert first["object"]["allowed"] is not None  # the object was found, and is the same the second time
+    assert second["object"] == first["object"]
+    assert calls["find_grasped_object"] == 1, calls  # main: once per query (2)
+    assert calls["points_bounds"] == 0, calls  # main: once per query (2); the cache holds the bounds
+    lo, hi = cache.bounds  # oracle: the bounds of the points themselves
+    assert np.array_equal(lo, points.min(axis=0)) and np.array_equal(hi, points.max(axis=0))
+
+
+def test_a_grasp_point_elsewhere_seeks_its_own_object(tiago, monkeypatch):
+    points = cloud(tray_scene(A))
+    cache = SceneCache(points)
+    calls: Counter[str] = Counter()
+    _counted(monkeypatch, grasped_object, "find_grasped_object", calls)
+    at_a = (THROUGH_B @ tiago.T_tcp_grasp(None))[:3, 3]
+    found = cache.grasped_object(at_a)
+    assert found is not None and cache.grasped_object(at_a) is found
+    assert (
+        cache.grasped_object(at_a + np.array([0.0, 0.0, 2.0])) is None
+    )  # nothing up there, and not the kept object
+    assert calls["find_grasped_object"] == 2
+
+
+def test_a_cloud_without_finite_points_is_refused_as_before():
+    from baseplace.errors import InputError
+
+    cache = SceneCache(np.full((4, 3), np.nan))
+    cache.prepare()  # nothing to prepare: the query says what is wrong
+    with pytest.raises(InputError, match="the cloud holds no finite points"):
+        cache.bounds  # noqa: B018
+    with pytest.raises(InputError, match="the cloud holds no finite points"):
+        inputs.points_bounds(np.full((4, 3), np.nan))
