@@ -84,3 +84,20 @@ def test_a_cloud_without_finite_points_is_refused_as_before():
         cache.bounds  # noqa: B018
     with pytest.raises(InputError, match="the cloud holds no finite points"):
         inputs.points_bounds(np.full((4, 3), np.nan))
+
+
+def test_a_navigate_query_in_a_cached_scene_reads_the_bounds_from_the_cache(tiago, monkeypatch):
+    from baseplace.errors import InputError
+    from baseplace.jobs import navigate
+    from baseplace.jobs.navigate import NavigateJob, navigate_job
+
+    points = cloud(tray_scene(A))
+    cache = SceneCache(points)
+    calls: Counter[str] = Counter()
+    _counted(monkeypatch, navigate, "points_bounds", calls)
+    far = f"{points[:, 0].max() + 5.0:.3f} 0 0"  # off the scene: refused on the bounds, before any planning
+    for cached in (cache, None):
+        job = NavigateJob("0 0 0", far, inputs.CloudInput(points=points), tiago, cache=cached)
+        with pytest.raises(InputError, match="--goal"):
+            navigate_job(job)
+    assert calls["points_bounds"] == 1, calls  # main: 2 (once per query, cache or not)

@@ -48,7 +48,7 @@ class NavigateJob:
         seed: random seed.
         png, mcap: also write a plot / an MCAP recording here.
         cache: a :class:`~baseplace.placement.scene_cache.SceneCache` of ``cloud.points``: its
-            segmentation, made once (the service).
+            segmentation and bounds, made once (the service).
         segmentation_cache: without ``cache``, read the cloud's segmentation from the per-user
             cache (:mod:`baseplace.terrain.cache`) and store it there once computed, as ``place``.
     """
@@ -93,7 +93,8 @@ def navigate_job(job: NavigateJob) -> NavigateReport:
     start, goal = base_xyyaw(job.start, "--start"), base_xyyaw(job.goal, "--goal")
     robot = load_robot(job.robot)
     cloud = world_cloud(job.cloud)
-    bounds = points_bounds(cloud.points)  # poses off the scene: refused before the segmentation
+    # poses off the scene: refused before the segmentation (a scene's cache found its bounds on upload)
+    bounds = job.cache.bounds if job.cache is not None else points_bounds(cloud.points)
     for what, pose in (("--start", start), ("--goal", goal)):
         check_on_scene(
             pose, what, bounds, "the cloud's bounds", CHECK_MARGIN + max(job.resolution or 0.0, 0.05)
