@@ -34,7 +34,7 @@ clearances refused everywhere, a 4 cm cube 1.75 clearances away free everywhere.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import coal
 import numpy as np
@@ -57,12 +57,19 @@ and :data:`EDGE_CELL` cells here and the experiments' 5 mm slab cells
 EDGE_CELL = 0.005
 """Cell edge [m] of the points near the object that lie at an edge or a corner (not on a smooth
 surface, :func:`denoised`): kept as measured, at the clearance (no allowance)."""
-SURFACE_ALLOWANCE = 0.004
-"""Added [m] to the clearance kept from the :data:`FINE` cells (the denoised points; not from the
-exact plane or the edges' cells): how much closer than the true surface they may let a link come. Measured with the allowance 0
-(tests/test_clearance_from_true_surface.py's scene, 3 mm noise, points 1 cm apart, a 3.5 cm bottle;
-spheres of 5 mm radius): 4.0 mm at most, from the local plane's chord under a curved surface (about
-rho^2 / (8 r): 2.2 mm there), the gaps between the points and the plane's own error (sigma / 4)."""
+SURFACE_SPREAD = 0.37
+"""The standard deviation of a denoised point's distance to the true surface, in the scene's noise
+sigma (bench/clearance_errors.py: 1.03-1.10 mm at 3 mm noise, cylinders of 3-4.5 cm radius and a
+10 cm box, 1 cm apart, three noise draws)."""
+SURFACE_CHORD = 0.0022
+"""How far [m] denoised points lie inside a curved true surface on average: their local plane is a
+chord (bench/clearance_errors.py: mean -2.2 mm on a 3 cm cylinder, -1.8 at 3.75 cm, -1.5 at 4.5 cm,
+-0.25 mm on a box's faces; the largest kept)."""
+SURFACE_GAP = 0.0022
+"""What [m] a small link (a 5 mm sphere, a fingertip) gains between denoised points 1 cm apart,
+beyond their bias and spread (bench/clearance_errors.py: 5 mm spheres touching the true side that
+no raw cell refuses lie at most 7.7 mm from a denoised cell, at a 3 mm noise whose chord and
+3 spreads give 5.5 mm)."""
 PLANE_DEPTH = 0.05
 """The exact plane is a prism this thick [m] under its top face."""
 OBJECT_TOLERANCE = 0.0125
@@ -89,6 +96,12 @@ SMOOTH_NEIGHBOURS = 32
 """Whether a point's surface is smooth (:func:`denoised`) is judged on this many nearest neighbours."""
 SMOOTH_VOTES = 9
 """A point's surface is smooth when the median quadric residual of its this many nearest points is."""
+SURFACE_FIT = 1.0
+"""A raw point's denoised neighbours are one smooth surface when a quadric fits them to this many
+times the noise (:func:`_onto_surfaces`; their own spread is about 0.3 of it, :data:`SURFACE_SPREAD`)."""
+SURFACE_REACH = 0.015
+"""A raw point is surrounded by its denoised neighbours when their centre lies this close [m] to it
+along the surface (:func:`_onto_surfaces`): not beyond a rim or an edge."""
 DENOISE_CHUNK = 65536
 """:func:`denoised` fits this many points' neighbourhoods at a time (about 25 MB of (chunk, 32, 3))."""
 
@@ -134,18 +147,54 @@ def group_size(group: Group) -> int:
     return sum(len(p) for p in group_parts(group))
 
 
+@dataclass(frozen=True)
+class SurfaceCells(VoxelMap):
+    """:data:`FINE` cells of points put onto their local surface (:func:`denoised`).
+
+    Attributes:
+        noise_margin: the scene's derived noise margin n [m], :data:`CLEARANCE_SIGMAS` sigma of its
+            noise (:func:`derived_clearance`).
+    """
+
+    noise_margin: float = DEFAULT_CLEARANCE
+
+
+def surface_error(noise_margin: float) -> float:
+    """The error u [m] of the denoised cells in a scene of noise margin ``noise_margin`` (n).
+
+    How far inside the true surface they may let a link reach, at :data:`CLEARANCE_SIGMAS` sigma
+    of their own error: their chord (:data:`SURFACE_CHORD`), :data:`CLEARANCE_SIGMAS` of their spread
+    (:data:`SURFACE_SPREAD` sigma, sigma = n / :data:`CLEARANCE_SIGMAS`) and the gaps between the
+    points (:data:`SURFACE_GAP`): 7.8 mm at 3 mm noise, where a raw point's is n = 9.2 mm.
+    """
+    return SURFACE_CHORD + SURFACE_SPREAD * noise_margin + SURFACE_GAP
+
+
 def margin(part: VoxelMap | SupportPlane, clearance: float, plane_clearance: float | None = None) -> float:
     """The distance [m] below which a link touches ``part`` (coal's security margin).
 
-    The clearance plus :data:`SURFACE_ALLOWANCE` from the (denoised) point cells, the clearance from
-    the other cells of at most :data:`MAX_FINE`, nothing from coarser voxels; from the exact plane
-    ``plane_clearance`` when given (:func:`derived_plane_clearance`), else the clearance.
+    Each kind keeps c - n + u from its own cells (the module's docstring): from the denoised cells
+    (:class:`SurfaceCells`) ``clearance`` - n + :func:`surface_error` (at least 0); the clearance
+    from the other cells of at most :data:`MAX_FINE` (raw points: u = n), nothing from coarser
+    voxels; from the exact plane ``plane_clearance`` when given (:func:`derived_plane_clearance`),
+    else the clearance.
     """
     if isinstance(part, SupportPlane) and plane_clearance is not None:
         return plane_clearance
-    if isinstance(part, VoxelMap) and part.resolution <= FINE + 1e-12:
-        return clearance + SURFACE_ALLOWANCE
+    if isinstance(part, SurfaceCells):
+        return max(clearance - part.noise_margin + surface_error(part.noise_margin), 0.0)
     return clearance if is_fine(part) else 0.0
+
+
+def clearance_record(clearance: float, note: str, noise_margin: float) -> dict[str, float | str]:
+    """The JSON's ``clearance`` block.
+
+    The clearance c [m] (``metres``), how it was chosen (``derived``), the noise margin n [m]
+    (``noise_margin``) and the bound c - n [m] the robot keeps from the true surface at
+    :data:`CLEARANCE_SIGMAS` sigma (``from_true_surface``).
+    """
+    return {"metres": round(clearance, 5), "derived": note, "noise_margin": round(noise_margin, 5),
+            "from_true_surface": round(clearance - noise_margin, 5)}  # fmt: skip
 
 
 def is_fine(part: VoxelMap | SupportPlane) -> bool:
@@ -270,6 +319,7 @@ def fine_groups(
     res = object_voxels.resolution
     p = np.asarray(points, dtype=float).reshape(-1, 3)
     p = p[np.all(np.isfinite(p), axis=1)]
+    around = p[grasped.footprint_distance(p[:, :2]) <= radius] if len(p) else p
     near = {name: grasped.footprint_distance(v.centres[:, :2]) <= radius if len(v) else np.zeros(0, bool)
             for name, v in [*groups.items(), (_OBJECT, object_voxels)]}  # fmt: skip
     keys = np.floor(p / res).astype(np.int64)
@@ -290,14 +340,15 @@ def fine_groups(
         if plane is not None:
             p, owner, is_object = p[~flat], owner[~flat], is_object[~flat]
     moved, smooth = denoised(p)  # the noise once: the clearance stands on the surface, not on the noise
+    surface = SurfaceCells(FINE, np.zeros((0, 3), dtype=np.int64), derived_clearance(plane, around)[0])
     out: dict[str, Group] = {}
     for k, name in enumerate(names):
         coarse = (groups[name] if name != _OBJECT else object_voxels).without(near[name])
         mine = is_object if name == _OBJECT else (owner == k) & ~is_object
         if name == _OBJECT:  # an object voxel's other points are obstacles
             mine_other = (owner == k) & ~is_object
-            out["obstacle"] = _joined(out.get("obstacle"), *_cells(moved, smooth, mine_other))
-        out[name] = _joined(out.get(name), coarse, *_cells(moved, smooth, mine))
+            out["obstacle"] = _joined(out.get("obstacle"), *_cells(moved, smooth, mine_other, surface))
+        out[name] = _joined(out.get(name), coarse, *_cells(moved, smooth, mine, surface))
     grasped_group = out.pop(_OBJECT)
     out = {name: g for name, g in out.items() if group_size(g)}
     if plane is not None:
@@ -345,7 +396,7 @@ def denoised(points: ArrayLike) -> tuple[FloatArray, NDArray[np.bool_]]:
     # the nearest fits decides)
     votes = tree.query(p, k=min(len(p), SMOOTH_VOTES))[1]
     smooth = np.median(residual[votes], axis=1) <= PLANAR_FACTOR * noise[0]
-    return np.where(smooth[:, None], p + shift, p), smooth
+    return _onto_surfaces(p, np.where(smooth[:, None], p + shift, p), smooth, noise[0])
 
 
 def _smooth_residual(centred: FloatArray, axes: FloatArray) -> FloatArray:
@@ -354,13 +405,58 @@ def _smooth_residual(centred: FloatArray, axes: FloatArray) -> FloatArray:
     The quadric gives the height along the first column of ``axes`` (N, 3, 3) over the other two. A quadric follows a bottle's curve but not an edge: a plane through both faces of an edge
     passes for noise where the points are 1 cm apart and the noise 3 mm; a quadric's residuals do not.
     """
+    return _quadric(centred, axes)[1]
+
+
+def _quadric(centred: FloatArray, axes: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """(N, 6) the coefficients of :func:`_smooth_residual`'s quadrics and (N,) their residuals [m]."""
     local = np.einsum("nki,nij->nkj", centred, axes)
     h, u, v = local[..., 0], local[..., 1], local[..., 2]
-    design = np.stack([np.ones_like(u), u, v, u * u, u * v, v * v], axis=-1)
+    design = _design(u, v)
     gram = np.einsum("nki,nkj->nij", design, design) + 1e-12 * np.eye(6)
     coef = np.linalg.solve(gram, np.einsum("nki,nk->ni", design, h)[..., None])[..., 0]
     residual = h - np.einsum("nkj,nj->nk", design, coef)
-    return np.sqrt(np.einsum("nk,nk->n", residual, residual) / max(h.shape[1] - 6, 1))
+    return coef, np.sqrt(np.einsum("nk,nk->n", residual, residual) / max(h.shape[1] - 6, 1))
+
+
+def _design(u: FloatArray, v: FloatArray) -> FloatArray:
+    """The quadric's terms (..., 6) at local coordinates ``u``, ``v``."""
+    return np.stack([np.ones_like(u), u, v, u * u, u * v, v * v], axis=-1)
+
+
+def _onto_surfaces(
+    p: FloatArray, moved: FloatArray, smooth: NDArray[np.bool_], noise: float
+) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """``moved`` and ``smooth`` (as :func:`denoised`), raw points on a denoised surface put onto it.
+
+    A raw point of ``p`` (N, 3) whose :data:`SMOOTH_NEIGHBOURS` nearest denoised points fit a quadric
+    to within :data:`SURFACE_FIT` of the noise (one smooth surface: a quadric does not fit both faces
+    of an edge), that surround it (their centre within :data:`SURFACE_REACH` of it along the surface:
+    not beyond a rim or an edge) and from which it lies within :data:`CLEARANCE_SIGMAS` noise, is a
+    point of that surface whose own fit failed on the noise's tail; it goes onto the quadric.
+    """
+    raw = np.flatnonzero(~smooth)
+    if len(raw) == 0 or smooth.sum() < SMOOTH_NEIGHBOURS:
+        return moved, smooth
+    from scipy.spatial import cKDTree
+
+    on = moved[smooth]
+    nb = on[cKDTree(on).query(p[raw], k=SMOOTH_NEIGHBOURS)[1]]  # (R, k, 3)
+    centre = nb.mean(axis=1)
+    centred = nb - centre[:, None, :]
+    _, axes = np.linalg.eigh(np.einsum("nki,nkj->nij", centred, centred))
+    coef, residual = _quadric(centred, axes)
+    h, u, v = np.einsum("ni,nij->nj", p[raw] - centre, axes).T
+    offset = h - np.einsum("nj,nj->n", _design(u, v), coef)  # along the surface's normal
+    onto = (
+        (residual <= SURFACE_FIT * noise)
+        & (np.hypot(u, v) <= SURFACE_REACH)
+        & (np.abs(offset) <= CLEARANCE_SIGMAS * noise)
+    )
+    moved, smooth = moved.copy(), smooth.copy()
+    moved[raw[onto]] = p[raw[onto]] - offset[onto, None] * axes[onto, :, 0]
+    smooth[raw[onto]] = True
+    return moved, smooth
 
 
 def _object_points(p: FloatArray, grasped: GraspedObject) -> NDArray[np.bool_]:
@@ -385,21 +481,28 @@ def _object_points(p: FloatArray, grasped: GraspedObject) -> NDArray[np.bool_]:
     return out
 
 
-def _cells(p: FloatArray, smooth: NDArray[np.bool_], mine: NDArray[np.bool_]) -> tuple[VoxelMap, VoxelMap]:
-    """The points ``p[mine]`` (N, 3): smooth ones in :data:`FINE` cells, the others in :data:`EDGE_CELL` cells."""
+def _cells(
+    p: FloatArray, smooth: NDArray[np.bool_], mine: NDArray[np.bool_], surface: SurfaceCells
+) -> tuple[SurfaceCells, VoxelMap]:
+    """The points ``p[mine]`` (N, 3): smooth ones in cells like ``surface``, the others in :data:`EDGE_CELL` cells."""
     # finer than a user may ask of VoxelMap.from_points: these are the few points near the object
     fine = np.unique(np.floor(p[mine & smooth] / FINE).astype(np.int64).reshape(-1, 3), axis=0)
     edge = np.unique(np.floor(p[mine & ~smooth] / EDGE_CELL).astype(np.int64).reshape(-1, 3), axis=0)
-    return VoxelMap(FINE, fine), VoxelMap(EDGE_CELL, edge)
+    return replace(surface, keys=fine), VoxelMap(EDGE_CELL, edge)
 
 
 def _joined(group: Group | None, *parts: VoxelMap) -> Group:
-    """A group of the non-empty parts (merged per resolution)."""
-    by_res: dict[float, list[NDArray[np.int64]]] = {}
+    """A group of the non-empty parts (merged per resolution and kind: denoised cells stay :class:`SurfaceCells`)."""
+    by_kind: dict[tuple[float, bool], list[NDArray[np.int64]]] = {}
+    like: dict[tuple[float, bool], VoxelMap] = {}
     for part in [*(group_parts(group) if group is not None else ()), *parts]:
         if isinstance(part, VoxelMap) and len(part):
-            by_res.setdefault(part.resolution, []).append(part.keys)
-    merged = tuple(VoxelMap(r, np.unique(np.concatenate(k), axis=0)) for r, k in sorted(by_res.items()))
+            key = (part.resolution, isinstance(part, SurfaceCells))
+            by_kind.setdefault(key, []).append(part.keys)
+            like[key] = part
+    merged = tuple(
+        replace(like[key], keys=np.unique(np.concatenate(k), axis=0)) for key, k in sorted(by_kind.items())
+    )
     if not merged:
         return VoxelMap(FINE, np.zeros((0, 3), dtype=np.int64))
     return merged[0] if len(merged) == 1 else merged
