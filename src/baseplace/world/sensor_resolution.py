@@ -10,25 +10,30 @@ plane (:class:`SupportPlane`): a prism whose top face is the fitted plane, and i
 the point groups. The robot keeps :attr:`~baseplace.world.environment.Environment.clearance` from
 the fine cells and the plane, derived from the plane's noise (:func:`derived_clearance`).
 
-The noise is counted once. A noisy point lies up to about 3 sigma outside the true surface; kept
-as measured in its 5 mm cell, the clearance stood on top of that noise and of the cell (measured on
-bench/find_rate.py's dev scenes, 3 mm noise: cells up to 11-15 mm outside the true bottles, so the
-margin from a bottle was the clearance plus 5 mm (median) to 12 mm, while the exact plane stood at
-the clearance). So a point on a smooth surface (a face, a bottle's side) is first put onto the
-plane fitted to its neighbours (:func:`denoised`) and kept in :data:`FINE` cells at the clearance
-plus :data:`SURFACE_ALLOWANCE` (the plane is a chord of a curved surface, and a small link may come
-between points 1 cm apart: :func:`margin`); a point at an edge or a corner stays as measured, in
-:data:`EDGE_CELL` cells at the clearance, as before, so no corner is rounded off. The margin from
-the true surface, measured with 5 mm spheres (three noise draws each, 3 mm noise, points 1 cm
-apart), in mm beyond the clearance, min / median / max:
+The clearance is stated against the TRUE surface, the same for every kind of model element (the
+lead's decision of issue 25). With c the clearance (given, or derived: :func:`derived_clearance`)
+and n the derived noise margin (:data:`CLEARANCE_SIGMAS` sigma of the scene's noise, the derived
+clearance even when c is given), the robot keeps at least c - n from the true surface at
+:data:`CLEARANCE_SIGMAS` sigma: 0 at the derived default, it does not touch. Each kind keeps
+c - n + u from its own cells (:func:`margin`), u that kind's own error at :data:`CLEARANCE_SIGMAS`
+sigma, measured:
 
-* around a 3.5 cm bottle's side (510 probes, tests/test_clearance_from_true_surface.py's scene):
-  0.0 / 2.6 / 6.5 (before: 0.2 / 5.3 / 12.4, and 0.9 clearances from the side were free between points);
-* around a 10 cm box, corners and edges included (1200 probes): -1.6 / 4.7 / 13.2 (before: -1.5 /
-  4.8 / 13.2; a corner itself lies between the points).
+* a point at an edge or a corner stays as measured, in :data:`EDGE_CELL` cells (no corner is
+  rounded off): its error is the noise, u = n, so its margin is c;
+* a point on a smooth surface (a face, a bottle's side) is put onto the plane fitted to its
+  neighbours (:func:`denoised`), in :data:`FINE` cells (:class:`SurfaceCells`): u =
+  :func:`surface_error`, its chord, :data:`CLEARANCE_SIGMAS` of its spread and the gaps between the
+  points (7.8 mm at 3 mm noise, where n = 9.2 mm; bench/clearance_errors.py). A raw point that
+  failed the smoothness test on the noise's tail while its smoothed neighbours fit one surface
+  around it goes onto that surface too (:func:`_onto_surfaces`);
+* the exact plane: its fit's 3 standard errors, at least :data:`MIN_CLEARANCE`, when c is derived
+  (:func:`derived_plane_clearance`), else c.
 
-tests/test_clearance_from_true_surface.py checks the bottle with coal on the true cylinder: 0.9
-clearances refused everywhere, a 4 cm cube 1.75 clearances away free everywhere.
+The JSON states c, n and c - n (:func:`clearance_record`). Before, the smoothed cells kept c + 4 mm
+(13.2 mm at 3 mm noise) and the clearance meant a distance from the points.
+tests/test_clearance_bound.py checks with coal on the true shapes (cylinders of 3 and 4.5 cm, a
+10 cm box with its corners, the table top; 3 mm noise, three draws) that 5 mm spheres 0.5 mm nearer
+than c - n are refused everywhere, and that a palm is free 11 mm beyond c - n from a noisy bottle.
 """
 
 from __future__ import annotations
