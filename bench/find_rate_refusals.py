@@ -114,6 +114,13 @@ def classify_pair(env: Environment, k: int, gid: int, margin: float, T_world_roo
                        round(float(np.max(signed[[n == name for n in names]])) * 1e3, 1)]
                 for name in by
             }  # fmt: skip
+            tops = {f"neighbour {k}": scene.table[2] + n[3] for k, n in enumerate(scene.neighbours)}
+            z = centres[touching, 2]
+            out["cells_below_top_mm"] = {  # a rim's points lie within about 2 cm of its top
+                name: [round(float(np.min(tops[name] - z[[n == name for n in names]])) * 1e3, 1),
+                       round(float(np.max(tops[name] - z[[n == name for n in names]])) * 1e3, 1)]
+                for name in by if name in tops
+            }  # fmt: skip
     else:  # the exact support plane: a convex prism whose top face is the fitted plane
         out["model_distance_mm"] = round(true_distance(g, Tk, part, np.eye(4)) * 1e3, 2)
         verts = np.array([np.asarray(part.points(i)) for i in range(part.num_points)])

@@ -74,12 +74,14 @@ def noisy_scene(neighbour: np.ndarray, footprint, seed: int):
     return groups, support_plane(groups)
 
 
-def _model(neighbour: np.ndarray, footprint, seed: int):
-    """(parts: (geometry, security margin) as Environment checks them, clearance) of a noisy scene."""
+def _model(neighbour: np.ndarray, footprint, seed: int, times: float = 1.0):
+    """(parts: (geometry, security margin) as Environment checks them, clearance) of a noisy scene,
+    at ``times`` the derived clearance."""
     groups, plane = noisy_scene(neighbour, footprint, seed)
     assert plane is not None
     clearance, _ = derived_clearance(plane)
     assert 2.5 * SIGMA <= clearance <= 3.5 * SIGMA  # 3 sigma of the plane's residuals
+    clearance *= times
     parts = []
     for group in groups.values():
         for part in group_parts(group):
@@ -93,10 +95,7 @@ def _model(neighbour: np.ndarray, footprint, seed: int):
 
 @pytest.fixture(scope="module")
 def scene():
-    def footprint(p):
-        return np.hypot(p[:, 0] - NEIGHBOUR[0], p[:, 1] - NEIGHBOUR[1]) <= RADIUS
-
-    return _model(_cylinder_points(NEIGHBOUR), footprint, 2511)
+    return _model(_cylinder_points(NEIGHBOUR), _footprint, 2511)
 
 
 BOX_HALF = 0.04  # the neighbour box: an 8 cm cube where the bottle stood
@@ -151,10 +150,19 @@ def test_a_probe_half_a_clearance_from_the_true_noisy_neighbour_is_refused(scene
         )
 
 
-def test_the_margin_from_the_true_side_is_never_less_than_the_clearance(scene):
-    """Small spheres (5 mm, a fingertip) 0.9 clearances from the true side, over the gaps between the
-    points (1 cm apart) and all around the side that faces away from the grasped bottle: all refused."""
-    parts, clearance = scene
+def _footprint(p):
+    return np.hypot(p[:, 0] - NEIGHBOUR[0], p[:, 1] - NEIGHBOUR[1]) <= RADIUS
+
+
+def test_the_margin_from_the_true_side_is_never_less_than_c_minus_n():
+    """Small spheres (5 mm, a fingertip) 0.9 (c - n) from the true side, over the gaps between the
+    points (1 cm apart) and all around the side that faces away from the grasped bottle: all refused.
+
+    The clearance c is kept from the TRUE surface less the noise margin n (3 sigma, the derived
+    clearance): the lead's decision of issue 25 (docs/results.md). Here c = 2 n, so 0.9 (c - n)
+    is the 0.9 clearances this test asked of the derived clearance before."""
+    parts, clearance = _model(_cylinder_points(NEIGHBOUR), _footprint, 2511, times=2.0)
+    clearance /= 2  # c - n
     true = coal.Cylinder(RADIUS, HEIGHT)
     T_true = coal.Transform3s(np.eye(3), np.array([*NEIGHBOUR, TOP + HEIGHT / 2]))
     sphere = coal.Sphere(0.005)

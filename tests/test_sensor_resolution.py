@@ -226,9 +226,14 @@ def test_cli_reports_the_clearance_and_how_it_was_derived(tiago_map, grasp_scene
     assert derived["exit_code"] == 0 and derived["placements"]
     assert derived["clearance"]["derived"].startswith("3 sigma of the support plane's residuals (sigma 3.")
     assert 0.0085 <= derived["clearance"]["metres"] <= 0.0095  # 3 x 3 mm
+    # the bound it keeps from the true surface: c - n, n the derived noise margin (0 at the default)
+    n = derived["clearance"]["noise_margin"]
+    assert n == derived["clearance"]["metres"] and derived["clearance"]["from_true_surface"] == 0.0
     given = json.loads(run_cli(*common, "--clearance", "0.03").stdout)
     # 3 cm: more than the hand's 16 mm over the table, so the grasp is refused, and says why
-    assert given["clearance"] == {"metres": 0.03, "derived": "given"} and given["exit_code"] == 3
+    assert given["clearance"] == {"metres": 0.03, "derived": "given", "noise_margin": n,
+                                  "from_true_surface": round(0.03 - n, 5)}  # fmt: skip
+    assert given["exit_code"] == 3
 
 
 @pytest.mark.parametrize("bad", [-0.001, float("nan"), float("inf"), 0.2])

@@ -26,6 +26,7 @@ from baseplace.jobs.report import (
     placement_row,
 )
 from baseplace.robots.defaults import DEFAULT_ROBOT
+from baseplace.world.sensor_resolution import clearance_record
 
 if TYPE_CHECKING:
     from pathlib import Path
@@ -208,7 +209,7 @@ def candidates_job(job: CandidatesJob, progress: inputs.Progress | None = None) 
         settings={"r_r": settings.r_r, "d_min": settings.d_min, "d_max": round(settings.d_max, 4),
                   "theta": round(settings.theta, 5), "k_obs": settings.k_obs, "grasp_standoff": standoff,
                   "reach_margin": reach_margin_json(irm_settings_for(robust)) if job.method == "irm" else None},
-        clearance={"metres": round(checks.environment.clearance, 5), "derived": checks.clearance_note},
+        clearance=clearance_record(checks.environment.clearance, checks.clearance_note, checks.noise_margin),
     )  # fmt: skip
     if png is not None:
         from baseplace.viz.candidates import plot_candidates

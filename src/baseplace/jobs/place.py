@@ -18,6 +18,7 @@ from baseplace.errors import InputError
 from baseplace.jobs import inputs
 from baseplace.jobs.report import NoResultError, PlaceReport, RobotRef, placement_row
 from baseplace.robots.defaults import DEFAULT_ROBOT
+from baseplace.world.sensor_resolution import clearance_record
 
 if TYPE_CHECKING:
     from pathlib import Path as FilePath
@@ -271,7 +272,7 @@ def place_job(job: PlaceJob, progress: inputs.Progress | None = None) -> PlaceRe
         object={"requested": job.object, "found": result.grasped_note,
                 "allowed": None if result.grasped is None else result.grasped.to_json()},
         floor=job.floor, regions=len(result.terrain.segmentation.regions),
-        clearance={"metres": round(result.clearance, 5), "derived": result.clearance_note},
+        clearance=clearance_record(result.clearance, result.clearance_note, result.noise_margin),
     )  # fmt: skip
     report.outputs.update(inputs.map_output(chosen))
     if png is not None:

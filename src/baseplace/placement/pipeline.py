@@ -135,6 +135,8 @@ class PlacementResult:
         grasped_note: how it was found ("given", "auto: ..." or "none").
         clearance: the clearance [m] the checks kept (:attr:`PlaceSettings.clearance`).
         clearance_note: how it was chosen ("given", "3 sigma of ...", "default: ...").
+        noise_margin: the derived noise margin n [m] (3 sigma of the scene's noise): the robot keeps
+            ``clearance`` - n from the true surface (:func:`~baseplace.world.sensor_resolution.margin`).
     """
 
     placements: list[Placement]
@@ -149,6 +151,7 @@ class PlacementResult:
     grasped_note: str = "none"
     clearance: float = 0.0
     clearance_note: str = ""
+    noise_margin: float = 0.0
 
 
 def place(
@@ -264,7 +267,8 @@ def place(
         "total": (t4 - t0) * 1e3,
     }
     return PlacementResult(placements, verifier.failures, tries, timings, terrain, osrm, verifier.contacts,
-                           verifier.rejected, obj, note, checks.clearance, checks.clearance_note)  # fmt: skip
+                           verifier.rejected, obj, note, checks.clearance, checks.clearance_note,
+                           checks.noise_margin)  # fmt: skip
 
 
 @dataclass
@@ -277,6 +281,7 @@ class SceneChecks:
         grasped_note: how it was found ("given", "auto: ..." or "none").
         clearance: the clearance [m] kept from the scene at sensor resolution.
         clearance_note: how it was chosen (see :attr:`PlacementResult.clearance_note`).
+        noise_margin: as :attr:`PlacementResult.noise_margin`.
     """
 
     verifier: Verifier
@@ -284,6 +289,7 @@ class SceneChecks:
     grasped_note: str
     clearance: float = 0.0
     clearance_note: str = ""
+    noise_margin: float = 0.0
 
 
 def scene_checks(
@@ -314,10 +320,10 @@ def scene_checks(
     voxels = cache.shared(("obstacles", key, s.resolution, s.support_dist, s.stand_on, outline.tobytes()),
                           lambda: _obstacles(terrain, s, outline, cache))  # fmt: skip
     transit = None
-    clearance, clearance_note = NO_FINE_SCENE
+    clearance, clearance_note, noise_margin = NO_FINE_SCENE
     if obj is not None:  # the allowed contact: per grasped object, kept for the scene's next queries
 
-        def environments_for_object() -> tuple[Environment, Environment | None, tuple[float, str]]:
+        def environments_for_object() -> tuple[Environment, Environment | None, tuple[float, str, float]]:
             # near it the cloud's points and the exact plane it stands on, kept at the clearance
             groups, object_voxels = contact_groups(terrain.voxels, voxels, obj, cache.points)
             kept = clearance_of(groups, s.clearance, cache.points, obj)
@@ -327,7 +333,7 @@ def scene_checks(
             # on the way to the pre-grasp the hand may not touch it either
             return hand, transit_environment(robot, groups, object_voxels, obstacles, kept[0], plane), kept
 
-        env, transit, (clearance, clearance_note) = cache.per_object(
+        env, transit, (clearance, clearance_note, noise_margin) = cache.per_object(
             ("environment", robot, arm_name, key, s.resolution, s.support_dist, object_key(obj),
              obstacles_key(obstacles), s.clearance),
             environments_for_object,
@@ -349,34 +355,36 @@ def scene_checks(
     verifier = Verifier(arm, DampedLeastSquaresIK(arm), env, targets,
                         {r.id: terrain.polygons[r.id] for r in seg.regions}, outline,
                         motion=motion)  # fmt: skip
-    return SceneChecks(verifier, obj, note, clearance, clearance_note)
+    return SceneChecks(verifier, obj, note, clearance, clearance_note, noise_margin)
 
 
-NO_FINE_SCENE = (0.0, "not used: no grasped object, the scene is 25 mm voxels")
+NO_FINE_SCENE = (0.0, "not used: no grasped object, the scene is 25 mm voxels", 0.0)
 """The clearance of a scene checked without a grasped object: nothing is at sensor resolution."""
 
 
 def clearance_of(
     groups: dict[str, Group], given: float | None, points: ArrayLike, grasped: GraspedObject
-) -> tuple[float, str]:
-    """The clearance [m] for the groups of :func:`contact_groups` and how it was chosen: given or derived.
+) -> tuple[float, str, float]:
+    """The clearance [m] for the groups of :func:`contact_groups`, how it was chosen, and the noise margin n [m].
 
-    Derived from the support plane's noise, or without one from the noise of the cloud (N, 3)
+    n is the derived clearance, whether a clearance is given or not. Derived from the support plane's noise, or without one from the noise of the cloud (N, 3)
     within :data:`~baseplace.world.support_plane.RADIUS` of the grasped object.
     """
-    if given is not None:
-        return float(given), "given"
     plane = support_plane(groups)
     if plane is not None:
-        return derived_clearance(plane)
-    p = np.asarray(points, dtype=float).reshape(-1, 3)
-    p = p[np.all(np.isfinite(p), axis=1)]
-    return derived_clearance(None, p[grasped.footprint_distance(p[:, :2]) <= RADIUS])
+        derived = derived_clearance(plane)
+    else:
+        p = np.asarray(points, dtype=float).reshape(-1, 3)
+        p = p[np.all(np.isfinite(p), axis=1)]
+        derived = derived_clearance(None, p[grasped.footprint_distance(p[:, :2]) <= RADIUS])
+    if given is not None:
+        return float(given), "given", derived[0]
+    return derived[0], derived[1], derived[0]
 
 
 def plane_clearance_of(
-    groups: dict[str, Group], given: float | None, kept: tuple[float, str]
-) -> tuple[float | None, tuple[float, str]]:
+    groups: dict[str, Group], given: float | None, kept: tuple[float, str, float]
+) -> tuple[float | None, tuple[float, str, float]]:
     """The clearance [m] from the exact support plane (None: ``kept``'s), and ``kept`` with it noted.
 
     A given clearance holds for the plane too; a derived one is the plane's own
@@ -386,7 +394,7 @@ def plane_clearance_of(
     if given is not None or plane is None:
         return None, kept
     metres, note = derived_plane_clearance(plane)
-    return metres, (kept[0], f"{kept[1]}; from {note}: {metres * 1e3:.1f} mm")
+    return metres, (kept[0], f"{kept[1]}; from {note}: {metres * 1e3:.1f} mm", kept[2])
 
 
 @dataclass
@@ -399,11 +407,13 @@ class ObjectChecks:
         motion: the reaching-motion check, or None.
         clearance_note: how the environment's clearance was chosen (see
             :attr:`PlacementResult.clearance_note`).
+        noise_margin: as :attr:`PlacementResult.noise_margin`.
     """
 
     environment: Environment
     motion: MotionChecker | None
     clearance_note: str = ""
+    noise_margin: float = 0.0
 
 
 def object_checks(
@@ -433,7 +443,7 @@ def object_checks(
     """
     check_clearance(clearance)
 
-    def environments() -> tuple[Environment, dict[str, Group], Group | None, str]:
+    def environments() -> tuple[Environment, dict[str, Group], Group | None, tuple[float, str, float]]:
         voxels = VoxelMap(0.025, np.zeros((0, 3), np.int64))
         if points is not None:
             voxels = VoxelMap.from_points(points) if cache is None else cache.shared(
@@ -445,12 +455,12 @@ def object_checks(
         plane, kept = plane_clearance_of(groups, clearance, kept)
         environment = Environment(robot, groups, grasped=object_voxels, hand_arm=hand_arm, shapes=obstacles,
                                   clearance=kept[0], plane_clearance=plane)  # fmt: skip
-        return environment, groups, object_voxels, kept[1]
+        return environment, groups, object_voxels, kept
 
     if cache is None:
-        environment, groups, object_voxels, note = environments()
+        environment, groups, object_voxels, kept = environments()
     else:  # per robot, arm and grasped object, kept for the scene's next queries
-        environment, groups, object_voxels, note = cache.per_object(
+        environment, groups, object_voxels, kept = cache.per_object(
             ("candidates", robot, hand_arm, object_key(grasped), obstacles_key(obstacles), clearance),
             environments,
         )
@@ -462,7 +472,7 @@ def object_checks(
         )
         checker = MotionChecker(robot, arm, environment if transit is None else transit,
                                 None if transit is None else environment, motion)  # fmt: skip
-    return ObjectChecks(environment, checker, note)
+    return ObjectChecks(environment, checker, kept[1], kept[2])
 
 
 def scene_environment(
