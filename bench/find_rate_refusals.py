@@ -31,6 +31,7 @@ from typing import Any
 
 import coal
 import numpy as np
+import pinocchio as pin
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
@@ -146,7 +147,12 @@ def link_clearance(
 def analyse(env: Environment, q: np.ndarray, T: np.ndarray, scene: Scene) -> list[dict[str, Any]]:
     """Every collision pair of the robot at arm joints ``q`` and base pose ``T``, classified."""
     arm = env.robot.arm()
-    env.contacts_arm(arm, q, T)  # places the geometries and fills the collision results
+    # coal on every scene pair at this state: contacts_arm asks coal only about the pairs the state
+    # filter leaves, so the other pairs' results would be those of an earlier state
+    env._place_obstacles(T)
+    pin.computeCollisions(
+        env.model, env.data, env.geom, env.geom_data, arm.to_pinocchio(q, env.robot.q_reference), False
+    )
     T_world_root = np.asarray(T, dtype=float) @ np.linalg.inv(env._T_root_base.homogeneous)
     hand = set(hand_geometry_ids(env.robot, env.geom))
     rows = []
