@@ -412,7 +412,9 @@ class MotionChecker:
         (no IK solution near the last configuration, or a joint change above ``max_joint_step``)
         is cut in halves, down to :data:`WALK_SUBDIVISIONS` halvings; the states of a cut step are
         walked in turn (m >= len(poses) + 1). The IK keeps joints off their limits through the
-        arm's redundancy (:attr:`_ik`), which plain clamped DLS runs into along a line.
+        arm's redundancy (:attr:`_ik`), which plain clamped DLS runs into along a line. With
+        ``stop``, the walk ends at the first state after ``q0`` for which ``stop(q, T_world_base)``
+        holds, that state included.
         """
         # seeds: the last step, then small perturbations of it
         jitter = np.random.default_rng(0).normal(0.0, 0.05, size=(4, self.arm.n_joints))
