@@ -91,11 +91,11 @@ class ApproachRecorder:
                 recorder._walks.append("pregrasp_collides")
             return free
 
-        def rec_walk(checker: MotionChecker, q0: Any, poses: Any, T: Any) -> Any:
+        def rec_walk(checker: MotionChecker, q0: Any, poses: Any, T: Any, **kwargs: Any) -> Any:
             recorder._events.clear()
             recorder._in_walk = True
             try:
-                steps = walk(checker, q0, poses, T)
+                steps = walk(checker, q0, poses, T, **kwargs)
             finally:
                 recorder._in_walk = False
             if steps is None:

@@ -8,8 +8,11 @@ check, run after the shared verification (:class:`~baseplace.placement.verify.Ve
    one) to a pre-grasp configuration, planned with OMPL's RRTConnect after a straight joint-space
    line is tried first; every state is checked with the same whole-robot collision model as the
    verification (:meth:`Environment.colliding_arm`), the grasped object included for every link;
-2. a straight approach from the pre-grasp, ``pregrasp_distance`` back along the TCP's approach
-   axis, to the grasp: the Cartesian line is followed in ``approach_step`` steps (halved where a
+2. a straight approach from the pre-grasp, at most ``pregrasp_distance`` back along the TCP's
+   approach axis, to the grasp: with a grasped object, the walk back from the grasp ends at the
+   first state where the whole robot clears the transit model (the object an obstacle of every
+   link, the hand's included), so a grasp near the top of the arm's reach is not refused for a
+   pre-grasp higher than the hand needs; the Cartesian line is followed in ``approach_step`` steps (halved where a
    step fails) by IK seeded with the previous step, an IK that uses the arm's redundancy to keep
    off the joint limits rather than stall against them (walked backwards from the verified grasp configuration, so the motion ends in
    exactly that configuration) and the joint line between steps is checked. The pre-grasp distance
@@ -39,7 +42,7 @@ import functools
 import itertools
 import math
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -169,8 +172,12 @@ class MotionSettings:
     """How the reaching motion is checked.
 
     Attributes:
-        pregrasp_distance: the pre-grasp lies this far back from the grasp along the approach
-            axis [m]; the last segment, the straight approach, is this long. The whole open hand
+        pregrasp_distance: the pre-grasp lies at most this far back from the grasp along the
+            approach axis [m]; the last segment, the straight approach, is at most this long.
+            With a grasped object the walk back ends sooner, at the first state that clears
+            the transit model: top-down grasps of bottles on tables (find-rate dev seeds) were
+            refused because TIAGo cannot reach 0.15 m above them, while its hand clears the
+            bottle about 0.13 m back. The whole open hand
             must be clear of the object there (the transit checks it), since only the approach
             may touch it. 0.15 m leaves TIAGo's open fingertips (0.245 m ahead of its TCP) 5.5 cm
             short of the grasp point: objects deeper than that towards the hand are refused at
@@ -367,7 +374,7 @@ class MotionChecker:
         if not self._approach_free(q, T_world_base):
             self._blocked = (q, "approach")
         else:
-            back = self._walk(q, line, T_world_base)
+            back = self._walk(q, line, T_world_base, stop=self._clear_of_object)
             if back is not None:
                 return back[::-1]
         rng = np.random.default_rng(seed)
@@ -381,14 +388,33 @@ class MotionChecker:
                 return forward
         return None
 
-    def _walk(self, q0: FloatArray, poses: list[FloatArray], T_world_base: FloatArray) -> FloatArray | None:
+    def _clear_of_object(self, q: FloatArray, T_world_base: FloatArray) -> bool:
+        """Whether a walk back from the grasp may end at ``q`` (n,), the pre-grasp.
+
+        It may where the whole robot, the hand included, clears the grasped object and everything
+        else, as the transit demands. Never without a grasped object (``approach_environment``
+        None): the approach then has its full ``pregrasp_distance``.
+        """
+        if self.approach_environment is None:
+            return False
+        return not self.environment.colliding_arm(self.arm, q, T_world_base)
+
+    def _walk(
+        self,
+        q0: FloatArray,
+        poses: list[FloatArray],
+        T_world_base: FloatArray,
+        stop: Callable[[FloatArray, FloatArray], bool] | None = None,
+    ) -> FloatArray | None:
         """(m, n) configurations from ``q0`` (at the TCP pose ``poses[0]``) through the others, or None.
 
         The (4, 4) poses lie on a straight line with one orientation (the approach), so a step that fails
         (no IK solution near the last configuration, or a joint change above ``max_joint_step``)
         is cut in halves, down to :data:`WALK_SUBDIVISIONS` halvings; the states of a cut step are
         walked in turn (m >= len(poses) + 1). The IK keeps joints off their limits through the
-        arm's redundancy (:attr:`_ik`), which plain clamped DLS runs into along a line.
+        arm's redundancy (:attr:`_ik`), which plain clamped DLS runs into along a line. With
+        ``stop``, the walk ends at the first state after ``q0`` for which ``stop(q, T_world_base)``
+        holds, that state included.
         """
         # seeds: the last step, then small perturbations of it
         jitter = np.random.default_rng(0).normal(0.0, 0.05, size=(4, self.arm.n_joints))
@@ -413,6 +439,8 @@ class MotionChecker:
                     return None
                 q, p_from = q_next, T_next[:3, 3]
                 steps.append(q)
+                if stop is not None and stop(q, T_world_base):
+                    return np.array(steps)
         return np.array(steps)
 
     def edge_states(self, a: FloatArray, b: FloatArray) -> int:
