@@ -228,7 +228,7 @@ def _points_outside_hull(g, c, r, reach, joint, F, T, hull_start, hull_planes, p
     a, b = hull_start[g], hull_start[g + 1]
     if a == b:
         return False
-    j = joint[g]
+    j, hint = joint[g], a
     local = np.empty(3)
     r2 = r * r
     e = r + 1e-9
@@ -250,7 +250,8 @@ def _points_outside_hull(g, c, r, reach, joint, F, T, hull_start, hull_planes, p
                     dx, dy, dz = points[p, 0] - T[0, 3], points[p, 1] - T[1, 3], points[p, 2] - T[2, 3]
                     for m in range(3):  # into the arm's base frame: T^-1 p
                         local[m] = T[0, m] * dx + T[1, m] * dy + T[2, m] * dz
-                    if not _outside_planes(local, reach, j, F, hull_planes, a, b):
+                    hint = _outside_planes(local, reach, j, F, hull_planes, a, b, hint)
+                    if hint < 0:
                         return False
                 u += 1
     return True
@@ -357,7 +358,9 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
                             touch = True
                             break
                 if touch and kind == 1:
-                    touch = not _vertices_outside(g, reach[p], joint, F, T, vert_start, verts, planes, a, b)
+                    touch = not _vertices_outside(
+                        g, W[g], reach[p], joint, F, T, vert_start, verts, planes, a, b
+                    )
                 out_i[p] = touch
                 any_pair |= touch
         for run in range(self_runs.shape[0]):
@@ -431,60 +434,69 @@ def _hull_clear(g, h, i, reach, joint, Cg, radius, stamp, sub_start, sub_joint, 
     if a == b:
         return False
     j = joint[g]
-    if _outside_planes(Cg[h], radius[h] + reach, j, F, hull_planes, a, b):
+    hint = _outside_planes(Cg[h], radius[h] + reach, j, F, hull_planes, a, b, a)
+    if hint >= 0:
         return True
     if sub_start[h + 1] - sub_start[h] <= 1:
         return False
     _cover_placed(h, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws)
     for s in range(sub_start[h], sub_start[h + 1]):
-        if not _outside_planes(Cs[s], sub_radius[s] + reach, j, F, hull_planes, a, b):
+        hint = _outside_planes(Cs[s], sub_radius[s] + reach, j, F, hull_planes, a, b, max(hint, a))
+        if hint < 0:
             return False
     return True
 
 
 @nb.njit(cache=True)
-def _vertices_outside(g, reach, joint, F, T, vert_start, verts, planes, a, b):
-    """Whether geometry g's hull vertices all lie more than ``reach`` outside one of the world planes a..b.
+def _vertices_outside(g, c, reach, joint, F, T, vert_start, verts, planes, a, b):
+    """Whether geometry g's hull points all lie more than ``reach`` outside one of the world planes a..b.
 
     The planes bound a convex part (inside <= 0), so such a plane keeps g's whole hull that far
-    from it. The vertices (``verts[vert_start[g]:vert_start[g + 1]]``, in the frame of the arm
+    from it. Only the plane that g's bounding sphere's centre c (3,) (world) lies farthest outside
+    is tried. The points (``verts[vert_start[g]:vert_start[g + 1]]``, in the frame of the arm
     joint that moves g) are placed by ``F`` and ``T`` (the arm's base in the world).
     """
     u0, u1 = vert_start[g], vert_start[g + 1]
-    if u0 == u1:
+    if u0 == u1 or a == b:
         return False
+    h, best = a, -np.inf
+    for k in range(a, b):
+        d = planes[k, 0] * c[0] + planes[k, 1] * c[1] + planes[k, 2] * c[2] + planes[k, 3]
+        if d > best:
+            h, best = k, d
     j = joint[g]
-    base, world = np.empty(3), np.empty(3)
-    for h in range(a, b):
-        clear = True
-        for u in range(u0, u1):
-            _place_one(j, verts[u], F, base)
-            for m in range(3):
-                world[m] = T[m, 0] * base[0] + T[m, 1] * base[1] + T[m, 2] * base[2] + T[m, 3]
-            if (
-                not planes[h, 0] * world[0] + planes[h, 1] * world[1] + planes[h, 2] * world[2] + planes[h, 3]
-                > reach
-            ):
-                clear = False
-                break
-        if clear:
-            return True
-    return False
+    base = np.empty(3)
+    for u in range(u0, u1):
+        _place_one(j, verts[u], F, base)
+        d = planes[h, 3]
+        for m in range(3):
+            d += planes[h, m] * (T[m, 0] * base[0] + T[m, 1] * base[1] + T[m, 2] * base[2] + T[m, 3])
+        if not d > reach:
+            return False
+    return True
 
 
 @nb.njit(cache=True, inline="always")
-def _outside_planes(c, r, j, F, planes, a, b):
-    """Whether the point c (3,) (arm base frame) lies more than r outside one of planes a..b of joint j's frame (-1: base)."""
+def _outside_planes(c, r, j, F, planes, a, b, hint):
+    """The index of a plane among a..b of joint j's frame (-1: the arm's base) that the point c (3,) (base frame) lies more than r outside, or -1.
+
+    The planes are tried from ``hint`` on (a plane that served a nearby point: the same face
+    usually serves again), then from a.
+    """
     x, y, z = c[0], c[1], c[2]
     if j >= 0:  # into the joint's frame: R^T (c - t)
         dx, dy, dz = x - F[j, 0, 3], y - F[j, 1, 3], z - F[j, 2, 3]
         x = F[j, 0, 0] * dx + F[j, 1, 0] * dy + F[j, 2, 0] * dz
         y = F[j, 0, 1] * dx + F[j, 1, 1] * dy + F[j, 2, 1] * dz
         z = F[j, 0, 2] * dx + F[j, 1, 2] * dy + F[j, 2, 2] * dz
-    for k in range(a, b):
+    h0 = hint if a <= hint < b else a
+    for n in range(b - a):
+        k = h0 + n
+        if k >= b:
+            k -= b - a
         if planes[k, 0] * x + planes[k, 1] * y + planes[k, 2] * z + planes[k, 3] > r:
-            return True
-    return False
+            return k
+    return -1
 
 
 @nb.njit(cache=True, inline="always")
@@ -594,6 +606,12 @@ _TABLES: weakref.WeakKeyDictionary[Robot, dict[tuple[str, bytes, bytes], tuple[N
 """Per robot, the packed self pair tables of :meth:`StateFilter._self_tables` (they hold no reference to it)."""
 
 
+_HULLS: weakref.WeakKeyDictionary[Robot, dict[int, list[tuple[FloatArray, FloatArray]]]] = (
+    weakref.WeakKeyDictionary()
+)
+"""Per robot, the :func:`convex_hull` of each of its first n collision geometries (by n)."""
+
+
 _COVERS: weakref.WeakKeyDictionary[Robot, dict[int, list[tuple[FloatArray, FloatArray]]]] = (
     weakref.WeakKeyDictionary()
 )
@@ -679,19 +697,28 @@ def _convex(points: FloatArray) -> coal.ConvexBase:
     return coal.Convex.convexHull(vertices, False, "")
 
 
-def _hull_planes(geometry: coal.CollisionGeometry, T_frame_geometry: FloatArray) -> FloatArray:
-    """(H, 4) the face planes (unit normal, offset; inside <= 0) of the geometry's convex hull in another frame.
+def convex_hull(geometry: coal.CollisionGeometry) -> tuple[FloatArray, FloatArray]:
+    """The convex hull of :func:`hull_points` in the geometry's frame: its face planes (H, 4) and vertices (V, 3).
 
-    The hull of :func:`hull_points` moved by ``T_frame_geometry`` (4, 4), each offset raised by
-    :data:`SLACK` (the hull holds the geometry up to rounding); none (0, 4) for a flat geometry.
+    Planes as unit normal and offset, inside <= 0, each offset raised by :data:`SLACK` (the hull
+    holds the geometry up to rounding). A flat geometry has no 3-D hull: no planes (0, 4), and
+    :func:`hull_points` as its vertices.
     """
-    P = hull_points(geometry) @ T_frame_geometry[:3, :3].T + T_frame_geometry[:3, 3]
+    P = hull_points(geometry)
     try:
-        planes = ConvexHull(P).equations.copy()
+        hull = ConvexHull(P)
     except (QhullError, ValueError):  # flat or too few points: no 3-D hull, no certificate
-        return np.zeros((0, 4))
+        return np.zeros((0, 4)), P
+    planes = hull.equations.copy()
     planes[:, 3] -= SLACK
-    return planes
+    return planes, P[hull.vertices]
+
+
+def _moved_planes(planes: FloatArray, T_frame_geometry: pin.SE3) -> FloatArray:
+    """Planes (H, 4) (unit normal, offset) of the geometry frame in another frame (``T_frame_geometry``)."""
+    normals = planes[:, :3] @ np.asarray(T_frame_geometry.rotation).T
+    offsets = planes[:, 3] - normals @ np.asarray(T_frame_geometry.translation)
+    return np.column_stack([normals, offsets])
 
 
 def _no_tables(n_pairs: int) -> tuple[NDArray[np.generic], ...]:
@@ -797,6 +824,10 @@ class StateFilter:
         if n_robot not in kept:  # the robot's geometries come first in every scene model
             kept[n_robot] = [sphere_cover(geom.geometryObjects[k].geometry) for k in range(n_robot)]
         covers = kept[n_robot]
+        known = _HULLS.setdefault(robot, {})
+        if n_robot not in known:
+            known[n_robot] = [convex_hull(geom.geometryObjects[k].geometry) for k in range(n_robot)]
+        convex = known[n_robot]
         gref = pin.GeometryData(geom)
         pin.updateGeometryPlacements(model, ref, geom, gref)
         for k in range(n_robot):
@@ -806,8 +837,9 @@ class StateFilter:
             frame = armbase_inv * ref.oMi[arm_ids[j]] if j >= 0 else pin.SE3.Identity()
             T = frame.inverse() * armbase_inv * gref.oMg[k]  # the geometry in its moving frame
             c, r = bounding_sphere(obj.geometry)
-            hulls.append(_hull_planes(obj.geometry, T.homogeneous))
-            corners.append(hull_points(obj.geometry) @ T.rotation.T + T.translation)
+            planes, vertices = convex[k]
+            hulls.append(_moved_planes(planes, T))
+            corners.append(vertices @ T.rotation.T + T.translation)
             joint.append(j)
             local.append(T.rotation @ c + T.translation)
             radius.append(r)
