@@ -547,10 +547,7 @@ class _Part:
         self.planes: FloatArray | None = None  # convex: (H, 4) unit normal, offset (inside: <= 0)
         self.sphere: tuple[FloatArray, float] | None = None  # anything else: its bounding sphere
         if isinstance(geometry, coal.OcTree):
-            boxes = np.array(geometry.toBoxes(), dtype=float).reshape(-1, 6)
-            for size in np.unique(boxes[:, 3]):
-                centres = boxes[boxes[:, 3] == size, :3]
-                self.indexes.append((PointIndex(centres, HASH_CELL), float(size) * math.sqrt(3) / 2))
+            self.indexes = _box_indexes(geometry)
             return
         vertices = _vertices(geometry) if isinstance(geometry, coal.ConvexBase) else None
         if vertices is not None and len(vertices) >= 4:
@@ -604,6 +601,28 @@ _TABLES: weakref.WeakKeyDictionary[Robot, dict[tuple[str, bytes, bytes], tuple[N
     weakref.WeakKeyDictionary()
 )
 """Per robot, the packed self pair tables of :meth:`StateFilter._self_tables` (they hold no reference to it)."""
+
+
+def _box_indexes(tree: coal.OcTree) -> list[tuple[PointIndex, float]]:
+    """Per box size of the OcTree's occupied boxes (:meth:`coal.OcTree.toBoxes`): their centres' index and half diagonal.
+
+    Kept per tree (:data:`_BOX_INDEXES`): every environment built on the same tree shares them.
+    """
+    kept = _BOX_INDEXES.get(tree)
+    if kept is None:
+        boxes = np.array(tree.toBoxes(), dtype=float).reshape(-1, 6)
+        kept = []
+        for size in np.unique(boxes[:, 3]):
+            centres = boxes[boxes[:, 3] == size, :3]
+            kept.append((PointIndex(centres, HASH_CELL), float(size) * math.sqrt(3) / 2))
+        _BOX_INDEXES[tree] = kept
+    return kept
+
+
+_BOX_INDEXES: weakref.WeakKeyDictionary[coal.OcTree, list[tuple[PointIndex, float]]] = (
+    weakref.WeakKeyDictionary()
+)
+"""Per OcTree, the box indexes of :func:`_box_indexes` (they hold no reference to it)."""
 
 
 _HULLS: weakref.WeakKeyDictionary[Robot, dict[int, list[tuple[FloatArray, FloatArray]]]] = (
