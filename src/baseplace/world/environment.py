@@ -113,6 +113,23 @@ def support_plane(groups: Mapping[str, Group]) -> SupportPlane | None:
     return None
 
 
+_OCTREE = "_baseplace_octree"
+
+
+def _octree(part: VoxelMap) -> coal.OcTree:
+    """The part's coal OcTree, built once and kept on the part itself.
+
+    The environments of one grasped object (the verification's and the transit's) are built from
+    the same groups, so they share the tree, and the state filter the box index it makes of it
+    (:class:`~baseplace.world.state_filter.StateFilter`); the tree lives and dies with the part.
+    """
+    tree = part.__dict__.get(_OCTREE)
+    if tree is None:
+        tree = coal.makeOctree(np.ascontiguousarray(part.centres), part.resolution)
+        object.__setattr__(part, _OCTREE, tree)  # a frozen dataclass: a cache, not a field
+    return tree
+
+
 _SELF_COLLISION = "_baseplace_self_collision"
 
 
@@ -207,7 +224,7 @@ class Environment:
                 if isinstance(part, SupportPlane):
                     geometry: coal.CollisionGeometry = part.geometry()
                 else:
-                    geometry = coal.makeOctree(np.ascontiguousarray(part.centres), part.resolution)
+                    geometry = _octree(part)
                 gid = self.geom.addGeometryObject(pin.GeometryObject(name, 0, pin.SE3.Identity(), geometry))
                 self.env_ids.append(gid)
                 self._margin[gid] = margin(part, self.clearance, plane_clearance)

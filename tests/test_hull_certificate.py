@@ -1,0 +1,103 @@
+"""The hull certificate of the state filter (world/state_filter.py): every pair it clears, coal finds free.
+
+Beyond the bounding spheres and their covers, a pair is certified by a robot geometry's convex
+hull: another geometry's spheres outside one of its face planes (self pairs), every box centre near
+it outside one (point parts), or all its hull's points outside one of a convex part's planes (the
+exact support plane). The oracle is coal on the pair, with the pair's security margin. The states
+are those of tests/test_state_filter.py: table scenes, lines along the approach, random samples and
+states within a fraction of a millimetre of contact; and for the self pairs, states around the
+stowed configuration (the arm beside the torso).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from baseplace.placement.motion import stowed_configuration
+from baseplace.world.environment import Environment
+from baseplace.world.state_filter import _uncertified_states
+from test_state_filter import SCENES, _environments, _near_contact, _states
+
+
+def _left(filt, q, T_world_armbase, hulls):
+    """Per pair (scene rows, then self pairs), whether the compiled call leaves it to coal at arm state q."""
+    robot_args, scene_and_self = filt._kernel_args
+    if not hulls:  # the same call with no hull planes and no hull points
+        G = len(filt.joint)
+        empty = (np.zeros(G + 1, np.int64), np.zeros((0, 4)), np.zeros(G + 1, np.int64), np.zeros((0, 3)))
+        robot_args = (*robot_args[:-4], *empty)
+    out = np.empty((1, len(filt._scene_rows) + len(filt._self_pairs)), dtype=np.bool_)
+    i = _uncertified_states(
+        np.ascontiguousarray(q[None]), *robot_args, T_world_armbase, *scene_and_self, 0, out
+    )
+    return out[0] if i == 0 else np.zeros(out.shape[1], dtype=bool)
+
+
+def test_hulls_clear_only_self_pairs_coal_finds_farther_than_their_margin(tiago):
+    arm = tiago.arm()
+    filt = Environment(tiago, {}).state_filter(arm)
+    rng = np.random.default_rng(11)
+    q0 = stowed_configuration(tiago, arm)
+    states = np.vstack(
+        [arm.sample(rng, 60), np.clip(q0 + rng.normal(0.0, 0.2, (140, arm.n_joints)), arm.lower, arm.upper)]
+    )
+    model, data, geom, gdata = filt.self_check
+    P = len(filt._scene_rows)
+    by_hulls, left_by_spheres = 0, 0
+    for q in states:
+        with_hulls = _left(filt, q, np.eye(4), True)[P:]
+        spheres_only = _left(filt, q, np.eye(4), False)[P:]
+        assert not np.any(with_hulls & ~spheres_only)  # the hulls only add certificates
+        pin.forwardKinematics(model, data, filt._full(q))
+        pin.updateGeometryPlacements(model, data, geom, gdata)
+        for p in np.flatnonzero(spheres_only & ~with_hulls):
+            pair = int(filt._self_index[p])
+            distance = pin.computeDistance(geom, gdata, pair).min_distance
+            assert distance > gdata.collisionRequests[pair].security_margin, f"pair {pair} at {q}"
+            by_hulls += 1
+        left_by_spheres += int(spheres_only.sum())
+    assert by_hulls > 0.5 * left_by_spheres  # most pairs the spheres leave, the hulls clear
+
+
+@pytest.fixture(scope="module")
+def scene_states(tiago):
+    """Per table scene and collision model (transit, approach): (environment, base pose, states (N, n))."""
+    rng = np.random.default_rng(5)
+    arm = tiago.arm()
+    out = []
+    for seed, cell, grasp, offset, yaw in SCENES:
+        target, transit, approach = _environments(tiago, seed, cell, grasp)
+        T_base, states = _states(tiago, target, offset, yaw, rng)
+        for env in (transit, approach):
+            out.append(
+                (env, T_base, np.vstack([states[::4], _near_contact(env, arm, T_base, states, rng, 40)]))
+            )
+    return out
+
+
+def test_hulls_clear_only_scene_pairs_coal_finds_free(tiago, scene_states):
+    """On the table scenes, a scene pair cleared by the hulls (points or the support plane) does not touch by coal."""
+    arm = tiago.arm()
+    P_kinds = {"points": 0, "plane": 0}
+    for env, T_base, states in scene_states:
+        filt = env.state_filter(arm)
+        T_world_armbase = T_base @ filt._T_base_armbase
+        P = len(filt._scene_rows)
+        kind = np.zeros(P, dtype=np.int64)
+        for part in filt._scene_parts[0]:
+            kind[part[3] : part[4]] = part[0]
+        for q in states:
+            with_hulls = _left(filt, q, T_world_armbase, True)[:P]
+            spheres_only = _left(filt, q, T_world_armbase, False)[:P]
+            assert not np.any(with_hulls & ~spheres_only)
+            rows = np.flatnonzero(spheres_only & ~with_hulls)
+            if len(rows) == 0:
+                continue
+            pairs = [int(p) for p in filt._scene_row_pair[rows]]
+            touching = list(filt._scene_touching(pairs, filt._full(q), T_base))
+            assert touching == [], f"pairs {touching} cleared by the hulls touch at {q}"
+            P_kinds["points"] += int((kind[rows] == 0).sum())
+            P_kinds["plane"] += int((kind[rows] == 1).sum())
+    assert P_kinds["points"] > 100 and P_kinds["plane"] > 10, P_kinds  # both certificates at work
