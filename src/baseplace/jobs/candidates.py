@@ -26,7 +26,6 @@ from baseplace.jobs.report import (
     placement_row,
 )
 from baseplace.robots.defaults import DEFAULT_ROBOT
-from baseplace.world.sensor_resolution import clearance_record
 
 if TYPE_CHECKING:
     from pathlib import Path
@@ -150,6 +149,7 @@ def candidates_job(job: CandidatesJob, progress: inputs.Progress | None = None) 
     from baseplace.reachability.cache import resolve_map
     from baseplace.world.grasped_object import GraspedObject, find_grasped_object, parse_grasped_object
     from baseplace.world.obstacles import check_clear_of, parse_obstacles
+    from baseplace.world.sensor_resolution import clearance_record
 
     t0 = time.perf_counter()
     robust = job.robustness or RobustnessSettings()

@@ -18,7 +18,6 @@ from baseplace.errors import InputError
 from baseplace.jobs import inputs
 from baseplace.jobs.report import NoResultError, PlaceReport, RobotRef, placement_row
 from baseplace.robots.defaults import DEFAULT_ROBOT
-from baseplace.world.sensor_resolution import clearance_record
 
 if TYPE_CHECKING:
     from pathlib import Path as FilePath
@@ -167,6 +166,7 @@ def place_job(job: PlaceJob, progress: inputs.Progress | None = None) -> PlaceRe
     from baseplace.reachability.cache import resolve_map
     from baseplace.world.grasped_object import parse_grasped_object
     from baseplace.world.obstacles import check_clear_of, parse_obstacles
+    from baseplace.world.sensor_resolution import clearance_record
 
     t0 = time.perf_counter()
     if job.targets and job.grasp_points:
