@@ -3,7 +3,9 @@
 The obstacles are the occupied voxels without the support voxels: a voxel is support when its
 cell belongs to a planar region and its centre lies within ``support_dist`` of that region's plane
 (seed 000 V: "remove all voxels ... that belong to a planar region"). The rest go into coal
-OcTrees, checked against every collision mesh of the robot, together with self-collision.
+OcTrees, checked against every collision mesh of the robot, together with self-collision. The
+support voxels removed (the floor the base stands on) are checked against the geometries the arms
+move only (group :data:`FLOOR`): the base stands on them, the arm and hand must keep off them.
 
 At a grasp only the hand may touch the grasped object (:mod:`baseplace.world.grasped_object`):
 its voxels are checked against every other link, and the surface under it stays an obstacle
@@ -184,7 +186,8 @@ class Environment:
     """Collision checks of the whole robot, placed in the world, against obstacle voxels.
 
     Obstacles come in named groups (e.g. "support", "obstacle"), each checked against every robot
-    link; collision reports name the group. The grasped object's voxels, if given, are checked
+    link but the groups of :data:`ARM_ONLY` (the floor the base stands on), checked against the
+    geometries the arms move only (:func:`arm_geometry_ids`); collision reports name the group. The grasped object's voxels, if given, are checked
     against every link but the hand's (:func:`hand_geometry_ids`): only the hand may touch them,
     to any depth (coal handles no negative security margin for meshes and OcTrees, so a limit on
     how deep is not checked).
