@@ -80,6 +80,10 @@ def test_a_hand_in_the_floor_is_refused_and_the_base_on_it_is_not(tiago):
     assert env.contacts_arm(arm, q_home, T_base) == []
     assert not env.colliding_arm(arm, q_home, T_base)
     assert env.colliding_arm_exact(arm, Q_LOW, T_base) and not env.colliding_arm_exact(arm, q_home, T_base)
+    # the compiled edge check (the state filter) agrees with coal on every pair along the line there
+    line = q_home + np.linspace(0.0, 1.0, 30)[:, None] * (Q_LOW - q_home)
+    exact = [k for k, q in enumerate(line) if env.colliding_arm_exact(arm, q, T_base)]
+    assert exact and env.first_colliding_arm(arm, line, T_base) == exact[0]
 
 
 def test_a_low_grasp_of_a_bottle_on_the_floor_is_not_blocked_twice(tiago):
