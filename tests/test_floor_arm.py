@@ -20,7 +20,7 @@ from baseplace.geometry.poses import pose_from_xyz_rpy
 from baseplace.placement.pipeline import PlaceSettings, scene_checks
 from baseplace.placement.scene_cache import SceneCache
 from baseplace.robots.ik import DampedLeastSquaresIK
-from baseplace.world.environment import FLOOR, GRASPED, Environment, arm_geometry_ids
+from baseplace.world.environment import FLOOR, FLOOR_PLANE, GRASPED, Environment, arm_geometry_ids
 from test_sensor_resolution import Oracle
 
 SIGMA = 0.003
@@ -115,6 +115,16 @@ def test_a_low_grasp_of_a_bottle_on_the_floor_is_not_blocked_twice(tiago):
     contacts = checks.verifier.environment.contacts_arm(arm, q, np.eye(4))
     assert not [c for c in contacts if c[1] not in (GRASPED,)], contacts
     assert math.isfinite(checks.clearance)
+    # the transit and approach models of the reaching motion hold the floor too, for the arm only
+    motion = checks.verifier.motion
+    assert motion is not None and motion.approach_environment is not None
+    q_home = np.array(tiago.q_reference)[arm.q_index]
+    for env in (motion.environment, motion.approach_environment):
+        touched = {
+            what for link, what in env.contacts_arm(arm, Q_LOW, np.eye(4)) if link == "hand_safety_box"
+        }
+        assert touched & {FLOOR, FLOOR_PLANE}, touched
+        assert env.contacts_arm(arm, q_home, np.eye(4)) == []
 
 
 @pytest.mark.parametrize("name", [FLOOR])
