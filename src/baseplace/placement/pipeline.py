@@ -46,7 +46,7 @@ from baseplace.world.environment import (
     obstacle_voxels,
     support_plane,
 )
-from baseplace.world.grasped_object import GraspedObject, find_grasped_object
+from baseplace.world.grasped_object import GraspedObject, find_grasped_object, rows_in
 from baseplace.world.obstacles import Obstacle, obstacles_key
 from baseplace.world.sensor_resolution import (
     Group,
@@ -319,13 +319,14 @@ def scene_checks(
         cache = SceneCache(points, terrain, s.resolution)  # this query only
     voxels = cache.shared(("obstacles", key, s.resolution, s.support_dist, s.stand_on, outline.tobytes()),
                           lambda: _obstacles(terrain, s, outline, cache))  # fmt: skip
+    floor = _floor(cache, key, s, outline, terrain, voxels)
     transit = None
     clearance, clearance_note, noise_margin = NO_FINE_SCENE
     if obj is not None:  # the allowed contact: per grasped object, kept for the scene's next queries
 
         def environments_for_object() -> tuple[Environment, Environment | None, tuple[float, str, float]]:
             # near it the cloud's points and the exact plane it stands on, kept at the clearance
-            groups, object_voxels = contact_groups(terrain.voxels, voxels, obj, cache.points)
+            groups, object_voxels = contact_groups(terrain.voxels, voxels, obj, cache.points, floor)
             kept = clearance_of(groups, s.clearance, cache.points, obj)
             plane, kept = plane_clearance_of(groups, s.clearance, kept)
             hand = Environment(robot, groups, grasped=object_voxels, hand_arm=arm_name, shapes=obstacles,
@@ -341,7 +342,8 @@ def scene_checks(
     elif environments is not None:
         env_key = key + obstacles_key(obstacles)
         if env_key not in environments:
-            environments[env_key] = Environment(robot, voxels, shapes=obstacles)
+            environments[env_key] = Environment(robot, contact_groups(voxels, voxels, None, floor=floor)[0],
+                                                shapes=obstacles)  # fmt: skip
         env = environments[env_key]
     else:
         env = scene_environment(robot, cache, s, obstacles)
@@ -489,12 +491,13 @@ def scene_environment(
     key = "floor" if s.strategy == "orm" else "regions"
     voxels = cache.shared(("obstacles", key, s.resolution, s.support_dist, s.stand_on, outline.tobytes()),
                           lambda: _obstacles(terrain, s, outline, cache))  # fmt: skip
+    groups = contact_groups(voxels, voxels, None, floor=_floor(cache, key, s, outline, terrain, voxels))[0]
     env_key = ("environment", robot, key, s.resolution, s.support_dist, s.stand_on, outline.tobytes())
     if not obstacles:
-        return cache.shared(env_key, lambda: Environment(robot, voxels))
+        return cache.shared(env_key, lambda: Environment(robot, groups))
     # per query's obstacles, like a grasped object: only the last few are kept (a service's scene lives long)
     return cache.per_object(
-        (*env_key, obstacles_key(obstacles)), lambda: Environment(robot, voxels, shapes=obstacles)
+        (*env_key, obstacles_key(obstacles)), lambda: Environment(robot, groups, shapes=obstacles)
     )
 
 
@@ -624,6 +627,20 @@ def _obstacles(
     # The flat-floor baseline knows one support surface: the floor at z = 0. Ramps are obstacles.
     z = terrain.voxels.centres[:, 2]
     return terrain.voxels.without(np.abs(z) <= s.support_dist)
+
+
+def _floor(
+    cache: SceneCache, key: str, s: PlaceSettings, outline: FloatArray, terrain: Terrain, obstacles: VoxelMap
+) -> VoxelMap:
+    """The support voxels :func:`_obstacles` removed (the surfaces the base may stand on), kept per scene.
+
+    Group :data:`~baseplace.world.environment.FLOOR`: the base and its wheels stand on them, the
+    geometries the arms move must keep off them (dev seed 25005: a hand went through the true floor).
+    """
+    return cache.shared(
+        ("floor", key, s.resolution, s.support_dist, s.stand_on, outline.tobytes()),
+        lambda: terrain.voxels.without(rows_in(terrain.voxels.keys, obstacles.keys)),
+    )
 
 
 def _check_targets(seg: Segmentation, targets: FloatArray) -> None:

@@ -3,7 +3,9 @@
 The obstacles are the occupied voxels without the support voxels: a voxel is support when its
 cell belongs to a planar region and its centre lies within ``support_dist`` of that region's plane
 (seed 000 V: "remove all voxels ... that belong to a planar region"). The rest go into coal
-OcTrees, checked against every collision mesh of the robot, together with self-collision.
+OcTrees, checked against every collision mesh of the robot, together with self-collision. The
+support voxels removed (the floor the base stands on) are checked against the geometries the arms
+move only (group :data:`FLOOR`): the base stands on them, the arm and hand must keep off them.
 
 At a grasp only the hand may touch the grasped object (:mod:`baseplace.world.grasped_object`):
 its voxels are checked against every other link, and the surface under it stays an obstacle
@@ -27,7 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 from baseplace.errors import InputError
 from baseplace.geometry.poses import FloatArray
 from baseplace.robots.collision import SelfCollision, load_collision_model
-from baseplace.robots.model import Arm, Robot
+from baseplace.robots.model import REVOLUTE, Arm, Robot
 from baseplace.terrain.segmentation import Segmentation
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.grasped_object import GraspedObject, rows_in
@@ -42,7 +44,7 @@ from baseplace.world.sensor_resolution import (
     margin,
 )
 from baseplace.world.state_filter import StateFilter
-from baseplace.world.support_plane import fit_support_slab
+from baseplace.world.support_plane import SUPPORT_PLANE, fit_support_slab
 
 SUPPORT_DIST = 0.1
 """Voxels this close [m] to their region's plane are support: 4 sigma of seed 000's 25 mm noise."""
@@ -72,7 +74,11 @@ def obstacle_voxels(
 
 
 def contact_groups(
-    voxels: VoxelMap, obstacles: VoxelMap, grasped: GraspedObject | None, points: ArrayLike | None = None
+    voxels: VoxelMap,
+    obstacles: VoxelMap,
+    grasped: GraspedObject | None,
+    points: ArrayLike | None = None,
+    floor: VoxelMap | None = None,
 ) -> tuple[dict[str, Group], Group | None]:
     """Split the scene for :class:`Environment`: ({"support": ..., "obstacle": ...}, the object).
 
@@ -81,27 +87,41 @@ def contact_groups(
     one a planar region removed from ``obstacles``; the other obstacles are ``obstacles`` less
     both. Without an object: ({"obstacle": obstacles}, None).
 
+    ``floor``: the support voxels removed from ``obstacles`` (the surfaces the base stands on), or
+    None; given, they are group :data:`FLOOR` (less the object's voxels and its support off the
+    floor), which :class:`Environment` checks against the geometries the arms move only; an object
+    standing on the floor keeps its exact plane there as :data:`FLOOR_PLANE` (the base stands on it).
+
     ``points``: the cloud (N, 3) the voxels were made from. Given, the voxels near the object
     become their points in fine cells (those on smooth surfaces put onto their local plane first),
     and the planar surface the object stands on, when the cloud fits a good plane
     (:func:`~baseplace.world.support_plane.fit_support_slab`), an exact plane (group
     "support_plane"): :func:`~baseplace.world.sensor_resolution.fine_groups`.
     """
+    floor = None if floor is None or len(floor) == 0 else floor
     if grasped is None:
-        return {"obstacle": obstacles}, None
+        return {"obstacle": obstacles, **({} if floor is None else {FLOOR: floor})}, None
     mine = grasped.voxel_mask(voxels)
     support = grasped.support_mask(voxels) & ~mine
+    on_floor = (
+        np.zeros(len(voxels), dtype=bool) if floor is None else support & rows_in(voxels.keys, floor.keys)
+    )
     taken = VoxelMap(voxels.resolution, voxels.keys[mine | support])
     rest = obstacles.without(rows_in(obstacles.keys, taken.keys))
     groups: dict[str, VoxelMap] = {
-        "support": VoxelMap(voxels.resolution, voxels.keys[support]),
+        "support": VoxelMap(voxels.resolution, voxels.keys[support & ~on_floor]),
         "obstacle": rest,
     }
+    if floor is not None:  # the object's support on the floor stays floor: the base stands there
+        groups[FLOOR] = floor.without(rows_in(floor.keys, voxels.keys[mine | (support & ~on_floor)]))
     object_voxels = VoxelMap(voxels.resolution, voxels.keys[mine])
     if points is None:
         return dict(groups), object_voxels
     slab = fit_support_slab(points, grasped.footprint_distance, grasped.bottom, voxels.resolution)
-    return fine_groups(groups, object_voxels, points, grasped, slab)
+    out, grasped_group = fine_groups(groups, object_voxels, points, grasped, slab)
+    if SUPPORT_PLANE in out and on_floor.sum() > (support & ~on_floor).sum():  # it stands on the floor
+        out[FLOOR_PLANE] = out.pop(SUPPORT_PLANE)
+    return out, grasped_group
 
 
 def support_plane(groups: Mapping[str, Group]) -> SupportPlane | None:
@@ -148,6 +168,28 @@ def _self_collision(robot: Robot) -> SelfCollision:
 
 GRASPED = "grasped_object"
 """Name of the grasped object's voxels in contact reports (touched by a link that is not the hand)."""
+FLOOR = "floor"
+"""Name of the group of support voxels the base stands on (removed from the obstacles,
+:func:`obstacle_voxels`): checked against the geometries the arms move only (:func:`arm_geometry_ids`)."""
+FLOOR_PLANE = "floor_plane"
+"""Name of the exact plane a grasped object stands on when that is the floor: as :data:`FLOOR`."""
+ARM_ONLY = (FLOOR, FLOOR_PLANE)
+"""The groups checked against the geometries the arms move only."""
+
+
+def arm_geometry_ids(robot: Robot, geom: pin.GeometryModel) -> list[int]:
+    """Indices of the collision geometries that an arm's first joint moves, of every arm of the robot.
+
+    The base, its wheels and the torso stand on the floor by design; the arm and hand must keep off it.
+    """
+    model = robot.model
+    firsts = set()
+    for name in robot.spec.arms:  # an arm's chain may start with a prismatic torso: its first revolute joint
+        arm = robot.arm(name)
+        revolute = [j for j, kind in zip(arm.joint_names, arm.kinds, strict=True) if kind == REVOLUTE]
+        if revolute:
+            firsts.add(model.getJointId(revolute[0]))
+    return [k for k, obj in enumerate(geom.geometryObjects) if firsts & set(model.supports[obj.parentJoint])]
 
 
 def hand_geometry_ids(robot: Robot, geom: pin.GeometryModel, arm_name: str | None = None) -> list[int]:
@@ -161,7 +203,8 @@ class Environment:
     """Collision checks of the whole robot, placed in the world, against obstacle voxels.
 
     Obstacles come in named groups (e.g. "support", "obstacle"), each checked against every robot
-    link; collision reports name the group. The grasped object's voxels, if given, are checked
+    link but the groups of :data:`ARM_ONLY` (the floor the base stands on), checked against the
+    geometries the arms move only (:func:`arm_geometry_ids`); collision reports name the group. The grasped object's voxels, if given, are checked
     against every link but the hand's (:func:`hand_geometry_ids`): only the hand may touch them,
     to any depth (coal handles no negative security margin for meshes and OcTrees, so a limit on
     how deep is not checked).
@@ -214,6 +257,7 @@ class Environment:
         n_robot = self.geom.ngeoms
         groups = dict(obstacles) if isinstance(obstacles, Mapping) else {"obstacle": obstacles}
         self.hand_ids = set(hand_geometry_ids(robot, self.geom, hand_arm)) if grasped is not None else set()
+        arm_ids = set(arm_geometry_ids(robot, self.geom)) if set(ARM_ONLY) & set(groups) else set()
         self.env_ids: list[int] = []
         self._margin: dict[int, float] = {}  # per scene geometry: the security margin of its pairs
         margins: list[float] = []  # per collision pair
@@ -228,8 +272,8 @@ class Environment:
                 gid = self.geom.addGeometryObject(pin.GeometryObject(name, 0, pin.SE3.Identity(), geometry))
                 self.env_ids.append(gid)
                 self._margin[gid] = margin(part, self.clearance, plane_clearance)
-                for k in range(n_robot):
-                    if name != GRASPED or k not in self.hand_ids:
+                for k in range(n_robot):  # the hand may touch the object; only the arms, the floor
+                    if (name != GRASPED or k not in self.hand_ids) and (name not in ARM_ONLY or k in arm_ids):
                         self.geom.addCollisionPair(pin.CollisionPair(k, gid))
                         margins.append(self._margin[gid])
         self.shapes = tuple(shapes)
