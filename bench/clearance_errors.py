@@ -32,6 +32,7 @@ from baseplace.world.sensor_resolution import CLEARANCE_SIGMAS, EDGE_CELL, FINE,
 from baseplace_experiments.results import RunClock, write_results
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from test_clearance_bound import _cylinder
 from test_clearance_from_true_surface import BOTTLE, SIGMA, TOP, _box_points
 
 SEEDS = (2521, 2522, 2523)
@@ -40,18 +41,6 @@ HEIGHT = 0.2
 BOX_HALF = 0.05
 PROBE = 0.005
 """Probe sphere radius [m] (a fingertip)."""
-
-
-def _cylinder(xy: tuple[float, float], r: float) -> np.ndarray:
-    """Side and top of a cylinder standing on the table, about 1 cm apart (as bench/find_rate.py samples it)."""
-    angles = np.linspace(0, 2 * math.pi, max(12, math.ceil(2 * math.pi * r / 0.01)), endpoint=False)
-    A, Z = np.meshgrid(angles, np.linspace(TOP, TOP + HEIGHT, round(HEIGHT / 0.01) + 1))
-    side = np.c_[xy[0] + r * np.cos(A.ravel()), xy[1] + r * np.sin(A.ravel()), Z.ravel()]
-    g = np.arange(-r, r + 1e-9, 0.01)
-    X, Y = np.meshgrid(g, g)
-    inside = np.hypot(X, Y).ravel() <= r
-    top = np.c_[xy[0] + X.ravel()[inside], xy[1] + Y.ravel()[inside], np.full(inside.sum(), TOP + HEIGHT)]
-    return np.concatenate([side, top])
 
 
 def _sdf_cylinder(p: np.ndarray, xy: tuple[float, float], r: float) -> np.ndarray:

@@ -18,7 +18,7 @@ import pytest
 from baseplace.placement.motion import stowed_configuration
 from baseplace.world.environment import Environment
 from baseplace.world.state_filter import _uncertified_states
-from test_state_filter import SCENES, _environments, _near_contact, _states
+from test_state_filter import table_scene_states
 
 
 def _left(filt, q, T_world_armbase, hulls):
@@ -64,17 +64,7 @@ def test_hulls_clear_only_self_pairs_coal_finds_farther_than_their_margin(tiago)
 @pytest.fixture(scope="module")
 def scene_states(tiago):
     """Per table scene and collision model (transit, approach): (environment, base pose, states (N, n))."""
-    rng = np.random.default_rng(5)
-    arm = tiago.arm()
-    out = []
-    for seed, cell, grasp, offset, yaw in SCENES:
-        target, transit, approach = _environments(tiago, seed, cell, grasp)
-        T_base, states = _states(tiago, target, offset, yaw, rng)
-        for env in (transit, approach):
-            out.append(
-                (env, T_base, np.vstack([states[::4], _near_contact(env, arm, T_base, states, rng, 40)]))
-            )
-    return out
+    return table_scene_states(tiago, 5, every=4, pairs=40)
 
 
 def test_hulls_clear_only_scene_pairs_coal_finds_free(tiago, scene_states):

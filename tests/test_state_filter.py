@@ -89,19 +89,27 @@ def _near_contact(env, arm, T_base, states, rng, pairs=120, depth=10):
     return np.array(out)
 
 
+def table_scene_states(tiago, seed: int, every: int = 1, pairs: int = 120):
+    """Per table scene and collision model (transit, approach): (environment, base pose, states (N, n)).
+
+    Every ``every``-th drawn state and ``pairs`` bisected pairs around contact (:func:`_near_contact`).
+    """
+    rng = np.random.default_rng(seed)
+    arm = tiago.arm()
+    out = []
+    for scene_seed, cell, grasp, offset, yaw in SCENES:
+        target, transit, approach = _environments(tiago, scene_seed, cell, grasp)
+        T_base, states = _states(tiago, target, offset, yaw, rng)
+        for env in (transit, approach):
+            near = _near_contact(env, arm, T_base, states, rng, pairs)
+            out.append((env, T_base, np.vstack([states[::every], near])))
+    return out
+
+
 @pytest.fixture(scope="module")
 def table_states(tiago):
     """Per scene and collision model (transit, approach): (environment, base pose, states (N, n))."""
-    rng = np.random.default_rng(7)
-    arm = tiago.arm()
-    out = []
-    for seed, cell, grasp, offset, yaw in SCENES:
-        target, transit, approach = _environments(tiago, seed, cell, grasp)
-        T_base, states = _states(tiago, target, offset, yaw, rng)
-        for env in (transit, approach):
-            near = _near_contact(env, arm, T_base, states, rng)
-            out.append((env, T_base, np.vstack([states, near])))
-    return out
+    return table_scene_states(tiago, 7)
 
 
 def test_verdicts_are_coals_on_table_scenes(tiago, table_states):
