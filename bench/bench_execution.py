@@ -154,13 +154,20 @@ PROTOCOLS = {  # version: (where the robot's model of the bottle begins, seeds, 
         SeedSplit(dev=(0,), held_out=(20, 21, 22)),
         MotionSettings(time_limit=30.0, max_checks=500, point_step=None),  # v5's and v6's planner
     ),
+    8: (
+        "support",  # not used by the product's models
+        SeedSplit(dev=(0,), held_out=(23, 24, 25)),
+        MotionSettings(time_limit=30.0, max_checks=500, point_step=None),  # v5-v7's planner
+    ),
 }
-SUPPORT_MODEL = {1: "voxels", 2: "voxels", 3: "slab", 4: "slab", 5: "product", 6: "product", 7: "product"}
+SUPPORT_MODEL = {1: "voxels", 2: "voxels", 3: "slab", 4: "slab", 5: "product", 6: "product", 7: "product",
+                 8: "product"}  # fmt: skip
 PROTOCOL_FILE = {
     4: "docs/protocols/execution_table_grid.md",
     5: "docs/protocols/execution_table_grid_v5.md",
     6: "docs/protocols/execution_table_grid_v6.md",
     7: "docs/protocols/execution_table_grid_v7.md",
+    8: "docs/protocols/execution_table_grid_v8.md",
 }
 """Protocols committed as files (v1-v3 were written in this docstring)."""
 BOOTSTRAP = 2000  # the robot's model of the table top around the bottle
