@@ -156,6 +156,18 @@ def _lower_bound(c, lo, hi, field, field_lo, field_h):
     return bound
 
 
+@nb.njit(cache=True, inline="always")
+def _cell_range(c, e, lo, cell, dims):
+    """The index's cells (i0, i1, j0, j1, k0, k1) that hold points within ``e`` of ``c`` (3,), clipped to the grid."""
+    i0 = max(math.floor((c[0] - e - lo[0]) / cell), 0)
+    i1 = min(math.floor((c[0] + e - lo[0]) / cell), dims[0] - 1)
+    j0 = max(math.floor((c[1] - e - lo[1]) / cell), 0)
+    j1 = min(math.floor((c[1] + e - lo[1]) / cell), dims[1] - 1)
+    k0 = max(math.floor((c[2] - e - lo[2]) / cell), 0)
+    k1 = min(math.floor((c[2] + e - lo[2]) / cell), dims[2] - 1)
+    return i0, i1, j0, j1, k0, k1
+
+
 @nb.njit(cache=True)
 def _within(c, r, first, points, keys, starts, lo, cell, dims):
     """The squared distance to the nearest point within ``r`` of ``c`` (-1.0 when there is none).
@@ -166,12 +178,7 @@ def _within(c, r, first, points, keys, starts, lo, cell, dims):
     r2 = r * r
     best = -1.0
     e = r + 1e-9  # the cells a point at exactly the radius lies in, whatever the rounding
-    i0 = max(math.floor((c[0] - e - lo[0]) / cell), 0)
-    i1 = min(math.floor((c[0] + e - lo[0]) / cell), dims[0] - 1)
-    j0 = max(math.floor((c[1] - e - lo[1]) / cell), 0)
-    j1 = min(math.floor((c[1] + e - lo[1]) / cell), dims[1] - 1)
-    k0 = max(math.floor((c[2] - e - lo[2]) / cell), 0)
-    k1 = min(math.floor((c[2] + e - lo[2]) / cell), dims[2] - 1)
+    i0, i1, j0, j1, k0, k1 = _cell_range(c, e, lo, cell, dims)
     for k in range(k0, k1 + 1):
         dz = max(lo[2] + k * cell - c[2], c[2] - (lo[2] + (k + 1) * cell), 0.0)
         for j in range(j0, j1 + 1):

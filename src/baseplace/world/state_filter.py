@@ -39,7 +39,7 @@ from scipy.spatial import ConvexHull, QhullError
 from baseplace.geometry.poses import FloatArray
 from baseplace.robots.model import Arm, Robot
 from baseplace.robots.spheres import _joint_frames, _place, _place_one
-from baseplace.world.point_index import PointIndex, _clear, _lower_bound, _within
+from baseplace.world.point_index import PointIndex, _cell_range, _clear, _lower_bound, _within
 
 SLACK = 1e-6
 """Added [m] to every certified distance: rounding in coal's and this module's arithmetic."""
@@ -236,13 +236,7 @@ def _points_outside_hull(g, c, r, reach, joint, F, T, hull_start, hull_planes, p
     j, hint = joint[g], a
     local = np.empty(3)
     r2 = r * r
-    e = r + 1e-9
-    i0 = max(math.floor((c[0] - e - lo[0]) / cell), 0)
-    i1 = min(math.floor((c[0] + e - lo[0]) / cell), dims[0] - 1)
-    j0 = max(math.floor((c[1] - e - lo[1]) / cell), 0)
-    j1 = min(math.floor((c[1] + e - lo[1]) / cell), dims[1] - 1)
-    k0 = max(math.floor((c[2] - e - lo[2]) / cell), 0)
-    k1 = min(math.floor((c[2] + e - lo[2]) / cell), dims[2] - 1)
+    i0, i1, j0, j1, k0, k1 = _cell_range(c, r + 1e-9, lo, cell, dims)
     for k in range(k0, k1 + 1):
         for jj in range(j0, j1 + 1):
             row = dims[0] * (jj + dims[1] * k)
