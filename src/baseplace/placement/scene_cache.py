@@ -158,19 +158,11 @@ class SceneCache:
         from baseplace.world.grasped_object import AutoSettings, find_grasped_object
 
         point = np.asarray(grasp_point, dtype=np.float64).reshape(-1)
-        key = point.tobytes()
-        with self._lock:
-            if key in self._found:
-                self._found.move_to_end(key)
-                return self._found[key]
         a = AutoSettings()
         near = a.max_size + a.link + a.voxel_size + NEAR_GRASP_MARGIN
-        found = find_grasped_object(self.points_near(point, near), point, a)
-        with self._lock:
-            self._found[key] = found
-            while len(self._found) > OBJECT_ENVIRONMENTS:
-                self._found.popitem(last=False)
-        return found
+        return self._recent(
+            self._found, point.tobytes(), lambda: find_grasped_object(self.points_near(point, near), point, a)
+        )
 
     def shared(self, key: Hashable, make: Callable[[], T]) -> T:
         """The value for ``key``, made by ``make()`` on first use and kept for the scene's life.
@@ -191,17 +183,27 @@ class SceneCache:
 
     def per_object(self, key: Hashable, make: Callable[[], T]) -> T:
         """As :meth:`shared`, for values that depend on a grasped object: the last few are kept."""
+        return self._recent(self._objects, key, make, count=True)
+
+    def _recent(
+        self, store: OrderedDict[Any, Any], key: Hashable, make: Callable[[], T], count: bool = False
+    ) -> T:
+        """The value for ``key`` in ``store``, made by ``make()`` (outside the lock) when missing.
+
+        ``store`` keeps the last :data:`OBJECT_ENVIRONMENTS` keys used. ``count``: tally
+        :attr:`hits` and :attr:`misses`.
+        """
         with self._lock:
-            if key in self._objects:
-                self.hits += 1
-                self._objects.move_to_end(key)
-                return self._objects[key]
+            if key in store:
+                self.hits += count
+                store.move_to_end(key)
+                return store[key]
         value = make()
         with self._lock:
-            if key in self._objects:
-                return self._objects[key]
-            self.misses += 1
-            self._objects[key] = value
-            while len(self._objects) > OBJECT_ENVIRONMENTS:
-                self._objects.popitem(last=False)
+            if key in store:  # made meanwhile by another query: that one is kept
+                return store[key]
+            self.misses += count
+            store[key] = value
+            while len(store) > OBJECT_ENVIRONMENTS:
+                store.popitem(last=False)
         return value
