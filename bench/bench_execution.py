@@ -96,7 +96,10 @@ the product builds (``baseplace candidates``: the scene near the bottle at senso
 plane it stands on exact, the clearance from the plane's noise) instead of the experiment's own
 voxels and slab. Held-out seeds 14, 15, 16.
 
-Usage: python bench/bench_execution.py --protocol 5 --split heldout [--cells 12]
+Protocols v6-v9: docs/protocols/execution_table_grid_v6.md ... _v9.md (v9: the robot planner with the
+product's 1 cm point bound, held-out seeds 26-31).
+
+Usage: python bench/bench_execution.py --protocol 9 --split heldout [--cells 12]
 """
 
 from __future__ import annotations
@@ -159,15 +162,21 @@ PROTOCOLS = {  # version: (where the robot's model of the bottle begins, seeds, 
         SeedSplit(dev=(0,), held_out=(23, 24, 25)),
         MotionSettings(time_limit=30.0, max_checks=500, point_step=None),  # v5-v7's planner
     ),
+    9: (
+        "support",  # not used by the product's models
+        SeedSplit(dev=(0,), held_out=(26, 27, 28, 29, 30, 31)),
+        MotionSettings(time_limit=30.0, max_checks=500, point_step=0.01),  # v8's + point bound
+    ),
 }
 SUPPORT_MODEL = {1: "voxels", 2: "voxels", 3: "slab", 4: "slab", 5: "product", 6: "product", 7: "product",
-                 8: "product"}  # fmt: skip
+                 8: "product", 9: "product"}  # fmt: skip
 PROTOCOL_FILE = {
     4: "docs/protocols/execution_table_grid.md",
     5: "docs/protocols/execution_table_grid_v5.md",
     6: "docs/protocols/execution_table_grid_v6.md",
     7: "docs/protocols/execution_table_grid_v7.md",
     8: "docs/protocols/execution_table_grid_v8.md",
+    9: "docs/protocols/execution_table_grid_v9.md",
 }
 """Protocols committed as files (v1-v3 were written in this docstring)."""
 BOOTSTRAP = 2000  # the robot's model of the table top around the bottle
@@ -220,7 +229,7 @@ def main() -> None:
             [t["methods"][m]["success"] for t in trials], DRAWS
         )
     result = {
-        "protocol": {"version": args.protocol, "bottle_from": cut, "support_model": support, "planner": {"time_limit": motion.time_limit, "max_checks": motion.max_checks}, "split": args.split, "seeds": list(seeds), "cells": len(cells), "draws": DRAWS,
+        "protocol": {"version": args.protocol, "bottle_from": cut, "support_model": support, "planner": {"time_limit": motion.time_limit, "max_checks": motion.max_checks, "point_step": motion.point_step}, "split": args.split, "seeds": list(seeds), "cells": len(cells), "draws": DRAWS,
                      "robust": {"pool": ROBUST.pool, "samples": ROBUST.samples,
                                 "ik_solutions": ROBUST.ik_solutions, "key": ROBUST_KEY},
                      "error_model": "gaussian sigma 0.03 m, 2 deg; tolerances 0.25 m, 0.25 rad",
