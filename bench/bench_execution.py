@@ -165,7 +165,7 @@ PROTOCOLS = {  # version: (where the robot's model of the bottle begins, seeds, 
     9: (
         "support",  # not used by the product's models
         SeedSplit(dev=(0,), held_out=(26, 27, 28, 29, 30, 31)),
-        MotionSettings(time_limit=30.0, max_checks=500, point_step=0.01),  # v8's + point bound
+        MotionSettings(time_limit=30.0, max_checks=2500, point_step=0.01),  # 5x v8's budget
     ),
 }
 SUPPORT_MODEL = {1: "voxels", 2: "voxels", 3: "slab", 4: "slab", 5: "product", 6: "product", 7: "product",
