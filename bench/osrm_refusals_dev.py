@@ -64,12 +64,17 @@ from baseplace.world.environment import Environment, hand_geometry_ids
 from baseplace.world.sensor_resolution import EDGE_CELL, FINE
 from baseplace_experiments import osrm_experiment
 from baseplace_experiments.allowed_grasps import SOLUTIONS, AllowedGrasps, TrueShape, scene_solids
-from baseplace_experiments.osrm_experiment import SCENE_CLASSES, ExperimentSettings, _class_name, osrm_scene
+from baseplace_experiments.osrm_experiment import (
+    COLLISION_CLOUDS,
+    SCENE_CLASSES,
+    ExperimentSettings,
+    _class_name,
+    osrm_scene,
+)
 from baseplace_experiments.osrm_v2 import GRASPS, SCENES, SEEDS, TRIES
 from baseplace_experiments.results import RunClock, write_results
 from baseplace_experiments.table_grid import RobotShapes
 
-STRATEGY = "MR"
 DETAILED = 3
 """Collision candidates per grasp whose touching cells are found one by one (the costly part)."""
 
@@ -253,6 +258,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--object-height-tolerance", type=float, default=None,
                         help="diagnosis only: points this far [m] above the grasped object's top, inside its "
                         "footprint's tolerance, are the object's (the library: OBJECT_TOLERANCE, 12.5 mm)")  # fmt: skip
+    parser.add_argument("--collision-cloud", choices=COLLISION_CLOUDS, default="noisy",
+                        help="the cloud the method's collision model comes from: noisy (protocol v2) or clean "
+                        "(protocol v3: the noise-free 12.5 mm sample the terrain's voxels come from)")  # fmt: skip
+    parser.add_argument("--strategy", choices=("TO", "MR", "MRTO"), default="MR")
     parser.add_argument("--out", required=True)
     args = parser.parse_args(argv)
     if args.object_height_tolerance is not None:
@@ -304,7 +313,8 @@ def main(argv: list[str] | None = None) -> int:
     Verifier.collisions = recording  # type: ignore[method-assign]
     osrm_experiment.experiment_scene = recording_scene  # type: ignore[assignment]
     osrm_experiment.place = recording_place  # type: ignore[assignment]
-    osrm_experiment.strategies_for = lambda n: (STRATEGY,)  # type: ignore[assignment]
+    strategy = args.strategy
+    osrm_experiment.strategies_for = lambda n: (strategy,)  # type: ignore[assignment]
     grasps_out: list[dict[str, Any]] = []
     per_class: dict[str, Counter[str]] = {}
     kinds: dict[str, Counter[str]] = {}
@@ -312,17 +322,18 @@ def main(argv: list[str] | None = None) -> int:
         c = names.index(cname)
         tally, kind_tally = per_class.setdefault(cname, Counter()), kinds.setdefault(cname, Counter())
         for seed in args.seeds:
-            s = ExperimentSettings(grasps_per_scene=GRASPS, seed=seed, tries=TRIES)
+            s = ExperimentSettings(grasps_per_scene=GRASPS, seed=seed, tries=TRIES,
+                                   collision_cloud=args.collision_cloud)  # fmt: skip
             for k in range(args.scenes):
                 t0 = time.perf_counter()
                 queries.clear()
                 out = osrm_scene(robot, rmap, c, k, s, SCENE_CLASSES, oracle)
                 tally.update({f"placed, touching the true scene: {w}": n
-                              for w, n in out.stats[STRATEGY].touched_true_scene.items()})  # fmt: skip
+                              for w, n in out.stats[strategy].touched_true_scene.items()})  # fmt: skip
                 scene = scenes[-1]
                 assert len(queries) == len(out.records)
                 for g, (rec, query) in enumerate(zip(out.records, queries, strict=True)):
-                    ok = rec.tries[STRATEGY] is not None
+                    ok = rec.tries[strategy] is not None
                     tally["counted"] += 1
                     tally["allowed"] += bool(rec.allowed)
                     tally["placed"] += ok
@@ -341,7 +352,7 @@ def main(argv: list[str] | None = None) -> int:
                 )
     result = {
         "benchmark": "osrm_refusals_dev",
-        "strategy": STRATEGY, "tries": TRIES, "grasps_per_scene": GRASPS, "scenes_per_seed": args.scenes,
+        "strategy": strategy, "collision_cloud": args.collision_cloud, "tries": TRIES, "grasps_per_scene": GRASPS, "scenes_per_seed": args.scenes,
         "classes": args.classes, "object_height_tolerance_m": args.object_height_tolerance, "method_ik_solutions_per_pose": 1, "oracle_ik_solutions_per_pose": SOLUTIONS,
         "per_class": {k: dict(v) for k, v in per_class.items()},
         "contacts_by_kind": {k: dict(v.most_common()) for k, v in kinds.items()},
