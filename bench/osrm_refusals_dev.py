@@ -26,6 +26,7 @@ points are taken up to that far above its top (inside its footprint's usual tole
 share of refusals its own lifted points cause can be measured.
 
 Usage: python bench/osrm_refusals_dev.py --classes flat --out bench/results/osrm_refusals_dev.json
+       python bench/osrm_refusals_dev.py --classes flat --collision-cloud clean --out bench/results/osrm_refusals_dev_clean.json
 
 Findings (dev seeds 1000-1002, MR, N = 100; bench/results/osrm_refusals_dev*.json): every allowed
 grasp MR refused is (A), every contact an edge (5 mm) cell of the "obstacle" group with the link's
@@ -35,6 +36,11 @@ the cloud's 25 mm z-noise lifts past ``OBJECT_TOLERANCE`` (12.5 mm) and which st
 edge cells because the noise near the object is measured as 0.0 mm (the vertical walls, whose
 points the z-noise moves along the wall, make the 20 % quantile of the local fits); the clearance
 is then 3 mm.
+
+``--collision-cloud clean`` (protocol v3) hands the method the noise-free 12.5 mm sample the
+terrain's voxels come from as its collision cloud (the segmentation stays the noisy cloud's);
+``--strategy`` picks TO, MR or MRTO. Findings on the clean cloud are in docs/protocols/osrm_v3.md
+(bench/results/osrm_refusals_dev_clean*.json).
 """
 
 from __future__ import annotations
