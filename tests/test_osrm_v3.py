@@ -79,3 +79,19 @@ def test_a_held_out_v3_run_is_refused_while_its_protocol_file_is_not_committed(m
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].endswith("osrm_v3_never_committed.md is not in a git work tree or not committed: commit it "
                             "before a held-out run, or run the dev split")  # fmt: skip
+
+
+def test_v2s_rows_go_beside_by_class_and_strategy():
+    v2 = {"protocol": 2, "seeds": [4101, 4102, 4103],
+          "rows": [{"scene": "flat", "strategy": "MR", "allowed_grasps": 57, "success_allowed_N100": 59.6,
+                    "ci95_allowed_N100": [44.8, 74.1]}]}  # fmt: skip
+    result = {"rows": [{"scene": "flat", "strategy": "MR"}, {"scene": "flat", "strategy": "TO"}]}
+    rows = osrm_v3.with_v2(result, v2)["rows"]
+    assert rows[0]["v2"]["success_allowed_N100"] == 59.6 and rows[0]["v2"]["ci95_allowed_N100"] == [
+        44.8,
+        74.1,
+    ]
+    assert rows[0]["v2"]["allowed_grasps"] == 57 and rows[0]["v2"]["seeds"] == [4101, 4102, 4103]
+    assert rows[1]["v2"] is None
+    with pytest.raises(InputError, match="takes a protocol-2 results file"):
+        osrm_v3.with_v2(result, {**v2, "protocol": 3})

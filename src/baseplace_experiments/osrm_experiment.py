@@ -408,7 +408,8 @@ def osrm_scene(
     allows it at the clearance the method's queries on it report (:func:`query_clearance`; the
     oracle's own generator, so the queries draw as without it, and nothing of the oracle reaches
     the method), and each verified placement's joints are checked on the true shapes with no margin.
-    The queries run at the method's default settings in both protocols.
+    The queries run at the method's default settings in both protocols, on the cloud
+    ``s.collision_cloud`` names (:func:`experiment_scene`; the terrain's segmentation is the noisy cloud's).
     """
     robot = Robot(robot) if isinstance(robot, str) else robot
     stats = {name: _Tally() for name in strategies_for(classes[class_index][1])}
