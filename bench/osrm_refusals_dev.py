@@ -95,7 +95,8 @@ def distance(g: coal.CollisionGeometry, T: np.ndarray, h: coal.CollisionGeometry
 
 
 def part_kind(part: coal.CollisionGeometry) -> str:
-    """The kind of a part of the method's model, from its geometry."""
+    """The kind of a part of the method's model, from its geometry (with ``--edge-cell`` at 1.25 mm
+    the edge cells read as fine cells)."""
     if isinstance(part, coal.OcTree):
         boxes = np.asarray(part.toBoxes())
         size = float(boxes[0, 3]) if len(boxes) else 0.0
@@ -268,10 +269,17 @@ def main(argv: list[str] | None = None) -> int:
                         help="the cloud the method's collision model comes from: noisy (protocol v2) or clean "
                         "(protocol v3: the noise-free 12.5 mm sample the terrain's voxels come from)")  # fmt: skip
     parser.add_argument("--strategy", choices=("TO", "MR", "MRTO"), default="MR")
+    parser.add_argument("--edge-cell", type=float, default=None,
+                        help="diagnosis only: the edge points' cell edge [m] (the library: EDGE_CELL, 5 mm); "
+                        "they keep the clearance as before")  # fmt: skip
     parser.add_argument("--out", required=True)
     args = parser.parse_args(argv)
     if args.object_height_tolerance is not None:
         _lift_object_tolerance(args.object_height_tolerance)
+    if args.edge_cell is not None:
+        if not 0 < args.edge_cell <= EDGE_CELL:
+            raise InputError(f"--edge-cell must be in (0, {EDGE_CELL}] m, got {args.edge_cell}")
+        sensor_resolution.EDGE_CELL = args.edge_cell  # read by sensor_resolution._cells at each call
     names = [_class_name(*c) for c in SCENE_CLASSES]
     if bad := [c for c in args.classes if c not in names]:
         raise InputError(f"unknown class {bad[0]!r}; choose from {names}")
@@ -359,7 +367,7 @@ def main(argv: list[str] | None = None) -> int:
     result = {
         "benchmark": "osrm_refusals_dev",
         "strategy": strategy, "collision_cloud": args.collision_cloud, "tries": TRIES, "grasps_per_scene": GRASPS, "scenes_per_seed": args.scenes,
-        "classes": args.classes, "object_height_tolerance_m": args.object_height_tolerance, "method_ik_solutions_per_pose": 1, "oracle_ik_solutions_per_pose": SOLUTIONS,
+        "classes": args.classes, "object_height_tolerance_m": args.object_height_tolerance, "edge_cell_m": args.edge_cell, "method_ik_solutions_per_pose": 1, "oracle_ik_solutions_per_pose": SOLUTIONS,
         "per_class": {k: dict(v) for k, v in per_class.items()},
         "contacts_by_kind": {k: dict(v.most_common()) for k, v in kinds.items()},
         "grasps": grasps_out,
