@@ -348,6 +348,13 @@ def main(argv: list[str] | None = None) -> int:
                 assert len(queries) == len(out.records)
                 for g, (rec, query) in enumerate(zip(out.records, queries, strict=True)):
                     ok = rec.tries[strategy] is not None
+                    if ok and rec.clearance is not None:  # the placement on the true shapes, at the clearance
+                        near = osrm_experiment._placement_contact(
+                            oracle.with_clearance(rec.clearance), scene,
+                            osrm_experiment._object_index(scene, query["grasped"]), query["result"].placements[0],
+                        )  # fmt: skip
+                        if near is not None:
+                            tally[f"placed, within the reported clearance of the true scene: {near}"] += 1
                     tally["counted"] += 1
                     tally["allowed"] += bool(rec.allowed)
                     tally["placed"] += ok
