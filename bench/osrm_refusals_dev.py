@@ -26,6 +26,7 @@ points are taken up to that far above its top (inside its footprint's usual tole
 share of refusals its own lifted points cause can be measured.
 
 Usage: python bench/osrm_refusals_dev.py --classes flat --out bench/results/osrm_refusals_dev.json
+       python bench/osrm_refusals_dev.py --classes flat --collision-cloud clean --out bench/results/osrm_refusals_dev_clean.json
 
 Findings (dev seeds 1000-1002, MR, N = 100; bench/results/osrm_refusals_dev*.json): every allowed
 grasp MR refused is (A), every contact an edge (5 mm) cell of the "obstacle" group with the link's
@@ -35,6 +36,11 @@ the cloud's 25 mm z-noise lifts past ``OBJECT_TOLERANCE`` (12.5 mm) and which st
 edge cells because the noise near the object is measured as 0.0 mm (the vertical walls, whose
 points the z-noise moves along the wall, make the 20 % quantile of the local fits); the clearance
 is then 3 mm.
+
+``--collision-cloud clean`` (protocol v3) hands the method the noise-free 12.5 mm sample the
+terrain's voxels come from as its collision cloud (the segmentation stays the noisy cloud's);
+``--strategy`` picks TO, MR or MRTO. Findings on the clean cloud are in docs/protocols/osrm_v3.md
+(bench/results/osrm_refusals_dev_clean*.json).
 """
 
 from __future__ import annotations
@@ -64,12 +70,17 @@ from baseplace.world.environment import Environment, hand_geometry_ids
 from baseplace.world.sensor_resolution import EDGE_CELL, FINE
 from baseplace_experiments import osrm_experiment
 from baseplace_experiments.allowed_grasps import SOLUTIONS, AllowedGrasps, TrueShape, scene_solids
-from baseplace_experiments.osrm_experiment import SCENE_CLASSES, ExperimentSettings, _class_name, osrm_scene
+from baseplace_experiments.osrm_experiment import (
+    COLLISION_CLOUDS,
+    SCENE_CLASSES,
+    ExperimentSettings,
+    _class_name,
+    osrm_scene,
+)
 from baseplace_experiments.osrm_v2 import GRASPS, SCENES, SEEDS, TRIES
 from baseplace_experiments.results import RunClock, write_results
 from baseplace_experiments.table_grid import RobotShapes
 
-STRATEGY = "MR"
 DETAILED = 3
 """Collision candidates per grasp whose touching cells are found one by one (the costly part)."""
 
@@ -84,7 +95,8 @@ def distance(g: coal.CollisionGeometry, T: np.ndarray, h: coal.CollisionGeometry
 
 
 def part_kind(part: coal.CollisionGeometry) -> str:
-    """The kind of a part of the method's model, from its geometry."""
+    """The kind of a part of the method's model, from its geometry (with ``--edge-cell`` at 1.25 mm
+    the edge cells read as fine cells)."""
     if isinstance(part, coal.OcTree):
         boxes = np.asarray(part.toBoxes())
         size = float(boxes[0, 3]) if len(boxes) else 0.0
@@ -253,10 +265,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--object-height-tolerance", type=float, default=None,
                         help="diagnosis only: points this far [m] above the grasped object's top, inside its "
                         "footprint's tolerance, are the object's (the library: OBJECT_TOLERANCE, 12.5 mm)")  # fmt: skip
+    parser.add_argument("--collision-cloud", choices=COLLISION_CLOUDS, default="noisy",
+                        help="the cloud the method's collision model comes from: noisy (protocol v2) or clean "
+                        "(protocol v3: the noise-free 12.5 mm sample the terrain's voxels come from)")  # fmt: skip
+    parser.add_argument("--strategy", choices=("TO", "MR", "MRTO"), default="MR")
+    parser.add_argument("--edge-cell", type=float, default=None,
+                        help="diagnosis only: the edge points' cell edge [m] (the library: EDGE_CELL, 5 mm); "
+                        "they keep the clearance as before")  # fmt: skip
     parser.add_argument("--out", required=True)
     args = parser.parse_args(argv)
     if args.object_height_tolerance is not None:
         _lift_object_tolerance(args.object_height_tolerance)
+    if args.edge_cell is not None:
+        if not 0 < args.edge_cell <= EDGE_CELL:
+            raise InputError(f"--edge-cell must be in (0, {EDGE_CELL}] m, got {args.edge_cell}")
+        sensor_resolution.EDGE_CELL = args.edge_cell  # read by sensor_resolution._cells at each call
     names = [_class_name(*c) for c in SCENE_CLASSES]
     if bad := [c for c in args.classes if c not in names]:
         raise InputError(f"unknown class {bad[0]!r}; choose from {names}")
@@ -304,7 +327,8 @@ def main(argv: list[str] | None = None) -> int:
     Verifier.collisions = recording  # type: ignore[method-assign]
     osrm_experiment.experiment_scene = recording_scene  # type: ignore[assignment]
     osrm_experiment.place = recording_place  # type: ignore[assignment]
-    osrm_experiment.strategies_for = lambda n: (STRATEGY,)  # type: ignore[assignment]
+    strategy = args.strategy
+    osrm_experiment.strategies_for = lambda n: (strategy,)  # type: ignore[assignment]
     grasps_out: list[dict[str, Any]] = []
     per_class: dict[str, Counter[str]] = {}
     kinds: dict[str, Counter[str]] = {}
@@ -312,17 +336,25 @@ def main(argv: list[str] | None = None) -> int:
         c = names.index(cname)
         tally, kind_tally = per_class.setdefault(cname, Counter()), kinds.setdefault(cname, Counter())
         for seed in args.seeds:
-            s = ExperimentSettings(grasps_per_scene=GRASPS, seed=seed, tries=TRIES)
+            s = ExperimentSettings(grasps_per_scene=GRASPS, seed=seed, tries=TRIES,
+                                   collision_cloud=args.collision_cloud)  # fmt: skip
             for k in range(args.scenes):
                 t0 = time.perf_counter()
                 queries.clear()
                 out = osrm_scene(robot, rmap, c, k, s, SCENE_CLASSES, oracle)
                 tally.update({f"placed, touching the true scene: {w}": n
-                              for w, n in out.stats[STRATEGY].touched_true_scene.items()})  # fmt: skip
+                              for w, n in out.stats[strategy].touched_true_scene.items()})  # fmt: skip
                 scene = scenes[-1]
                 assert len(queries) == len(out.records)
                 for g, (rec, query) in enumerate(zip(out.records, queries, strict=True)):
-                    ok = rec.tries[STRATEGY] is not None
+                    ok = rec.tries[strategy] is not None
+                    if ok and rec.clearance is not None:  # the placement on the true shapes, at the clearance
+                        near = osrm_experiment._placement_contact(
+                            oracle.with_clearance(rec.clearance), scene,
+                            osrm_experiment._object_index(scene, query["grasped"]), query["result"].placements[0],
+                        )  # fmt: skip
+                        if near is not None:
+                            tally[f"placed, within the reported clearance of the true scene: {near}"] += 1
                     tally["counted"] += 1
                     tally["allowed"] += bool(rec.allowed)
                     tally["placed"] += ok
@@ -341,8 +373,8 @@ def main(argv: list[str] | None = None) -> int:
                 )
     result = {
         "benchmark": "osrm_refusals_dev",
-        "strategy": STRATEGY, "tries": TRIES, "grasps_per_scene": GRASPS, "scenes_per_seed": args.scenes,
-        "classes": args.classes, "object_height_tolerance_m": args.object_height_tolerance, "method_ik_solutions_per_pose": 1, "oracle_ik_solutions_per_pose": SOLUTIONS,
+        "strategy": strategy, "collision_cloud": args.collision_cloud, "tries": TRIES, "grasps_per_scene": GRASPS, "scenes_per_seed": args.scenes,
+        "classes": args.classes, "object_height_tolerance_m": args.object_height_tolerance, "edge_cell_m": args.edge_cell, "method_ik_solutions_per_pose": 1, "oracle_ik_solutions_per_pose": SOLUTIONS,
         "per_class": {k: dict(v) for k, v in per_class.items()},
         "contacts_by_kind": {k: dict(v.most_common()) for k, v in kinds.items()},
         "grasps": grasps_out,

@@ -240,7 +240,7 @@ def cmd_experiment_osrm(args: argparse.Namespace) -> int:
     from baseplace_experiments.results import RunClock, fixed_protocol
 
     clock = RunClock()
-    if args.protocol == 2:
+    if args.protocol in (2, 3):
         return _experiment_osrm_v2(args, clock)
     if args.scenes is None:
         args.scenes = 10
@@ -293,68 +293,78 @@ def cmd_experiment_osrm(args: argparse.Namespace) -> int:
 
 
 def _experiment_osrm_v2(args: argparse.Namespace, clock: Any) -> int:
-    """Protocol v2 of Tables I and II (docs/protocols/osrm_v2.md): several seeds, intervals, allowed grasps."""
+    """Protocol v2 or v3 of Tables I and II (docs/protocols/osrm_v2.md, osrm_v3.md): seeds, intervals, allowed grasps.
+
+    v3 is v2 with the method's collision model from the clean cloud, its own seeds and v2's rows beside.
+    """
     from baseplace.reachability.storage import load_map
     from baseplace.robots.model import Robot
-    from baseplace_experiments import osrm_v2
+    from baseplace_experiments import osrm_v2, osrm_v3
     from baseplace_experiments.osrm_experiment import SCENE_CLASSES
     from baseplace_experiments.results import fixed_protocol
+
+    v3 = args.protocol == 3
+    protocol: Any = osrm_v3 if v3 else osrm_v2
 
     scenes = osrm_v2.SCENES if args.scenes is None else args.scenes
     grasps = osrm_v2.GRASPS if args.grasps is None else args.grasps
     if args.seeds is not None:
         seeds = list(args.seeds)
-        if set(seeds) & set(osrm_v2.SEEDS.held_out) and seeds != list(osrm_v2.SEEDS.held_out):
+        if set(seeds) & set(protocol.SEEDS.held_out) and seeds != list(protocol.SEEDS.held_out):
             raise InputError(
-                f"held-out seeds {list(osrm_v2.SEEDS.held_out)} run only all together: use --split held-out"
+                f"held-out seeds {list(protocol.SEEDS.held_out)} run only all together: use --split held-out"
             )
         split = (
             "held-out"
-            if seeds == list(osrm_v2.SEEDS.held_out)
+            if seeds == list(protocol.SEEDS.held_out)
             else "dev"
-            if seeds == list(osrm_v2.SEEDS.dev)
+            if seeds == list(protocol.SEEDS.dev)
             else None
         )
     else:
         split = args.split or "dev"
-        seeds = list(osrm_v2.SEEDS.seeds(split))
+        seeds = list(protocol.SEEDS.seeds(split))
     if split == "held-out":
-        osrm_v2.held_out_settings_check(scenes, grasps, args.tries)
+        protocol.held_out_settings_check(scenes, grasps, args.tries)
         if args.flat_only:
-            raise InputError("a held-out protocol-v2 run covers every class: drop --flat-only")
+            raise InputError(f"a held-out protocol-v{args.protocol} run covers every class: drop --flat-only")
     results_path = _results_path(args.results)
-    v1 = None
+    before = None
     if args.beside is not None:
         try:
-            v1 = json.loads(Path(args.beside).read_text())
+            before = json.loads(Path(args.beside).read_text())
         except (OSError, ValueError) as exc:
             raise InputError(f"--beside {args.beside}: not a readable results file ({exc})") from None
-    protocol_file = fixed_protocol(osrm_v2.PROTOCOL_FILE, split)
+        if v3:
+            osrm_v3.beside_check(before)
+    protocol_file = fixed_protocol(protocol.PROTOCOL_FILE, split)
     robot = Robot(args.robot)
     rmap = load_map(args.map, robot) if args.map else _default_map(args, robot)
     classes = SCENE_CLASSES if not args.flat_only else SCENE_CLASSES[:1]
     with _bars(args) as bars:
-        bar = bars.counter("osrm experiment v2", scenes * len(classes) * len(seeds), "scenes")
-        result = osrm_v2.run_osrm_v2(robot, rmap, seeds, scenes, grasps, args.tries, classes, bar)
-    if v1 is not None:
-        result = osrm_v2.with_v1(result, v1)
+        bar = bars.counter(f"osrm experiment v{args.protocol}", scenes * len(classes) * len(seeds), "scenes")
+        run = osrm_v3.run_osrm_v3 if v3 else osrm_v2.run_osrm_v2
+        result = run(robot, rmap, seeds, scenes, grasps, args.tries, classes, bar)
+    if before is not None:
+        result = osrm_v3.with_v2(result, before) if v3 else osrm_v2.with_v1(result, before)
     result["seed_role"] = split or "other"
 
     def ci(v: Any) -> str:
         return "-" if v is None else f"{v[0]:.0f}-{v[1]:.0f}"
 
     lines = [f"{'scene':<16} {'strategy':<8} {'counted':>7} {'allowed':>7} {'N=1':>5} {'N=100':>6} {'95% CI':>8} "
-             f"{'allowed N=100':>13} {'95% CI':>8} {'paper':>6} {'v1':>6}"]  # fmt: skip
+             f"{'allowed N=100':>13} {'95% CI':>8} {'paper':>6} {'v2' if v3 else 'v1':>6}"]  # fmt: skip
     for r in result["rows"]:
-        v1_rate = None if r.get("v1") is None else r["v1"]["success_rate"]
+        old = r.get("v2" if v3 else "v1")
+        v1_rate = None if old is None else old["success_allowed_N100" if v3 else "success_rate"]
         lines.append(f"{r['scene']:<16} {r['strategy']:<8} {r['counted_grasps']:>7} {r['allowed_grasps']:>7} "
                      f"{_cell(r['success_counted_N1'], '.1f'):>5} {_cell(r['success_counted_N100'], '.1f'):>6} "
                      f"{ci(r['ci95_counted_N100']):>8} {_cell(r['success_allowed_N100'], '.1f'):>13} "
                      f"{ci(r['ci95_allowed_N100']):>8} {_cell(r['paper_success_rate'], '.1f'):>6} "
                      f"{_cell(v1_rate, '.1f'):>6}")  # fmt: skip
     lines.append(f"seeds {seeds} ({result['seed_role']}), {clock.seconds:.0f} s")
-    result = _write_results(results_path, result, clock, lines, seeds=osrm_v2.SEEDS, split=split, used_seeds=seeds,
-                            protocol=(osrm_v2.__doc__ or "").strip(), protocol_file=protocol_file)  # fmt: skip
+    result = _write_results(results_path, result, clock, lines, seeds=protocol.SEEDS, split=split, used_seeds=seeds,
+                            protocol=(protocol.__doc__ or "").strip(), protocol_file=protocol_file)  # fmt: skip
     _emit(args, result, "\n".join(lines))
     return 0
 
@@ -439,8 +449,9 @@ def add_experiment_commands(sub: Any) -> None:
                 "may touch the grasped object.")  # fmt: skip
     p.add_argument("--robot", default="tiago", help="built-in name or robot file (default: tiago)")
     p.add_argument("--map", default=None, help="reachability map (default: the cached default map)")
-    p.add_argument("--protocol", type=int, choices=(1, 2), default=1,
-                   help="1: one seed, as before; 2: docs/protocols/osrm_v2.md (three seeds, intervals, allowed grasps)")  # fmt: skip
+    p.add_argument("--protocol", type=int, choices=(1, 2, 3), default=1,
+                   help="1: one seed, as before; 2: docs/protocols/osrm_v2.md (three seeds, intervals, allowed grasps); "
+                   "3: docs/protocols/osrm_v3.md (v2, the method's collision model from the clean cloud)")  # fmt: skip
     p.add_argument("--scenes", type=int, default=None,
                    help="scenes per class (protocol 1, default 10) or per seed and class (protocol 2, default 7)")  # fmt: skip
     p.add_argument("--grasps", type=int, default=None,
@@ -455,7 +466,9 @@ def add_experiment_commands(sub: Any) -> None:
         help="protocol 2: seeds, comma-separated (default: the split's)",
     )
     p.add_argument(
-        "--beside", default=None, help="protocol 2: a protocol-1 results file whose rows go beside"
+        "--beside",
+        default=None,
+        help="protocol 2: a protocol-1 results file whose rows go beside; protocol 3: a protocol-2 one",
     )
     p.add_argument("--flat-only", action="store_true", help="Table I only")
     p.add_argument("--dev", action="store_true", help="run on the development seed (for choosing parameters)")

@@ -39,7 +39,7 @@ import shapely
 from numpy.typing import NDArray
 from shapely.geometry import Polygon
 
-from baseplace.errors import BaseplaceError
+from baseplace.errors import BaseplaceError, InputError
 from baseplace.geometry.poses import FloatArray, invert_transforms, pose_from_xyz_rpy
 from baseplace.geometry.surface_poses import plane_base_poses
 from baseplace.placement.pipeline import POSE_ONLY_CHECKS, PlaceSettings, place
@@ -74,6 +74,8 @@ SEEDS = SeedSplit(DEV_SEEDS, HELD_OUT_SEEDS)
 """Both, as recorded in the results file's provenance."""
 PROTOCOL_FILE = "docs/protocols/osrm.md"
 """The protocol, committed before a held-out run (:func:`~baseplace_experiments.results.fixed_protocol`)."""
+COLLISION_CLOUDS = ("noisy", "clean")
+"""The clouds the method's collision model may come from (:attr:`ExperimentSettings.collision_cloud`)."""
 BUDGETS = (1, 3, 10, 100)
 """Candidate budgets N at which success is reported."""
 PAPER = {  # seed 000 Tables I and II: success rate [%]
@@ -313,6 +315,11 @@ class ExperimentSettings:
     object_height: tuple[float, float] = (0.15, 0.25)
     extent: tuple[float, float] = (7.0, 7.0)
     box_near: float = 0.3
+    collision_cloud: str = "noisy"
+    """The cloud ``place`` builds its collision model from (its fine cells near the grasped object,
+    its derived clearance): "noisy" (protocols v1, v2: the cloud the terrain is segmented from) or
+    "clean" (protocol v3: the noise-free sample the terrain's collision voxels come from, seed
+    000's OctoMap). The segmentation is the noisy cloud's in both."""
 
 
 def strategies_for(n_planes: int) -> tuple[str, ...]:
@@ -323,12 +330,19 @@ def strategies_for(n_planes: int) -> tuple[str, ...]:
 def experiment_scene(
     s: ExperimentSettings, class_index: int, k: int, classes: tuple[tuple[str, int], ...] = SCENE_CLASSES
 ) -> tuple[np.random.Generator, Scene, FloatArray, Terrain]:
-    """Scene k of a class, deterministic in (seed, class_index, k): (rng, scene, noisy cloud, terrain).
+    """Scene k of a class, deterministic in (seed, class_index, k): (rng, scene, method's cloud, terrain).
 
     Seed 000 VI adds the noise to the height map: the terrain is segmented from the noisy cloud,
-    and its collision voxels (the seed's OctoMap) come from a clean one. The returned generator
+    and its collision voxels (the seed's OctoMap) come from a clean one, a second sensor sample of
+    the scene at the same 12.5 mm spacing with no noise (never the true shapes). The cloud returned
+    for the method (``place``'s ``points``: its fine collision cells and derived clearance) is the
+    noisy one, or with ``s.collision_cloud == "clean"`` that clean sample. The returned generator
     goes on to draw the scene's grasps.
     """
+    if s.collision_cloud not in COLLISION_CLOUDS:
+        raise InputError(
+            f"collision_cloud must be one of {list(COLLISION_CLOUDS)}, got {s.collision_cloud!r}"
+        )
     size_class, n_planes = classes[class_index]
     rng = np.random.default_rng([s.seed, class_index, k])
     settings = SceneSettings(
@@ -340,10 +354,9 @@ def experiment_scene(
         incline_only_scene(settings, rng) if size_class == "incline-only" else generate_scene(settings, rng)
     )
     points = scene.sample_cloud(rng)
-    clean = VoxelMap.from_points(
-        scene.sample_cloud(np.random.default_rng([s.seed, class_index, k, 1]), sigma=0.0)
-    )
-    return rng, scene, points, dataclasses.replace(terrain_from_points(points), voxels=clean)
+    clean = scene.sample_cloud(np.random.default_rng([s.seed, class_index, k, 1]), sigma=0.0)
+    terrain = dataclasses.replace(terrain_from_points(points), voxels=VoxelMap.from_points(clean))
+    return rng, scene, clean if s.collision_cloud == "clean" else points, terrain
 
 
 def incline_only_scene(settings: SceneSettings, rng: np.random.Generator) -> Scene:
@@ -395,7 +408,8 @@ def osrm_scene(
     allows it at the clearance the method's queries on it report (:func:`query_clearance`; the
     oracle's own generator, so the queries draw as without it, and nothing of the oracle reaches
     the method), and each verified placement's joints are checked on the true shapes with no margin.
-    The queries run at the method's default settings in both protocols.
+    The queries run at the method's default settings in both protocols, on the cloud
+    ``s.collision_cloud`` names (:func:`experiment_scene`; the terrain's segmentation is the noisy cloud's).
     """
     robot = Robot(robot) if isinstance(robot, str) else robot
     stats = {name: _Tally() for name in strategies_for(classes[class_index][1])}

@@ -83,8 +83,16 @@ def run_osrm_v2(
     tries: int = TRIES,
     classes: tuple[tuple[str, int], ...] = SCENE_CLASSES,
     progress: Any = None,
+    base: ExperimentSettings | None = None,
+    protocol: int = 2,
 ) -> dict[str, Any]:
-    """Table I and II rows of protocol v2: per class and strategy, success with scene-bootstrap intervals."""
+    """Table I and II rows of protocol v2: per class and strategy, success with scene-bootstrap intervals.
+
+    ``base``: the scene and query settings but the seed, grasps and tries (default v2's,
+    :class:`ExperimentSettings`'s defaults); protocol v3 hands the method the clean cloud this way.
+    ``protocol`` is recorded in the result.
+    """
+    base = base or ExperimentSettings()
     if not seeds or scenes < 1 or grasps < 1 or tries < 1:
         raise InputError(
             f"need seeds and scenes, grasps, tries >= 1; got {list(seeds)}, {scenes}, {grasps}, {tries}"
@@ -92,7 +100,7 @@ def run_osrm_v2(
     oracle = AllowedGrasps(RobotShapes(robot, rmap.info.arm))
     outcomes: dict[tuple[int, int], list[SceneOutcome]] = {}
     for seed in seeds:
-        s = ExperimentSettings(grasps_per_scene=grasps, seed=seed, tries=tries)
+        s = dataclasses.replace(base, grasps_per_scene=grasps, seed=seed, tries=tries)
         for c in range(len(classes)):
             for k in range(scenes):
                 outcomes.setdefault((seed, c), []).append(osrm_scene(robot, rmap, c, k, s, classes, oracle))
@@ -104,12 +112,12 @@ def run_osrm_v2(
         for name in strategies_for(classes[c][1])
     ]
     every = [r for x in outcomes.values() for r in x]
-    return {"protocol": 2, "rows": rows, "seeds": [int(s) for s in seeds], "scenes_per_seed": scenes,
+    return {"protocol": protocol, "rows": rows, "seeds": [int(s) for s in seeds], "scenes_per_seed": scenes,
             "grasps_per_scene": grasps, "tries": tries, "budgets": list(BUDGETS),
             "planner": _planner_summary(every), "clearance": _clearance_summary(every),
             "grasp_depth_m": GRASP_DEPTH, "oracle_ik_solves_per_pose": SOLUTIONS,
             "bootstrap": {"draws": DRAWS, "seed": SEED, "level": 0.95, "resampled": "scenes within seed and class"},
-            "settings": dataclasses.asdict(ExperimentSettings(grasps_per_scene=grasps, tries=tries))}  # fmt: skip
+            "settings": dataclasses.asdict(dataclasses.replace(base, grasps_per_scene=grasps, tries=tries))}  # fmt: skip
 
 
 def _planner_summary(outcomes: list[SceneOutcome]) -> dict[str, Any]:
