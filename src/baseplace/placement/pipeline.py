@@ -85,7 +85,7 @@ class PlaceSettings:
             (:mod:`baseplace.placement.robustness`).
         clearance: a link closer than this [m] to the scene at sensor resolution (the cloud's
             points near the grasped object, the plane it stands on) touches it; None: derived from
-            the cloud, 3 sigma of the support plane's residuals
+            the cloud, 3 sigma of its noise near the object in the worst direction
             (:func:`~baseplace.world.sensor_resolution.derived_clearance`).
         stand_on: where the base may stand. "ground" (default): the planar regions large enough
             for the footprint that the base can drive onto from the ground, the lowest of them,

@@ -8,7 +8,8 @@ instead (:func:`fine_groups`); farther away the 25 mm voxels stay. The plane the
 when the cloud fits one (:func:`~baseplace.world.support_plane.fit_support_slab`), is an exact
 plane (:class:`SupportPlane`): a prism whose top face is the fitted plane, and its points leave
 the point groups. The robot keeps :attr:`~baseplace.world.environment.Environment.clearance` from
-the fine cells and the plane, derived from the plane's noise (:func:`derived_clearance`).
+the fine cells and the plane, derived from the scene's noise in its worst direction
+(:func:`surface_noise`, :func:`derived_clearance`).
 
 The clearance is stated against the TRUE surface, the same for every kind of model element (the
 lead's decision of issue 25). With c the clearance (given, or derived: :func:`derived_clearance`)
@@ -90,7 +91,7 @@ once in 740): the few hundred points of an object's top leave none behind, where
 is an obstacle cell at the hand's fingertips (bench/osrm_refusals_dev.py: 25 mm noise lifted the
 tops' points 10-24 mm past 12.5 mm and blocked 27 of 28 refused flat grasps)."""
 CLEARANCE_SIGMAS = 3.0
-"""The derived clearance is this many robust standard deviations of the support plane's residuals."""
+"""The derived clearance is this many standard deviations of the scene's noise (:func:`derived_clearance`)."""
 MIN_CLEARANCE = 0.003
 """The derived clearance is at least this [m]: a sensor's quantisation and calibration error."""
 DEFAULT_CLEARANCE = 0.01
