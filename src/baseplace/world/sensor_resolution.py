@@ -366,7 +366,7 @@ def derived_clearance(
     surfaces = "" if noise is None else f"; near the object: {noise.describe()}"
     return metres, (
         f"3 sigma of the support plane's residuals (sigma {plane.slab.sigma * 1e3:.1f} mm, {plane.slab.points} "
-        f"points, cut by the fit's height window) or of the surfaces' noise in its worst direction, the "
+        f"points within the fit's height window) or of the surfaces' noise in its worst direction, the "
         f"larger (sigma {sigma * 1e3:.1f} mm{surfaces}{floor})"
     )
 
