@@ -113,3 +113,26 @@ def test_the_objects_points_follow_the_noise_above_its_top():
     record = clearance_record(0.075, "x", 0.075)
     assert record["object_above_top"] == pytest.approx(4 * 0.025)
     assert clearance_record(0.009, "x", 0.009)["object_above_top"] == OBJECT_TOLERANCE
+
+
+def test_the_noise_is_measured_once_per_object(monkeypatch):
+    """contact_groups measures the noise near the object; the clearance reuses it (about 50 ms a measurement)."""
+    from baseplace.placement import pipeline
+    from baseplace.world import sensor_resolution
+
+    p = _box_on_table(0.025, 0.0, 4)
+    obj = GraspedObject.box([0.0, 0.0, TABLE + HEIGHT / 2], [2 * BOX, 2 * BOX, HEIGHT])
+    voxels = VoxelMap.from_points(p)
+    groups, _ = contact_groups(voxels, voxels, obj, p)
+    calls = []
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    real = sensor_resolution.surface_noise
+    monkeypatch.setattr(sensor_resolution, "surface_noise", counted)
+    monkeypatch.setattr(pipeline, "surface_noise", counted, raising=False)
+    metres, note, margin = pipeline.clearance_of(groups, None, p, obj)
+    assert calls == []
+    assert metres == margin and metres / CLEARANCE_SIGMAS == pytest.approx(0.025, rel=0.2), note

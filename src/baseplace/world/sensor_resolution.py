@@ -278,7 +278,7 @@ class SurfaceNoise:
                 f"{NOISE_QUANTILE:.0%} quantile of the local fits per direction")  # fmt: skip
 
 
-def surface_noise(points: ArrayLike) -> SurfaceNoise | None:
+def surface_noise(points: ArrayLike, along_z: bool = True) -> SurfaceNoise | None:
     """The sensor noise of a cloud's surfaces (N, 3) [m] by direction, or None (too few points).
 
     Noise that moves a point along its surface is invisible to a plane fitted to its neighbours:
@@ -300,7 +300,8 @@ def surface_noise(points: ArrayLike) -> SurfaceNoise | None:
     make it larger. So the :data:`NOISE_QUANTILE` quantile of a direction's fits, divided by that chi
     variable's same quantile, is sigma wherever at least that share of them is flat (in a cluttered
     tray the median was 3 to 7 mm on a noise-free cloud, edges everywhere). None for fewer than
-    :data:`NOISE_NEIGHBOURS` + 1 points.
+    :data:`NOISE_NEIGHBOURS` + 1 points. ``along_z`` False skips the height fits (vertical None):
+    :func:`denoised` needs the noise across the local planes only.
     """
     from scipy.spatial import cKDTree
     from scipy.stats import chi2
@@ -321,6 +322,10 @@ def surface_noise(points: ArrayLike) -> SurfaceNoise | None:
     across = np.sqrt(np.maximum(values[:, 0], 0.0))
     upright = np.abs(vectors[:, 2, 0]) <= math.sin(math.radians(30.0))  # the normal near horizontal
 
+    if not along_z:
+        return SurfaceNoise(
+            None, read(across[upright]), read(across) or 0.0, (0, int(upright.sum()), len(samples))
+        )
     nb = p[cKDTree(p[:, :2]).query(samples[:, :2], k=k)[1]]
     centred = nb - nb.mean(axis=1, keepdims=True)
     uv, h = centred[..., :2], centred[..., 2]
@@ -510,7 +515,7 @@ def denoised(points: ArrayLike) -> tuple[FloatArray, NDArray[np.bool_]]:
     from scipy.spatial import cKDTree
 
     p = np.asarray(points, dtype=float).reshape(-1, 3)
-    noise = surface_noise(p)
+    noise = surface_noise(p, along_z=False)
     if noise is None:
         return p, np.zeros(len(p), dtype=bool)
     k = NOISE_NEIGHBOURS
