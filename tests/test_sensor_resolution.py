@@ -232,7 +232,7 @@ def test_cli_reports_the_clearance_and_how_it_was_derived(tiago_map, grasp_scene
     given = json.loads(run_cli(*common, "--clearance", "0.03").stdout)
     # 3 cm: more than the hand's 16 mm over the table, so the grasp is refused, and says why
     assert given["clearance"] == {"metres": 0.03, "derived": "given", "noise_margin": n,
-                                  "from_true_surface": round(0.03 - n, 5)}  # fmt: skip
+                                  "from_true_surface": round(0.03 - n, 5), "object_above_top": 0.0125}  # fmt: skip
     assert given["exit_code"] == 3
 
 

@@ -53,6 +53,8 @@ from baseplace.world.sensor_resolution import (
     check_clearance,
     derived_clearance,
     derived_plane_clearance,
+    scene_noise,
+    surface_noise,
 )
 from baseplace.world.support_plane import RADIUS
 
@@ -83,7 +85,7 @@ class PlaceSettings:
             (:mod:`baseplace.placement.robustness`).
         clearance: a link closer than this [m] to the scene at sensor resolution (the cloud's
             points near the grasped object, the plane it stands on) touches it; None: derived from
-            the cloud, 3 sigma of the support plane's residuals
+            the cloud, 3 sigma of its noise near the object in the worst direction
             (:func:`~baseplace.world.sensor_resolution.derived_clearance`).
         stand_on: where the base may stand. "ground" (default): the planar regions large enough
             for the footprint that the base can drive onto from the ground, the lowest of them,
@@ -369,16 +371,16 @@ def clearance_of(
 ) -> tuple[float, str, float]:
     """The clearance [m] for the groups of :func:`contact_groups`, how it was chosen, and the noise margin n [m].
 
-    n is the derived clearance, whether a clearance is given or not. Derived from the support plane's noise, or without one from the noise of the cloud (N, 3)
-    within :data:`~baseplace.world.support_plane.RADIUS` of the grasped object.
+    n is the derived clearance, whether a clearance is given or not. Derived from the noise of the cloud (N, 3)
+    within :data:`~baseplace.world.support_plane.RADIUS` of the grasped object in its worst direction
+    (measured once, by :func:`contact_groups`), and the support plane's residuals.
     """
-    plane = support_plane(groups)
-    if plane is not None:
-        derived = derived_clearance(plane)
-    else:
+    noise = scene_noise(groups)
+    if noise is None:  # no denoised cells near the object kept it
         p = np.asarray(points, dtype=float).reshape(-1, 3)
         p = p[np.all(np.isfinite(p), axis=1)]
-        derived = derived_clearance(None, p[grasped.footprint_distance(p[:, :2]) <= RADIUS])
+        noise = surface_noise(p[grasped.footprint_distance(p[:, :2]) <= RADIUS])
+    derived = derived_clearance(support_plane(groups), noise=noise)
     if given is not None:
         return float(given), "given", derived[0]
     return derived[0], derived[1], derived[0]
@@ -395,7 +397,7 @@ def plane_clearance_of(
     plane = support_plane(groups)
     if given is not None or plane is None:
         return None, kept
-    metres, note = derived_plane_clearance(plane)
+    metres, note = derived_plane_clearance(plane, scene_noise(groups))
     return metres, (kept[0], f"{kept[1]}; from {note}: {metres * 1e3:.1f} mm", kept[2])
 
 

@@ -8,7 +8,8 @@ instead (:func:`fine_groups`); farther away the 25 mm voxels stay. The plane the
 when the cloud fits one (:func:`~baseplace.world.support_plane.fit_support_slab`), is an exact
 plane (:class:`SupportPlane`): a prism whose top face is the fitted plane, and its points leave
 the point groups. The robot keeps :attr:`~baseplace.world.environment.Environment.clearance` from
-the fine cells and the plane, derived from the plane's noise (:func:`derived_clearance`).
+the fine cells and the plane, derived from the scene's noise in its worst direction
+(:func:`surface_noise`, :func:`derived_clearance`).
 
 The clearance is stated against the TRUE surface, the same for every kind of model element (the
 lead's decision of issue 25). With c the clearance (given, or derived: :func:`derived_clearance`)
@@ -81,9 +82,16 @@ give 5.5 mm; the rim's 3.5 mm kept)."""
 PLANE_DEPTH = 0.05
 """The exact plane is a prism this thick [m] under its top face."""
 OBJECT_TOLERANCE = 0.0125
-"""Points this close [m] to a given box or cylinder are the object's (4 sigma of 3 mm sensor noise)."""
+"""Points this close [m] to a given box or cylinder are the object's (4 sigma of 3 mm sensor noise),
+at least: above its top the tolerance follows the measured noise (:func:`object_tolerance`)."""
+OBJECT_SIGMAS = 4.0
+"""Points up to this many sigma of the measured noise above a box's or cylinder's top are the object's
+(:func:`object_tolerance`). A noisy top leaves a point beyond 4 sigma once in 30 000 (beyond 3 sigma
+once in 740): the few hundred points of an object's top leave none behind, where each left behind
+is an obstacle cell at the hand's fingertips (bench/osrm_refusals_dev.py: 25 mm noise lifted the
+tops' points 10-24 mm past 12.5 mm and blocked 27 of 28 refused flat grasps)."""
 CLEARANCE_SIGMAS = 3.0
-"""The derived clearance is this many robust standard deviations of the support plane's residuals."""
+"""The derived clearance is this many standard deviations of the scene's noise (:func:`derived_clearance`)."""
 MIN_CLEARANCE = 0.003
 """The derived clearance is at least this [m]: a sensor's quantisation and calibration error."""
 DEFAULT_CLEARANCE = 0.01
@@ -95,6 +103,8 @@ NOISE_QUANTILE = 0.2
 """The share of local fits read (:func:`surface_noise`): at least this many neighbourhoods must be flat."""
 NOISE_SAMPLES = 4000
 """At most this many points (every n-th) have their local plane fitted."""
+NOISE_MIN_FITS = 30
+"""A direction of :func:`surface_noise` is measured on at least this many local fits, else not at all."""
 MAX_CLEARANCE = 0.1
 """The largest clearance [m] accepted: more would forbid most grasps outright."""
 PLANAR_FACTOR = 1.2
@@ -156,9 +166,21 @@ class SurfaceCells(VoxelMap):
     Attributes:
         noise_margin: the scene's derived noise margin n [m], :data:`CLEARANCE_SIGMAS` sigma of its
             noise (:func:`derived_clearance`).
+        noise: the noise near the object it was derived from (:func:`surface_noise`), measured once
+            per object for the clearance too (:func:`scene_noise`); None: too few points.
     """
 
     noise_margin: float = DEFAULT_CLEARANCE
+    noise: SurfaceNoise | None = None
+
+
+def scene_noise(groups: dict[str, Group]) -> SurfaceNoise | None:
+    """The noise :func:`fine_groups` measured near the object, kept in its denoised cells, or None."""
+    for group in groups.values():
+        for part in group_parts(group):
+            if isinstance(part, SurfaceCells) and part.noise is not None:
+                return part.noise
+    return None
 
 
 def surface_error(noise_margin: float) -> float:
@@ -192,11 +214,28 @@ def clearance_record(clearance: float, note: str, noise_margin: float) -> dict[s
     """The JSON's ``clearance`` block.
 
     The clearance c [m] (``metres``), how it was chosen (``derived``), the noise margin n [m]
-    (``noise_margin``) and the bound c - n [m] the robot keeps from the true surface at
-    :data:`CLEARANCE_SIGMAS` sigma (``from_true_surface``).
+    (``noise_margin``), the bound c - n [m] the robot keeps from the true surface at
+    :data:`CLEARANCE_SIGMAS` sigma (``from_true_surface``) outside the grasped object's tolerance,
+    and that tolerance above its top [m] (``object_above_top``, :func:`object_tolerance`).
     """
     return {"metres": round(clearance, 5), "derived": note, "noise_margin": round(noise_margin, 5),
-            "from_true_surface": round(clearance - noise_margin, 5)}  # fmt: skip
+            "from_true_surface": round(clearance - noise_margin, 5),
+            "object_above_top": round(object_tolerance(noise_margin), 5)}  # fmt: skip
+
+
+def object_tolerance(noise_margin: float) -> float:
+    """How far [m] above a box's or cylinder's top its points are still the object's.
+
+    :data:`OBJECT_SIGMAS` sigma of the measured noise (sigma = ``noise_margin`` /
+    :data:`CLEARANCE_SIGMAS`, the worst direction, :func:`derived_clearance`), at least
+    :data:`OBJECT_TOLERANCE`: 100 mm at 25 mm noise, 12.5 mm at 3 mm. Sideways the tolerance stays
+    :data:`OBJECT_TOLERANCE`: the noise across vertical patches is not measured reliably
+    (:attr:`SurfaceNoise.horizontal`), and a wider ring would take more of a neighbour's points.
+    The price: an obstacle's points within the tolerance over the object's footprint are the
+    object's, which only the hand may touch; c - n (``from_true_surface``) holds for every surface
+    outside it (docs/placement.md).
+    """
+    return max(OBJECT_TOLERANCE, OBJECT_SIGMAS * noise_margin / CLEARANCE_SIGMAS)
 
 
 def is_fine(part: VoxelMap | SupportPlane) -> bool:
@@ -204,17 +243,65 @@ def is_fine(part: VoxelMap | SupportPlane) -> bool:
     return isinstance(part, SupportPlane) or part.resolution <= MAX_FINE + 1e-12
 
 
-def surface_noise(points: ArrayLike) -> tuple[float, int] | None:
-    """The sensor noise [m] of a cloud's surfaces (N, 3) and how many local fits measured it, or None.
+@dataclass(frozen=True)
+class SurfaceNoise:
+    """The sensor noise [m] of a cloud's surfaces by direction (:func:`surface_noise`).
 
-    Without a support plane to fit, the noise is read off the surfaces themselves: at up to
-    :data:`NOISE_SAMPLES` points, the plane through its :data:`NOISE_NEIGHBOURS` nearest
-    neighbours (the covariance's smallest eigenvalue over k - 3 degrees of freedom). On a flat
-    surface each such standard deviation is sigma times a chi variable of k - 3 degrees of
-    freedom; edges, corners and curvature only make it larger. So the :data:`NOISE_QUANTILE`
-    quantile of them, divided by that chi variable's same quantile, is sigma wherever at least
-    that share of the neighbourhoods is flat (in a cluttered tray the median was 3 to 7 mm on a
-    noise-free cloud, edges everywhere). None for fewer than :data:`NOISE_NEIGHBOURS` + 1 points.
+    Attributes:
+        vertical: sigma along z, from the horizontal patches (a height z = a x + b y + c fitted to
+            each sample's nearest neighbours in xy), or None (fewer than :data:`NOISE_MIN_FITS`).
+        horizontal: sigma across the vertical patches (the plane through each sample's nearest
+            neighbours in 3-D, its normal within 30 deg of horizontal), or None. Reported, not
+            counted in :attr:`worst`: where walls are short, few such neighbourhoods are flat and it
+            reads edges (seed 000's noise-free tray: 9.3 mm, its 2 % quantile 4.2 mm).
+        along_normals: sigma across every local plane (all 3-D fits): the noise a smoothed surface
+            shows (:func:`denoised` compares its residuals with this).
+        fits: how many local fits measured each: (vertical, horizontal, along_normals).
+    """
+
+    vertical: float | None
+    horizontal: float | None
+    along_normals: float
+    fits: tuple[int, int, int]
+
+    @property
+    def worst(self) -> float:
+        """The larger sigma [m] along z and across all local planes: what the clearance must cover."""
+        return max(self.along_normals, self.vertical or 0.0)
+
+    def describe(self) -> str:
+        """The sigma per direction, for the JSON's ``derived`` note."""
+        mm = lambda v: "-" if v is None else f"{v * 1e3:.1f} mm"  # noqa: E731
+        v, h, a = self.fits
+        return (f"sigma along z {mm(self.vertical)} ({v} horizontal patches), across vertical patches "
+                f"{mm(self.horizontal)} ({h}, not counted: edges inflate it), across all local planes {mm(self.along_normals)} ({a}); "
+                f"{NOISE_QUANTILE:.0%} quantile of the local fits per direction")  # fmt: skip
+
+
+def surface_noise(points: ArrayLike, along_z: bool = True) -> SurfaceNoise | None:
+    """The sensor noise of a cloud's surfaces (N, 3) [m] by direction, or None (too few points).
+
+    Noise that moves a point along its surface is invisible to a plane fitted to its neighbours:
+    seed 000's clouds carry 25 mm of noise on z only, and the plane through a vertical wall's points
+    sees none of it. So each direction is read where it moves points off their surface, at up to
+    :data:`NOISE_SAMPLES` points:
+
+    * along z on horizontal patches: the height z = a x + b y + c fitted to the
+      :data:`NOISE_NEIGHBOURS` nearest neighbours in xy. Chosen in 3-D, neighbours of similar
+      height would be preferred and noise larger than the points' spacing cut (11 mm read for
+      25 mm); chosen in xy, the noise on z is not selected. Patches steeper than 45 deg
+      (a wall's column of points) are left out;
+    * across vertical patches: the plane through the nearest neighbours in 3-D whose normal is
+      within 30 deg of horizontal;
+    * across every local plane (all 3-D fits).
+
+    Each local fit's standard deviation (its residuals over k - 3 degrees of freedom) is, on a flat
+    patch, sigma times a chi variable of k - 3 degrees of freedom; edges, corners and curvature only
+    make it larger. So the :data:`NOISE_QUANTILE` quantile of a direction's fits, divided by that chi
+    variable's same quantile, is sigma wherever at least that share of them is flat (in a cluttered
+    tray the median was 3 to 7 mm on a noise-free cloud, edges everywhere). None for fewer than
+    :data:`NOISE_NEIGHBOURS` + 1 points. ``along_z`` False skips the height fits (vertical None):
+    :func:`denoised` needs the noise across the local planes only.
     """
     from scipy.spatial import cKDTree
     from scipy.stats import chi2
@@ -223,47 +310,94 @@ def surface_noise(points: ArrayLike) -> tuple[float, int] | None:
     k = NOISE_NEIGHBOURS
     if len(p) <= k:
         return None
-    step = max(1, len(p) // NOISE_SAMPLES)
-    _, idx = cKDTree(p).query(p[::step], k=k)
-    nb = p[idx]
-    centred = nb - nb.mean(axis=1, keepdims=True)
-    cov = np.einsum("nki,nkj->nij", centred, centred) / (k - 3)
-    smallest = np.linalg.eigvalsh(cov)[:, 0]
-    local = np.sqrt(np.maximum(smallest, 0.0))
     scale = math.sqrt(chi2.ppf(NOISE_QUANTILE, k - 3) / (k - 3))
-    return float(np.quantile(local, NOISE_QUANTILE) / scale), len(idx)
+
+    def read(local: FloatArray) -> float | None:
+        return float(np.quantile(local, NOISE_QUANTILE) / scale) if len(local) >= NOISE_MIN_FITS else None
+
+    samples = p[:: max(1, len(p) // NOISE_SAMPLES)]
+    nb = p[cKDTree(p).query(samples, k=k)[1]]
+    centred = nb - nb.mean(axis=1, keepdims=True)
+    values, vectors = np.linalg.eigh(np.einsum("nki,nkj->nij", centred, centred) / (k - 3))
+    across = np.sqrt(np.maximum(values[:, 0], 0.0))
+    upright = np.abs(vectors[:, 2, 0]) <= math.sin(math.radians(30.0))  # the normal near horizontal
+
+    if not along_z:
+        return SurfaceNoise(
+            None, read(across[upright]), read(across) or 0.0, (0, int(upright.sum()), len(samples))
+        )
+    nb = p[cKDTree(p[:, :2]).query(samples[:, :2], k=k)[1]]
+    centred = nb - nb.mean(axis=1, keepdims=True)
+    uv, h = centred[..., :2], centred[..., 2]
+    gram = np.einsum("nki,nkj->nij", uv, uv) + 1e-12 * np.eye(2)
+    slope = np.linalg.solve(gram, np.einsum("nki,nk->ni", uv, h)[..., None])[..., 0]
+    residual = h - np.einsum("nki,ni->nk", uv, slope)
+    height = np.sqrt(np.einsum("nk,nk->n", residual, residual) / (k - 3))
+    level = np.hypot(slope[:, 0], slope[:, 1]) <= 1.0
+
+    vertical, horizontal = read(height[level]), read(across[upright])
+    return SurfaceNoise(vertical, horizontal, read(across) or 0.0,
+                        (int(level.sum()), int(upright.sum()), len(samples)))  # fmt: skip
 
 
-def derived_clearance(plane: SupportPlane | None, points: ArrayLike | None = None) -> tuple[float, str]:
+def derived_clearance(
+    plane: SupportPlane | None, points: ArrayLike | None = None, noise: SurfaceNoise | None = None
+) -> tuple[float, str]:
     """The default clearance [m] and how it was derived.
 
-    3 sigma of the support plane's residuals; without a plane, 3 sigma of the surfaces' noise
-    (:func:`surface_noise` of ``points``, the cloud near the object); at least :data:`MIN_CLEARANCE`.
-    :data:`DEFAULT_CLEARANCE` only when neither can be measured.
+    :data:`CLEARANCE_SIGMAS` sigma of the scene's noise in its worst direction
+    (:func:`surface_noise` of ``points``, the cloud near the object, or ``noise`` when already
+    measured), and with a support plane at least of its residuals (:func:`plane_sigma`); at least
+    :data:`MIN_CLEARANCE`. :data:`DEFAULT_CLEARANCE` only when neither can be measured.
     """
+    if noise is None and points is not None:
+        noise = surface_noise(points)
     if plane is None:
-        noise = None if points is None else surface_noise(points)
         if noise is None:
             return (
                 DEFAULT_CLEARANCE,
                 "default: no support plane fitted and too few points to measure the noise",
             )
-        sigma, n = noise
+        sigma = noise.worst
         metres = max(CLEARANCE_SIGMAS * sigma, MIN_CLEARANCE)
         floor = f", at least {MIN_CLEARANCE * 1e3:.0f} mm" if metres == MIN_CLEARANCE else ""
         return metres, (
-            f"3 sigma of the surfaces' noise near the object, no support plane fitted (sigma {sigma * 1e3:.1f} mm, "
-            f"{NOISE_QUANTILE:.0%} quantile of {n} local plane fits{floor})"
+            f"3 sigma of the surfaces' noise near the object in its worst direction, no support plane "
+            f"fitted (sigma {sigma * 1e3:.1f} mm: {noise.describe()}{floor})"
         )
-    sigma = plane.slab.sigma
+    sigma = plane_sigma(plane.slab, noise)
     metres = max(CLEARANCE_SIGMAS * sigma, MIN_CLEARANCE)
     floor = f", at least {MIN_CLEARANCE * 1e3:.0f} mm" if metres == MIN_CLEARANCE else ""
+    surfaces = "" if noise is None else f"; near the object: {noise.describe()}"
     return metres, (
-        f"3 sigma of the support plane's residuals (sigma {sigma * 1e3:.1f} mm, {plane.slab.points} points{floor})"
+        f"3 sigma of the support plane's residuals (sigma {plane.slab.sigma * 1e3:.1f} mm, {plane.slab.points} "
+        f"points within the fit's height window) or of the surfaces' noise in its worst direction, the "
+        f"larger (sigma {sigma * 1e3:.1f} mm{surfaces}{floor})"
     )
 
 
-def derived_plane_clearance(plane: SupportPlane) -> tuple[float, str]:
+def _noise_margin(slab: SupportSlab | None, noise: SurfaceNoise | None) -> float:
+    """The noise margin n [m] that :func:`derived_clearance` derives from a fit and the surfaces' noise."""
+    if slab is not None:
+        return max(CLEARANCE_SIGMAS * plane_sigma(slab, noise), MIN_CLEARANCE)
+    if noise is None:
+        return DEFAULT_CLEARANCE
+    return max(CLEARANCE_SIGMAS * noise.worst, MIN_CLEARANCE)
+
+
+def plane_sigma(slab: SupportSlab, noise: SurfaceNoise | None) -> float:
+    """The sensor noise [m] at the support plane: its residuals' sigma, at least the surfaces' worst.
+
+    The fit (:func:`~baseplace.world.support_plane.fit_support_slab`) keeps the points within 15 mm
+    of the densest height layer and up to half a voxel above the object's bottom, and refuses a fit
+    whose 99th percentile exceeds 1 cm: with noise of more than about 5 mm its residuals are cut to
+    about +-10 mm, and their sigma saturates near 7 mm (6.8-7.7 mm read on seed 000's clouds with
+    25 mm noise). The surfaces' own noise (:func:`surface_noise`) is read without such a window.
+    """
+    return slab.sigma if noise is None else max(slab.sigma, noise.worst)
+
+
+def derived_plane_clearance(plane: SupportPlane, noise: SurfaceNoise | None = None) -> tuple[float, str]:
     """The default clearance [m] from the exact support plane, and how it was derived.
 
     The plane is fitted to thousands of points: where its surface lies is known to its fit's
@@ -272,9 +406,10 @@ def derived_plane_clearance(plane: SupportPlane) -> tuple[float, str]:
     dev seeds 25000-25059: the fitted plane lay 0.0-0.5 mm above the true table top while the hand
     was refused at 3.6 and 6.0 mm over it, the margin 9 mm). So :data:`CLEARANCE_SIGMAS` standard
     errors, at least :data:`MIN_CLEARANCE` (a sensor's calibration error and a real top's unevenness,
-    well above the 0.5 mm measured bias of the fit).
+    well above the 0.5 mm measured bias of the fit). sigma is :func:`plane_sigma` (``noise`` the
+    surfaces' noise near the object, when measured).
     """
-    sigma, n = plane.slab.sigma, max(plane.slab.points, 1)
+    sigma, n = plane_sigma(plane.slab, noise), max(plane.slab.points, 1)
     error = sigma / math.sqrt(n)
     metres = max(CLEARANCE_SIGMAS * error, MIN_CLEARANCE)
     floor = f", at least {MIN_CLEARANCE * 1e3:.0f} mm" if metres == MIN_CLEARANCE else ""
@@ -333,7 +468,8 @@ def fine_groups(
             owner[rows_in(keys, v.keys[near[name]])] = k
     taken = owner >= 0
     p, owner = p[taken], owner[taken]
-    is_object = _object_points(p, grasped)
+    noise = surface_noise(around)  # measured once per object, for the clearance here and in its callers
+    is_object = _object_points(p, grasped, object_tolerance(_noise_margin(slab, noise)))
     plane = None
     if slab is not None:
         r = p[:, 2] - slab.height(p[:, :2])
@@ -342,7 +478,8 @@ def fine_groups(
         if plane is not None:
             p, owner, is_object = p[~flat], owner[~flat], is_object[~flat]
     moved, smooth = denoised(p)  # the noise once: the clearance stands on the surface, not on the noise
-    surface = SurfaceCells(FINE, np.zeros((0, 3), dtype=np.int64), derived_clearance(plane, around)[0])
+    surface = SurfaceCells(FINE, np.zeros((0, 3), dtype=np.int64), derived_clearance(plane, noise=noise)[0],
+                           noise)  # fmt: skip
     out: dict[str, Group] = {}
     for k, name in enumerate(names):
         coarse = (groups[name] if name != _OBJECT else object_voxels).without(near[name])
@@ -365,8 +502,9 @@ def denoised(points: ArrayLike) -> tuple[FloatArray, NDArray[np.bool_]]:
     """The points (N, 3) [m] on smooth surfaces put onto their local plane, and which those are (N,).
 
     A point's surface is smooth when a quadric fitted to its :data:`SMOOTH_NEIGHBOURS` nearest
-    points leaves residuals of at most :data:`PLANAR_FACTOR` times the surfaces' noise
-    (:func:`surface_noise`; :func:`_smooth_residual`), as the median over its :data:`SMOOTH_VOTES`
+    points leaves residuals of at most :data:`PLANAR_FACTOR` times the surfaces' noise across their
+    local planes (:attr:`SurfaceNoise.along_normals` of :func:`surface_noise` of ``points``;
+    :func:`_smooth_residual`), as the median over its :data:`SMOOTH_VOTES`
     nearest points: a face, a bottle's side. Such a point goes onto the plane fitted to its
     :data:`NOISE_NEIGHBOURS` nearest, which leaves about sigma / 4 of the noise; on a curved
     surface that plane is a chord, inside it by about rho^2 / (8 r) (rho the neighbourhood's
@@ -377,7 +515,7 @@ def denoised(points: ArrayLike) -> tuple[FloatArray, NDArray[np.bool_]]:
     from scipy.spatial import cKDTree
 
     p = np.asarray(points, dtype=float).reshape(-1, 3)
-    noise = surface_noise(p)
+    noise = surface_noise(p, along_z=False)
     if noise is None:
         return p, np.zeros(len(p), dtype=bool)
     k = NOISE_NEIGHBOURS
@@ -397,7 +535,7 @@ def denoised(points: ArrayLike) -> tuple[FloatArray, NDArray[np.bool_]]:
     # an edge is a line of bad fits; one bad fit among good ones is the noise's tail (the median of
     # the nearest fits decides)
     votes = tree.query(p, k=min(len(p), SMOOTH_VOTES))[1]
-    smooth = np.median(residual[votes], axis=1) <= PLANAR_FACTOR * noise[0]
+    smooth = np.median(residual[votes], axis=1) <= PLANAR_FACTOR * noise.along_normals
     return np.where(smooth[:, None], p + shift, p), smooth
 
 
@@ -416,10 +554,13 @@ def _smooth_residual(centred: FloatArray, axes: FloatArray) -> FloatArray:
     return np.sqrt(np.einsum("nk,nk->n", residual, residual) / max(h.shape[1] - 6, 1))
 
 
-def _object_points(p: FloatArray, grasped: GraspedObject) -> NDArray[np.bool_]:
+def _object_points(
+    p: FloatArray, grasped: GraspedObject, above: float = OBJECT_TOLERANCE
+) -> NDArray[np.bool_]:
     """(N,) True for the points (N, 3) on the object.
 
-    Those within :data:`OBJECT_TOLERANCE` of its footprint and no higher than that above its top;
+    Those within :data:`OBJECT_TOLERANCE` of its footprint and no higher than ``above`` [m] above its
+    top (:func:`object_tolerance`);
     for a box or cylinder, above its bottom's cell; for points, also down to its support (a found
     object leaves out its foot, the band of its support), and every point in one of its cells.
     """
@@ -428,7 +569,7 @@ def _object_points(p: FloatArray, grasped: GraspedObject) -> NDArray[np.bool_]:
     top = grasped.bottom + grasped.size[2]
     # a shape's lowest cell holds the support's surface too: not the object's
     low = grasped.bottom - DEPTH if grasped.kind == "points" else grasped.bottom + MAX_FINE / 2
-    z_ok = (p[:, 2] >= low) & (p[:, 2] <= top + OBJECT_TOLERANCE)
+    z_ok = (p[:, 2] >= low) & (p[:, 2] <= top + above)
     out = np.zeros(len(p), dtype=bool)
     if z_ok.any():
         out[z_ok] = grasped.footprint_distance(p[z_ok, :2]) <= OBJECT_TOLERANCE
