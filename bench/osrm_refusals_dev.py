@@ -388,8 +388,8 @@ def _lift_object_tolerance(metres: float) -> None:
     """Diagnosis: the grasped object's points reach ``metres`` above its top (the library's rule, widened)."""
     real = sensor_resolution._object_points
 
-    def lifted(p: np.ndarray, grasped: Any) -> Any:
-        out = real(p, grasped)
+    def lifted(p: np.ndarray, grasped: Any, *rest: Any) -> Any:
+        out = real(p, grasped, *rest)
         if len(p) == 0 or grasped.kind == "points":
             return out
         top = grasped.bottom + grasped.size[2]
