@@ -42,6 +42,7 @@ import functools
 import itertools
 import math
 import time
+import weakref
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
@@ -112,6 +113,27 @@ def lever_arms(robot: Robot, arm: Arm, geom: object) -> FloatArray:
         bound[parent] = max(bound[parent], offset + bound[k])
     ids = [model.getJointId(name) for name in arm.joint_names]
     return np.array([1.0 if _prismatic(model, j) else bound[j] for j in ids])
+
+
+_LEVERS: weakref.WeakKeyDictionary[Robot, dict[tuple[str, int], FloatArray]] = weakref.WeakKeyDictionary()
+"""Per robot, :func:`lever_arms` by arm and number of robot geometries (they hold no reference to it)."""
+
+
+def _kept_lever_arms(robot: Robot, arm: Arm, geom: object) -> FloatArray:
+    """:func:`lever_arms`, computed once per robot and arm (3 ms of every :class:`MotionChecker` built per query).
+
+    They depend on the robot's collision geometries only: an :class:`Environment`'s scene parts
+    hang on the world (joint 0), which :func:`lever_arms` passes over, so every environment of a
+    robot with as many robot geometries gives the same.
+    """
+    n_robot = len([obj for obj in geom.geometryObjects if obj.parentJoint != 0])  # type: ignore[attr-defined]
+    kept = _LEVERS.setdefault(robot, {})
+    key = (arm.name, n_robot)
+    if key not in kept:
+        levers = lever_arms(robot, arm, geom)
+        levers.flags.writeable = False
+        kept[key] = levers
+    return kept[key]
 
 
 def _prismatic(model: object, joint: int) -> bool:
@@ -310,7 +332,7 @@ class MotionChecker:
             else s.pregrasp_distance
         )
         """The approach's length [m]: the setting, or derived from the hand."""
-        self.levers = lever_arms(robot, arm, environment.geom)
+        self.levers = _kept_lever_arms(robot, arm, environment.geom)
         """(n,) the arm joints' lever arms [m] (:func:`lever_arms`)."""
         self.state_checks = 0
         """Collision checks of transit states so far."""
