@@ -67,10 +67,10 @@ BUDGETS = (1, 100)
 """Budgets N at which success and its interval are reported."""
 
 
-def held_out_settings_check(scenes: int, grasps: int, tries: int) -> None:
-    """A held-out run takes the protocol's counts: anything else is refused before any work."""
+def held_out_settings_check(scenes: int, grasps: int, tries: int, version: int = 2) -> None:
+    """A held-out run of protocol ``version`` (v2 or v3, the same counts) takes the protocol's counts: else refused before any work."""
     if (scenes, grasps, tries) != (SCENES, GRASPS, TRIES):
-        raise InputError(f"a held-out protocol-v2 run uses --scenes {SCENES} --grasps {GRASPS} --tries {TRIES} "
+        raise InputError(f"a held-out protocol-v{version} run uses --scenes {SCENES} --grasps {GRASPS} --tries {TRIES} "
                          f"(the protocol's), got {scenes}, {grasps}, {tries}")  # fmt: skip
 
 

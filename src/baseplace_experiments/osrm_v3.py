@@ -16,14 +16,13 @@ and analysis are reused unchanged):
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import functools
 from typing import Any
 
 from baseplace.errors import InputError
-from baseplace.reachability.rmap import ReachabilityMap
-from baseplace.robots.model import Robot
-from baseplace_experiments.osrm_experiment import SCENE_CLASSES, ExperimentSettings
-from baseplace_experiments.osrm_v2 import BUDGETS, GRASPS, SCENES, TRIES, run_osrm_v2
+from baseplace_experiments import osrm_v2
+from baseplace_experiments.osrm_experiment import ExperimentSettings
+from baseplace_experiments.osrm_v2 import BUDGETS
 from baseplace_experiments.results import SeedSplit
 
 PROTOCOL = 3
@@ -36,24 +35,12 @@ SETTINGS = ExperimentSettings(collision_cloud="clean")
 
 
 def held_out_settings_check(scenes: int, grasps: int, tries: int) -> None:
-    """A held-out run takes the protocol's counts: anything else is refused before any work."""
-    if (scenes, grasps, tries) != (SCENES, GRASPS, TRIES):
-        raise InputError(f"a held-out protocol-v3 run uses --scenes {SCENES} --grasps {GRASPS} --tries {TRIES} "
-                         f"(the protocol's), got {scenes}, {grasps}, {tries}")  # fmt: skip
+    """A held-out run takes v2's counts: anything else is refused before any work."""
+    osrm_v2.held_out_settings_check(scenes, grasps, tries, version=PROTOCOL)
 
 
-def run_osrm_v3(
-    robot: Robot,
-    rmap: ReachabilityMap,
-    seeds: Sequence[int],
-    scenes: int = SCENES,
-    grasps: int = GRASPS,
-    tries: int = TRIES,
-    classes: tuple[tuple[str, int], ...] = SCENE_CLASSES,
-    progress: Any = None,
-) -> dict[str, Any]:
-    """Table I and II rows of protocol v3 (v2's rows and analysis, the clean collision cloud)."""
-    return run_osrm_v2(robot, rmap, seeds, scenes, grasps, tries, classes, progress, SETTINGS, PROTOCOL)
+run_osrm_v3 = functools.partial(osrm_v2.run_osrm_v2, base=SETTINGS, protocol=PROTOCOL)
+"""Table I and II rows of protocol v3 (:func:`~baseplace_experiments.osrm_v2.run_osrm_v2` on :data:`SETTINGS`)."""
 
 
 def beside_check(v2: Any) -> None:
