@@ -117,7 +117,10 @@ def test_experiment_smoke_flat_scene(tiago):
     )
 
     rmap = build_map(tiago, None, BuildSettings(samples=5_000_000, seed=2))
-    settings = ExperimentSettings(grasps_per_scene=3, tries=60, seed=1)
+    # The seed's setup (protocol v3): the 25 mm noise on the height map, the collision model from the
+    # clean cloud. On the noisy cloud the derived clearance is 3 sigma of its 25 mm z-noise (~75 mm)
+    # and next to no grasp in the tray is placeable, correctly (docs/placement.md).
+    settings = ExperimentSettings(grasps_per_scene=3, tries=60, seed=1, collision_cloud="clean")
     result = run_osrm_experiment(tiago, rmap, 1, settings, classes=(("flat", 0),))
     assert result["seed_role"] == "other" and not set(DEV_SEEDS) & set(HELD_OUT_SEEDS)
     rows = {r["strategy"]: r for r in result["rows"]}
