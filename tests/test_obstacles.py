@@ -236,11 +236,13 @@ def test_bad_obstacles_exit_2_with_one_line_naming_the_forms(tmp_path, spec, wor
         assert '"box X Y Z SX SY SZ [YAW]"' in lines[0] and "cylinder X Y Z RADIUS HEIGHT" in lines[0]
 
 
-def test_degrees_converts_a_box_yaw(tmp_path):
-    # with --degrees the 90 is a yaw, not an error; the run stops later, at the empty cloud
+def test_degrees_converts_a_box_yaw(tmp_path, tiago_map):
+    # with --degrees the 90 is a yaw, not an error; the run stops later, at the empty cloud. The small
+    # map given spares the run a build of the default map (2e8 samples, ~50 s), which comes before that stop.
     np.save(tmp_path / "c.npy", np.zeros((10, 3)))
-    proc = run_cli("place", "--cloud", str(tmp_path / "c.npy"), "--target", "0.5 0.3 0.75 0 90 0", "--degrees",
-                   "--obstacle", "box 3 3 0.3 0.2 0.2 0.4 90", "--json")  # fmt: skip
+    save_map(tiago_map, tmp_path / "tiago.rmap")
+    proc = run_cli("place", "--cloud", str(tmp_path / "c.npy"), "--map", str(tmp_path / "tiago.rmap"), "--target",
+                   "0.5 0.3 0.75 0 90 0", "--degrees", "--obstacle", "box 3 3 0.3 0.2 0.2 0.4 90", "--json")  # fmt: skip
     out = json.loads(proc.stdout)
     assert out["inputs"]["obstacle"] == [f"box 3 3 0.3 0.2 0.2 0.4 {math.pi / 2!r}"], out  # the argv as read
 

@@ -333,6 +333,10 @@ def serve_cache(tmp_path_factory, tiago, tiago_map):
     return root
 
 
+READ_TIMEOUT_S = 3.0
+"""The server's --read-timeout: the slow-client tests below wait it out (the default, 10 s, twice)."""
+
+
 class RealServer:
     def __init__(self, cache: Path, timeout_s: float, tray: np.ndarray) -> None:
         self.port = free_port()
@@ -340,7 +344,8 @@ class RealServer:
         env = {**os.environ, "BASEPLACE_CACHE": str(cache)}
         env.pop("BASEPLACE_TOKEN", None)
         self.proc = subprocess.Popen([sys.executable, "-m", "baseplace.cli", "serve", "--port", str(self.port),
-                                      "--no-warm-up", "--timeout", str(timeout_s)], env=env,
+                                      "--no-warm-up", "--timeout", str(timeout_s), "--read-timeout",
+                                      str(READ_TIMEOUT_S)], env=env,
                                      stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)  # fmt: skip
         deadline = time.time() + 120
         while time.time() < deadline:
