@@ -243,9 +243,10 @@ def _solve(
     seeds[:, 1:] = rng.uniform(arm.lower, arm.upper, size=(len(T), settings.restarts, arm.n_joints))
     q = np.zeros((len(T), arm.n_joints))
     attempts = np.empty(len(T), dtype=np.int64)
+    # limit_gain and saturate given (their defaults): the same compiled signature as ik.py's call
     _solve_batch(np.ascontiguousarray(T), seeds, arm.placements, arm.axes, arm.kinds, arm.T_last_tcp,
                  arm.lower, arm.upper, arm.continuous, settings.max_iterations, ik.tol_position,
-                 ik.tol_rotation, ik.damping, q, attempts)  # fmt: skip
+                 ik.tol_rotation, ik.damping, q, attempts, 0.0, False)  # fmt: skip
     return attempts >= 0
 
 
