@@ -352,32 +352,25 @@ def derived_clearance(
     """
     if noise is None and points is not None:
         noise = surface_noise(points)
+    metres = _noise_margin(None if plane is None else plane.slab, noise)
+    floor = f", at least {MIN_CLEARANCE * 1e3:.0f} mm" if metres == MIN_CLEARANCE else ""
     if plane is None:
         if noise is None:
-            return (
-                DEFAULT_CLEARANCE,
-                "default: no support plane fitted and too few points to measure the noise",
-            )
-        sigma = noise.worst
-        metres = max(CLEARANCE_SIGMAS * sigma, MIN_CLEARANCE)
-        floor = f", at least {MIN_CLEARANCE * 1e3:.0f} mm" if metres == MIN_CLEARANCE else ""
+            return metres, "default: no support plane fitted and too few points to measure the noise"
         return metres, (
             f"3 sigma of the surfaces' noise near the object in its worst direction, no support plane "
-            f"fitted (sigma {sigma * 1e3:.1f} mm: {noise.describe()}{floor})"
+            f"fitted (sigma {noise.worst * 1e3:.1f} mm: {noise.describe()}{floor})"
         )
-    sigma = plane_sigma(plane.slab, noise)
-    metres = max(CLEARANCE_SIGMAS * sigma, MIN_CLEARANCE)
-    floor = f", at least {MIN_CLEARANCE * 1e3:.0f} mm" if metres == MIN_CLEARANCE else ""
     surfaces = "" if noise is None else f"; near the object: {noise.describe()}"
     return metres, (
         f"3 sigma of the support plane's residuals (sigma {plane.slab.sigma * 1e3:.1f} mm, {plane.slab.points} "
         f"points within the fit's height window) or of the surfaces' noise in its worst direction, the "
-        f"larger (sigma {sigma * 1e3:.1f} mm{surfaces}{floor})"
+        f"larger (sigma {plane_sigma(plane.slab, noise) * 1e3:.1f} mm{surfaces}{floor})"
     )
 
 
 def _noise_margin(slab: SupportSlab | None, noise: SurfaceNoise | None) -> float:
-    """The noise margin n [m] that :func:`derived_clearance` derives from a fit and the surfaces' noise."""
+    """The noise margin n [m] from a fit and the surfaces' noise: :func:`derived_clearance`'s metres."""
     if slab is not None:
         return max(CLEARANCE_SIGMAS * plane_sigma(slab, noise), MIN_CLEARANCE)
     if noise is None:
