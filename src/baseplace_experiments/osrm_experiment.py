@@ -321,6 +321,12 @@ class ExperimentSettings:
     "clean" (protocol v3: the noise-free sample the terrain's collision voxels come from, seed
     000's OctoMap). The segmentation is the noisy cloud's in both."""
 
+    def __post_init__(self) -> None:
+        if self.collision_cloud not in COLLISION_CLOUDS:
+            raise InputError(
+                f"collision_cloud must be one of {list(COLLISION_CLOUDS)}, got {self.collision_cloud!r}"
+            )
+
 
 def strategies_for(n_planes: int) -> tuple[str, ...]:
     """Table I (flat) compares the ORM baseline too; Table II only the OSRM strategies."""
@@ -339,10 +345,6 @@ def experiment_scene(
     noisy one, or with ``s.collision_cloud == "clean"`` that clean sample. The returned generator
     goes on to draw the scene's grasps.
     """
-    if s.collision_cloud not in COLLISION_CLOUDS:
-        raise InputError(
-            f"collision_cloud must be one of {list(COLLISION_CLOUDS)}, got {s.collision_cloud!r}"
-        )
     size_class, n_planes = classes[class_index]
     rng = np.random.default_rng([s.seed, class_index, k])
     settings = SceneSettings(
