@@ -356,12 +356,12 @@ def _experiment_osrm_v2(args: argparse.Namespace, clock: Any) -> int:
              f"{'allowed N=100':>13} {'95% CI':>8} {'paper':>6} {'v2' if v3 else 'v1':>6}"]  # fmt: skip
     for r in result["rows"]:
         old = r.get("v2" if v3 else "v1")
-        v1_rate = None if old is None else old["success_allowed_N100" if v3 else "success_rate"]
+        old_rate = None if old is None else old["success_allowed_N100" if v3 else "success_rate"]
         lines.append(f"{r['scene']:<16} {r['strategy']:<8} {r['counted_grasps']:>7} {r['allowed_grasps']:>7} "
                      f"{_cell(r['success_counted_N1'], '.1f'):>5} {_cell(r['success_counted_N100'], '.1f'):>6} "
                      f"{ci(r['ci95_counted_N100']):>8} {_cell(r['success_allowed_N100'], '.1f'):>13} "
                      f"{ci(r['ci95_allowed_N100']):>8} {_cell(r['paper_success_rate'], '.1f'):>6} "
-                     f"{_cell(v1_rate, '.1f'):>6}")  # fmt: skip
+                     f"{_cell(old_rate, '.1f'):>6}")  # fmt: skip
     lines.append(f"seeds {seeds} ({result['seed_role']}), {clock.seconds:.0f} s")
     result = _write_results(results_path, result, clock, lines, seeds=protocol.SEEDS, split=split, used_seeds=seeds,
                             protocol=(protocol.__doc__ or "").strip(), protocol_file=protocol_file)  # fmt: skip
