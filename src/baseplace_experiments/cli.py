@@ -453,17 +453,17 @@ def add_experiment_commands(sub: Any) -> None:
                    help="1: one seed, as before; 2: docs/protocols/osrm_v2.md (three seeds, intervals, allowed grasps); "
                    "3: docs/protocols/osrm_v3.md (v2, the method's collision model from the clean cloud)")  # fmt: skip
     p.add_argument("--scenes", type=int, default=None,
-                   help="scenes per class (protocol 1, default 10) or per seed and class (protocol 2, default 7)")  # fmt: skip
+                   help="scenes per class (protocol 1, default 10) or per seed and class (protocols 2 and 3, default 7)")  # fmt: skip
     p.add_argument("--grasps", type=int, default=None,
-                   help="grasp candidates per scene (default: protocol 1 50, protocol 2 its fixed count)")  # fmt: skip
+                   help="grasp candidates per scene (default: protocol 1 50, protocols 2 and 3 their fixed count)")  # fmt: skip
     p.add_argument("--tries", type=int, default=100, help="N: candidates per query (default 100)")
     p.add_argument("--split", choices=("dev", "held-out"), default=None,
-                   help="protocol 2's seed set: dev (default) or held-out (the reported tables)")  # fmt: skip
+                   help="protocols 2 and 3: the seed set, dev (default) or held-out (the reported tables)")  # fmt: skip
     p.add_argument(
         "--seeds",
         type=_int_list,
         default=None,
-        help="protocol 2: seeds, comma-separated (default: the split's)",
+        help="protocols 2 and 3: seeds, comma-separated (default: the split's)",
     )
     p.add_argument(
         "--beside",

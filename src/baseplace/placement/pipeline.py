@@ -178,7 +178,9 @@ def place(
         targets: (K, 4, 4) or (4, 4) world TCP targets.
         settings: search settings.
         rng: randomness (default: seed 0).
-        terrain: a segmentation of the same cloud to reuse (skips segmentation).
+        terrain: the scene's segmentation to reuse (skips segmentation): of ``points``, or of
+            another cloud of the same scene (seed 000 VI segments a noisy height map); the
+            collision model is built from ``points`` either way.
         environments: a cache of collision environments for this terrain, filled on first use
             (repeated queries in one scene then skip building the obstacle OcTree); not used
             with a grasped object.
