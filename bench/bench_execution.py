@@ -122,6 +122,7 @@ from baseplace_experiments.execution_experiment import (
 )
 from baseplace_experiments.results import SeedSplit, fixed_protocol
 from baseplace_experiments.table_grid import RobotShapes
+from bench_motion_verdicts import REFERENCE
 from common import report
 
 DRAWS = 5
@@ -167,9 +168,14 @@ PROTOCOLS = {  # version: (where the robot's model of the bottle begins, seeds, 
         SeedSplit(dev=(0,), held_out=(26, 27, 28, 29, 30, 31)),
         MotionSettings(time_limit=30.0, max_checks=2500, point_step=0.01),  # 5x v8's budget
     ),
+    10: (
+        "support",  # not used by the product's models
+        SeedSplit(dev=(0, 1, 2), held_out=(32, 33, 34, 35, 36, 37)),
+        REFERENCE,  # bench_motion_verdicts' reference planner: a budget verdicts do not depend on
+    ),
 }
 SUPPORT_MODEL = {1: "voxels", 2: "voxels", 3: "slab", 4: "slab", 5: "product", 6: "product", 7: "product",
-                 8: "product", 9: "product"}  # fmt: skip
+                 8: "product", 9: "product", 10: "product"}  # fmt: skip
 PROTOCOL_FILE = {
     4: "docs/protocols/execution_table_grid.md",
     5: "docs/protocols/execution_table_grid_v5.md",
@@ -177,6 +183,7 @@ PROTOCOL_FILE = {
     7: "docs/protocols/execution_table_grid_v7.md",
     8: "docs/protocols/execution_table_grid_v8.md",
     9: "docs/protocols/execution_table_grid_v9.md",
+    10: "docs/protocols/execution_table_grid_v10.md",
 }
 """Protocols committed as files (v1-v3 were written in this docstring)."""
 BOOTSTRAP = 2000  # the robot's model of the table top around the bottle
