@@ -96,10 +96,11 @@ the product builds (``baseplace candidates``: the scene near the bottle at senso
 plane it stands on exact, the clearance from the plane's noise) instead of the experiment's own
 voxels and slab. Held-out seeds 14, 15, 16.
 
-Protocols v6-v9: docs/protocols/execution_table_grid_v6.md ... _v9.md (v9: the robot planner with the
-product's 1 cm point bound, held-out seeds 26-31).
+Protocols v6-v10: docs/protocols/execution_table_grid_v6.md ... _v10.md (v9: the robot planner with the
+product's 1 cm point bound, held-out seeds 26-31; v10: the robot re-plans with the reference planner of
+bench_motion_verdicts.py, held-out seeds 32-37, on a quiet machine).
 
-Usage: python bench/bench_execution.py --protocol 9 --split heldout [--cells 12]
+Usage: python bench/bench_execution.py --protocol 10 --split heldout [--cells 12]
 """
 
 from __future__ import annotations
