@@ -1,4 +1,4 @@
-"""Why the default method's executed draws fail on the table-grid execution dev seeds (protocol v6).
+"""Why the default method's executed draws fail on the table-grid execution dev seeds (protocol v6, or v10).
 
 Development data only: seeds 0, 1, 2 (any other seed is refused; 14-19 are held-out). Each trial
 is run exactly as ``bench/bench_execution.py --protocol 6`` runs it (its protocol table, map,
@@ -19,7 +19,7 @@ default method's trials use. For every failed draw of the default method:
 * ``no_placement``: the IRM search's verifier checks, by outcome (``bench/irm_pool_dev.py``'s
   recording verifier).
 
-Usage: NUMBA_NUM_THREADS=1 python bench/execution_failures_dev.py [--seeds 0 1 2] [--cells 12]
+Usage: NUMBA_NUM_THREADS=1 python bench/execution_failures_dev.py [--seeds 0 1 2] [--cells 12] [--protocol 10]
 """
 
 from __future__ import annotations
@@ -280,10 +280,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=list(DEV_SEEDS))
     parser.add_argument("--cells", type=int, default=12, help="cells per seed (first N of the 3 x 4 grid)")
+    parser.add_argument("--protocol", type=int, choices=(6, 10), default=PROTOCOL,
+                        help="bench_execution's protocol to run the trials as (default 6)")  # fmt: skip
     args = parser.parse_args(argv)
     if not args.seeds or any(seed not in DEV_SEEDS for seed in args.seeds):
         raise InputError(f"development seeds only ({', '.join(map(str, DEV_SEEDS))}), got {args.seeds}")
-    cut, _, motion = PROTOCOLS[PROTOCOL]
+    cut, _, motion = PROTOCOLS[args.protocol]
     recorder = Recorder()
     recorder.install()
     irm_module.Verifier = _recording  # type: ignore[misc,assignment]
@@ -298,7 +300,7 @@ def main(argv: list[str] | None = None) -> int:
             recorder.calls.clear()
             LOG.clear()
             t = execution_trial(robot, rmap, shapes, seed, cell, CHEAP_ROBUST, ROBUST_KEY, DRAWS, cut=cut,
-                                motion=motion, support=SUPPORT_MODEL[PROTOCOL])  # fmt: skip
+                                motion=motion, support=SUPPORT_MODEL[args.protocol])  # fmt: skip
             placed = [m for m in EXECUTION_METHODS if t["methods"][m]["pose"] is not None]
             assert len(recorder.calls) == DRAWS * len(placed)
             first = placed.index("default") * DRAWS if "default" in placed else None
@@ -324,11 +326,11 @@ def main(argv: list[str] | None = None) -> int:
             trials.append(row)
             print(seed, cell, default["outcomes"], [f["cause"] for f in failures], flush=True)
         done.append(seed)
-        write(trials, done, len(cells))
+        write(trials, done, len(cells), args.protocol)
     return 0
 
 
-def write(trials: list[dict[str, Any]], seeds: list[int], cells: int) -> None:
+def write(trials: list[dict[str, Any]], seeds: list[int], cells: int, protocol: int) -> None:
     """The classification so far, per seed and overall, with provenance."""
     per_seed: dict[str, Any] = {}
     for seed in seeds:
@@ -347,10 +349,11 @@ def write(trials: list[dict[str, Any]], seeds: list[int], cells: int) -> None:
         per_seed[str(seed)] = {"draws": sum(len(t["outcomes"]) for t in rows), "outcomes": dict(outcomes),
                                "causes": dict(causes.most_common()),
                                "contacts": dict(contacts.most_common())}  # fmt: skip
-    result = {"protocol": {"version": PROTOCOL, "method": "default", "cells": cells, "draws": DRAWS,
+    result = {"protocol": {"version": protocol, "method": "default", "cells": cells, "draws": DRAWS,
                            "robust_not_analysed": {"pool": CHEAP_ROBUST.pool, "samples": CHEAP_ROBUST.samples}},
               "per_seed": per_seed, "trials": trials}  # fmt: skip
-    report("execution_failures_dev", result, seeds=SeedSplit(dev=DEV_SEEDS, held_out=HELD_OUT), split="dev",
+    name = "execution_failures_dev" if protocol == PROTOCOL else f"execution_failures_dev_v{protocol}"
+    report(name, result, seeds=SeedSplit(dev=DEV_SEEDS, held_out=HELD_OUT), split="dev",
            used_seeds=seeds)  # fmt: skip
 
 
