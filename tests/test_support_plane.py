@@ -17,8 +17,8 @@ from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import Environment, contact_groups
 from baseplace.world.grasped_object import GraspedObject
-from baseplace.world.sensor_resolution import FINE, SupportPlane
-from baseplace.world.support_plane import RADIUS, SUPPORT_PLANE
+from baseplace.world.sensor_resolution import FINE, PLANE_DEPTH, SupportPlane
+from baseplace.world.support_plane import RADIUS, SUPPORT_PLANE, fit_support_slab
 
 RES = 0.025
 TARGET = [0.75, -0.15, 0.85, 0.0, 0.0, 0.0]  # side grasp in front of the base (as tests/test_motion.py)
@@ -194,3 +194,53 @@ def test_a_surface_that_is_not_planar_is_no_plane_its_points_stay_cells():
         assert any(
             tuple(np.floor(p / r).astype(np.int64)) in keys for r, keys in sets.items() if r > FINE
         ) or (fine.query(p)[0] <= reach)
+
+
+def _table_with_sides(top: float, rng: np.random.Generator, sigma: float = 0.003):
+    """A table top (1 cm grid) with its 3 cm side faces sampled as seed 004's table grid samples them
+    (rows 3, 2 and 1 cm under the top), a cylinder 10 cm from two edges, Gaussian noise per axis."""
+    (x0, x1), (y0, y1) = TABLE_XY
+    xs, ys = np.arange(x0, x1 + 1e-9, 0.01), np.arange(y0, y1 + 1e-9, 0.01)
+    X, Y = np.meshgrid(xs, ys)
+    parts = [np.c_[X.ravel(), Y.ravel(), np.full(X.size, top)]]
+    for z in (top - 0.03, top - 0.02, top - 0.01):
+        parts += [np.c_[xs, np.full(len(xs), y), np.full(len(xs), z)] for y in (y0, y1)]
+        parts += [np.c_[np.full(len(ys), x), ys, np.full(len(ys), z)] for x in (x0, x1)]
+    table = np.concatenate(parts)
+    xy = (x1 - 0.1, y1 - 0.1)
+    obj = GraspedObject.cylinder([*xy, top + 0.075], 0.03, 0.15)
+    a, z = np.meshgrid(
+        np.linspace(0, 2 * np.pi, 40, endpoint=False), np.arange(top + 0.005, top + 0.15, 0.01)
+    )
+    bottle = np.c_[xy[0] + 0.03 * np.cos(a).ravel(), xy[1] + 0.03 * np.sin(a).ravel(), z.ravel()]
+    table = table + rng.normal(0.0, sigma, table.shape)
+    return table, np.concatenate([table, bottle + rng.normal(0.0, sigma, bottle.shape)]), obj
+
+
+def test_a_table_seen_with_its_side_faces_keeps_its_exact_plane_on_its_top():
+    """The side faces' points within the fit's band lie below the plane: they must not cost the top its
+    exact plane (on main 6 of these 10 scenes had none, and the hand met raw noisy cells up to 2 cm
+    over the true top: table-grid execution dev seeds)."""
+    for seed in range(10):
+        _, cloud, obj = _table_with_sides(0.7, np.random.default_rng(seed))
+        slab = fit_support_slab(cloud, obj.footprint_distance, obj.bottom, RES)
+        assert slab is not None, f"seed {seed}: no plane"
+        assert np.all(np.abs(slab.height(slab.hull) - 0.7) < 1e-3), f"seed {seed}: off the true top"
+
+
+def test_the_plane_kept_beside_side_faces_loses_no_point():
+    sigma, top = 0.003, 0.7
+    table, cloud, obj = _table_with_sides(top, np.random.default_rng(0), sigma)
+    groups, object_group = _models(cloud, obj, slab=True)
+    plane = groups.pop(SUPPORT_PLANE, None)
+    assert isinstance(plane, SupportPlane)
+    # each point of the top and of the side faces is in a cell or inside the plane's prism
+    cells = [c for g in [*groups.values(), object_group] for c in _cells(g)]
+    sets = _key_sets(cells)
+    in_prism = (
+        _in_hull(table[:, :2], plane.hull)
+        & (table[:, 2] <= top + 5 * sigma)
+        & (table[:, 2] >= top - PLANE_DEPTH + 1e-3)
+    )
+    for p, inside in zip(table, in_prism, strict=True):
+        assert inside or any(tuple(np.floor(p / r).astype(np.int64)) in keys for r, keys in sets.items())
