@@ -53,3 +53,26 @@ def test_no_package_imports_a_package_above_it():
             upward.add((a, b))
     assert upward <= KNOWN_UPWARD, f"imports up the layers: {sorted(upward - KNOWN_UPWARD)}"
     assert upward == KNOWN_UPWARD, f"removed: strike them from KNOWN_UPWARD: {sorted(KNOWN_UPWARD - upward)}"
+
+
+def test_the_caches_find_their_folder_without_the_kernel_generator():
+    """Issue 26's walk: the map and segmentation caches take the per-user cache folder from ``files``.
+
+    Reading a cached map or segmentation needs no FK code generator.
+    """
+    g = _graph()
+    for cache in ("baseplace.reachability.cache", "baseplace.terrain.cache", "baseplace.jobs.reach"):
+        assert not g.has_edge(cache, "baseplace.robots.codegen"), cache
+        assert g.has_edge(cache, "baseplace.files"), cache
+
+
+def test_a_cached_segmentation_needs_no_diagnosis():
+    """Issue 26's walk: ``terrain.pipeline`` imports the diagnosis of a failed segmentation where it segments."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, baseplace.terrain.cache, baseplace.terrain.pipeline; "
+        "sys.exit('baseplace.terrain.diagnose' in sys.modules)"
+    )
+    assert subprocess.run([sys.executable, "-c", code], check=False).returncode == 0

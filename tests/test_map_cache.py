@@ -5,11 +5,11 @@ from __future__ import annotations
 import h5py
 import numpy as np
 
+from baseplace.files import private_dir
 from baseplace.reachability import cache as map_cache
 from baseplace.reachability.build import BuildSettings
 from baseplace.reachability.cache import cached_map, cached_map_path
 from baseplace.reachability.storage import load_map, save_map
-from baseplace.robots.codegen import private_dir
 
 
 def _gzip(path) -> bool:

@@ -142,7 +142,7 @@ def test_tampered_cached_kernel_is_regenerated_not_imported(tmp_path):
 
 
 def test_kernel_cache_of_another_user_or_open_to_others(tmp_path, monkeypatch):
-    from baseplace.robots.codegen import private_dir
+    from baseplace.files import private_dir
 
     d = tmp_path / "k"
     d.mkdir(mode=0o777)

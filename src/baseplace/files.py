@@ -101,6 +101,46 @@ def _full(path: Path, what: str, reason: str, existed: bool) -> OutputError:
     )
 
 
+def cache_root() -> Path:
+    """The per-user cache: ``$BASEPLACE_CACHE`` or ``~/.cache/baseplace``.
+
+    It holds the generated FK kernels (``kernels/``), the default reachability maps (``maps/``)
+    and the segmented terrains (``terrain/``); create its folders with :func:`private_dir`.
+    """
+    return Path(
+        os.environ.get("BASEPLACE_CACHE") or os.path.join(os.path.expanduser("~"), ".cache", "baseplace")
+    )
+
+
+def private_dir(directory: Path) -> Path:
+    """Create ``directory`` (mode 0700) if needed; refuse one that others could write into.
+
+    For the per-user cache's folders (:func:`cache_root`). Whoever can write the kernel cache can
+    run code in every build (numba's cache holds compiled code), so it must belong to this user and
+    be writable by nobody else.
+
+    Raises:
+        InputError: the directory cannot be created or belongs to another user.
+        OutputError: no room on its disk for the directory.
+    """
+    try:
+        directory.mkdir(mode=0o700, parents=True, exist_ok=True)
+        st = directory.stat()
+    except OSError as exc:
+        if is_disk_full(exc):
+            reason = disk_full_reason(exc)
+            raise OutputError(f"cannot create cache directory {directory}: {reason}", reason) from None
+        raise InputError(f"cannot create cache directory {directory}: {exc.strerror}") from None
+    if st.st_uid != os.getuid():
+        raise InputError(
+            f"cache directory {directory} belongs to another user; "
+            "set BASEPLACE_CACHE to a directory of your own"
+        )
+    if st.st_mode & 0o022:
+        os.chmod(directory, 0o700)  # ours, but others could write into it: close it first
+    return directory
+
+
 def skip_cache_entry(what: str, directory: str | Path, exc: BaseException) -> None:
     """Warn in one line that a cache entry was not stored in ``directory`` because of ``exc``.
 

@@ -292,9 +292,8 @@ def set_workers(workers: int | None) -> None:
 
 def store_in_cache(rmap: ReachabilityMap, path: Path) -> bool:
     """Keep a default map built by ``build-map`` in the per-user cache too; False where it cannot."""
-    from baseplace.files import OutputError, skip_cache_entry
+    from baseplace.files import OutputError, private_dir, skip_cache_entry
     from baseplace.reachability.storage import save_map
-    from baseplace.robots.codegen import private_dir
 
     try:
         private_dir(path.parent)

@@ -493,16 +493,18 @@ def scene_environment(
     terrain = cache.terrain(s.resolution)
     outline = footprint_outline(robot.spec.footprint_radius, robot.spec.footprint_polygon)
     key = "floor" if s.strategy == "orm" else "regions"
-    voxels = cache.shared(("obstacles", key, s.resolution, s.support_dist, s.stand_on, outline.tobytes()),
-                          lambda: _obstacles(terrain, s, outline, cache))  # fmt: skip
-    groups = contact_groups(voxels, voxels, None, floor=_floor(cache, key, s, outline, terrain, voxels))[0]
+
+    def environment() -> Environment:  # built once per cache: a warm query finds it made
+        voxels = cache.shared(("obstacles", key, s.resolution, s.support_dist, s.stand_on, outline.tobytes()),
+                              lambda: _obstacles(terrain, s, outline, cache))  # fmt: skip
+        floor = _floor(cache, key, s, outline, terrain, voxels)
+        return Environment(robot, contact_groups(voxels, voxels, None, floor=floor)[0], shapes=obstacles)
+
     env_key = ("environment", robot, key, s.resolution, s.support_dist, s.stand_on, outline.tobytes())
     if not obstacles:
-        return cache.shared(env_key, lambda: Environment(robot, groups))
+        return cache.shared(env_key, environment)
     # per query's obstacles, like a grasped object: only the last few are kept (a service's scene lives long)
-    return cache.per_object(
-        (*env_key, obstacles_key(obstacles)), lambda: Environment(robot, groups, shapes=obstacles)
-    )
+    return cache.per_object((*env_key, obstacles_key(obstacles)), environment)
 
 
 def with_floor(points: ArrayLike, z: float, margin: float = 2.0, spacing: float = 0.02) -> FloatArray:

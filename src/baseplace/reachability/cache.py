@@ -16,10 +16,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from baseplace.errors import InputError
-from baseplace.files import OutputError, skip_cache_entry
+from baseplace.files import OutputError, cache_root, private_dir, skip_cache_entry
 from baseplace.reachability.settings import BuildSettings
 from baseplace.reachability.storage import FORMAT_VERSION, is_compressed, load_map, save_map
-from baseplace.robots.codegen import cache_dir, private_dir
 from baseplace.status import map_step, step_progress
 
 if TYPE_CHECKING:
@@ -38,7 +37,7 @@ def cached_map_path(robot: Robot, settings: BuildSettings, arm: str | None = Non
     for name in ("self_collision", "manipulability", "certify", "support_threshold"):
         if getattr(settings, name):
             key += f"-{name}{getattr(settings, name)}"
-    return cache_dir().parent / "maps" / f"map-{hashlib.sha256(key.encode()).hexdigest()[:32]}.rmap"
+    return cache_root() / "maps" / f"map-{hashlib.sha256(key.encode()).hexdigest()[:32]}.rmap"
 
 
 def cached_map(

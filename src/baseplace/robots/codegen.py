@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import hashlib
 import importlib.util
-import os
 import sys
 from pathlib import Path
 from types import ModuleType
@@ -22,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from baseplace.errors import InputError
+from baseplace.files import cache_root, private_dir
 from baseplace.robots.model import PRISMATIC, Arm
 
 # Coefficients below this are dropped (URDF rpy values like 1.5708 leave ~5e-12 residues). Each
@@ -181,39 +180,8 @@ _loaded: dict[str, ModuleType] = {}
 
 
 def cache_dir() -> Path:
-    """Where generated kernels (and numba's compiled copies) are kept."""
-    root = os.environ.get("BASEPLACE_CACHE") or os.path.join(os.path.expanduser("~"), ".cache", "baseplace")
-    return Path(root) / "kernels"
-
-
-def private_dir(directory: Path) -> Path:
-    """Create ``directory`` (mode 0700) if needed; refuse one that others could write into.
-
-    Whoever can write the kernel cache can run code in every build (numba's cache holds compiled
-    code), so it must belong to this user and be writable by nobody else.
-
-    Raises:
-        InputError: the directory cannot be created or belongs to another user.
-        OutputError: no room on its disk for the directory.
-    """
-    from baseplace.files import OutputError, disk_full_reason, is_disk_full
-
-    try:
-        directory.mkdir(mode=0o700, parents=True, exist_ok=True)
-        st = directory.stat()
-    except OSError as exc:
-        if is_disk_full(exc):
-            reason = disk_full_reason(exc)
-            raise OutputError(f"cannot create cache directory {directory}: {reason}", reason) from None
-        raise InputError(f"cannot create cache directory {directory}: {exc.strerror}") from None
-    if st.st_uid != os.getuid():
-        raise InputError(
-            f"cache directory {directory} belongs to another user; "
-            "set BASEPLACE_CACHE to a directory of your own"
-        )
-    if st.st_mode & 0o022:
-        os.chmod(directory, 0o700)  # ours, but others could write into it: close it first
-    return directory
+    """Where generated kernels (and numba's compiled copies) are kept, in the per-user cache."""
+    return cache_root() / "kernels"
 
 
 def _kernel_file(directory: Path, key: str, source: str) -> Path:

@@ -94,7 +94,12 @@ CLI_NAMES = {"targets": "target", "grasp_points": "grasp_point", "obstacles": "o
 
 
 def in_radians(command: str, req: dict[str, Any]) -> dict[str, Any]:
-    """The request's angles in radians: with ``degrees``, converted as the CLI's ``--degrees`` converts them."""
+    """The request's angles in radians: with ``degrees``, converted as the CLI's ``--degrees`` converts them.
+
+    Without ``degrees`` the request is already in radians: it is passed on as it is (a copy).
+    """
+    if not req.get("degrees"):
+        return dict(req)
     import argparse
 
     from baseplace.argtypes import in_radians as cli_in_radians

@@ -94,8 +94,7 @@ def check_up_direction_cached(points: ArrayLike, optical: bool = False) -> None:
 
     check_up_direction(pts, optical=optical)  # raises for a cloud that does not look z-up
     from baseplace.errors import InputError
-    from baseplace.files import atomic_write
-    from baseplace.robots.codegen import private_dir
+    from baseplace.files import atomic_write, private_dir
 
     try:
         private_dir(marker.parent)
@@ -115,9 +114,9 @@ def _prune(directory: Path, pattern: str, keep: int) -> None:
 
 def terrain_dir() -> Path:
     """Where the cache keeps segmented terrains (beside the kernels and the maps)."""
-    from baseplace.robots.codegen import cache_dir
+    from baseplace.files import cache_root
 
-    return cache_dir().parent / "terrain"
+    return cache_root() / "terrain"
 
 
 def cached_terrain(
@@ -206,9 +205,8 @@ def _digest(key: str, arrays: dict[str, np.ndarray]) -> str:
 
 def write_terrain(path: Path, key: str, terrain: Terrain) -> None:
     """Store ``terrain`` under ``key`` at ``path`` (atomically), then drop the oldest entries."""
-    from baseplace.files import atomic_hdf5
+    from baseplace.files import atomic_hdf5, private_dir
     from baseplace.h5files import short_text, write_header
-    from baseplace.robots.codegen import private_dir
 
     private_dir(path.parent)
     arrays = _arrays(terrain)

@@ -13,7 +13,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError, unknown
-from baseplace.terrain.diagnose import auto_resolution, explain_no_support
 from baseplace.terrain.graph import GraphSettings, build_region_graph
 from baseplace.terrain.heightmap import HeightMap, check_cells
 from baseplace.terrain.segmentation import (
@@ -100,6 +99,9 @@ def terrain_from_points(
             count and the limit), or no level region, with its cause (too small for the cell:
             the resolution to try; no level plane: the dominant plane's normal as up vector).
     """
+    # imported here: a segmentation read from the cache (terrain/cache.py) never needs the diagnosis
+    from baseplace.terrain.diagnose import auto_resolution, explain_no_support
+
     segmenter = make_segmenter(algorithm)
     t_auto = time.perf_counter()
     if resolution is None:
