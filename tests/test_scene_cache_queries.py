@@ -101,3 +101,31 @@ def test_a_navigate_query_in_a_cached_scene_reads_the_bounds_from_the_cache(tiag
         with pytest.raises(InputError, match="--goal"):
             navigate_job(job)
     assert calls["points_bounds"] == 1, calls  # main: 2 (once per query, cache or not)
+
+
+def test_the_same_targets_again_find_their_osrm_made_and_the_same_placements(tiago, tiago_map, monkeypatch):
+    from baseplace.placement import pipeline
+
+    points = cloud(tray_scene(A))
+    cache = SceneCache(points)
+    calls: Counter[str] = Counter()
+    _counted(monkeypatch, pipeline, "build_osrm", calls)
+    first = _query(tiago, tiago_map, points, cache, 0)
+    second = _query(tiago, tiago_map, points, cache, 1)
+    assert calls["build_osrm"] == 1, calls  # main: once per query (2)
+    # oracle: the same query without a scene cache builds its own OSRM and finds the same
+    alone = _query(tiago, tiago_map, points, SceneCache(points), 1)
+    for key in ("placements", "failures", "tries"):
+        assert second[key] == alone[key], key
+    assert first["targets"] == second["targets"]
+    moved = THROUGH_B.copy()
+    moved[0, 3] += 0.05  # other targets: an OSRM of their own
+    target = " ".join(f"{v:.6f}" for v in (*moved[:3, 3], *matrix_to_rpy(moved[:3, :3])))
+    settings = PlaceSettings(tries=5, motion=None, robustness=RobustnessSettings(samples=0))
+    job = PlaceJob([target], tiago, cloud=inputs.CloudInput(points=points), map=tiago_map, settings=settings,
+                   seed=0, cache=cache)  # fmt: skip
+    try:
+        place_job(job)
+    except NoResultError:
+        pass
+    assert calls["build_osrm"] == 3, calls  # the oracle's own, and the moved targets'

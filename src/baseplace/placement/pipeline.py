@@ -28,7 +28,7 @@ from baseplace.placement import deadline
 from baseplace.placement.motion import MotionChecker, MotionSettings, transit_environment
 from baseplace.placement.osrm import OSRM, build_osrm, footprint_kernels
 from baseplace.placement.robustness import RobustnessScorer, RobustnessSettings, rank_by_robustness
-from baseplace.placement.scene_cache import SceneCache, object_key
+from baseplace.placement.scene_cache import Same, SceneCache, object_key
 from baseplace.placement.strategies import make_strategy
 from baseplace.placement.verify import Placement, Verifier
 from baseplace.reachability.rmap import ReachabilityMap
@@ -124,7 +124,7 @@ class PlacementResult:
         placements: verified placements (at most M).
         failures: counts of rejected candidates by reason, and "exhausted" when the strategy ran dry.
         tries: candidates checked.
-        timings_ms: segmentation, osrm, collision_setup (the grasped object and the obstacle
+        timings_ms: segmentation, osrm (built, or found in the scene's cache), collision_setup (the grasped object and the obstacle
             OcTrees), query (candidates and verification), request_to_placement (all but the
             segmentation: seed 000's t_a) and total [ms]; the query's share spent in the
             reaching-motion check (motion) and the robustness score (robustness).
@@ -189,7 +189,8 @@ def place(
             :func:`find_grasped_object`; none if no point is near it) or None (nothing may be
             touched).
         cache: what earlier queries in this scene built (segmentation, obstacle voxels, collision
-            environments, per grasped object too), reused and filled (:class:`SceneCache`);
+            environments, per grasped object too, and the OSRM per targets), reused and filled
+            (:class:`SceneCache`);
             ``points`` must be its cloud. Takes the place of ``terrain`` and ``environments``.
         obstacles: collision objects given by hand (:mod:`baseplace.world.obstacles`), checked
             beside the cloud's voxels by every check (collision, reaching motion, robustness).
@@ -209,7 +210,20 @@ def place(
     outline = footprint_outline(robot.spec.footprint_radius, robot.spec.footprint_polygon)
     _check_targets(seg, T_targets)
     allowed = support_regions(terrain, s, outline, cache)
-    osrm = build_osrm(seg, rmap, T_targets, outline, rmap.horizontal_reach, s.n_orientations, allowed)
+
+    def make_osrm() -> OSRM:
+        made = build_osrm(seg, rmap, T_targets, outline, rmap.horizontal_reach, s.n_orientations, allowed)
+        for array in (made.values, made.near, made.fits, made.gammas):
+            array.flags.writeable = False  # shared by the scene's queries: read only
+        return made
+
+    t_osrm = time.perf_counter()
+    if cache is None:
+        osrm = make_osrm()
+    else:  # per scene and targets: a query that asks again for the same targets finds it made
+        osrm = cache.per_targets(("osrm", Same(rmap), Same(seg), T_targets.tobytes(), outline.tobytes(),
+                                  s.n_orientations, None if allowed is None else tuple(allowed)), make_osrm)  # fmt: skip
+    osrm_ms = (time.perf_counter() - t_osrm) * 1e3
     if not osrm.near.any():
         raise InputError(
             f"no planar region lies within the arm's reach ({rmap.horizontal_reach:.2f} m) of every target"
@@ -262,7 +276,7 @@ def place(
     t4 = time.perf_counter()
     timings = {
         "segmentation": (t1 - t0) * 1e3,
-        "osrm": osrm.build_ms,
+        "osrm": osrm_ms,
         "collision_setup": (t3 - t2) * 1e3,
         "query": (t4 - t3) * 1e3,
         "request_to_placement": (t4 - t1) * 1e3,

@@ -204,13 +204,10 @@ class RobustnessEstimator:
         self._resolution = resolution
         self._cache: dict[tuple[int, int, int], bool] = {}
 
-    def _key(self, T: FloatArray) -> tuple[int, int, int]:
-        yaw = float(yaw_of(T))
-        return (
-            round(T[0, 3] / self._resolution),
-            round(T[1, 3] / self._resolution),
-            round(yaw / self._resolution),
-        )
+    def _keys(self, poses: FloatArray) -> list[tuple[int, int, int]]:
+        """Per pose (S, 4, 4), its cell of the cache grid: x, y and yaw rounded to the resolution."""
+        xyyaw = np.stack([poses[:, 0, 3], poses[:, 1, 3], yaw_of(poses)], axis=1) / self._resolution
+        return [(a, b, c) for a, b, c in np.rint(xyyaw).astype(np.int64).tolist()]
 
     def successes(
         self, T_world_base: ArrayLike, q_seeds: list[FloatArray] | None = None
@@ -225,7 +222,7 @@ class RobustnessEstimator:
             q_seeds: per target, the nominal arm configuration (n,) that seeds the IK.
         """
         poses = perturbed(T_world_base, self.offsets)
-        keys = [self._key(T) for T in poses]
+        keys = self._keys(poses)
         todo = [i for i, k in enumerate(keys) if k not in self._cache]
         if todo:
             ok = np.ones(len(todo), dtype=bool)

@@ -32,12 +32,34 @@ OBJECT_ENVIRONMENTS = 8
 """Collision environments kept per scene for distinct grasped objects, and objects found per grasp
 point (least recently used go)."""
 
+OSRMS = 8
+"""OSRMs kept per scene for distinct targets (least recently used go): a robot that asks again for
+the same grasp (another seed, after a failed attempt) finds the map of its base poses made."""
+
 NEAR_GRASP_MARGIN = 0.05
 """Margin [m] of the cloud window in which :meth:`SceneCache.grasped_object` seeks the object, beyond
 the largest distance :func:`~baseplace.world.grasped_object.find_grasped_object` reads a point at."""
 
 NEAR_CELL = 0.25
 """Cell of the grid that finds a cloud's points near a point [m]."""
+
+
+class Same:
+    """A cache key part that is one object, by identity (arrays and maps hash by no value of theirs).
+
+    It holds the object: an id() of a collected one could come back for another.
+    """
+
+    __slots__ = ("obj",)
+
+    def __init__(self, obj: object) -> None:
+        self.obj = obj
+
+    def __hash__(self) -> int:
+        return id(self.obj)
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Same) and other.obj is self.obj
 
 
 def object_key(obj: GraspedObject | None) -> str:
@@ -72,6 +94,7 @@ class SceneCache:
             self._terrains[resolution] = terrain
         self._shared: dict[Hashable, Any] = {}
         self._objects: OrderedDict[Hashable, Any] = OrderedDict()
+        self._osrms: OrderedDict[Hashable, Any] = OrderedDict()
         self._lock = threading.Lock()
         self.hits = 0
         self.misses = 0
@@ -185,13 +208,24 @@ class SceneCache:
         """As :meth:`shared`, for values that depend on a grasped object: the last few are kept."""
         return self._recent(self._objects, key, make, count=True)
 
+    def per_targets(self, key: Hashable, make: Callable[[], T]) -> T:
+        """As :meth:`shared`, for values that depend on the targets (the OSRM): the last :data:`OSRMS` are kept.
+
+        A store of their own: a query's new targets never push out a grasped object's environment.
+        """
+        return self._recent(self._osrms, key, make, limit=OSRMS)
+
     def _recent(
-        self, store: OrderedDict[Any, Any], key: Hashable, make: Callable[[], T], count: bool = False
+        self,
+        store: OrderedDict[Any, Any],
+        key: Hashable,
+        make: Callable[[], T],
+        count: bool = False,
+        limit: int = OBJECT_ENVIRONMENTS,
     ) -> T:
         """The value for ``key`` in ``store``, made by ``make()`` (outside the lock) when missing.
 
-        ``store`` keeps the last :data:`OBJECT_ENVIRONMENTS` keys used. ``count``: tally
-        :attr:`hits` and :attr:`misses`.
+        ``store`` keeps the last ``limit`` keys used. ``count``: tally :attr:`hits` and :attr:`misses`.
         """
         with self._lock:
             if key in store:
@@ -204,6 +238,6 @@ class SceneCache:
                 return store[key]
             self.misses += count
             store[key] = value
-            while len(store) > OBJECT_ENVIRONMENTS:
+            while len(store) > limit:
                 store.popitem(last=False)
         return value
