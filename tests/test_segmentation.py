@@ -43,6 +43,17 @@ def test_voxels_and_height_map_against_known_points():
         HeightMap.from_voxels(vox, 0.01)
 
 
+def test_centres_at_some_cells_are_the_grid_centres_there_bit_for_bit(scene_and_map):
+    _, hmap = scene_and_map
+    X, Y = hmap.cell_centres()  # oracle: the (H, W) grids every caller read before
+    rng = np.random.default_rng(4)
+    rows, cols = rng.integers(0, hmap.shape[0], 500), rng.integers(0, hmap.shape[1], 500)
+    x, y = hmap.centres_at(rows, cols)
+    assert np.array_equal(x, X[rows, cols]) and np.array_equal(y, Y[rows, cols])
+    # and by hand: cell (r, c) is centred half a cell past its corner
+    assert x[0] == pytest.approx(hmap.origin[0] + (cols[0] + 0.5) * hmap.resolution, abs=1e-12)
+
+
 @pytest.mark.parametrize(
     ("algorithm", "min_accuracy", "max_error_deg"), [("robust", 0.985, 0.5), ("baseline", 0.8, 15)]
 )

@@ -56,20 +56,18 @@ class OSRM:
 
     def poses(self, rows: NDArray[np.int64], cols: NDArray[np.int64], gammas: FloatArray) -> FloatArray:
         """World base poses (N, 4, 4) at cell centres with orientations ``gammas`` (N,)."""
-        X, Y = self.seg.hmap.cell_centres()
+        X, Y = self.seg.hmap.centres_at(rows, cols)
         labels = self.seg.labels[rows, cols]
         out = np.empty((len(rows), 4, 4))
         for rid in np.unique(labels):
             sel = labels == rid
             r = self.seg.regions[int(rid)]
-            out[sel] = plane_base_poses(
-                X[rows[sel], cols[sel]], Y[rows[sel], cols[sel]], gammas[sel], r.normal, r.d
-            )
+            out[sel] = plane_base_poses(X[sel], Y[sel], gammas[sel], r.normal, r.d)
         return out
 
     def gamma_to_target(self, rows: NDArray[np.int64], cols: NDArray[np.int64]) -> FloatArray:
         """The gamma (N,) that points the base's forward (x) axis at the targets' centroid."""
-        X, Y = self.seg.hmap.cell_centres()
+        X, Y = self.seg.hmap.centres_at(rows, cols)
         goal = self.targets[:, :3, 3].mean(axis=0)
         out = np.empty(len(rows))
         labels = self.seg.labels[rows, cols]
@@ -77,7 +75,7 @@ class OSRM:
             sel = labels == rid
             r = self.seg.regions[int(rid)]
             R0 = plane_frame(r.normal)
-            p = np.c_[X[rows[sel], cols[sel]], Y[rows[sel], cols[sel]]]
+            p = np.c_[X[sel], Y[sel]]
             z = r.height_at(p)
             d = goal - np.c_[p, z]
             out[sel] = np.arctan2(d @ R0[:, 1], d @ R0[:, 0])  # in-plane direction in the R0 frame

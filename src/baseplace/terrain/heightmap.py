@@ -104,6 +104,17 @@ class HeightMap:
         ys = self.origin[1] + (np.arange(h) + 0.5) * self.resolution
         return np.meshgrid(xs, ys)
 
+    def centres_at(self, rows: ArrayLike, cols: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """World x (N,) and y (N,) of the centres of cells (rows (N,), cols (N,)): :meth:`cell_centres` there.
+
+        The same values, bit for bit, without the (H, W) grids: a candidate needs one cell's centre.
+        """
+        r = np.asarray(rows, dtype=np.int64)
+        c = np.asarray(cols, dtype=np.int64)
+        x: FloatArray = self.origin[0] + (c.astype(np.float64) + 0.5) * self.resolution
+        y: FloatArray = self.origin[1] + (r.astype(np.float64) + 0.5) * self.resolution
+        return x, y
+
     def cell_of(self, xy: ArrayLike) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.bool_]]:
         """Row, column and in-bounds flag of world points (N, 2)."""
         p = np.asarray(xy, dtype=float).reshape(-1, 2)
