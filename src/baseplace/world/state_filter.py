@@ -262,11 +262,11 @@ def _shape_touches(c, r, kind, a, b, planes, balls):
 
     Kind 1: the hull planes a..b (inside <= 0); kind 2: the ball ``balls[a]`` (centre, radius).
     """
-    if kind == 1:
-        best = -np.inf
+    if kind == 1:  # certified by the first plane the centre lies more than r outside
         for h in range(a, b):
-            best = max(best, planes[h, 0] * c[0] + planes[h, 1] * c[1] + planes[h, 2] * c[2] + planes[h, 3])
-        return not best > r
+            if planes[h, 0] * c[0] + planes[h, 1] * c[1] + planes[h, 2] * c[2] + planes[h, 3] > r:
+                return False
+        return True
     dx, dy, dz = c[0] - balls[a, 0], c[1] - balls[a, 1], c[2] - balls[a, 2]
     return not math.sqrt(dx * dx + dy * dy + dz * dz) > r + balls[a, 3]
 
@@ -321,6 +321,9 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
         any_pair = False
         for q in range(parts.shape[0]):
             kind, a, b, r0, r1 = parts[q, 0], parts[q, 1], parts[q, 2], parts[q, 3], parts[q, 4]
+            if kind == 0 and _part_far(r0, r1, scene_rows, joint, Wj, group_radius, part_reach[q], geo[q]):
+                out_i[r0:r1] = False  # every row's group sphere clear of the part's bounding box
+                continue
             if kind == 0:
                 pts = all_points[offs[q, 0] : offs[q + 1, 0]]
                 keys = all_keys[offs[q, 1] : offs[q + 1, 1]]
@@ -388,6 +391,36 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
         if any_pair:
             return i
     return -1
+
+
+@nb.njit(cache=True, inline="always")
+def _part_far(r0, r1, rows, joint, Wj, group_radius, reach, geo):
+    """Whether the group sphere of every row r0..r1's arm joint is farther than ``reach`` from a point part's bounding box.
+
+    ``geo[0:3]``, ``geo[3:6]``: the box (the lowest and highest box centre); ``reach`` at least
+    every row's. :func:`_points_rows` certifies such rows by the same box distance (the first
+    term of :func:`~baseplace.world.point_index._lower_bound`), so this early out changes no
+    answer: it spares the part's array views and the call (about 1 us per part and state).
+    """
+    group = -2
+    for p in range(r0, r1):
+        j = joint[rows[p]]
+        if j == group:
+            continue
+        group = j
+        if j < 0:
+            return False
+        d2 = 0.0
+        for k in range(3):
+            c = Wj[j, k]
+            if c < geo[k]:
+                d2 += (geo[k] - c) ** 2
+            elif c > geo[3 + k]:
+                d2 += (c - geo[3 + k]) ** 2
+        r = group_radius[j] + reach
+        if not d2 > r * r:
+            return False
+    return True
 
 
 @nb.njit(cache=True)
