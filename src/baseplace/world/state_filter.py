@@ -302,6 +302,7 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
     W, Ws = np.empty((G, 3)), np.empty((K, 3))
     stamp = np.full(G, -1)  # the state each geometry's cover spheres were last placed for
     near_h = np.empty(K, dtype=np.bool_)
+    hull_hint = np.full((self_pairs.shape[0], 2), -1, dtype=np.int64)  # per self pair and hull: the plane that last served
     P = scene_rows.shape[0]
     reach = np.empty(P)
     part_reach = np.zeros(parts.shape[0])  # the largest of each part's rows
@@ -379,13 +380,16 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
                 if touch:
                     touch = _covers_near(g, h, i, self_reach[p], Cg, radius, stamp, sub_start, sub_joint, sub_local,
                                          sub_radius, F, T, Cs, Ws, near_h)  # fmt: skip
-                if touch:
-                    touch = not (
-                        _hull_clear(g, h, i, self_reach[p], joint, Cg, radius, stamp, sub_start, sub_joint, sub_local,
-                                    sub_radius, F, T, Cs, Ws, hull_start, hull_planes)
-                        or _hull_clear(h, g, i, self_reach[p], joint, Cg, radius, stamp, sub_start, sub_joint,
-                                       sub_local, sub_radius, F, T, Cs, Ws, hull_start, hull_planes)
-                    )  # fmt: skip
+                if touch:  # by g's hull, else h's; each tried first from the plane that served it last
+                    k = _hull_clear(g, h, i, self_reach[p], joint, Cg, radius, stamp, sub_start, sub_joint, sub_local,
+                                    sub_radius, F, T, Cs, Ws, hull_start, hull_planes, hull_hint[p, 0])
+                    if k >= 0:
+                        hull_hint[p, 0], touch = k, False
+                    else:
+                        k = _hull_clear(h, g, i, self_reach[p], joint, Cg, radius, stamp, sub_start, sub_joint,
+                                        sub_local, sub_radius, F, T, Cs, Ws, hull_start, hull_planes, hull_hint[p, 1])
+                        if k >= 0:
+                            hull_hint[p, 1], touch = k, False  # fmt: skip
                 out_i[P + p] = touch
                 any_pair |= touch
         if any_pair:
@@ -453,30 +457,33 @@ def _covers_near(
 
 @nb.njit(cache=True)
 def _hull_clear(g, h, i, reach, joint, Cg, radius, stamp, sub_start, sub_joint, sub_local, sub_radius, F, T, Cs, Ws,
-                hull_start, hull_planes):  # fmt: skip
-    """Whether geometry h at state i is farther than ``reach`` from geometry g's convex hull, by g's face planes.
+                hull_start, hull_planes, hint):  # fmt: skip
+    """A face plane of geometry g's convex hull that shows geometry h at state i farther than ``reach`` from it, or -1.
 
     g's hull faces (``hull_planes[hull_start[g]:hull_start[g + 1]]``, unit normal and offset in the
     frame of the arm joint that moves g, inside <= 0) each bound a half-space holding g, so a
     sphere whose centre lies more than its radius + ``reach`` outside any one of them is that far
-    from g. h is clear when its bounding sphere is, or every sphere of its cover is. Tighter than
-    sphere against sphere where g is large and flat-sided (TIAGo's torso beside the arm).
+    from g. h is clear when its bounding sphere is, or every sphere of its cover is (the plane
+    returned: the one that served the last). Tighter than sphere against sphere where g is large
+    and flat-sided (TIAGo's torso beside the arm). The planes are tried from ``hint`` on (the one
+    that served this pair at an earlier state, or -1), which changes no answer, only how soon it comes.
     """
     a, b = hull_start[g], hull_start[g + 1]
     if a == b:
-        return False
+        return -1
     j = joint[g]
-    hint = _outside_planes(Cg[h], radius[h] + reach, j, F, hull_planes, a, b, a)
-    if hint >= 0:
-        return True
+    k = _outside_planes(Cg[h], radius[h] + reach, j, F, hull_planes, a, b, hint)
+    if k >= 0:
+        return k
     if sub_start[h + 1] - sub_start[h] <= 1:
-        return False
+        return -1
     _cover_placed(h, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws)
+    k = hint
     for s in range(sub_start[h], sub_start[h + 1]):
-        hint = _outside_planes(Cs[s], sub_radius[s] + reach, j, F, hull_planes, a, b, max(hint, a))
-        if hint < 0:
-            return False
-    return True
+        k = _outside_planes(Cs[s], sub_radius[s] + reach, j, F, hull_planes, a, b, max(k, a))
+        if k < 0:
+            return -1
+    return k
 
 
 @nb.njit(cache=True)
