@@ -39,7 +39,7 @@ from scipy.spatial import ConvexHull, QhullError
 from baseplace.geometry.poses import FloatArray
 from baseplace.robots.model import Arm, Robot
 from baseplace.robots.spheres import _joint_frames, _place, _place_one
-from baseplace.world.point_index import PointIndex, _cell_range, _clear, _lower_bound, _within
+from baseplace.world.point_index import PointIndex, _cell_range, _clear, _lower_bound, _seek, _within
 
 SLACK = 1e-6
 """Added [m] to every certified distance: rounding in coal's and this module's arithmetic."""
@@ -237,10 +237,11 @@ def _points_outside_hull(g, c, r, reach, joint, F, T, hull_start, hull_planes, p
     local = np.empty(3)
     r2 = r * r
     i0, i1, j0, j1, k0, k1 = _cell_range(c, r + 1e-9, lo, cell, dims)
+    u = 0  # every key before u is below the next row's first (:func:`~baseplace.world.point_index._seek`)
     for k in range(k0, k1 + 1):
         for jj in range(j0, j1 + 1):
             row = dims[0] * (jj + dims[1] * k)
-            u = np.searchsorted(keys, row + i0)
+            u = _seek(keys, u, row + i0)
             while u < len(keys) and keys[u] <= row + i1:
                 for p in range(starts[u], starts[u + 1]):
                     dx, dy, dz = points[p, 0] - c[0], points[p, 1] - c[1], points[p, 2] - c[2]
