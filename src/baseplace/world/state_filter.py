@@ -303,7 +303,8 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
     W, Ws = np.empty((G, 3)), np.empty((K, 3))
     stamp = np.full(G, -1)  # the state each geometry's cover spheres were last placed for
     near_h = np.empty(K, dtype=np.bool_)
-    hull_hint = np.full((self_pairs.shape[0], 2), -1, dtype=np.int64)  # per self pair and hull: the plane that last served
+    # per self pair and hull (its first geometry's, its second's): the plane that last served
+    hull_hint = np.full((self_pairs.shape[0], 2), -1, dtype=np.int64)
     P = scene_rows.shape[0]
     reach = np.empty(P)
     part_reach = np.zeros(parts.shape[0])  # the largest of each part's rows
@@ -383,14 +384,14 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
                                          sub_radius, F, T, Cs, Ws, near_h)  # fmt: skip
                 if touch:  # by g's hull, else h's; each tried first from the plane that served it last
                     k = _hull_clear(g, h, i, self_reach[p], joint, Cg, radius, stamp, sub_start, sub_joint, sub_local,
-                                    sub_radius, F, T, Cs, Ws, hull_start, hull_planes, hull_hint[p, 0])
+                                    sub_radius, F, T, Cs, Ws, hull_start, hull_planes, hull_hint[p, 0])  # fmt: skip
                     if k >= 0:
                         hull_hint[p, 0], touch = k, False
                     else:
                         k = _hull_clear(h, g, i, self_reach[p], joint, Cg, radius, stamp, sub_start, sub_joint,
-                                        sub_local, sub_radius, F, T, Cs, Ws, hull_start, hull_planes, hull_hint[p, 1])
+                                        sub_local, sub_radius, F, T, Cs, Ws, hull_start, hull_planes, hull_hint[p, 1])  # fmt: skip
                         if k >= 0:
-                            hull_hint[p, 1], touch = k, False  # fmt: skip
+                            hull_hint[p, 1], touch = k, False
                 out_i[P + p] = touch
                 any_pair |= touch
         if any_pair:
