@@ -55,6 +55,8 @@ class Timers:
     def __init__(self) -> None:
         self.s: defaultdict[str, float] = defaultdict(float)
         self.n: defaultdict[str, int] = defaultdict(int)
+        self.active = False
+        """Count only while set (the timed repeat of a check)."""
 
     def wrap(self, owner: Any, name: str, key: str) -> None:
         inner = getattr(owner, name)
@@ -64,8 +66,9 @@ class Timers:
             try:
                 return inner(*args, **kwargs)
             finally:
-                self.s[key] += time.perf_counter() - t
-                self.n[key] += 1
+                if self.active:
+                    self.s[key] += time.perf_counter() - t
+                    self.n[key] += 1
 
         setattr(owner, name, timed)
 
@@ -135,7 +138,8 @@ def main() -> None:
         q, T_base = np.array(row["q_grasp"]), np.array(row["T_world_base"])
         for r in range(args.repeat):
             checker = MotionChecker(robot, arm, *models[key], MotionSettings())
-            if per_checker is not None and r == args.repeat - 1:
+            timers.active = r == args.repeat - 1
+            if per_checker is not None and timers.active:
                 per_checker(checker)
             if profile is not None and r == args.repeat - 1:
                 profile.enable()
