@@ -79,7 +79,7 @@ def reach_row(robot: Robot, seed: int) -> dict[str, Any]:
         furthest = round(0.01 * k, 2)
     return {"seed": seed, "tcp_z": round(float(T_tcp[2, 3]), 4), "bottle_top_z": round(top, 4),
             "fingertips_clear_top_at_m": round(float(clears), 4), "furthest_reachable_m": furthest,
-            "straight_approach_exists": furthest is not None and furthest >= clears}  # fmt: skip
+            "straight_approach_exists": bool(furthest is not None and furthest >= clears)}  # fmt: skip
 
 
 def smooth_row(seed: int) -> dict[str, Any]:
