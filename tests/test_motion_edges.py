@@ -123,3 +123,55 @@ def test_derived_pregrasp_keeps_the_open_hand_clear_of_the_grasped_cylinder(tiag
     assert motion.pregrasp_distance == pytest.approx(
         0.265, abs=0.001
     )  # TIAGo: 0.245 m fingertip reach + 0.02
+
+
+def test_a_wide_grasped_object_gets_a_pregrasp_beyond_the_default_distance_clear_of_it(tiago):
+    """A cylinder of 6 cm radius stands on the grasp point: at the default pre-grasp distance (0.15 m)
+    TIAGo's open fingertips (0.245 m ahead of the TCP) are still 5.5 cm into it, so the transit (where
+    nothing may touch it) cannot end there; the walk back goes on until the hand is clear of it (find-rate
+    dev seed 25030: 72 of 100 candidates refused so). Oracle: pinocchio FK puts every approach state on
+    the approach line, and coal on the true cylinder (the URDF's meshes, :class:`RobotShapes`) finds
+    the whole robot clear of it at the pre-grasp and along the transit, and only the hand touching
+    it along the approach."""
+    from baseplace.placement.motion import transit_environment
+    from baseplace.robots.fk import forward_kinematics
+    from baseplace_experiments.table_grid import RobotShapes, TrueShape
+
+    arm, q = _grasp_configuration(tiago)
+    target = pose_from_xyz_rpy(TARGET)
+    p_grasp = (target @ tiago.T_tcp_grasp(arm.name))[:3, 3]
+    radius, height = 0.06, 0.3
+    a, z = np.meshgrid(
+        np.linspace(0, 2 * np.pi, 160, endpoint=False), np.linspace(-height / 2, height / 2, 61)
+    )
+    ring = np.c_[radius * np.cos(a.ravel()), radius * np.sin(a.ravel()), z.ravel()]
+    r, b = np.meshgrid(np.linspace(0, radius, 13), np.linspace(0, 2 * np.pi, 160, endpoint=False))
+    caps = [np.c_[r.ravel() * np.cos(b.ravel()), r.ravel() * np.sin(b.ravel()), np.full(r.size, s * height / 2)]
+            for s in (-1, 1)]  # fmt: skip
+    cells = VoxelMap.from_points(np.vstack([ring, *caps]) * 0.999 + p_grasp, resolution=0.005)
+    approach_env = Environment(tiago, _empty(), grasped=cells)
+    transit = transit_environment(tiago, {"obstacle": _empty()}, cells)
+    assert transit is not None
+    motion = MotionChecker(tiago, arm, transit, approach_environment=approach_env,
+                           settings=MotionSettings(time_limit=5.0))  # fmt: skip
+    assert motion.pregrasp_distance == pytest.approx(0.15)
+    result = motion.check(q, np.eye(4), target)
+    assert result is not None, motion.last_contacts
+
+    T_cyl = np.eye(4)
+    T_cyl[:3, 3] = p_grasp
+    cylinder = TrueShape("cylinder", coal.Cylinder(radius, height), T_cyl)
+    shapes = RobotShapes(tiago)
+    axis = target[:3, :3] @ np.array([1.0, 0.0, 0.0])
+    for state in result.approach:  # on the line, behind the grasp, the orientation kept
+        T = forward_kinematics(arm, state)
+        offset = T[:3, 3] - target[:3, 3]
+        assert np.linalg.norm(offset - (offset @ axis) * axis) < 1e-3
+        assert np.allclose(T[:3, :3], target[:3, :3], atol=1e-2)
+        assert shapes.touching(state, np.eye(4), [], grasped=cylinder) is None  # only the hand may touch it
+    back = -(forward_kinematics(arm, result.approach[0])[:3, 3] - target[:3, 3]) @ axis
+    assert back > 0.15 + 1e-6  # beyond the default distance: there the fingertips were in the cylinder
+    assert shapes.touching(result.approach[0], np.eye(4), [cylinder]) is None  # pre-grasp: all clear
+    for p, n in itertools.pairwise(result.path):
+        for s in np.linspace(0.0, 1.0, max(2, int(np.ceil(np.abs(n - p).max() / 0.01)) + 1)):
+            assert shapes.touching(p + s * (n - p), np.eye(4), [cylinder]) is None

@@ -61,3 +61,16 @@ def test_empty_cloud_and_bad_input():
         PointIndex(np.array([[0.0, np.nan, 0.0]]))
     with pytest.raises(InputError, match="positive"):
         PointIndex(np.zeros((1, 3)), cell=0.0)
+
+
+def test_seek_is_searchsorted_from_a_lower_bound():
+    """The galloping search a query's cell rows use (``_seek``) answers as numpy's binary search."""
+    from baseplace.world.point_index import _seek
+
+    rng = np.random.default_rng(5)
+    for n in (0, 1, 2, 7, 100, 5000):
+        keys = np.sort(rng.integers(0, 3 * n + 5, n)).astype(np.int64)
+        for v in rng.integers(-2, 3 * n + 8, 200):
+            truth = int(np.searchsorted(keys, v))
+            for u in {0, truth // 3, truth // 2, max(truth - 1, 0), truth}:  # every key before u is below v
+                assert _seek(keys, u, int(v)) == truth, (n, v, u)

@@ -168,6 +168,29 @@ def _cell_range(c, e, lo, cell, dims):
     return i0, i1, j0, j1, k0, k1
 
 
+@nb.njit(cache=True, inline="always")
+def _seek(keys, u, v):
+    """``np.searchsorted(keys, v)`` for sorted keys whose first u are all below v: galloping from u.
+
+    The cells of one query are visited in increasing key order, so the next row's cells lie just
+    after the last one read: a few steps from there instead of a binary search over every key.
+    """
+    n = len(keys)
+    lo, hi, step = u, u, 1
+    while hi < n and keys[hi] < v:  # keys[:lo] < v; stop at a key >= v or the end
+        lo = hi + 1
+        hi = lo + step
+        step *= 2
+    hi = min(hi, n)
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if keys[mid] < v:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
 @nb.njit(cache=True)
 def _within(c, r, first, points, keys, starts, lo, cell, dims):
     """The squared distance to the nearest point within ``r`` of ``c`` (-1.0 when there is none).
@@ -179,6 +202,7 @@ def _within(c, r, first, points, keys, starts, lo, cell, dims):
     best = -1.0
     e = r + 1e-9  # the cells a point at exactly the radius lies in, whatever the rounding
     i0, i1, j0, j1, k0, k1 = _cell_range(c, e, lo, cell, dims)
+    a = 0  # every key before a is below the next row's first (the rows come in increasing order)
     for k in range(k0, k1 + 1):
         dz = max(lo[2] + k * cell - c[2], c[2] - (lo[2] + (k + 1) * cell), 0.0)
         for j in range(j0, j1 + 1):
@@ -186,7 +210,7 @@ def _within(c, r, first, points, keys, starts, lo, cell, dims):
             if dy * dy + dz * dz > r2 * (1.0 + 1e-9) + 1e-18:
                 continue
             row = dims[0] * (j + dims[1] * k)
-            a = np.searchsorted(keys, row + i0)  # the occupied cells of this row within [i0, i1]
+            a = _seek(keys, a, row + i0)  # the occupied cells of this row within [i0, i1]
             while a < len(keys) and keys[a] <= row + i1:
                 i = keys[a] - row
                 dx = max(lo[0] + i * cell - c[0], c[0] - (lo[0] + (i + 1) * cell), 0.0)

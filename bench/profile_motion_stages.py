@@ -1,0 +1,170 @@
+"""Where the reaching-motion check spends its time, by stage (issue 25 item 3; development only).
+
+Replays the checks of a ``bench_motion_verdicts.py`` results file (its inputs: seed, cell, grasp,
+base pose, target, grasp configuration; development seeds only, as that bench runs them) with the
+product's ``MotionSettings()`` and the same OMPL seed, rebuilding each scene's two collision models
+as that bench does (``scene_checks``), without the ``place`` calls that found the inputs. Each
+check's wall time is split by wrapping the checker's and the state filter's methods with
+``perf_counter`` timers (nested stages are counted in each: the table is inclusive):
+
+* ``approach``: the whole approach walk, of which ``walk_ik`` (the walk's IK steps,
+  ``DampedLeastSquaresIK.solve_from``), ``approach_edges`` (the joint lines between walk steps in the
+  approach model) and ``walk_stop`` (the transit-model test that ends a walk back early);
+* ``transit_ends`` (the start and pre-grasp states), ``transit_line`` (the straight joint line);
+* ``rrt`` (OMPL RRTConnect, with its shortcut), of which ``shortcut``;
+* across all stages: ``kernel`` (the compiled sphere pre-filter, ``_uncertified_states``),
+  ``coal_scene`` / ``coal_self`` (the exact fallbacks, with their calls).
+
+Also verdicts: the number found, and each check whose verdict differs from the file's ``product``.
+``--cprofile N``: cProfile the first N checks instead and print the top functions.
+
+Usage: python bench/profile_motion_stages.py [--results motion_verdicts_s12_final_a] [--repeat 1]
+"""
+
+from __future__ import annotations
+
+import argparse
+import cProfile
+import json
+import pstats
+import time
+from collections import defaultdict
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+import baseplace.world.state_filter as state_filter
+from baseplace.placement.motion import MotionChecker, MotionSettings
+from baseplace.placement.pipeline import PlaceSettings, scene_checks, with_floor
+from baseplace.placement.scene_cache import SceneCache
+from baseplace.reachability.cache import resolve_map
+from baseplace.robots.ik import DampedLeastSquaresIK
+from baseplace.robots.model import Robot
+from baseplace_experiments.execution_experiment import trial_scene
+from baseplace_experiments.table_grid import TableGridSettings
+from bench_motion_verdicts import check_seed
+
+RESULTS = Path(__file__).parent / "results"
+
+
+class Timers:
+    """Inclusive wall time and calls per stage name."""
+
+    def __init__(self) -> None:
+        self.s: defaultdict[str, float] = defaultdict(float)
+        self.n: defaultdict[str, int] = defaultdict(int)
+        self.active = False
+        """Count only while set (the timed repeat of a check)."""
+
+    def wrap(self, owner: Any, name: str, key: str) -> None:
+        inner = getattr(owner, name)
+
+        def timed(*args: Any, **kwargs: Any) -> Any:
+            t = time.perf_counter()
+            try:
+                return inner(*args, **kwargs)
+            finally:
+                if self.active:
+                    self.s[key] += time.perf_counter() - t
+                    self.n[key] += 1
+
+        setattr(owner, name, timed)
+
+
+def instrument(timers: Timers) -> Callable[[MotionChecker], None]:
+    """Wrap the module-level stages once; returns the per-checker wrapping."""
+    timers.wrap(state_filter, "_uncertified_states", "kernel")
+    timers.wrap(state_filter.StateFilter, "_scene_coal", "coal_scene")
+    timers.wrap(state_filter.StateFilter, "_self_coal", "coal_self")
+    timers.wrap(DampedLeastSquaresIK, "solve_from", "walk_ik")
+
+    def per_checker(checker: MotionChecker) -> None:
+        timers.wrap(checker, "approach", "approach")
+        timers.wrap(checker, "_clear_of_object", "walk_stop")
+        timers.wrap(checker, "_rrt", "rrt")
+        timers.wrap(checker, "_shortcut", "shortcut")
+        timers.wrap(checker, "_free", "transit_ends")
+        inner_blocking = checker._blocking
+
+        def blocking(a: Any, b: Any, T: Any, environment: Any) -> Any:
+            key = "transit_line" if environment is checker.environment else "approach_edges"
+            t = time.perf_counter()
+            try:
+                return inner_blocking(a, b, T, environment)
+            finally:
+                timers.s[key] += time.perf_counter() - t
+                timers.n[key] += 1
+
+        checker._blocking = blocking  # type: ignore[method-assign]
+
+    return per_checker
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--results", default="motion_verdicts_s12_final_a", help="bench/results/NAME.json")
+    parser.add_argument("--repeat", type=int, default=1, help="check each input this often (times: the last)")
+    parser.add_argument("--cprofile", type=int, default=0, help="cProfile the first N checks instead")
+    parser.add_argument("--uninstrumented", action="store_true", help="no stage timers (wall times only)")
+    args = parser.parse_args()
+    rows = json.loads((RESULTS / f"{args.results}.json").read_text())["checks"]
+    held_out = set(range(3, 14))
+    assert not held_out & {row["seed"] for row in rows}, "held-out seeds"
+    robot = Robot("tiago")
+    rmap = resolve_map(robot, None).rmap
+    arm = robot.arm(rmap.info.arm)
+    s = TableGridSettings()
+    timers = Timers()
+    per_checker = None if args.uninstrumented or args.cprofile else instrument(timers)
+    models: dict[tuple[Any, ...], Any] = {}
+    walls, cpus, found, changed = [], [], 0, []
+    profile = cProfile.Profile() if args.cprofile else None
+    todo = rows[: args.cprofile] if args.cprofile else rows
+    for row in todo:
+        key = (row["seed"], tuple(row["cell"]), row["grasp"])
+        target = np.array(row["target"])
+        if key not in models:
+            _, _, seen = trial_scene(row["seed"], tuple(row["cell"]), s)
+            points = with_floor(seen, 0.0)
+            cache = SceneCache(points)
+            checks = scene_checks(robot, arm.name, points, cache.terrain(None), target[None], PlaceSettings(),
+                                  "auto", cache)  # fmt: skip
+            product = checks.verifier.motion
+            assert product is not None
+            models[key] = (product.environment, product.approach_environment)
+        seed = check_seed(row["seed"], tuple(row["cell"]), row["grasp"], row["placement"])
+        q, T_base = np.array(row["q_grasp"]), np.array(row["T_world_base"])
+        for r in range(args.repeat):
+            checker = MotionChecker(robot, arm, *models[key], MotionSettings())
+            timers.active = r == args.repeat - 1
+            if per_checker is not None and timers.active:
+                per_checker(checker)
+            if profile is not None and r == args.repeat - 1:
+                profile.enable()
+            t, c = time.perf_counter(), time.process_time()
+            motion = checker.check(q, T_base, target, seed=seed)
+            wall, cpu = time.perf_counter() - t, time.process_time() - c
+            if profile is not None and r == args.repeat - 1:
+                profile.disable()
+        walls.append(wall * 1e3)
+        cpus.append(cpu * 1e3)
+        found += motion is not None
+        if "product" in row and row["product"]["found"] != (motion is not None):
+            changed.append((key, row["placement"], row["product"]["found"], motion is not None))
+    w = np.array(walls)
+    print(f"{len(w)} checks, found {found}; ms median {np.median(w):.2f} p90 {np.quantile(w, 0.9):.2f} "
+          f"mean {w.mean():.2f}; cpu ms median {np.median(cpus):.2f} mean {np.mean(cpus):.2f}; verdicts changed against the file: {changed}")  # fmt: skip
+    if timers.s:
+        total = w.sum() / 1e3
+        print(f"{'stage':16s} {'ms/check':>9s} {'share':>6s} {'calls/check':>11s} {'us/call':>8s}")
+        for k, v in sorted(timers.s.items(), key=lambda kv: -kv[1]):
+            n = timers.n[k]
+            print(f"{k:16s} {v / len(w) * 1e3:9.2f} {v / total:6.1%} {n / len(w):11.1f} {v / n * 1e6:8.1f}")
+    if profile is not None:
+        pstats.Stats(profile).sort_stats("tottime").print_stats(25)
+
+
+if __name__ == "__main__":
+    main()
