@@ -55,3 +55,19 @@ def test_motion_checkers_of_one_robot_share_its_lever_arms(tiago):
     b = MotionChecker(tiago, arm, second, settings=MotionSettings())
     assert a.levers is b.levers
     np.testing.assert_array_equal(b.levers, lever_arms(tiago, arm, second.geom))
+
+
+def test_motion_checkers_of_one_robot_measure_its_hand_once(tiago, monkeypatch):
+    """The open hand's reach (robot-only, 9 ms) is measured once per robot and arm, not per query."""
+    from baseplace.placement import motion
+
+    arm = tiago.arm()
+    fresh = motion.hand_reach(tiago, arm)
+    calls = []
+    monkeypatch.setattr(motion, "hand_reach", lambda *a: calls.append(a) or fresh)
+    monkeypatch.setattr(motion, "_KEPT", type(motion._KEPT)())  # an empty cache for this test
+    checkers = [
+        MotionChecker(tiago, arm, Environment(tiago, {}), settings=MotionSettings()) for _ in range(3)
+    ]
+    assert len(calls) == 1
+    assert all(c.hand_clear_distance == fresh + motion.PREGRASP_MARGIN for c in checkers)

@@ -46,6 +46,7 @@ import time
 import weakref
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -116,25 +117,31 @@ def lever_arms(robot: Robot, arm: Arm, geom: object) -> FloatArray:
     return np.array([1.0 if _prismatic(model, j) else bound[j] for j in ids])
 
 
-_LEVERS: weakref.WeakKeyDictionary[Robot, dict[tuple[str, int], FloatArray]] = weakref.WeakKeyDictionary()
-"""Per robot, :func:`lever_arms` by arm and number of robot geometries (they hold no reference to it)."""
+T = TypeVar("T")
+_KEPT: weakref.WeakKeyDictionary[Robot, dict[tuple[str, str, int], object]] = weakref.WeakKeyDictionary()
+"""Per robot, what :func:`_kept` computed, by name, arm and number of robot geometries (no reference to the robot)."""
 
 
-def _kept_lever_arms(robot: Robot, arm: Arm, geom: object) -> FloatArray:
-    """:func:`lever_arms`, computed once per robot and arm (3 ms of every :class:`MotionChecker` built per query).
+def _kept(robot: Robot, arm: Arm, geom: object, name: str, compute: Callable[[], T]) -> T:
+    """``compute()``, once per robot, arm and ``name``: a quantity of the robot's collision geometries only.
 
-    They depend on the robot's collision geometries only: an :class:`Environment`'s scene parts
-    hang on the world (joint 0), which :func:`lever_arms` passes over, so every environment of a
-    robot with as many robot geometries gives the same.
+    :func:`lever_arms` (3 ms) and :func:`hand_reach` (9 ms) were computed for every
+    :class:`MotionChecker`, that is every query. An :class:`Environment`'s scene parts hang on the
+    world (joint 0), which both pass over, so every environment of a robot with as many robot
+    geometries gives the same.
     """
     n_robot = len([obj for obj in geom.geometryObjects if obj.parentJoint != 0])  # type: ignore[attr-defined]
-    kept = _LEVERS.setdefault(robot, {})
-    key = (arm.name, n_robot)
+    kept = _KEPT.setdefault(robot, {})
+    key = (name, arm.name, n_robot)
     if key not in kept:
-        levers = lever_arms(robot, arm, geom)
-        levers.flags.writeable = False
-        kept[key] = levers
-    return kept[key]
+        kept[key] = compute()
+    return kept[key]  # type: ignore[return-value]
+
+
+def _read_only_lever_arms(robot: Robot, arm: Arm, geom: object) -> FloatArray:
+    levers = lever_arms(robot, arm, geom)
+    levers.flags.writeable = False
+    return levers
 
 
 def _prismatic(model: object, joint: int) -> bool:
@@ -330,13 +337,22 @@ class MotionChecker:
             )
         self.q_start = q0
         self.axis = approach_axis(arm)
-        self.hand_clear_distance = hand_reach(robot, arm, environment.geom) + PREGRASP_MARGIN
+        reach = _kept(
+            robot, arm, environment.geom, "hand_reach", lambda: hand_reach(robot, arm, environment.geom)
+        )
+        self.hand_clear_distance = reach + PREGRASP_MARGIN
         """How far back [m] the whole open hand stands behind the grasp's TCP (:func:`hand_reach`)."""
         self.pregrasp_distance = (
             self.hand_clear_distance if s.pregrasp_distance is None else s.pregrasp_distance
         )
         """The approach's length [m]: the setting, or derived from the hand."""
-        self.levers = _kept_lever_arms(robot, arm, environment.geom)
+        self.levers = _kept(
+            robot,
+            arm,
+            environment.geom,
+            "levers",
+            lambda: _read_only_lever_arms(robot, arm, environment.geom),
+        )
         """(n,) the arm joints' lever arms [m] (:func:`lever_arms`)."""
         self.state_checks = 0
         """Collision checks of transit states so far."""
