@@ -11,6 +11,8 @@ and what does one check cost?
   with 3 mm noise), plus a floor at z = 0 (``with_floor``), as ``baseplace place --floor 0`` sees
   it. Development seeds :data:`SEEDS` (dev data in every experiment here; none of the held-out
   seeds of docs/protocols/execution_table_grid.md, 11-13, nor those of earlier runs, 3-10).
+  ``--split held-out`` runs protocol v1 (docs/protocols/motion_verdicts_v1.md) on its held-out
+  seeds :data:`HELD_OUT`, the product against the reference only.
 * Grasps: :data:`GRASPS` of the 32 grasps ``TableGridSettings.grasps`` makes at the *estimate*
   (16 side, 16 top-down 2 cm under the top), one target per query.
 * Inputs: the product's own: ``place`` with the pose-only checks (footprint, IK, collision; no
@@ -63,6 +65,7 @@ from typing import Any
 
 import numpy as np
 
+from baseplace.errors import InputError
 from baseplace.geometry.poses import FloatArray
 from baseplace.placement.motion import MotionChecker, MotionSettings
 from baseplace.placement.pipeline import POSE_ONLY_CHECKS, PlaceSettings, place, scene_checks, with_floor
@@ -73,6 +76,7 @@ from baseplace.robots.model import Robot
 from baseplace.world.environment import Environment
 from baseplace_experiments.execution import ExecutionOracle, ExecutionSettings
 from baseplace_experiments.execution_experiment import trial_scene
+from baseplace_experiments.results import fixed_protocol
 from baseplace_experiments.table_grid import (
     RobotShapes,
     TableGridSettings,
@@ -83,6 +87,9 @@ from common import report
 
 SEEDS = (0, 1, 2)
 """Development seeds of the table grid (see the module docstring)."""
+HELD_OUT = (40, 41, 42, 43, 44, 45, 46, 47, 48, 49)
+"""Held-out seeds of protocol v1 (:data:`PROTOCOL_FILE`), run once."""
+PROTOCOL_FILE = "docs/protocols/motion_verdicts_v1.md"
 CELLS = ((0, 0), (1, 0), (2, 0), (1, 1))
 GRASPS = (0, 2, 4, 6, 8, 20)
 """Indices into ``TableGridSettings.grasps``: side grasps approaching along yaw 0, 45, 90, 135 and
@@ -324,7 +331,11 @@ def figures(rows: list[dict[str, Any]]) -> dict[str, Any]:
     names = [name for name in CHECKERS if rows and name in rows[0]]
     with_reference = "reference" in names
     feasible = sum(row["reference_valid"] for row in rows) if with_reference else None
-    out: dict[str, Any] = {"checks": len(rows), "reference_feasible": feasible}
+    out: dict[str, Any] = {
+        "checks": len(rows),
+        "scenes": len({(row["seed"], *row["cell"]) for row in rows}),
+        "reference_feasible": feasible,
+    }
     for name in (n for n in names if n != "reference"):
         r = [row[name] for row in rows]
         false_none = (
@@ -355,6 +366,13 @@ def figures(rows: list[dict[str, Any]]) -> dict[str, Any]:
                 round(false_none / feasible, 4) if feasible and false_none is not None else None
             ),
             "false_no_motion_of_feasible_ci95": [round(low_f, 4), round(high_f, 4)],
+            "false_no_motion_per_scene": dict(
+                Counter(
+                    f"{row['seed']} {tuple(row['cell'])}"
+                    for row in rows
+                    if with_reference and not row[name]["found"] and row["reference_valid"]
+                )
+            ),
             "found_touching_at_finer_recheck": sum(1 for x in r if x["found"] and x["recheck"]["colliding"]),
             "found_touching_true_scene": sum(1 for x in r if x["found"] and any(x["true_scene"].values())),
             "found_touching_true_scene_in_transit": sum(
@@ -395,7 +413,11 @@ def figures(rows: list[dict[str, Any]]) -> dict[str, Any]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--seeds", type=int, nargs="+", default=list(SEEDS), help="table-grid dev seeds")
+    parser.add_argument("--split", choices=["dev", "held-out"], default="dev",
+                        help=f"dev seeds {list(SEEDS)} or protocol v1's held-out seeds {list(HELD_OUT)}")  # fmt: skip
+    parser.add_argument(
+        "--seeds", type=int, nargs="+", default=None, help="table-grid dev seeds (dev split only)"
+    )
     parser.add_argument("--cells", type=int, default=len(CELLS), help=f"first N of {list(CELLS)}")
     parser.add_argument("--grasps", type=int, nargs="+", default=list(GRASPS),
                         help="indices into the 32 table-grid grasps (0-15 side, 16-31 top-down)")  # fmt: skip
@@ -408,9 +430,29 @@ def main() -> None:
     parser.add_argument("--checkers", nargs="+", choices=list(CHECKERS), default=["product", "product_500", "reference"],
                         help="which motion checkers run on each placement (module docstring)")  # fmt: skip
     args = parser.parse_args()
-    held_out = {3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13}
+    if args.split == "held-out":
+        if args.seeds is not None or args.cells != len(CELLS) or args.max_checks is not None:
+            parser.error(
+                "the held-out split runs protocol v1 as written: no --seeds, --cells or --max-checks"
+            )
+        if (
+            args.checkers != ["product", "reference"]
+            or args.grasps != list(GRASPS)
+            or args.per_grasp != PER_GRASP
+        ):
+            parser.error(
+                "the held-out split runs protocol v1 as written: --checkers product reference, default grasps and --per-grasp"
+            )
+        args.seeds = list(HELD_OUT)
+    elif args.seeds is None:
+        args.seeds = list(SEEDS)
+    held_out = {*range(3, 38), *HELD_OUT} if args.split == "dev" else set()
     if held_out & set(args.seeds):
-        parser.error(f"seeds {sorted(held_out & set(args.seeds))} are held out by another experiment")
+        parser.error(f"seeds {sorted(held_out & set(args.seeds))} are held out by an experiment")
+    try:
+        protocol_file = fixed_protocol(PROTOCOL_FILE, args.split)
+    except InputError as e:
+        parser.error(str(e))
     load_start = os.getloadavg()
     robot = Robot("tiago")
     rmap = resolve_map(robot, None).rmap
@@ -493,13 +535,13 @@ def main() -> None:
             "reference": dataclasses.asdict(REFERENCE), "recheck_resolution_divisor": RECHECK,
             "checkers": {n: {**dataclasses.asdict(CHECKERS[n][0]), "every_pair_to_coal": CHECKERS[n][1]}
                          for n in args.checkers},
-            "split": "dev", "load_average": {"start": load_start, "end": os.getloadavg()},
+            "split": args.split, "load_average": {"start": load_start, "end": os.getloadavg()},
             "wall_s": round(time.perf_counter() - t_run, 1),
         },
         "summary": summary,
         "checks": rows,
     }  # fmt: skip
-    report(args.name, result)
+    report(args.name, result, split=args.split, used_seeds=list(args.seeds), protocol_file=protocol_file)
     print_table(summary)
     print("base on the floor only:")
     print_table(summary["floor_only"])
