@@ -53,8 +53,8 @@ def run(args: argparse.Namespace) -> None:
     s = TableGridSettings()
     profile = cProfile.Profile() if args.cprofile else None
     rows = []
-    for seed in SEEDS:
-        for cell in CELLS:
+    for seed in SEEDS if args.scene is None else (args.scene[0],):
+        for cell in CELLS if args.scene is None else (tuple(args.scene[1:]),):
             _, p_est, seen = trial_scene(seed, cell, s)
             points = with_floor(seen, 0.0)
             cache = SceneCache(points)
@@ -101,6 +101,7 @@ def main() -> None:
     parser.add_argument("--queries", type=int, default=5, help="counted warm queries per scene")
     parser.add_argument("--name", default="warm_profile", help="results file bench/results/NAME.json")
     parser.add_argument("--cprofile", action="store_true", help="cProfile the counted queries")
+    parser.add_argument("--scene", type=int, nargs=3, metavar=("SEED", "CX", "CY"), help="this scene only")
     parser.add_argument("--compare", nargs=2, metavar=("A", "B"), help="compare two results files")
     args = parser.parse_args()
     if args.compare:
