@@ -4,7 +4,9 @@ Runs ``bench_warm_place.py``'s queries in process (its scenes, its side grasp, `
 the service's defaults and one :class:`SceneCache` per scene, so every counted query is warm), with
 no HTTP in between. Per query it records the placements (pose, joints, robustness) and the
 rejections (failures, contacts), so that two library checkouts can be compared verdict for verdict
-(``--compare A B``: two results files of this script), and the ``timings_ms`` medians.
+(``--compare A B``: two results files of this script), the ``timings_ms`` medians and the CPU
+time of each query (``cpu_ms``, the process's, with ``NUMBA_NUM_THREADS=1``: less sensitive than wall
+time to other processes on a shared machine).
 ``--cprofile``: cProfile the counted queries and print the top functions (cumulative and own time).
 
 Usage: python bench/profile_warm_place.py [--queries 5] [--name warm_profile] [--cprofile]
@@ -17,6 +19,7 @@ import argparse
 import cProfile
 import json
 import pstats
+import time
 from pathlib import Path
 from typing import Any
 
@@ -64,18 +67,22 @@ def run(args: argparse.Namespace) -> None:
                                settings=PlaceSettings(), seed=q, cache=cache)  # fmt: skip
                 if profile is not None and q > 0:
                     profile.enable()
+                cpu = time.process_time()
                 try:
                     answer = place_job(job).to_json()
                 except NoResultError as e:
                     answer = e.report.to_json()
+                cpu_ms = (time.process_time() - cpu) * 1e3
                 if profile is not None and q > 0:
                     profile.disable()
                 if q > 0:
                     rows.append({"seed": seed, "cell": list(cell), "query": q,
-                                 "timings_ms": answer.get("timings_ms", {}), **verdict(answer)})  # fmt: skip
+                                 "timings_ms": answer.get("timings_ms", {}), "cpu_ms": round(cpu_ms, 2),
+                                 **verdict(answer)})  # fmt: skip
             print(seed, cell, rows[-1]["timings_ms"].get("request_to_placement"), flush=True)
     keys = ("request_to_placement", "motion", "robustness", "osrm", "query")
     medians = {k: float(np.median([r["timings_ms"].get(k, np.nan) for r in rows])) for k in keys}
+    medians["cpu"] = float(np.median([r["cpu_ms"] for r in rows]))
     print(medians, "found", sum(bool(r["placements"]) for r in rows), "of", len(rows))
     report(args.name, {"medians_ms": medians, "rows": rows})
     if profile is not None:
