@@ -101,11 +101,15 @@ class Verifier:
     def collisions(self, q: FloatArray, T_world_base: FloatArray) -> list[tuple[str, str]] | None:
         """Check (3) of arm joints (n,) at a base pose (4, 4): None when free, else every contact.
 
-        A contact is (robot link, what it touched), as :attr:`contacts` counts them.
+        A contact is (robot link, what it touched), as :attr:`contacts` counts them. One call gives
+        the verdict and the reason: :meth:`Environment.contacts_arm` asks coal about every pair the
+        state filter's spheres leave (what :meth:`Environment.colliding_arm` asks, up to its first
+        touching pair), so it is empty exactly when that is False; a rejected candidate no longer
+        runs coal twice (tests/test_verify_contacts.py: the same verdicts and contacts as coal on
+        every pair).
         """
-        if not self.environment.colliding_arm(self.arm, q, T_world_base):
-            return None
-        return self.environment.contacts_arm(self.arm, q, T_world_base)
+        contacts = self.environment.contacts_arm(self.arm, q, T_world_base)
+        return contacts or None
 
     def _reject(self, T: FloatArray, reason: str, contact: tuple[str, str] | None = None) -> None:
         self.failures[reason] += 1

@@ -300,6 +300,10 @@ class Environment:
         self._T_root_base = ref.oMf[self.model.getFrameId(robot.spec.base_frame)]
         self._n_robot = n_robot
         self._placed: bytes | None = None  # the base pose the scene geometries were last placed for
+        # the scene geometries (references into self.geom: no geometry is added after this) and
+        # their world poses (None: the world frame), placed for each new base pose
+        objects = self.geom.geometryObjects
+        self._scene_objects = [(objects[gid], self._T_world_env.get(gid)) for gid in self.env_ids]
         self._filters: dict[str, StateFilter] = {}
 
     @property
@@ -352,15 +356,19 @@ class Environment:
         return self._touches_obstacles(q, T_world_base)
 
     def _place_obstacles(self, T_world_base: ArrayLike) -> None:
+        """Place the scene geometries in the robot's root frame for a base pose (4, 4), unless they are already.
+
+        Once per new base pose (every candidate, every robustness draw that reaches coal): the
+        geometry objects are looked up once, at construction (about 30 -> 8 us a call, 8 parts).
+        """
         T = _base_pose(T_world_base)
-        if T.tobytes() == self._placed:
+        key = T.tobytes()
+        if key == self._placed:
             return
-        self._placed = T.tobytes()
+        self._placed = key
         T_root_world = self._T_root_base * pin.SE3(T).inverse()
-        for gid in self.env_ids:
-            T_world_env = self._T_world_env.get(gid)
-            placement = T_root_world if T_world_env is None else T_root_world * T_world_env
-            self.geom.geometryObjects[gid].placement = placement
+        for obj, T_world_env in self._scene_objects:
+            obj.placement = T_root_world if T_world_env is None else T_root_world * T_world_env
 
     def _touches_obstacles(self, q: NDArray[np.float64], T_world_base: ArrayLike) -> bool:
         if not self.env_ids:
