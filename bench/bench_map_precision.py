@@ -11,8 +11,16 @@ Protocol 2 (docs/protocols/map_precision_v2.md, ``--protocol 2``): the same, wit
 ``reachability/support.py``, hole fill included) and a new held-out seed; ``--protocol 1`` (the
 default) reads every map with the build's fixed threshold and no fill, as v1's results were measured.
 
+``--diagnose`` (dev split only) adds, per distribution, where the misses (IK solves, the map says
+no) and the false calls (the map says yes, IK fails) lie next to the hits and the true rejections:
+the pose's cell's sample count, its support (the map's own count, and count 1: the share of the 64
+interpolation neighbours reached, a proxy for the distance from the reached set's boundary), its
+offset from the cell's centre (position in voxels, orientation in rad), and for the IK-solved poses
+how many joints of the solution lie within 2 % of their range of a limit. It draws nothing from the
+seed's stream, so the protocol's figures are the same with or without it.
+
 Usage: python bench/bench_map_precision.py [--samples 1e7 | --map FILE] [--n 4000] [--split dev]
-       [--protocol 2] [--name map_precision_1e7]
+       [--protocol 2] [--name map_precision_1e7] [--diagnose]
 """
 
 from __future__ import annotations
@@ -21,6 +29,7 @@ import argparse
 import math
 
 import numpy as np
+from numpy.typing import NDArray
 
 from baseplace.geometry.poses import FloatArray, pose_from_xyz_rpy, rotation_taking
 from baseplace.placement.robustness import wilson_interval
@@ -94,10 +103,10 @@ def _rate(k: int, n: int) -> dict[str, object]:
 
 
 def measure(rmap: ReachabilityMap, ik: DampedLeastSquaresIK, T: FloatArray, rng: np.random.Generator,
-            with_recall: bool) -> dict[str, object]:  # fmt: skip
+            with_recall: bool, diagnose: bool = False) -> dict[str, object]:  # fmt: skip
     """Precision (and recall) of the map's verdict on poses (N, 4, 4) against IK."""
     called = rmap.reachability(T) > 0
-    _, solved = ik.solve_batch(T, rng)
+    q, solved = ik.solve_batch(T, rng)
     solved = np.asarray(solved, dtype=bool)
     out: dict[str, object] = {
         "poses": len(T),
@@ -107,6 +116,86 @@ def measure(rmap: ReachabilityMap, ik: DampedLeastSquaresIK, T: FloatArray, rng:
     }
     if with_recall:
         out["recall"] = _rate(int((called & solved).sum()), int(solved.sum()))
+    if diagnose:
+        out["diagnosis"] = diagnosis(rmap, ik, T, called, solved, q)
+    return out
+
+
+SUPPORT_STEPS = np.round(np.arange(0.05, 1.0001, 0.05), 2)
+"""The support of a pose is read to this resolution (the largest step whose test it passes)."""
+
+
+def support_at(rmap: ReachabilityMap, T: FloatArray, count: int) -> FloatArray:
+    """(N,) support of each pose with support count ``count``, to :data:`SUPPORT_STEPS`; 0 below the first.
+
+    Read through the map's own lookup with the test at each step, the fill at the same step (so a pose
+    in an unreached cell gets its support too).
+    """
+    out = np.zeros(len(T))
+    for step in SUPPORT_STEPS:
+        out[rmap.with_support(count, float(step), float(step)).reachability(T) > 0] = step
+    return out
+
+
+def cell_counts(rmap: ReachabilityMap, T: FloatArray) -> NDArray[np.int64]:
+    """(N,) samples in each pose's cell (0: unreached or outside the grid)."""
+    c = rmap.grid.cell_index(T)
+    i = np.minimum(np.searchsorted(rmap.cells, c), max(len(rmap.cells) - 1, 0))
+    hit = (c >= 0) & (rmap.cells[i] == c) if len(rmap.cells) else np.zeros(len(T), dtype=bool)
+    return np.where(hit, rmap.counts[i].astype(np.int64), 0)
+
+
+def _summary(values: FloatArray, bins: list[float]) -> dict[str, object]:
+    if len(values) == 0:
+        return {"n": 0}
+    hist = np.histogram(values, bins=bins)[0]
+    return {
+        "n": len(values),
+        "median": round(float(np.median(values)), 3),
+        "histogram": {
+            f"[{lo:g}, {hi:g})": int(k) for lo, hi, k in zip(bins[:-1], bins[1:], hist, strict=True)
+        },
+    }
+
+
+def diagnosis(rmap: ReachabilityMap, ik: DampedLeastSquaresIK, T: FloatArray, called: NDArray[np.bool_],
+              solved: NDArray[np.bool_], q: FloatArray) -> dict[str, object]:  # fmt: skip
+    """Where the hits, misses, false calls and true rejections lie (module docstring)."""
+    arm = ik.arm
+    grid = rmap.grid
+    counts = cell_counts(rmap, T)
+    count = rmap.info.support_count or 1
+    own = support_at(rmap, T, count)
+    occupied = support_at(rmap, T, 1)
+    inside = counts > 0
+    centre = grid.cell_centre(np.where(grid.cell_index(T) >= 0, grid.cell_index(T), 0))
+    offset_pos = np.abs(T[:, :3, 3] - centre[:, :3, 3]).max(axis=1) / grid.voxel_size
+    cos = (np.einsum("nij,nij->n", centre[:, :3, :3], T[:, :3, :3]) - 1.0) / 2.0
+    offset_rot = np.arccos(np.clip(cos, -1.0, 1.0))
+    lower, upper = np.asarray(arm.lower), np.asarray(arm.upper)
+    margin = np.minimum(q - lower, upper - q) / (upper - lower)
+    at_limit = (margin < 0.02).sum(axis=1)
+    groups = {
+        "hit": called & solved,
+        "miss": ~called & solved,
+        "false_call": called & ~solved,
+        "true_reject": ~called & ~solved,
+    }
+    count_bins = [0, 1, 2, 3, 5, 10, 20, 50, 1e9]
+    unit = [0, 0.05, 0.2, 0.4, 0.6, 0.8, 1.01]
+    out: dict[str, object] = {}
+    for name, m in groups.items():
+        row: dict[str, object] = {
+            "n": int(m.sum()),
+            "cell_count": _summary(counts[m], count_bins),
+            "support": _summary(own[m], unit),
+            "support_count_1": _summary(occupied[m], unit),
+            "offset_position_voxels": _summary(offset_pos[m & inside], [0, 0.25, 0.4, 0.5001]),
+            "offset_orientation_rad": _summary(offset_rot[m & inside], [0, 0.2, 0.4, 0.6, 0.8, 4]),
+        }
+        if name in ("hit", "miss"):
+            row["joints_within_2pct_of_limit"] = _summary(at_limit[m], [0, 1, 2, 3, 9])
+        out[name] = row
     return out
 
 
@@ -131,7 +220,10 @@ def main() -> None:
     parser.add_argument("--split", choices=sorted(SPLITS[1]), default="dev")
     parser.add_argument("--protocol", type=int, choices=sorted(PROTOCOL_FILES), default=1)
     parser.add_argument("--name", default=None, help="results file bench/results/NAME.json")
+    parser.add_argument("--diagnose", action="store_true", help="where the misses and false calls lie")
     args = parser.parse_args()
+    if args.diagnose and args.split != "dev":
+        parser.error("--diagnose is for the dev split only")
     protocol_file = fixed_protocol(PROTOCOL_FILES[args.protocol], args.split)
     seed = SPLITS[args.protocol][args.split]
     robot = Robot("tiago")
@@ -149,9 +241,9 @@ def main() -> None:
     axis = np.asarray(arm.approach_axis, dtype=float)
     held_out = forward_kinematics(arm, arm.sample(rng, 10_000))
     distributions = {
-        "side": measure(rmap, ik, side_grasps(rng, args.n, axis), rng, True),
-        "top-down": measure(rmap, ik, top_down_grasps(rng, args.n, axis), rng, True),
-        "uniform": measure(rmap, ik, uniform_kept(rmap, rng, args.n), rng, False),
+        "side": measure(rmap, ik, side_grasps(rng, args.n, axis), rng, True, args.diagnose),
+        "top-down": measure(rmap, ik, top_down_grasps(rng, args.n, axis), rng, True, args.diagnose),
+        "uniform": measure(rmap, ik, uniform_kept(rmap, rng, args.n), rng, False, args.diagnose),
     }
     called = int((rmap.reachability(held_out) > 0).sum())
     result = {
