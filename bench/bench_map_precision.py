@@ -18,8 +18,12 @@ interpolation neighbours reached, a proxy for the distance from the reached set'
 offset from the cell's centre (position in voxels, orientation in rad), and for the IK-solved poses
 how many joints of the solution lie within 2 % of their range of a limit; and, for the side and
 top-down draws, the ceiling of any reading of the support: for the map's support count and for
-count 1, the strictest step (threshold and fill alike) whose recall reaches 98.5 % and its precision.
-It draws nothing from the seed's stream, so the protocol's figures are the same with or without it.
+count 1, the strictest step (threshold and fill alike) whose recall reaches 98.5 % and its precision;
+and whether the bin's reachable part lies off the pose: for up to :data:`TILT_POSES` poses of each
+group (the true rejections only in reached cells), the share IK solves once the TCP z axis is tilted
+by :data:`TILT` about the TCP's x or y axis (4 directions, the position kept; still inside the bin
+for most poses). Its IK draws from :data:`DIAGNOSIS_SEED`, never from the split's seed stream, so the
+protocol's figures are the same with or without ``--diagnose``.
 
 Usage: python bench/bench_map_precision.py [--samples 1e7 | --map FILE] [--n 4000] [--split dev]
        [--protocol 2] [--name map_precision_1e7] [--diagnose]
@@ -123,6 +127,13 @@ def measure(rmap: ReachabilityMap, ik: DampedLeastSquaresIK, T: FloatArray, rng:
     return out
 
 
+DIAGNOSIS_SEED = 0xD1A6
+"""The IK restarts of ``--diagnose``'s tilted poses (dev only; independent of every split's seed)."""
+TILT = 0.3
+"""How far ``--diagnose`` tilts the TCP z axis [rad]: under the 0.8 rad orientation bin."""
+TILT_POSES = 100
+"""Poses per group that ``--diagnose`` tilts."""
+
 SUPPORT_STEPS = np.round(np.arange(0.05, 1.0001, 0.05), 2)
 """The support of a pose is read to this resolution (the largest step whose test it passes)."""
 
@@ -183,6 +194,7 @@ def diagnosis(rmap: ReachabilityMap, ik: DampedLeastSquaresIK, T: FloatArray, ca
         "false_call": called & ~solved,
         "true_reject": ~called & ~solved,
     }
+    tilt_rng = np.random.default_rng(DIAGNOSIS_SEED)
     count_bins = [0, 1, 2, 3, 5, 10, 20, 50, 1e9]
     unit = [0, 0.05, 0.2, 0.4, 0.6, 0.8, 1.01]
     out: dict[str, object] = {}
@@ -197,6 +209,8 @@ def diagnosis(rmap: ReachabilityMap, ik: DampedLeastSquaresIK, T: FloatArray, ca
         }
         if name in ("hit", "miss"):
             row["joints_within_2pct_of_limit"] = _summary(at_limit[m], [0, 1, 2, 3, 9])
+        if name != "miss":
+            row["ik_solves_tilted"] = _tilted(ik, T[m & inside][:TILT_POSES], tilt_rng)
         out[name] = row
     if not solved.all() and called.any() and (~called).any():  # a draw with recall: the readings' ceiling
         out["best_reading_at_target_recall"] = {
@@ -204,6 +218,23 @@ def diagnosis(rmap: ReachabilityMap, ik: DampedLeastSquaresIK, T: FloatArray, ca
             "support_count_1": _best_reading(occupied, solved),
         }
     return out
+
+
+def _tilted(ik: DampedLeastSquaresIK, T: FloatArray, rng: np.random.Generator) -> dict[str, object]:
+    """Share of poses IK solves with the TCP z axis tilted by :data:`TILT` in at least one of 4 directions."""
+    if len(T) == 0:
+        return {"n": 0}
+    c, s = math.cos(TILT), math.sin(TILT)
+    turns = np.array([
+        [[1, 0, 0], [0, c, -s], [0, s, c]], [[1, 0, 0], [0, c, s], [0, -s, c]],
+        [[c, 0, s], [0, 1, 0], [-s, 0, c]], [[c, 0, -s], [0, 1, 0], [s, 0, c]],
+    ])  # fmt: skip
+    tilted = np.repeat(T, 4, axis=0)
+    tilted[:, :3, :3] = tilted[:, :3, :3] @ np.tile(turns, (len(T), 1, 1))
+    _, solved = ik.solve_batch(tilted, rng)
+    solved = np.asarray(solved, dtype=bool).reshape(len(T), 4)
+    return {"n": len(T), "tilt_rad": TILT, "any_direction": _rate(int(solved.any(axis=1).sum()), len(T)),
+            "per_direction": round(float(solved.mean()), 4)}  # fmt: skip
 
 
 def _best_reading(support: FloatArray, solved: NDArray[np.bool_]) -> dict[str, object]:
