@@ -60,11 +60,17 @@ FINE = 0.00125
 a cell reaches 0 to FINE beyond its point along each axis."""
 MAX_FINE = 0.005
 """Cells no coarser than this [m] are at sensor resolution and kept at the clearance: the :data:`FINE`
-and :data:`EDGE_CELL` cells here and the experiments' 5 mm slab cells
+cells here (smoothed, :class:`SurfaceCells`, and raw, :class:`RawCells`) and the experiments' 5 mm slab cells
 (:func:`~baseplace.world.support_plane.with_support_slab`)."""
-EDGE_CELL = 0.005
-"""Cell edge [m] of the points near the object that lie at an edge or a corner (not on a smooth
-surface, :func:`denoised`): kept as measured, at the clearance (no allowance)."""
+REACH_STEP = 0.001
+"""The raw points' covering radii (:class:`RawCells`) are rounded up to this [m]: one part per step."""
+SPACING_NEIGHBOURS = 4
+"""A point's sample spacing is the distance to its this-many-th nearest neighbour (:func:`sample_spacing`):
+on a square grid of spacing s its four nearest lie at s."""
+JOINT_SIGMAS = 1.79
+"""Two samples' noise both beyond this many sigma is as rare as one sample's beyond
+:data:`CLEARANCE_SIGMAS` (Q(1.79)^2 = Q(3.0) = 0.00135): how deep the nearer of a surface point's two
+nearest samples lies, at :data:`CLEARANCE_SIGMAS` sigma (:func:`raw_margin`)."""
 SURFACE_SPREAD = 0.37
 """The standard deviation of a denoised point's distance to the true surface, in the scene's noise
 sigma (bench/clearance_errors.py: 1.03-1.10 mm at 3 mm noise, cylinders of 3-4.5 cm radius and a
@@ -174,6 +180,20 @@ class SurfaceCells(VoxelMap):
     noise: SurfaceNoise | None = None
 
 
+@dataclass(frozen=True)
+class RawCells(VoxelMap):
+    """:data:`FINE` cells of the points near the object kept as measured (at an edge or a corner, :func:`denoised`).
+
+    Attributes:
+        noise_margin: the scene's derived noise margin n [m] (as :class:`SurfaceCells`).
+        reach: the covering radius h [m] of these points' sampling: every surface point has two
+            samples within it (:func:`sample_spacing` / sqrt(2)); :func:`raw_margin`.
+    """
+
+    noise_margin: float = DEFAULT_CLEARANCE
+    reach: float = 0.0
+
+
 def scene_noise(groups: dict[str, Group]) -> SurfaceNoise | None:
     """The noise :func:`fine_groups` measured near the object, kept in its denoised cells, or None."""
     for group in groups.values():
@@ -207,7 +227,60 @@ def margin(part: VoxelMap | SupportPlane, clearance: float, plane_clearance: flo
         return plane_clearance
     if isinstance(part, SurfaceCells):
         return max(clearance - part.noise_margin + surface_error(part.noise_margin), 0.0)
+    if isinstance(part, RawCells):
+        return raw_margin(clearance, part.noise_margin, part.reach)
     return clearance if is_fine(part) else 0.0
+
+
+def raw_margin(clearance: float, noise_margin: float, reach: float) -> float:
+    """The distance [m] below which a link touches a raw point's cell (:class:`RawCells`): at least the clearance.
+
+    A point p at c - n from the true surface (c ``clearance``, n ``noise_margin``) has two samples
+    whose true positions lie within h (``reach``) of its foot on the surface (its covering radius;
+    on a square grid of spacing s, h = s / sqrt(2), also at an edge whose first rows lie within
+    s / 2 of it). Each sample lies off the surface by its noise; the nearer of the two lies deeper
+    than :data:`JOINT_SIGMAS` sigma (sigma = n / :data:`CLEARANCE_SIGMAS`) as rarely as one sample
+    beyond :data:`CLEARANCE_SIGMAS` sigma, and at least :data:`MIN_CLEARANCE` (a calibration error
+    moves every sample alike). So p lies within sqrt(h^2 + (c - n + e)^2) of a sample, e that depth
+    (Pythagoras: the gap along the surface, the depth across it). The :data:`FINE` cell holding the
+    sample reaches beyond it, never short of it. With h = 0 and the noise at its floor this is c
+    itself; at 1 cm spacing and 3 mm noise (h 7.1 mm, c - n + e 5.5 mm) c decides.
+    """
+    sigma = noise_margin / CLEARANCE_SIGMAS
+    depth = clearance - noise_margin + max(JOINT_SIGMAS * sigma, MIN_CLEARANCE)
+    return max(clearance, math.hypot(reach, depth))
+
+
+def sample_spacing(points: ArrayLike, at: ArrayLike) -> FloatArray:
+    """(M,) the sample spacing [m] of ``points`` (N, 3) near each of ``at`` (M, 3).
+
+    The median, over the :data:`SMOOTH_VOTES` points nearest each, of their distance to their
+    :data:`SPACING_NEIGHBOURS`-th nearest neighbour. 0 for fewer than :data:`SPACING_NEIGHBOURS` + 1 points.
+    """
+    from scipy.spatial import cKDTree
+
+    p = np.asarray(points, dtype=float).reshape(-1, 3)
+    q = np.asarray(at, dtype=float).reshape(-1, 3)
+    if len(p) <= SPACING_NEIGHBOURS or len(q) == 0:
+        return np.zeros(len(q))
+    tree = cKDTree(p)
+    own = tree.query(p, k=SPACING_NEIGHBOURS + 1)[0][:, -1]
+    votes = tree.query(q, k=min(len(p), SMOOTH_VOTES))[1]
+    return np.median(own[votes], axis=1)
+
+
+def max_shift(noise_margin: float) -> float:
+    """How far [m] :func:`denoised` may move a point onto its local plane in a scene of noise margin n.
+
+    Its noise across the surface at :data:`OBJECT_SIGMAS` sigma (sigma = n / :data:`CLEARANCE_SIGMAS`:
+    once in 30 000 points beyond) plus the plane's chord inside a curved surface
+    (:data:`SURFACE_CHORD`). A longer move is a plane through both faces of an edge or a corner,
+    cutting it off: the point stays raw. About 14.5 mm at 3 mm noise; 6.2 mm on a noise-free cloud
+    (n at its 3 mm floor), where the noise read on a sparse cloud's edges (4.5 mm on a 10 cm box
+    sampled every 12.5 mm) let :func:`denoised` move a box's edge rows 6 mm inward
+    (tests/test_clearance_bound_spacing.py).
+    """
+    return OBJECT_SIGMAS * noise_margin / CLEARANCE_SIGMAS + SURFACE_CHORD
 
 
 def clearance_record(clearance: float, note: str, noise_margin: float) -> dict[str, float | str]:
@@ -461,6 +534,7 @@ def fine_groups(
             owner[rows_in(keys, v.keys[near[name]])] = k
     taken = owner >= 0
     p, owner = p[taken], owner[taken]
+    sampled = p
     noise = surface_noise(around)  # measured once per object, for the clearance here and in its callers
     is_object = _object_points(p, grasped, object_tolerance(_noise_margin(slab, noise)))
     plane = None
@@ -470,17 +544,19 @@ def fine_groups(
         plane = _plane(slab, p[flat])
         if plane is not None:
             p, owner, is_object = p[~flat], owner[~flat], is_object[~flat]
-    moved, smooth = denoised(p)  # the noise once: the clearance stands on the surface, not on the noise
-    surface = SurfaceCells(FINE, np.zeros((0, 3), dtype=np.int64), derived_clearance(plane, noise=noise)[0],
-                           noise)  # fmt: skip
+    reach = sample_spacing(sampled, p) / math.sqrt(2.0)  # before the plane leaves: its points are samples too
+    n = derived_clearance(plane, noise=noise)[0]
+    # the noise once: the clearance stands on the surface, not on the noise
+    moved, smooth = denoised(p, max_shift(n))
+    surface = SurfaceCells(FINE, np.zeros((0, 3), dtype=np.int64), n, noise)
     out: dict[str, Group] = {}
     for k, name in enumerate(names):
         coarse = (groups[name] if name != _OBJECT else object_voxels).without(near[name])
         mine = is_object if name == _OBJECT else (owner == k) & ~is_object
         if name == _OBJECT:  # an object voxel's other points are obstacles
             mine_other = (owner == k) & ~is_object
-            out["obstacle"] = _joined(out.get("obstacle"), *_cells(moved, smooth, mine_other, surface))
-        out[name] = _joined(out.get(name), coarse, *_cells(moved, smooth, mine, surface))
+            out["obstacle"] = _joined(out.get("obstacle"), *_cells(moved, smooth, mine_other, surface, reach))
+        out[name] = _joined(out.get(name), coarse, *_cells(moved, smooth, mine, surface, reach))
     grasped_group = out.pop(_OBJECT)
     out = {name: g for name, g in out.items() if group_size(g)}
     if plane is not None:
@@ -491,7 +567,7 @@ def fine_groups(
 _OBJECT = "\0object"
 
 
-def denoised(points: ArrayLike) -> tuple[FloatArray, NDArray[np.bool_]]:
+def denoised(points: ArrayLike, shift_limit: float | None = None) -> tuple[FloatArray, NDArray[np.bool_]]:
     """The points (N, 3) [m] on smooth surfaces put onto their local plane, and which those are (N,).
 
     A point's surface is smooth when a quadric fitted to its :data:`SMOOTH_NEIGHBOURS` nearest
@@ -503,7 +579,8 @@ def denoised(points: ArrayLike) -> tuple[FloatArray, NDArray[np.bool_]]:
     surface that plane is a chord, inside it by about rho^2 / (8 r) (rho the neighbourhood's
     radius, r the curvature's): 2.6 mm on a 3 cm bottle sampled every centimetre. A point near an
     edge or a corner stays where it was measured: a plane through both faces would cut the corner
-    off. All stay when the noise cannot be measured (too few points).
+    off. All stay when the noise cannot be measured (too few points), and a point whose move would
+    exceed ``shift_limit`` [m] (:func:`max_shift`) stays too.
     """
     from scipy.spatial import cKDTree
 
@@ -529,6 +606,8 @@ def denoised(points: ArrayLike) -> tuple[FloatArray, NDArray[np.bool_]]:
     # the nearest fits decides)
     votes = tree.query(p, k=min(len(p), SMOOTH_VOTES))[1]
     smooth = np.median(residual[votes], axis=1) <= PLANAR_FACTOR * noise.along_normals
+    if shift_limit is not None:  # a move beyond the noise is a plane cutting an edge or a corner off
+        smooth &= np.einsum("ni,ni->n", shift, shift) <= shift_limit * shift_limit
     return np.where(smooth[:, None], p + shift, p), smooth
 
 
@@ -573,22 +652,32 @@ def _object_points(
 
 
 def _cells(
-    p: FloatArray, smooth: NDArray[np.bool_], mine: NDArray[np.bool_], surface: SurfaceCells
-) -> tuple[SurfaceCells, VoxelMap]:
-    """The points ``p[mine]`` (N, 3): smooth ones in cells like ``surface``, the others in :data:`EDGE_CELL` cells."""
+    p: FloatArray, smooth: NDArray[np.bool_], mine: NDArray[np.bool_], surface: SurfaceCells,
+    reach: FloatArray,
+) -> tuple[VoxelMap, ...]:  # fmt: skip
+    """The points ``p[mine]`` (N, 3): smooth ones in cells like ``surface``, the others in :class:`RawCells`.
+
+    The raw points by their covering radius ``reach`` (N,) [m], rounded up to :data:`REACH_STEP`:
+    one part per step.
+    """
     # finer than a user may ask of VoxelMap.from_points: these are the few points near the object
     fine = np.unique(np.floor(p[mine & smooth] / FINE).astype(np.int64).reshape(-1, 3), axis=0)
-    edge = np.unique(np.floor(p[mine & ~smooth] / EDGE_CELL).astype(np.int64).reshape(-1, 3), axis=0)
-    return replace(surface, keys=fine), VoxelMap(EDGE_CELL, edge)
+    raw = mine & ~smooth
+    steps = np.ceil(reach[raw] / REACH_STEP - 1e-9).astype(np.int64)
+    parts: list[VoxelMap] = [replace(surface, keys=fine)]
+    for step in np.unique(steps):
+        keys = np.unique(np.floor(p[raw][steps == step] / FINE).astype(np.int64).reshape(-1, 3), axis=0)
+        parts.append(RawCells(FINE, keys, surface.noise_margin, float(step) * REACH_STEP))
+    return tuple(parts)
 
 
 def _joined(group: Group | None, *parts: VoxelMap) -> Group:
     """A group of the non-empty parts (merged per resolution and kind: denoised cells stay :class:`SurfaceCells`)."""
-    by_kind: dict[tuple[float, bool], list[NDArray[np.int64]]] = {}
-    like: dict[tuple[float, bool], VoxelMap] = {}
+    by_kind: dict[tuple[float, str, float], list[NDArray[np.int64]]] = {}
+    like: dict[tuple[float, str, float], VoxelMap] = {}
     for part in [*(group_parts(group) if group is not None else ()), *parts]:
         if isinstance(part, VoxelMap) and len(part):
-            key = (part.resolution, isinstance(part, SurfaceCells))
+            key = (part.resolution, type(part).__name__, getattr(part, "reach", 0.0))
             by_kind.setdefault(key, []).append(part.keys)
             like[key] = part
     merged = tuple(
