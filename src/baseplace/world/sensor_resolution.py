@@ -64,9 +64,9 @@ cells here (smoothed, :class:`SurfaceCells`, and raw, :class:`RawCells`) and the
 (:func:`~baseplace.world.support_plane.with_support_slab`)."""
 REACH_STEP = 0.001
 """The raw points' covering radii (:class:`RawCells`) are rounded up to this [m]: one part per step."""
-SPACING_NEIGHBOURS = 4
-"""A point's sample spacing is the distance to its this-many-th nearest neighbour (:func:`sample_spacing`):
-on a square grid of spacing s its four nearest lie at s."""
+SPACING_NEIGHBOURS = 12
+"""A point's sample spacing is read from the radius R of its this many nearest neighbours
+(:func:`sample_spacing`): on a surface sampled every s, a ball of radius R holds pi R^2 / s^2 samples."""
 JOINT_SIGMAS = 1.79
 """Two samples' noise both beyond this many sigma is as rare as one sample's beyond
 :data:`CLEARANCE_SIGMAS` (Q(1.79)^2 = Q(3.0) = 0.00135): how deep the nearer of a surface point's two
@@ -251,20 +251,37 @@ def raw_margin(clearance: float, noise_margin: float, reach: float) -> float:
     return max(clearance, math.hypot(reach, depth))
 
 
-def sample_spacing(points: ArrayLike, at: ArrayLike) -> FloatArray:
-    """(M,) the sample spacing [m] of ``points`` (N, 3) near each of ``at`` (M, 3).
+def free_reach(noise_margin: float) -> float:
+    """The largest covering radius [m] whose raw cells keep just the clearance (:func:`raw_margin`).
 
-    The median, over the :data:`SMOOTH_VOTES` points nearest each, of their distance to their
-    :data:`SPACING_NEIGHBOURS`-th nearest neighbour. 0 for fewer than :data:`SPACING_NEIGHBOURS` + 1 points.
+    hypot(h, c - n + e) <= c for every c >= n when h^2 <= n^2 - e^2 (the bound is tightest at
+    c = n): 7.4 mm at 3 mm noise (n 9.2 mm), 0 with the noise at its floor.
+    """
+    depth = max(JOINT_SIGMAS * noise_margin / CLEARANCE_SIGMAS, MIN_CLEARANCE)
+    return math.sqrt(max(noise_margin * noise_margin - depth * depth, 0.0))
+
+
+def sample_spacing(points: ArrayLike, at: ArrayLike) -> FloatArray:
+    """(M,) the sample spacing s [m] of ``points`` (N, 3) near each of ``at`` (M, 3).
+
+    From the density: the radius R of each point's :data:`SPACING_NEIGHBOURS` nearest neighbours
+    gives s = R sqrt(pi / k) (a ball of radius R on a surface sampled every s holds pi R^2 / s^2
+    samples; the noise across the surface barely changes the count, where the distance to the
+    nearest few grows with it); the median over the :data:`SMOOTH_VOTES` points nearest each of
+    ``at``. Read on tests/test_clearance_bound_spacing.py's clouds: 9.2 mm for 9 mm, 12.2-12.8 mm
+    for 12.5 mm (noise-free), 12.4 mm for 12.5 mm and 6.4 mm for 6 mm at 3 mm noise; on a
+    bench/find_rate.py neighbour bottle (1 cm, 3 mm noise) 10.1 mm. 0 for fewer than
+    :data:`SPACING_NEIGHBOURS` + 1 points.
     """
     from scipy.spatial import cKDTree
 
     p = np.asarray(points, dtype=float).reshape(-1, 3)
     q = np.asarray(at, dtype=float).reshape(-1, 3)
-    if len(p) <= SPACING_NEIGHBOURS or len(q) == 0:
+    k = SPACING_NEIGHBOURS
+    if len(p) <= k or len(q) == 0:
         return np.zeros(len(q))
     tree = cKDTree(p)
-    own = tree.query(p, k=SPACING_NEIGHBOURS + 1)[0][:, -1]
+    own = tree.query(p, k=k + 1)[0][:, -1] * math.sqrt(math.pi / k)
     votes = tree.query(q, k=min(len(p), SMOOTH_VOTES))[1]
     return np.median(own[votes], axis=1)
 
@@ -657,17 +674,18 @@ def _cells(
 ) -> tuple[VoxelMap, ...]:  # fmt: skip
     """The points ``p[mine]`` (N, 3): smooth ones in cells like ``surface``, the others in :class:`RawCells`.
 
-    The raw points by their covering radius ``reach`` (N,) [m], rounded up to :data:`REACH_STEP`:
-    one part per step.
+    The raw points by their covering radius ``reach`` (N,) [m]: those up to :func:`free_reach` in
+    one part, the others rounded up to :data:`REACH_STEP` beyond it, one part per step.
     """
     # finer than a user may ask of VoxelMap.from_points: these are the few points near the object
     fine = np.unique(np.floor(p[mine & smooth] / FINE).astype(np.int64).reshape(-1, 3), axis=0)
     raw = mine & ~smooth
-    steps = np.ceil(reach[raw] / REACH_STEP - 1e-9).astype(np.int64)
+    free = free_reach(surface.noise_margin)  # every reach up to it keeps c: one part
+    steps = np.ceil(np.maximum(reach[raw] - free, 0.0) / REACH_STEP - 1e-9).astype(np.int64)
     parts: list[VoxelMap] = [replace(surface, keys=fine)]
     for step in np.unique(steps):
         keys = np.unique(np.floor(p[raw][steps == step] / FINE).astype(np.int64).reshape(-1, 3), axis=0)
-        parts.append(RawCells(FINE, keys, surface.noise_margin, float(step) * REACH_STEP))
+        parts.append(RawCells(FINE, keys, surface.noise_margin, free + float(step) * REACH_STEP))
     return tuple(parts)
 
 
