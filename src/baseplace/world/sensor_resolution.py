@@ -19,10 +19,16 @@ clearance even when c is given), the robot keeps at least c - n from the true su
 c - n + u from its own cells (:func:`margin`), u that kind's own error at :data:`CLEARANCE_SIGMAS`
 sigma, measured:
 
-* a point at an edge or a corner stays as measured, in :data:`EDGE_CELL` cells (no corner is
-  rounded off): its error is the noise, u = n, so its margin is c;
+* a point at an edge or a corner stays as measured (no corner is rounded off), in :data:`FINE`
+  cells (:class:`RawCells`): its error is the noise, u = n, so its margin is c, and more where its
+  samples are sparse: the true surface between them lies up to their covering radius h away along
+  it (:func:`raw_margin`: max(c, hypot(h, c - n + e)), e the nearer of two samples' depth at
+  3 sigma; c itself at 1 cm spacing and 3 mm noise, :func:`free_reach`; h from the density,
+  :func:`sample_spacing`). Before, 5 mm cells at c, reaching 0-5 mm beyond each point along each
+  axis, let spheres through on clouds sparser than about 6 mm (tests/test_clearance_bound_spacing.py);
 * a point on a smooth surface (a face, a bottle's side) is put onto the plane fitted to its
-  neighbours (:func:`denoised`), in :data:`FINE` cells (:class:`SurfaceCells`): u =
+  neighbours (:func:`denoised`; not when that moves it beyond its noise at 4 sigma plus the chord,
+  :func:`max_shift`: a plane through both faces of an edge), in :data:`FINE` cells (:class:`SurfaceCells`): u =
   :func:`surface_error`, its chord, :data:`CLEARANCE_SIGMAS` of its spread and the gaps between the
   points (9.1 mm at 3 mm noise, where n = 9.2 mm; bench/clearance_errors.py);
 * the exact plane: its fit's 3 standard errors, at least :data:`MIN_CLEARANCE`, when c is derived
@@ -218,8 +224,9 @@ def margin(part: VoxelMap | SupportPlane, clearance: float, plane_clearance: flo
     """The distance [m] below which a link touches ``part`` (coal's security margin).
 
     Each kind keeps c - n + u from its own cells (the module's docstring): from the denoised cells
-    (:class:`SurfaceCells`) ``clearance`` - n + :func:`surface_error` (at least 0); the clearance
-    from the other cells of at most :data:`MAX_FINE` (raw points: u = n), nothing from coarser
+    (:class:`SurfaceCells`) ``clearance`` - n + :func:`surface_error` (at least 0); from the raw
+    points' cells (:class:`RawCells`) :func:`raw_margin` (u = n, and their gaps); the clearance from
+    the other cells of at most :data:`MAX_FINE` (the experiments' slab cells), nothing from coarser
     voxels; from the exact plane ``plane_clearance`` when given (:func:`derived_plane_clearance`),
     else the clearance.
     """
