@@ -19,13 +19,13 @@ clearance even when c is given), the robot keeps at least c - n from the true su
 c - n + u from its own cells (:func:`margin`), u that kind's own error at :data:`CLEARANCE_SIGMAS`
 sigma, measured:
 
-* a point at an edge or a corner stays as measured (no corner is rounded off), in :data:`FINE`
-  cells (:class:`RawCells`): its error is the noise, u = n, so its margin is c, and more where its
-  samples are sparse: the true surface between them lies up to their covering radius h away along
-  it (:func:`raw_margin`: max(c, hypot(h, c - n + e)), e the nearer of two samples' depth at
-  3 sigma; c itself at 1 cm spacing and 3 mm noise, :func:`free_reach`; h from the density,
-  :func:`sample_spacing`). Before, 5 mm cells at c, reaching 0-5 mm beyond each point along each
-  axis, let spheres through on clouds sparser than about 6 mm (tests/test_clearance_bound_spacing.py);
+* a point at an edge or a corner stays as measured (no corner is rounded off): its error is the
+  noise, u = n, so its margin is c. In :data:`FINE` cells (:class:`RawCells`) where the noise
+  margin covers the gaps between the samples (their covering radius h, from the density:
+  :func:`sample_spacing`, at most :func:`free_reach`: 1 cm spacing at 3 mm noise), else in
+  :data:`EDGE_CELL` cells as before (a 5 mm cell reaches 0-5 mm beyond its point along each axis,
+  up to 8.7 mm diagonally; on sparser clouds it still lets spheres through:
+  tests/test_clearance_bound_spacing.py);
 * a point on a smooth surface (a face, a bottle's side) is put onto the plane fitted to its
   neighbours (:func:`denoised`; not when that moves it beyond its noise at 4 sigma plus the chord,
   :func:`max_shift`: a plane through both faces of an edge), in :data:`FINE` cells (:class:`SurfaceCells`): u =
@@ -68,15 +68,17 @@ MAX_FINE = 0.005
 """Cells no coarser than this [m] are at sensor resolution and kept at the clearance: the :data:`FINE`
 cells here (smoothed, :class:`SurfaceCells`, and raw, :class:`RawCells`) and the experiments' 5 mm slab cells
 (:func:`~baseplace.world.support_plane.with_support_slab`)."""
-REACH_STEP = 0.001
-"""The raw points' covering radii (:class:`RawCells`) are rounded up to this [m]: one part per step."""
+EDGE_CELL = 0.005
+"""Cell edge [m] of the points near the object that lie at an edge or a corner (not on a smooth
+surface, :func:`denoised`) where the noise does not cover the gaps between the samples
+(:func:`free_reach`): kept as measured, at the clearance (no allowance)."""
 SPACING_NEIGHBOURS = 12
 """A point's sample spacing is read from the radius R of its this many nearest neighbours
 (:func:`sample_spacing`): on a surface sampled every s, a ball of radius R holds pi R^2 / s^2 samples."""
 JOINT_SIGMAS = 1.79
 """Two samples' noise both beyond this many sigma is as rare as one sample's beyond
 :data:`CLEARANCE_SIGMAS` (Q(1.79)^2 = Q(3.0) = 0.00135): how deep the nearer of a surface point's two
-nearest samples lies, at :data:`CLEARANCE_SIGMAS` sigma (:func:`raw_margin`)."""
+nearest samples lies, at :data:`CLEARANCE_SIGMAS` sigma (:func:`free_reach`)."""
 SURFACE_SPREAD = 0.37
 """The standard deviation of a denoised point's distance to the true surface, in the scene's noise
 sigma (bench/clearance_errors.py: 1.03-1.10 mm at 3 mm noise, cylinders of 3-4.5 cm radius and a
@@ -188,16 +190,11 @@ class SurfaceCells(VoxelMap):
 
 @dataclass(frozen=True)
 class RawCells(VoxelMap):
-    """:data:`FINE` cells of the points near the object kept as measured (at an edge or a corner, :func:`denoised`).
+    """:data:`FINE` cells of raw points near the object whose sampling the noise margin covers.
 
-    Attributes:
-        noise_margin: the scene's derived noise margin n [m] (as :class:`SurfaceCells`).
-        reach: the covering radius h [m] of these points' sampling: every surface point has two
-            samples within it (:func:`sample_spacing` / sqrt(2)); :func:`raw_margin`.
+    Points kept as measured (at an edge or a corner, :func:`denoised`) where the scene's noise
+    margin covers the gaps between the samples (:func:`free_reach`): kept at the clearance.
     """
-
-    noise_margin: float = DEFAULT_CLEARANCE
-    reach: float = 0.0
 
 
 def scene_noise(groups: dict[str, Group]) -> SurfaceNoise | None:
@@ -225,8 +222,8 @@ def margin(part: VoxelMap | SupportPlane, clearance: float, plane_clearance: flo
 
     Each kind keeps c - n + u from its own cells (the module's docstring): from the denoised cells
     (:class:`SurfaceCells`) ``clearance`` - n + :func:`surface_error` (at least 0); from the raw
-    points' cells (:class:`RawCells`) :func:`raw_margin` (u = n, and their gaps); the clearance from
-    the other cells of at most :data:`MAX_FINE` (the experiments' slab cells), nothing from coarser
+    points' cells (:class:`RawCells`, :data:`EDGE_CELL`: u = n) and the other cells of at most
+    :data:`MAX_FINE` (the experiments' slab cells) the clearance, nothing from coarser
     voxels; from the exact plane ``plane_clearance`` when given (:func:`derived_plane_clearance`),
     else the clearance.
     """
@@ -234,35 +231,23 @@ def margin(part: VoxelMap | SupportPlane, clearance: float, plane_clearance: flo
         return plane_clearance
     if isinstance(part, SurfaceCells):
         return max(clearance - part.noise_margin + surface_error(part.noise_margin), 0.0)
-    if isinstance(part, RawCells):
-        return raw_margin(clearance, part.noise_margin, part.reach)
     return clearance if is_fine(part) else 0.0
 
 
-def raw_margin(clearance: float, noise_margin: float, reach: float) -> float:
-    """The distance [m] below which a link touches a raw point's cell (:class:`RawCells`): at least the clearance.
+def free_reach(noise_margin: float) -> float:
+    """The largest covering radius h [m] of a raw point's sampling for which c covers its gaps.
 
-    A point p at c - n from the true surface (c ``clearance``, n ``noise_margin``) has two samples
-    whose true positions lie within h (``reach``) of its foot on the surface (its covering radius;
-    on a square grid of spacing s, h = s / sqrt(2), also at an edge whose first rows lie within
+    A link at c - n from the true surface (c the clearance, n ``noise_margin``) stands over a surface
+    point with two samples whose true positions lie within h of it (h the sampling's covering
+    radius: s / sqrt(2) on a square grid of spacing s, also at an edge whose first rows lie within
     s / 2 of it). Each sample lies off the surface by its noise; the nearer of the two lies deeper
     than :data:`JOINT_SIGMAS` sigma (sigma = n / :data:`CLEARANCE_SIGMAS`) as rarely as one sample
-    beyond :data:`CLEARANCE_SIGMAS` sigma, and at least :data:`MIN_CLEARANCE` (a calibration error
-    moves every sample alike). So p lies within sqrt(h^2 + (c - n + e)^2) of a sample, e that depth
-    (Pythagoras: the gap along the surface, the depth across it). The :data:`FINE` cell holding the
-    sample reaches beyond it, never short of it. With h = 0 and the noise at its floor this is c
-    itself; at 1 cm spacing and 3 mm noise (h 7.1 mm, c - n + e 5.5 mm) c decides.
-    """
-    sigma = noise_margin / CLEARANCE_SIGMAS
-    depth = clearance - noise_margin + max(JOINT_SIGMAS * sigma, MIN_CLEARANCE)
-    return max(clearance, math.hypot(reach, depth))
-
-
-def free_reach(noise_margin: float) -> float:
-    """The largest covering radius [m] whose raw cells keep just the clearance (:func:`raw_margin`).
-
-    hypot(h, c - n + e) <= c for every c >= n when h^2 <= n^2 - e^2 (the bound is tightest at
-    c = n): 7.4 mm at 3 mm noise (n 9.2 mm), 0 with the noise at its floor.
+    beyond :data:`CLEARANCE_SIGMAS` sigma, and at least :data:`MIN_CLEARANCE` deep (a calibration
+    error moves every sample alike). So the link lies within hypot(h, c - n + e) of a sample, e that
+    depth (the gap along the surface, the depth across it): within c, for every c >= n, when
+    h^2 <= n^2 - e^2 (tightest at c = n). 7.4 mm at 3 mm noise (n 9.2 mm: 1 cm spacing is covered),
+    0 with the noise at its 3 mm floor. A point the :data:`FINE` cell holds lies inside it, so the
+    cell reaches at least as far.
     """
     depth = max(JOINT_SIGMAS * noise_margin / CLEARANCE_SIGMAS, MIN_CLEARANCE)
     return math.sqrt(max(noise_margin * noise_margin - depth * depth, 0.0))
@@ -679,30 +664,27 @@ def _cells(
     p: FloatArray, smooth: NDArray[np.bool_], mine: NDArray[np.bool_], surface: SurfaceCells,
     reach: FloatArray,
 ) -> tuple[VoxelMap, ...]:  # fmt: skip
-    """The points ``p[mine]`` (N, 3): smooth ones in cells like ``surface``, the others in :class:`RawCells`.
+    """The points ``p[mine]`` (N, 3): smooth ones in cells like ``surface``, the others raw.
 
-    The raw points by their covering radius ``reach`` (N,) [m]: those up to :func:`free_reach` in
-    one part, the others rounded up to :data:`REACH_STEP` beyond it, one part per step.
+    A raw point whose sampling's covering radius ``reach`` (N,) [m] is at most :func:`free_reach`
+    goes into a :class:`RawCells` cell, the others into :data:`EDGE_CELL` cells.
     """
     # finer than a user may ask of VoxelMap.from_points: these are the few points near the object
     fine = np.unique(np.floor(p[mine & smooth] / FINE).astype(np.int64).reshape(-1, 3), axis=0)
     raw = mine & ~smooth
-    free = free_reach(surface.noise_margin)  # every reach up to it keeps c: one part
-    steps = np.ceil(np.maximum(reach[raw] - free, 0.0) / REACH_STEP - 1e-9).astype(np.int64)
-    parts: list[VoxelMap] = [replace(surface, keys=fine)]
-    for step in np.unique(steps):
-        keys = np.unique(np.floor(p[raw][steps == step] / FINE).astype(np.int64).reshape(-1, 3), axis=0)
-        parts.append(RawCells(FINE, keys, surface.noise_margin, free + float(step) * REACH_STEP))
-    return tuple(parts)
+    dense = reach <= free_reach(surface.noise_margin)
+    covered = np.unique(np.floor(p[raw & dense] / FINE).astype(np.int64).reshape(-1, 3), axis=0)
+    sparse = np.unique(np.floor(p[raw & ~dense] / EDGE_CELL).astype(np.int64).reshape(-1, 3), axis=0)
+    return replace(surface, keys=fine), RawCells(FINE, covered), VoxelMap(EDGE_CELL, sparse)
 
 
 def _joined(group: Group | None, *parts: VoxelMap) -> Group:
     """A group of the non-empty parts (merged per resolution and kind: denoised cells stay :class:`SurfaceCells`)."""
-    by_kind: dict[tuple[float, str, float], list[NDArray[np.int64]]] = {}
-    like: dict[tuple[float, str, float], VoxelMap] = {}
+    by_kind: dict[tuple[float, str], list[NDArray[np.int64]]] = {}
+    like: dict[tuple[float, str], VoxelMap] = {}
     for part in [*(group_parts(group) if group is not None else ()), *parts]:
         if isinstance(part, VoxelMap) and len(part):
-            key = (part.resolution, type(part).__name__, getattr(part, "reach", 0.0))
+            key = (part.resolution, type(part).__name__)
             by_kind.setdefault(key, []).append(part.keys)
             like[key] = part
     merged = tuple(
