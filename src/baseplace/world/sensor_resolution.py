@@ -285,9 +285,11 @@ def max_shift(noise_margin: float) -> float:
     once in 30 000 points beyond) plus the plane's chord inside a curved surface
     (:data:`SURFACE_CHORD`). A longer move is a plane through both faces of an edge or a corner,
     cutting it off: the point stays raw. About 14.5 mm at 3 mm noise; 6.2 mm on a noise-free cloud
-    (n at its 3 mm floor), where the noise read on a sparse cloud's edges (4.5 mm on a 10 cm box
-    sampled every 12.5 mm) let :func:`denoised` move a box's edge rows 6 mm inward
-    (tests/test_clearance_bound_spacing.py).
+    (n at its 3 mm floor), where the noise read on a sparse cloud's edges (4.5 mm near a 10 cm box
+    sampled every 12.5 mm) passes edge rows as smooth and moves them inward (6.3 mm at the box's
+    vertical edge). With the limit the noise-free 3 cm bottle sampled every 12.5 mm keeps c - n for
+    5 mm spheres at its rim and over its side (tests/test_clearance_bound_spacing.py; 1 mm spheres
+    at its rim and the box's edges still not).
     """
     return OBJECT_SIGMAS * noise_margin / CLEARANCE_SIGMAS + SURFACE_CHORD
 
