@@ -8,7 +8,8 @@
   reachable one has no straight top-down approach at all (the find-rate oracle checks no motion).
 * ``smooth``: the share of each true shape's points (within 0.35 m of the grasped bottle, above
   the table top) that :func:`~baseplace.world.sensor_resolution.denoised` finds on a smooth
-  surface; the others stay raw points in 5 mm cells at the full clearance.
+  surface; the others stay raw points at the full clearance; per neighbour bottle also by band
+  (``neighbour_bands``: its bottom 3 cm, its side, its top 2 cm with its top face, the rim).
 
 Usage: python bench/find_rate_refusal_evidence.py {reach,smooth} --seeds 25011 ... --out x.json
 """
@@ -45,6 +46,10 @@ RADII = (0.35, 0.45, 0.55, 0.65, 0.75)
 DIRECTIONS, HEADINGS = 24, 12
 MAX_BACK = 0.15
 """The largest offset along the approach tried [m]."""
+RIM = 0.02
+"""``smooth``: a neighbour's points this close [m] under its top, and its top, are its rim band."""
+BOTTOM = 0.03
+"""``smooth``: a neighbour's points this close [m] over the table top are its bottom band."""
 
 
 def reachable(ik: DampedLeastSquaresIK, T: np.ndarray, rng: np.random.Generator) -> bool:
@@ -90,9 +95,16 @@ def smooth_row(seed: int) -> dict[str, Any]:
     names = np.array(nearest_shape(near, scene)[0])
     keep = names != "bottle (own points)"
     _, smooth = denoised(near[keep])
-    names = names[keep]
+    names, near = names[keep], near[keep]
+    bands = {}
+    for k, (_, _, _, h) in enumerate(scene.neighbours):  # where on each neighbour bottle the raw points lie
+        mine = names == f"neighbour {k}"
+        z = near[mine, 2] - scene.table[2]
+        band = np.where(z > h - RIM, "rim", np.where(z < BOTTOM, "bottom", "side"))
+        bands[f"neighbour {k}"] = {b: {"points": int(np.sum(band == b)), "smooth_share": round(float(smooth[mine][band == b].mean()), 3)}
+                                   for b in ("bottom", "side", "rim") if np.any(band == b)}  # fmt: skip
     return {"seed": seed, "smooth_share": {n: round(float(smooth[names == n].mean()), 3) for n in sorted(set(names))},
-            "points": {n: int(np.sum(names == n)) for n in sorted(set(names))}}  # fmt: skip
+            "points": {n: int(np.sum(names == n)) for n in sorted(set(names))}, "neighbour_bands": bands}  # fmt: skip
 
 
 def main(argv: list[str] | None = None) -> int:

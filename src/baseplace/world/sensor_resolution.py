@@ -19,10 +19,16 @@ clearance even when c is given), the robot keeps at least c - n from the true su
 c - n + u from its own cells (:func:`margin`), u that kind's own error at :data:`CLEARANCE_SIGMAS`
 sigma, measured:
 
-* a point at an edge or a corner stays as measured, in :data:`EDGE_CELL` cells (no corner is
-  rounded off): its error is the noise, u = n, so its margin is c;
+* a point at an edge or a corner stays as measured (no corner is rounded off): its error is the
+  noise, u = n, so its margin is c. In :data:`FINE` cells (:class:`RawCells`) where the noise
+  margin covers the gaps between the samples (their covering radius h, from the density:
+  :func:`sample_spacing`, at most :func:`free_reach`: 1 cm spacing at 3 mm noise), else in
+  :data:`EDGE_CELL` cells as before (a 5 mm cell reaches 0-5 mm beyond its point along each axis,
+  up to 8.7 mm diagonally; on sparser clouds it still lets spheres through:
+  tests/test_clearance_bound_spacing.py);
 * a point on a smooth surface (a face, a bottle's side) is put onto the plane fitted to its
-  neighbours (:func:`denoised`), in :data:`FINE` cells (:class:`SurfaceCells`): u =
+  neighbours (:func:`denoised`; not when that moves it beyond its noise at 4 sigma plus the chord,
+  :func:`max_shift`: a plane through both faces of an edge), in :data:`FINE` cells (:class:`SurfaceCells`): u =
   :func:`surface_error`, its chord, :data:`CLEARANCE_SIGMAS` of its spread and the gaps between the
   points (9.1 mm at 3 mm noise, where n = 9.2 mm; bench/clearance_errors.py);
 * the exact plane: its fit's 3 standard errors, at least :data:`MIN_CLEARANCE`, when c is derived
@@ -60,11 +66,19 @@ FINE = 0.00125
 a cell reaches 0 to FINE beyond its point along each axis."""
 MAX_FINE = 0.005
 """Cells no coarser than this [m] are at sensor resolution and kept at the clearance: the :data:`FINE`
-and :data:`EDGE_CELL` cells here and the experiments' 5 mm slab cells
+cells here (smoothed, :class:`SurfaceCells`, and raw, :class:`RawCells`) and the experiments' 5 mm slab cells
 (:func:`~baseplace.world.support_plane.with_support_slab`)."""
 EDGE_CELL = 0.005
 """Cell edge [m] of the points near the object that lie at an edge or a corner (not on a smooth
-surface, :func:`denoised`): kept as measured, at the clearance (no allowance)."""
+surface, :func:`denoised`) where the noise does not cover the gaps between the samples
+(:func:`free_reach`): kept as measured, at the clearance (no allowance)."""
+SPACING_NEIGHBOURS = 12
+"""A point's sample spacing is read from the radius R of its this many nearest neighbours
+(:func:`sample_spacing`): on a surface sampled every s, a ball of radius R holds pi R^2 / s^2 samples."""
+JOINT_SIGMAS = 1.79
+"""Two samples' noise both beyond this many sigma is as rare as one sample's beyond
+:data:`CLEARANCE_SIGMAS` (Q(1.79)^2 = Q(3.0) = 0.00135): how deep the nearer of a surface point's two
+nearest samples lies, at :data:`CLEARANCE_SIGMAS` sigma (:func:`free_reach`)."""
 SURFACE_SPREAD = 0.37
 """The standard deviation of a denoised point's distance to the true surface, in the scene's noise
 sigma (bench/clearance_errors.py: 1.03-1.10 mm at 3 mm noise, cylinders of 3-4.5 cm radius and a
@@ -174,6 +188,15 @@ class SurfaceCells(VoxelMap):
     noise: SurfaceNoise | None = None
 
 
+@dataclass(frozen=True)
+class RawCells(VoxelMap):
+    """:data:`FINE` cells of raw points near the object whose sampling the noise margin covers.
+
+    Points kept as measured (at an edge or a corner, :func:`denoised`) where the scene's noise
+    margin covers the gaps between the samples (:func:`free_reach`): kept at the clearance.
+    """
+
+
 def scene_noise(groups: dict[str, Group]) -> SurfaceNoise | None:
     """The noise :func:`fine_groups` measured near the object, kept in its denoised cells, or None."""
     for group in groups.values():
@@ -198,8 +221,9 @@ def margin(part: VoxelMap | SupportPlane, clearance: float, plane_clearance: flo
     """The distance [m] below which a link touches ``part`` (coal's security margin).
 
     Each kind keeps c - n + u from its own cells (the module's docstring): from the denoised cells
-    (:class:`SurfaceCells`) ``clearance`` - n + :func:`surface_error` (at least 0); the clearance
-    from the other cells of at most :data:`MAX_FINE` (raw points: u = n), nothing from coarser
+    (:class:`SurfaceCells`) ``clearance`` - n + :func:`surface_error` (at least 0); from the raw
+    points' cells (:class:`RawCells`, :data:`EDGE_CELL`: u = n) and the other cells of at most
+    :data:`MAX_FINE` (the experiments' slab cells) the clearance, nothing from coarser
     voxels; from the exact plane ``plane_clearance`` when given (:func:`derived_plane_clearance`),
     else the clearance.
     """
@@ -208,6 +232,66 @@ def margin(part: VoxelMap | SupportPlane, clearance: float, plane_clearance: flo
     if isinstance(part, SurfaceCells):
         return max(clearance - part.noise_margin + surface_error(part.noise_margin), 0.0)
     return clearance if is_fine(part) else 0.0
+
+
+def free_reach(noise_margin: float) -> float:
+    """The largest covering radius h [m] of a raw point's sampling for which c covers its gaps.
+
+    A link at c - n from the true surface (c the clearance, n ``noise_margin``) stands over a surface
+    point with two samples whose true positions lie within h of it (h the sampling's covering
+    radius: s / sqrt(2) on a square grid of spacing s, also at an edge whose first rows lie within
+    s / 2 of it). Each sample lies off the surface by its noise; the nearer of the two lies deeper
+    than :data:`JOINT_SIGMAS` sigma (sigma = n / :data:`CLEARANCE_SIGMAS`) as rarely as one sample
+    beyond :data:`CLEARANCE_SIGMAS` sigma, and at least :data:`MIN_CLEARANCE` deep (a calibration
+    error moves every sample alike). So the link lies within hypot(h, c - n + e) of a sample, e that
+    depth (the gap along the surface, the depth across it): within c, for every c >= n, when
+    h^2 <= n^2 - e^2 (tightest at c = n). 7.4 mm at 3 mm noise (n 9.2 mm: 1 cm spacing is covered),
+    0 with the noise at its 3 mm floor. A point the :data:`FINE` cell holds lies inside it, so the
+    cell reaches at least as far.
+    """
+    depth = max(JOINT_SIGMAS * noise_margin / CLEARANCE_SIGMAS, MIN_CLEARANCE)
+    return math.sqrt(max(noise_margin * noise_margin - depth * depth, 0.0))
+
+
+def sample_spacing(points: ArrayLike, at: ArrayLike) -> FloatArray:
+    """(M,) the sample spacing s [m] of ``points`` (N, 3) near each of ``at`` (M, 3).
+
+    From the density: the radius R of each point's :data:`SPACING_NEIGHBOURS` nearest neighbours
+    gives s = R sqrt(pi / k) (a ball of radius R on a surface sampled every s holds pi R^2 / s^2
+    samples; the noise across the surface barely changes the count, where the distance to the
+    nearest few grows with it); the median over the :data:`SMOOTH_VOTES` points nearest each of
+    ``at``. Read on tests/test_clearance_bound_spacing.py's clouds: 9.2 mm for 9 mm, 12.2-12.8 mm
+    for 12.5 mm (noise-free), 12.4 mm for 12.5 mm and 6.4 mm for 6 mm at 3 mm noise; on a
+    bench/find_rate.py neighbour bottle (1 cm, 3 mm noise) 10.1 mm. 0 for fewer than
+    :data:`SPACING_NEIGHBOURS` + 1 points.
+    """
+    from scipy.spatial import cKDTree
+
+    p = np.asarray(points, dtype=float).reshape(-1, 3)
+    q = np.asarray(at, dtype=float).reshape(-1, 3)
+    k = SPACING_NEIGHBOURS
+    if len(p) <= k or len(q) == 0:
+        return np.zeros(len(q))
+    tree = cKDTree(p)
+    own = tree.query(p, k=k + 1)[0][:, -1] * math.sqrt(math.pi / k)
+    votes = tree.query(q, k=min(len(p), SMOOTH_VOTES))[1]
+    return np.median(own[votes], axis=1)
+
+
+def max_shift(noise_margin: float) -> float:
+    """How far [m] :func:`denoised` may move a point onto its local plane in a scene of noise margin n.
+
+    Its noise across the surface at :data:`OBJECT_SIGMAS` sigma (sigma = n / :data:`CLEARANCE_SIGMAS`:
+    once in 30 000 points beyond) plus the plane's chord inside a curved surface
+    (:data:`SURFACE_CHORD`). A longer move is a plane through both faces of an edge or a corner,
+    cutting it off: the point stays raw. About 14.5 mm at 3 mm noise; 6.2 mm on a noise-free cloud
+    (n at its 3 mm floor), where the noise read on a sparse cloud's edges (4.5 mm near a 10 cm box
+    sampled every 12.5 mm) passes edge rows as smooth and moves them inward (6.3 mm at the box's
+    vertical edge). With the limit the noise-free 3 cm bottle sampled every 12.5 mm keeps c - n for
+    5 mm spheres at its rim and over its side (tests/test_clearance_bound_spacing.py; 1 mm spheres
+    at its rim and the box's edges still not).
+    """
+    return OBJECT_SIGMAS * noise_margin / CLEARANCE_SIGMAS + SURFACE_CHORD
 
 
 def clearance_record(clearance: float, note: str, noise_margin: float) -> dict[str, float | str]:
@@ -461,6 +545,7 @@ def fine_groups(
             owner[rows_in(keys, v.keys[near[name]])] = k
     taken = owner >= 0
     p, owner = p[taken], owner[taken]
+    sampled = p
     noise = surface_noise(around)  # measured once per object, for the clearance here and in its callers
     is_object = _object_points(p, grasped, object_tolerance(_noise_margin(slab, noise)))
     plane = None
@@ -470,17 +555,19 @@ def fine_groups(
         plane = _plane(slab, p[flat])
         if plane is not None:
             p, owner, is_object = p[~flat], owner[~flat], is_object[~flat]
-    moved, smooth = denoised(p)  # the noise once: the clearance stands on the surface, not on the noise
-    surface = SurfaceCells(FINE, np.zeros((0, 3), dtype=np.int64), derived_clearance(plane, noise=noise)[0],
-                           noise)  # fmt: skip
+    reach = sample_spacing(sampled, p) / math.sqrt(2.0)  # before the plane leaves: its points are samples too
+    n = derived_clearance(plane, noise=noise)[0]
+    # the noise once: the clearance stands on the surface, not on the noise
+    moved, smooth = denoised(p, max_shift(n))
+    surface = SurfaceCells(FINE, np.zeros((0, 3), dtype=np.int64), n, noise)
     out: dict[str, Group] = {}
     for k, name in enumerate(names):
         coarse = (groups[name] if name != _OBJECT else object_voxels).without(near[name])
         mine = is_object if name == _OBJECT else (owner == k) & ~is_object
         if name == _OBJECT:  # an object voxel's other points are obstacles
             mine_other = (owner == k) & ~is_object
-            out["obstacle"] = _joined(out.get("obstacle"), *_cells(moved, smooth, mine_other, surface))
-        out[name] = _joined(out.get(name), coarse, *_cells(moved, smooth, mine, surface))
+            out["obstacle"] = _joined(out.get("obstacle"), *_cells(moved, smooth, mine_other, surface, reach))
+        out[name] = _joined(out.get(name), coarse, *_cells(moved, smooth, mine, surface, reach))
     grasped_group = out.pop(_OBJECT)
     out = {name: g for name, g in out.items() if group_size(g)}
     if plane is not None:
@@ -491,7 +578,7 @@ def fine_groups(
 _OBJECT = "\0object"
 
 
-def denoised(points: ArrayLike) -> tuple[FloatArray, NDArray[np.bool_]]:
+def denoised(points: ArrayLike, shift_limit: float | None = None) -> tuple[FloatArray, NDArray[np.bool_]]:
     """The points (N, 3) [m] on smooth surfaces put onto their local plane, and which those are (N,).
 
     A point's surface is smooth when a quadric fitted to its :data:`SMOOTH_NEIGHBOURS` nearest
@@ -503,7 +590,8 @@ def denoised(points: ArrayLike) -> tuple[FloatArray, NDArray[np.bool_]]:
     surface that plane is a chord, inside it by about rho^2 / (8 r) (rho the neighbourhood's
     radius, r the curvature's): 2.6 mm on a 3 cm bottle sampled every centimetre. A point near an
     edge or a corner stays where it was measured: a plane through both faces would cut the corner
-    off. All stay when the noise cannot be measured (too few points).
+    off. All stay when the noise cannot be measured (too few points), and a point whose move would
+    exceed ``shift_limit`` [m] (:func:`max_shift`) stays too.
     """
     from scipy.spatial import cKDTree
 
@@ -529,6 +617,8 @@ def denoised(points: ArrayLike) -> tuple[FloatArray, NDArray[np.bool_]]:
     # the nearest fits decides)
     votes = tree.query(p, k=min(len(p), SMOOTH_VOTES))[1]
     smooth = np.median(residual[votes], axis=1) <= PLANAR_FACTOR * noise.along_normals
+    if shift_limit is not None:  # a move beyond the noise is a plane cutting an edge or a corner off
+        smooth &= np.einsum("ni,ni->n", shift, shift) <= shift_limit * shift_limit
     return np.where(smooth[:, None], p + shift, p), smooth
 
 
@@ -573,22 +663,30 @@ def _object_points(
 
 
 def _cells(
-    p: FloatArray, smooth: NDArray[np.bool_], mine: NDArray[np.bool_], surface: SurfaceCells
-) -> tuple[SurfaceCells, VoxelMap]:
-    """The points ``p[mine]`` (N, 3): smooth ones in cells like ``surface``, the others in :data:`EDGE_CELL` cells."""
+    p: FloatArray, smooth: NDArray[np.bool_], mine: NDArray[np.bool_], surface: SurfaceCells,
+    reach: FloatArray,
+) -> tuple[VoxelMap, ...]:  # fmt: skip
+    """The points ``p[mine]`` (N, 3): smooth ones in cells like ``surface``, the others raw.
+
+    A raw point whose sampling's covering radius ``reach`` (N,) [m] is at most :func:`free_reach`
+    goes into a :class:`RawCells` cell, the others into :data:`EDGE_CELL` cells.
+    """
     # finer than a user may ask of VoxelMap.from_points: these are the few points near the object
     fine = np.unique(np.floor(p[mine & smooth] / FINE).astype(np.int64).reshape(-1, 3), axis=0)
-    edge = np.unique(np.floor(p[mine & ~smooth] / EDGE_CELL).astype(np.int64).reshape(-1, 3), axis=0)
-    return replace(surface, keys=fine), VoxelMap(EDGE_CELL, edge)
+    raw = mine & ~smooth
+    dense = reach <= free_reach(surface.noise_margin)
+    covered = np.unique(np.floor(p[raw & dense] / FINE).astype(np.int64).reshape(-1, 3), axis=0)
+    sparse = np.unique(np.floor(p[raw & ~dense] / EDGE_CELL).astype(np.int64).reshape(-1, 3), axis=0)
+    return replace(surface, keys=fine), RawCells(FINE, covered), VoxelMap(EDGE_CELL, sparse)
 
 
 def _joined(group: Group | None, *parts: VoxelMap) -> Group:
     """A group of the non-empty parts (merged per resolution and kind: denoised cells stay :class:`SurfaceCells`)."""
-    by_kind: dict[tuple[float, bool], list[NDArray[np.int64]]] = {}
-    like: dict[tuple[float, bool], VoxelMap] = {}
+    by_kind: dict[tuple[float, str], list[NDArray[np.int64]]] = {}
+    like: dict[tuple[float, str], VoxelMap] = {}
     for part in [*(group_parts(group) if group is not None else ()), *parts]:
         if isinstance(part, VoxelMap) and len(part):
-            key = (part.resolution, isinstance(part, SurfaceCells))
+            key = (part.resolution, type(part).__name__)
             by_kind.setdefault(key, []).append(part.keys)
             like[key] = part
     merged = tuple(
