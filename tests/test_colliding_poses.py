@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from baseplace.errors import InputError
-from baseplace.placement.robustness import perturbed
+from baseplace.placement.robustness import BaseErrorModel, RobustnessEstimator, RobustnessSettings, perturbed
+from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.world.state_filter import StateFilter
 from test_state_filter import SCENES, _environments, _states
 
@@ -100,3 +101,36 @@ def test_one_state_per_pose(tiago, pose_pairs):
         env.colliding_arm_poses(arm, Q[:3], T[:2])
     with pytest.raises(InputError):
         env.colliding_arm_poses(arm, Q[:1], T[0])
+
+
+def test_robustness_draws_get_coals_verdicts(tiago):
+    """The score's draws equal an independent reference: each draw's IK solution, coal on every pair at the draw's pose.
+
+    Wide base errors on a table scene (many draws put the base or the arm in the table), one IK
+    solution per draw (the default; a second one from a random start would hide most wrong
+    verdicts). The reference solves the same batched IK (the estimator's restarts and random
+    stream, ``seed + 1``) and asks :meth:`Environment.colliding_arm_exact` draw by draw.
+    """
+    scene_seed, cell, grasp, offset, yaw = SCENES[0]
+    target, _, env = _environments(
+        tiago, scene_seed, cell, grasp
+    )  # the approach model: the hand may touch the object
+    arm = tiago.arm()
+    T_base, _ = _states(tiago, target, offset, yaw, np.random.default_rng(3))
+    q_seed = DampedLeastSquaresIK(arm, restarts=20).solve(
+        np.linalg.inv(T_base) @ target, np.random.default_rng(4)
+    )
+    settings = RobustnessSettings(samples=64, error=BaseErrorModel(sigma_xy=0.12, sigma_yaw=0.4))
+    estimator = RobustnessEstimator(arm, env, target[None], settings)
+    ok = estimator.successes(T_base, [q_seed])
+    poses = perturbed(T_base, estimator.offsets)
+    ik = DampedLeastSquaresIK(arm, restarts=settings.ik_restarts)
+    q, found = ik.solve_batch(np.linalg.inv(poses) @ target, np.random.default_rng(settings.seed + 1), q_seed)
+    reference = np.array(
+        [
+            bool(f) and not env.colliding_arm_exact(arm, qi, T)
+            for qi, f, T in zip(q, found, poses, strict=True)
+        ]
+    )
+    assert 5 < reference.sum() < len(reference) - 5  # draws on both sides
+    np.testing.assert_array_equal(ok, reference)
