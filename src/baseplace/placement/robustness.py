@@ -216,6 +216,8 @@ class RobustnessEstimator:
 
         With a motion check, also the reaching motion to each target's configuration there, planned
         with a seed per draw (the same draws and seeds for every placement of the estimator).
+        The draws' IK solutions are checked for collision together, each at its own pose
+        (:meth:`~baseplace.world.environment.Environment.colliding_arm_poses`, coal's verdicts).
 
         Args:
             T_world_base: (4, 4) nominal base pose.
@@ -235,12 +237,15 @@ class RobustnessEstimator:
                 seed = None if q_seeds is None else q_seeds[k]
                 T_base_tcp = T_base_world[live] @ target
                 q, found = self._ik.solve_batch(T_base_tcp, self._rng, seed)
+                draw_poses = poses[np.asarray(todo)[live]]
+                hit = ~np.asarray(found, dtype=bool)  # every draw's IK solution checked in one call
+                hit[~hit] = self.environment.colliding_arm_poses(self.arm, q[~hit], draw_poses[~hit])
                 for j, row in enumerate(live.tolist()):
                     if j % 64 == 0:
                         deadline.check()
-                    T_draw = poses[todo[row]]
+                    T_draw = draw_poses[j]
                     q_ok: FloatArray | None = q[j]
-                    if not found[j] or self.environment.colliding_arm(self.arm, q[j], T_draw):
+                    if hit[j]:
                         q_ok = self._other_solution(T_base_tcp[j], T_draw)
                     if q_ok is not None and self.motion is not None:
                         plan_seed = self.settings.seed + 1000 * todo[row] + k

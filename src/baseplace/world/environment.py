@@ -392,6 +392,25 @@ class Environment:
         """
         return self.state_filter(arm).first_colliding(Q_arm, _base_pose(T_world_base))
 
+    def colliding_arm_poses(self, arm: Arm, Q_arm: ArrayLike, T_world_base: ArrayLike) -> NDArray[np.bool_]:
+        """(S,) :meth:`colliding_arm` for each pair of arm joint values Q_arm[s] (n,) and base pose T_world_base[s] (4, 4).
+
+        The geometries no arm joint moves are checked for all poses together
+        (:meth:`StateFilter.colliding_poses`); the verdicts are coal's.
+
+        Raises:
+            InputError: the poses are not finite (S, 4, 4) matrices, or not one per state.
+        """
+        T = np.asarray(T_world_base, dtype=float)
+        Q = np.asarray(Q_arm, dtype=float)
+        if T.ndim != 3 or T.shape[1:] != (4, 4) or not np.all(np.isfinite(T)):
+            raise InputError("base poses must be finite (S, 4, 4) matrices")
+        if Q.ndim != 2 or len(Q) != len(T) or Q.shape[1] != arm.n_joints:
+            raise InputError(
+                f"need one arm state ({arm.n_joints},) per base pose, got {Q.shape} for {len(T)} poses"
+            )
+        return self.state_filter(arm).colliding_poses(Q, T)
+
     def state_filter(self, arm: Arm) -> StateFilter:
         """The pre-filtered state check of ``arm`` (built on first use, kept)."""
         if arm.name not in self._filters:

@@ -1204,6 +1204,91 @@ class StateFilter:
         self.coal_pairs += len(pairs)
         return next(self._scene_touching(pairs, q_full, T_world_base), None) is not None
 
+    def colliding_poses(self, Q_arm: ArrayLike, T_world_base: ArrayLike) -> NDArray[np.bool_]:
+        """Per pair (arm joint values Q_arm[s] (n,), base pose T_world_base[s] (4, 4)): :meth:`colliding`'s verdict.
+
+        For many base poses at once: the error draws of the robustness score (Stulp et al. 2012's
+        action-related places, seed 000 Alg. 2's check at each drawn pose), each at its own pose.
+        The geometries no arm joint moves do not depend on the arm's state, so their spheres are
+        placed for every pose and tested against each scene part in one compiled call per part
+        (:meth:`_static_uncertified`) instead of one setup per pose; a pose whose leftover pairs
+        coal finds touching collides. The others go through the compiled state check
+        (:func:`_uncertified_states`), one state at its own pose, and coal on the pairs left, with
+        the request and margin of :meth:`first_colliding`: the verdict is coal's. The static answer
+        kept for :meth:`first_colliding` is neither used nor changed.
+
+        Returns:
+            (S,) bool, True where the robot touches the scene or itself.
+        """
+        T = np.asarray(T_world_base, dtype=float).reshape(-1, 4, 4)
+        Q = np.ascontiguousarray(np.asarray(Q_arm, dtype=float).reshape(len(T), self.arm.n_joints))
+        hit = np.zeros(len(T), dtype=bool)
+        if len(T) == 0:
+            return hit
+        T_armbase = np.ascontiguousarray(T @ self._T_base_armbase)
+        static = self._static_uncertified(T_armbase)
+        P = len(self._scene_rows)
+        out = np.empty((1, P + len(self._self_pairs)), dtype=np.bool_)
+        robot, scene_and_self = self._kernel_args
+        for s in range(len(T)):
+            q_full = self._full(Q[s]) if static[s] else None
+            if q_full is not None and self._scene_coal(static[s], q_full, T[s]):
+                hit[s] = True
+                continue
+            if _uncertified_states(Q[s : s + 1], *robot, T_armbase[s], *scene_and_self, 0, out) < 0:  # type: ignore[call-arg]
+                continue
+            self.coal_states += 1
+            q_full = self._full(Q[s]) if q_full is None else q_full
+            scene = self._scene_row_pair[np.flatnonzero(out[0, :P])]
+            if len(scene) and self._scene_coal(scene.tolist(), q_full, T[s]):
+                hit[s] = True
+                continue
+            own = self._self_index[np.flatnonzero(out[0, P:])]
+            hit[s] = bool(len(own)) and self._self_coal(own, q_full)
+        return hit
+
+    def _static_uncertified(self, T_world_armbase: FloatArray) -> list[list[int]]:
+        """Per arm base pose (S, 4, 4), the scene pairs of the geometries no arm joint moves that their spheres do not clear.
+
+        :meth:`_Part.uncertified` for all poses at once: those geometries' sphere centres (fixed
+        in the arm's base frame) placed by every pose (:func:`_transformed_poses`, the arithmetic
+        of :func:`_transformed`), then one compiled test per scene part's index over all of them.
+        """
+        S = len(T_world_armbase)
+        left: list[list[int]] = [[] for _ in range(S)]
+        W = np.empty((S, len(self.local), 3))
+        _transformed_poses(self.local, T_world_armbase, W)
+        for part in self._static_parts:
+            G = len(part.robot_a)
+            if G == 0:
+                continue
+            C = np.ascontiguousarray(W[:, part.robot_a].reshape(-1, 3))
+            reach = np.tile(part.reach, S)
+            if part._arrays:
+                free = np.ones(len(C), dtype=bool)
+                buf = np.empty(len(C), dtype=np.bool_)
+                for arrays, part_reach in part._arrays:
+                    _clear(buf, C, np.tile(part_reach, S), *arrays)
+                    free &= buf
+            elif part.planes is not None:
+                free = np.max(C @ part.planes[:, :3].T + part.planes[:, 3], axis=1) > reach
+            else:
+                assert part.sphere is not None
+                centre, r = part.sphere
+                free = np.linalg.norm(C - centre, axis=1) > reach + r
+            for s, k in zip(*np.nonzero(~free.reshape(S, G)), strict=True):
+                left[s].append(int(part.pair_a[k]))
+        return left
+
+
+@nb.njit(cache=True)
+def _transformed_poses(C, T, out):
+    """Points C (G, 3) moved by each rigid transform T[s] (S, 4, 4), into ``out`` (S, G, 3) (:func:`_transformed`'s arithmetic)."""
+    for s in range(T.shape[0]):
+        for k in range(C.shape[0]):
+            for a in range(3):
+                out[s, k, a] = T[s, a, 0] * C[k, 0] + T[s, a, 1] * C[k, 1] + T[s, a, 2] * C[k, 2] + T[s, a, 3]
+
 
 def _touching(
     check: tuple[pin.Model, pin.Data, pin.GeometryModel, pin.GeometryData],
