@@ -110,6 +110,56 @@ def test_edge_verdicts_with_lever_arms_are_coals(tiago, table_lines):
     assert blocked > 20 and free > 20
 
 
+def _certified_touching(env, arm, Q, T_base, levers):
+    """(pairs certified, of those coal finds touching at their margin) over every state of Q, certificates ahead on.
+
+    The compiled call is run over all of Q (it stops at each state with pairs left; it goes on
+    from the next, its certificates kept, as :meth:`StateFilter.first_colliding` does); then
+    every pair it certified at every state, scene and self, is asked of coal.
+    """
+    filt = env.state_filter(arm)
+    filt.first_colliding(Q[:1], T_base)  # the base pose placed
+    robot_args, scene_and_self = filt._kernel_args
+    P = len(filt._scene_rows)
+    out = np.empty((len(Q), P + len(filt._self_pairs)), dtype=np.bool_)
+    ahead = _ahead(Q, levers, filt._n_columns)
+    i = -1
+    while i < len(Q):
+        i = _uncertified_states(Q, *robot_args, filt._T_world_armbase, *scene_and_self, i + 1, out, *ahead)
+        i = len(Q) if i < 0 else i
+    certified = touching = 0
+    for k, q in enumerate(Q):
+        q_full = filt._full(q)
+        scene = filt._scene_row_pair[np.flatnonzero(~out[k, :P])].tolist()
+        own = filt._self_index[np.flatnonzero(~out[k, P:])].tolist()
+        certified += len(scene) + len(own)
+        touching += len(list(filt._scene_touching(scene, q_full, T_base)))
+        touching += len(list(filt._self_touching(own, q_full)))
+    return certified, touching
+
+
+def test_certificates_ahead_clear_only_pairs_coal_finds_free(tiago, table_lines):
+    """Every pair the compiled call certifies at a state, by its own test or a certificate from a state behind, is free by coal.
+
+    The lines of the noisy table cut at 1 cm of robot travel (:meth:`MotionChecker.edge_states`),
+    in bisection order, the states of several lines in one call. Pair by pair, not only the
+    first touching state: a bound too small (the lever arms quartered) is caught here.
+    """
+    transit, approach, T_base, lines = table_lines
+    arm = tiago.arm()
+    levers = lever_arms(tiago, arm, transit.geom)
+    checker = MotionChecker(tiago, arm, transit, approach, MotionSettings(point_step=0.01))
+    certified = 0
+    for env in (transit, approach):
+        for a, b in lines[::4]:
+            n = checker.edge_states(a, b)
+            Q = a + np.outer(np.array(bisection_order(n), dtype=float) / n, b - a)
+            c, touching = _certified_touching(env, arm, Q, T_base, levers)
+            assert touching == 0, f"{touching} certified pairs touch by coal on the line {a} -> {b}"
+            certified += c
+    assert certified > 10_000
+
+
 def test_motion_checker_blocks_where_a_state_by_state_check_does(tiago, table_lines):
     """MotionChecker._blocking (whole lines) returns the state the landed one-state-at-a-time loop returned."""
     transit, approach, T_base, lines = table_lines
