@@ -216,13 +216,20 @@ def _points_rows(out_i, r0, r1, rows, reach, W, radius, Ws, sub_start, sub_radiu
         elif touch:
             touch = False
             _cover_placed(g, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws)
+            least = (
+                np.inf
+            )  # the smallest room of the cover's spheres (0 where only the exact query clears one)
             for u in range(sub_start[g], sub_start[g + 1]):
                 r = sub_radius[u] + reach[p]
-                if _lower_bound(Ws[u], lo, hi, field, field_lo, field_h) <= r and (
-                    _within(Ws[u], r, True, points, keys, starts, lo, cell, dims) >= 0.0
-                ):
-                    touch = True
-                    break
+                room = _lower_bound(Ws[u], lo, hi, field, field_lo, field_h) - r
+                if not room > 0.0:
+                    room = 0.0
+                    if _within(Ws[u], r, True, points, keys, starts, lo, cell, dims) >= 0.0:
+                        touch = True
+                        break
+                least = min(least, room)
+            if not touch:  # the geometry lies in its cover's union: clear by the least room
+                _mark(cert, c0 + p, i, least, s, s_slack, order, rank)
         if touch:
             touch = not _points_outside_hull(g, W[g], radius[g] + reach[p], reach[p], joint, F, T, hull_start,
                                              hull_planes, points, keys, starts, lo, cell, dims)  # fmt: skip
@@ -392,10 +399,15 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
                 if touch and sub_start[g + 1] - sub_start[g] > 1:
                     touch = False
                     _cover_placed(g, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws)
+                    least = np.inf
                     for u in range(sub_start[g], sub_start[g + 1]):
-                        if _shape_touches(Ws[u], sub_radius[u] + reach[p], kind, a, b, planes, balls):
+                        room = _shape_gap(Ws[u], sub_radius[u] + reach[p], kind, a, b, planes, balls)
+                        if not room > 0.0:
                             touch = True
                             break
+                        least = min(least, room)
+                    if not touch:  # the geometry lies in its cover's union
+                        _mark(cert, c_rows + p, i, least, s, s_slack, order, rank)
                 if touch and kind == 1:
                     touch = not _vertices_outside(
                         g, W[g], reach[p], joint, F, T, vert_start, verts, planes, a, b
