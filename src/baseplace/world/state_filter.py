@@ -21,6 +21,17 @@ one sphere that truly contains it (:func:`bounding_sphere`), placed by the arm's
 Only the pairs not certified go to coal (``pinocchio.computeCollision``, the same call, request
 and margin as the full check), so the verdict is coal's. Geometries no arm joint moves are
 checked against the scene once per base pose and the answer kept.
+
+Certificates ahead (conservative advancement, Mirtich 1996; the travel bound from the joints'
+lever arms as in Schwarzer, Saha and Latombe 2005): within one call the base pose is fixed, and
+the arm's lever arms bound how far any robot point can be between two states (:func:`_ahead`). A
+pair certified by a distance with room to spare (a group sphere, bounding sphere or every cover
+sphere farther than needed by that room, from a part's bounding box, its box centres' distance
+bound, its planes or ball, or for a self pair the other sphere) stays free at every later state
+of the call its geometry cannot have moved that room from (half of it for a self pair: both
+sides move), so it is not tested there (:func:`_mark`); a state with nothing left to test is not
+even placed. The edge checks' states (1 cm of robot travel apart, issue 25 item 3) are mostly
+such states.
 """
 
 from __future__ import annotations
@@ -448,8 +459,11 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
                 if not touch:
                     _mark(cert, c_pairs + p, i, gap / 2, s, s_slack, order, rank)
                 if touch and self_table[p] >= 0:
-                    touch = not _table_clear(Q[i], self_table[p], tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off,
-                                             tab_cert)  # fmt: skip
+                    room = _table_room(Q[i], self_table[p], tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off,
+                                       tab_cert)  # fmt: skip
+                    touch = not room > 0.0
+                    if not touch:  # the hulls' distance less the margin, at least
+                        _mark(cert, c_pairs + p, i, room / 2, s, s_slack, order, rank)
                 if touch:
                     touch = _covers_near(g, h, i, self_reach[p], Cg, radius, stamp, sub_start, sub_joint, sub_local,
                                          sub_radius, F, T, Cs, Ws, near_h)  # fmt: skip
@@ -458,11 +472,17 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
                                     sub_radius, F, T, Cs, Ws, hull_start, hull_planes, hull_hint[p, 0])  # fmt: skip
                     if k >= 0:
                         hull_hint[p, 0], touch = k, False
+                        room = _plane_room(g, h, self_reach[p], joint, Cg, radius, sub_start, sub_radius, F, Cs,
+                                           hull_planes, k)  # fmt: skip
+                        _mark(cert, c_pairs + p, i, room / 2, s, s_slack, order, rank)
                     else:
                         k = _hull_clear(h, g, i, self_reach[p], joint, Cg, radius, stamp, sub_start, sub_joint,
                                         sub_local, sub_radius, F, T, Cs, Ws, hull_start, hull_planes, hull_hint[p, 1])  # fmt: skip
                         if k >= 0:
                             hull_hint[p, 1], touch = k, False
+                            room = _plane_room(h, g, self_reach[p], joint, Cg, radius, sub_start, sub_radius, F, Cs,
+                                               hull_planes, k)  # fmt: skip
+                            _mark(cert, c_pairs + p, i, room / 2, s, s_slack, order, rank)
                 out_i[P + p] = touch
                 any_pair |= touch
         if any_pair:
@@ -614,6 +634,35 @@ def _hull_clear(g, h, i, reach, joint, Cg, radius, stamp, sub_start, sub_joint, 
 
 
 @nb.njit(cache=True)
+def _plane_room(g, h, reach, joint, Cg, radius, sub_start, sub_radius, F, Cs, planes, k):
+    """How much farther [m] than ``reach`` geometry h lies outside plane k of geometry g's hull (:func:`_hull_clear` found it).
+
+    By h's bounding sphere when that is clear of the plane, else by its cover's spheres (placed
+    by :func:`_hull_clear`); 0 when neither shows room by this one plane.
+    """
+    j = joint[g]
+    room = -_plane_depth(Cg[h], j, F, planes, k) - radius[h] - reach
+    if room > 0.0 or sub_start[h + 1] - sub_start[h] <= 1:
+        return max(room, 0.0)
+    least = np.inf
+    for u in range(sub_start[h], sub_start[h + 1]):
+        least = min(least, -_plane_depth(Cs[u], j, F, planes, k) - sub_radius[u] - reach)
+    return max(least, 0.0)
+
+
+@nb.njit(cache=True, inline="always")
+def _plane_depth(c, j, F, planes, k):
+    """Minus the signed distance of the point c (3,) (the arm's base frame) to plane k of joint j's frame (-1: the base)."""
+    x, y, z = c[0], c[1], c[2]
+    if j >= 0:  # into the joint's frame: R^T (c - t)
+        dx, dy, dz = x - F[j, 0, 3], y - F[j, 1, 3], z - F[j, 2, 3]
+        x = F[j, 0, 0] * dx + F[j, 1, 0] * dy + F[j, 2, 0] * dz
+        y = F[j, 0, 1] * dx + F[j, 1, 1] * dy + F[j, 2, 1] * dz
+        z = F[j, 0, 2] * dx + F[j, 1, 2] * dy + F[j, 2, 2] * dz
+    return -(planes[k, 0] * x + planes[k, 1] * y + planes[k, 2] * z + planes[k, 3])
+
+
+@nb.njit(cache=True)
 def _vertices_outside(g, c, reach, joint, F, T, vert_start, verts, planes, a, b):
     """Whether geometry g's hull points all lie more than ``reach`` outside one of the world planes a..b.
 
@@ -684,6 +733,12 @@ def _table_clear(q, t, tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off, tab
     Coal's distance at the nearest grid node, less how far the two geometries can have moved
     relative to each other since (lever arm times joint change, per joint), is above the margin.
     """
+    return _table_room(q, t, tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off, tab_cert) > 0.0
+
+
+@nb.njit(cache=True, inline="always")
+def _table_room(q, t, tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off, tab_cert):
+    """How much farther [m] than the margin self pair table t shows the pair at arm state q (n,), at least (:func:`_table_clear`)."""
     index, slack = 0, 0.0
     for d in range(2):
         j = tab_joint[t, d]
@@ -692,7 +747,7 @@ def _table_clear(q, t, tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off, tab
         u = min(max(round((q[j] - tab_lo[t, d]) / tab_step[t, d]), 0), tab_n[t, d] - 1)
         slack += tab_rho[t, d] * abs(q[j] - (tab_lo[t, d] + u * tab_step[t, d]))
         index = index * tab_n[t, d] + u
-    return tab_cert[tab_off[t] + index] > slack
+    return tab_cert[tab_off[t] + index] - slack
 
 
 @nb.njit(cache=True, inline="always")
