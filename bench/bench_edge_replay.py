@@ -79,6 +79,7 @@ def main() -> None:
     result = {
         "results_file": args.results,
         "checks": len(rows),
+        "seeds": sorted({row["seed"] for row in rows}),
         "calls": len(calls),
         "states": int(sum(len(c[1]) for c in calls)),
         "answers_identical": True,
@@ -86,7 +87,7 @@ def main() -> None:
         "ratio_none_over_levers": round(float(np.mean(ms["none"]) / np.mean(ms["levers"])), 2),
         "split_ms_mean_of_two": {k: round(v, 1) for k, v in sorted(split.items())},
     }
-    report(args.name, result, split="dev", seeds_used=sorted({row["seed"] for row in rows}))
+    report(args.name, result, split="dev")
 
 
 if __name__ == "__main__":
