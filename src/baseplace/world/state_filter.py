@@ -1436,7 +1436,9 @@ class StateFilter:
             if q_full is not None and self._scene_coal(static[s], q_full, T[s]):
                 hit[s] = True
                 continue
-            if _uncertified_states(Q[s : s + 1], *robot, T_armbase[s], *scene_and_self, 0, out) < 0:  # type: ignore[call-arg]
+            one = Q[s : s + 1]
+            if _uncertified_states(one, *robot, T_armbase[s], *scene_and_self, 0, out,  # type: ignore[call-arg]
+                                   *_ahead(one, None, self._n_columns)) < 0:  # fmt: skip
                 continue
             self.coal_states += 1
             q_full = self._full(Q[s]) if q_full is None else q_full
