@@ -44,9 +44,9 @@ Nor are raw points on an edge put onto its two faces (session 14, bench/clearanc
 ``on_edges``: a RANSAC two-plane fit to a raw point's 32-48 nearest points, the point onto the
 nearer face, past the edge line onto the line): at 3 mm noise and 1 cm sampling each face holds
 8-20 points, the fits leave the moved points 1.4-2.8 mm (sd) off the true shape, up to 12 mm inside,
-and a model that takes 47-79 % of a rim's raw points needs u = 5.5-9.9 mm for 5 mm spheres touching
-the true rim or edge (n = 9 mm), one that takes 15-24 % up to 10.2 mm: no smaller than a raw
-point's u = n, so no gain.
+and a model that takes 57-79 % of the raw points of a rim's top 2 cm needs u = 5.9-9.9 mm for 5 mm
+spheres touching the true rim or edge (n = 9 mm; three draws per shape), one that takes 16-24 % up
+to 10.2 mm: no smaller than a raw point's u = n, so no gain (bench/results/clearance_errors_s14_edge.json).
 tests/test_clearance_bound.py checks with coal on the true shapes (cylinders of 3 and 4.5 cm, a
 10 cm box with its corners, the table top; 3 mm noise, three draws) that 5 mm spheres 0.5 mm nearer
 than c - n are refused everywhere, and that a palm is free ACCEPT beyond c - n from a noisy bottle.
