@@ -40,6 +40,16 @@ putting those that failed the smoothness test on the noise's tail onto the surfa
 neighbours (a quadric through them within 1 sigma, their centre within 1.5 cm, the point within
 3 sigma of it) was measured and left out: it moved points up to 14 mm inside a box's true surface
 and left 5 mm spheres at a bottle's rim up to 11.9 mm from the model's cells (bench/clearance_errors.py).
+Nor are raw points on an edge put onto its two faces (session 14, bench/clearance_errors.py's
+``on_edges``: a RANSAC two-plane fit to a raw point's 32-48 nearest points, the point onto the
+nearer face, past the edge line onto the line): at 3 mm noise and 1 cm sampling each face holds
+8-20 points, the fits leave the moved points 1.4-2.8 mm (sd) off the true shape, up to 12 mm inside,
+and a model that takes 57-79 % of the raw points of a rim's top 2 cm needs u = 5.9-9.9 mm for 5 mm
+spheres touching the true rim or edge (n = 9 mm; three draws per shape), one that takes 16-24 % up
+to 10.2 mm: no smaller than a raw point's u = n, so no gain (bench/results/clearance_errors_s14_edge.json).
+Wired in (u = 1.1 n) where the noise covers the sampling it changed no dev find-rate verdict (3/6,
+17/28, 0 false positives); on every raw point it took dev 25023 (18/28) only by replacing the 5 mm
+cells of a sparse rim, and left 5 mm spheres at a 12.5 mm box's edges (3 mm noise) free.
 tests/test_clearance_bound.py checks with coal on the true shapes (cylinders of 3 and 4.5 cm, a
 10 cm box with its corners, the table top; 3 mm noise, three draws) that 5 mm spheres 0.5 mm nearer
 than c - n are refused everywhere, and that a palm is free ACCEPT beyond c - n from a noisy bottle.
