@@ -156,10 +156,8 @@ class ExactStates:
         self._env = env
         self.colliding_arm = env.colliding_arm_exact
 
-    def first_colliding_arm(
-        self, arm: Any, Q: FloatArray, T_world_base: FloatArray, levers: Any = None
-    ) -> int:
-        """The whole-line check, state by state with coal on every pair (``levers`` not needed)."""
+    def first_colliding_arm(self, arm: Any, Q: FloatArray, T_world_base: FloatArray) -> int:
+        """The whole-line check, state by state with coal on every pair."""
         return next((i for i, q in enumerate(Q) if self._env.colliding_arm_exact(arm, q, T_world_base)), -1)
 
     def __getattr__(self, name: str) -> Any:

@@ -14,19 +14,13 @@ import pinocchio as pin
 import pytest
 
 from baseplace.geometry.poses import pose_from_xyz_rpy
-from baseplace.placement.motion import (
-    MotionChecker,
-    MotionSettings,
-    bisection_order,
-    lever_arms,
-    stowed_configuration,
-)
+from baseplace.placement.motion import MotionChecker, MotionSettings, bisection_order, stowed_configuration
 from baseplace.placement.pipeline import PlaceSettings, scene_checks, with_floor
 from baseplace.placement.scene_cache import SceneCache
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.spheres import _joint_frames
 from baseplace.world.environment import Environment
-from baseplace.world.state_filter import _ahead, _table_clear, _uncertified_states, sphere_cover
+from baseplace.world.state_filter import _table_clear, _uncertified_states, sphere_cover
 from baseplace_experiments.execution_experiment import trial_scene
 from baseplace_experiments.table_grid import TableGridSettings
 from test_state_filter import (  # the coal oracle; a geometry's extreme points
@@ -83,81 +77,6 @@ def test_edge_verdicts_are_coals_on_a_noisy_table(tiago, table_lines):
     assert coal_blocked_only == 0
     assert blocked > 30 and free > 30  # both verdicts, on lines into the table and beside it
     assert transit.state_filter(arm).coal_states > 0  # states at contact reach coal
-
-
-def test_edge_verdicts_with_lever_arms_are_coals(tiago, table_lines):
-    """With the lever arms, pairs certified with room to spare are not tested again ahead: still coal's first state.
-
-    The lines cut as the product cuts them (no robot point moves more than 1 cm between two
-    states, :meth:`MotionChecker.edge_states`), in bisection order. The oracle is coal on every
-    pair, state by state in the same order, up to the first touching.
-    """
-    transit, approach, T_base, lines = table_lines
-    arm = tiago.arm()
-    levers = lever_arms(tiago, arm, transit.geom)
-    checker = MotionChecker(tiago, arm, transit, approach, MotionSettings(point_step=0.01))
-    blocked = free = 0
-    for env in (transit, approach):
-        for a, b in lines[::2]:
-            n = checker.edge_states(a, b)
-            Q = a + np.outer(np.array(bisection_order(n), dtype=float) / n, b - a)
-            first = env.first_colliding_arm(arm, Q, T_base, levers)
-            expected = next((k for k, q in enumerate(Q) if env.colliding_arm_exact(arm, q, T_base)), -1)
-            assert first == expected, f"edge check says state {first}, coal {expected}, line {a} -> {b}"
-            blocked += first >= 0
-            free += first < 0
-    print(f"{blocked} lines blocked, {free} free")
-    assert blocked > 20 and free > 20
-
-
-def _certified_touching(env, arm, Q, T_base, levers):
-    """(pairs certified, of those coal finds touching at their margin) over every state of Q, certificates ahead on.
-
-    The compiled call is run over all of Q (it stops at each state with pairs left; it goes on
-    from the next, its certificates kept, as :meth:`StateFilter.first_colliding` does); then
-    every pair it certified at every state, scene and self, is asked of coal.
-    """
-    filt = env.state_filter(arm)
-    filt.first_colliding(Q[:1], T_base)  # the base pose placed
-    robot_args, scene_and_self = filt._kernel_args
-    P = len(filt._scene_rows)
-    out = np.empty((len(Q), P + len(filt._self_pairs)), dtype=np.bool_)
-    ahead = _ahead(Q, levers, filt._n_columns)
-    i = -1
-    while i < len(Q):
-        i = _uncertified_states(Q, *robot_args, filt._T_world_armbase, *scene_and_self, i + 1, out, *ahead)
-        i = len(Q) if i < 0 else i
-    certified = touching = 0
-    for k, q in enumerate(Q):
-        q_full = filt._full(q)
-        scene = filt._scene_row_pair[np.flatnonzero(~out[k, :P])].tolist()
-        own = filt._self_index[np.flatnonzero(~out[k, P:])].tolist()
-        certified += len(scene) + len(own)
-        touching += len(list(filt._scene_touching(scene, q_full, T_base)))
-        touching += len(list(filt._self_touching(own, q_full)))
-    return certified, touching
-
-
-def test_certificates_ahead_clear_only_pairs_coal_finds_free(tiago, table_lines):
-    """Every pair the compiled call certifies at a state, by its own test or a certificate from a state behind, is free by coal.
-
-    The lines of the noisy table cut at 1 cm of robot travel (:meth:`MotionChecker.edge_states`),
-    in bisection order, the states of several lines in one call. Pair by pair, not only the
-    first touching state: a bound too small (the lever arms quartered) is caught here.
-    """
-    transit, approach, T_base, lines = table_lines
-    arm = tiago.arm()
-    levers = lever_arms(tiago, arm, transit.geom)
-    checker = MotionChecker(tiago, arm, transit, approach, MotionSettings(point_step=0.01))
-    certified = 0
-    for env in (transit, approach):
-        for a, b in lines[::4]:
-            n = checker.edge_states(a, b)
-            Q = a + np.outer(np.array(bisection_order(n), dtype=float) / n, b - a)
-            c, touching = _certified_touching(env, arm, Q, T_base, levers)
-            assert touching == 0, f"{touching} certified pairs touch by coal on the line {a} -> {b}"
-            certified += c
-    assert certified > 10_000
 
 
 def test_motion_checker_blocks_where_a_state_by_state_check_does(tiago, table_lines):
@@ -282,9 +201,7 @@ def test_every_self_pair_the_spheres_certify_is_free_by_coal(tiago):
     for q in states:
         out = np.empty((1, P + len(filt._self_pairs)), dtype=np.bool_)
         q1 = np.ascontiguousarray(q[None])
-        i = _uncertified_states(
-            q1, *robot_args, np.eye(4), *scene_and_self, 0, out, *_ahead(q1, None, filt._n_columns)
-        )
+        i = _uncertified_states(q1, *robot_args, np.eye(4), *scene_and_self, 0, out)
         left = out[0, P:] if i == 0 else np.zeros(len(filt._self_pairs), dtype=bool)
         pin.forwardKinematics(model, data, filt._full(q))
         pin.updateGeometryPlacements(model, data, geom, gdata)

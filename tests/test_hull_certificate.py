@@ -17,7 +17,7 @@ import pytest
 
 from baseplace.placement.motion import stowed_configuration
 from baseplace.world.environment import Environment
-from baseplace.world.state_filter import _ahead, _uncertified_states
+from baseplace.world.state_filter import _uncertified_states
 from test_state_filter import table_scene_states
 
 
@@ -29,9 +29,8 @@ def _left(filt, q, T_world_armbase, hulls):
         empty = (np.zeros(G + 1, np.int64), np.zeros((0, 4)), np.zeros(G + 1, np.int64), np.zeros((0, 3)))
         robot_args = (*robot_args[:-4], *empty)
     out = np.empty((1, len(filt._scene_rows) + len(filt._self_pairs)), dtype=np.bool_)
-    q1 = np.ascontiguousarray(q[None])
     i = _uncertified_states(
-        q1, *robot_args, T_world_armbase, *scene_and_self, 0, out, *_ahead(q1, None, filt._n_columns)
+        np.ascontiguousarray(q[None]), *robot_args, T_world_armbase, *scene_and_self, 0, out
     )
     return out[0] if i == 0 else np.zeros(out.shape[1], dtype=bool)
 

@@ -179,9 +179,9 @@ def test_a_check_budget_stops_planning_before_the_time_limit(tiago, wall_scene):
     env.colliding_arm = counting  # type: ignore[method-assign]
     first_colliding = env.first_colliding_arm
 
-    def counting_line(arm, Q, T, levers=None):  # type: ignore[no-untyped-def]
+    def counting_line(arm, Q, T):  # type: ignore[no-untyped-def]
         i = first_colliding(
-            arm, Q, T, levers
+            arm, Q, T
         )  # a whole line's states, as checked one by one up to the first touching
         counted[0] += len(Q) if i < 0 else i + 1
         return i

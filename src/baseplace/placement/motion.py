@@ -516,7 +516,7 @@ class MotionChecker:
         """
         n = self.edge_states(a, b)
         Q = a + np.outer(_bisection_fractions(n), b - a)
-        i = environment.first_colliding_arm(self.arm, Q, T_world_base, self.levers)
+        i = environment.first_colliding_arm(self.arm, Q, T_world_base)
         if environment is self.environment:
             self.state_checks += len(Q) if i < 0 else i + 1
         return None if i < 0 else Q[i]

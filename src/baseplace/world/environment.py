@@ -385,16 +385,12 @@ class Environment:
         """
         return self.state_filter(arm).colliding(q_arm, _base_pose(T_world_base))
 
-    def first_colliding_arm(
-        self, arm: Arm, Q_arm: ArrayLike, T_world_base: ArrayLike, levers: ArrayLike | None = None
-    ) -> int:
+    def first_colliding_arm(self, arm: Arm, Q_arm: ArrayLike, T_world_base: ArrayLike) -> int:
         """The index of the first of the arm states Q_arm (m, n) for which :meth:`colliding_arm` is True, or -1.
 
-        Every state's spheres in one compiled call (:meth:`StateFilter.first_colliding`); with
-        the arm's ``levers`` (``baseplace.placement.motion.lever_arms``), a pair certified with
-        room to spare is not tested again at the states it cannot have crossed that room by.
+        Every state's spheres in one compiled call (:meth:`StateFilter.first_colliding`).
         """
-        return self.state_filter(arm).first_colliding(Q_arm, _base_pose(T_world_base), levers)
+        return self.state_filter(arm).first_colliding(Q_arm, _base_pose(T_world_base))
 
     def colliding_arm_poses(self, arm: Arm, Q_arm: ArrayLike, T_world_base: ArrayLike) -> NDArray[np.bool_]:
         """(S,) :meth:`colliding_arm` for each pair of arm joint values Q_arm[s] (n,) and base pose T_world_base[s] (4, 4).

@@ -21,17 +21,6 @@ one sphere that truly contains it (:func:`bounding_sphere`), placed by the arm's
 Only the pairs not certified go to coal (``pinocchio.computeCollision``, the same call, request
 and margin as the full check), so the verdict is coal's. Geometries no arm joint moves are
 checked against the scene once per base pose and the answer kept.
-
-Certificates ahead (conservative advancement, Mirtich 1996; the travel bound from the joints'
-lever arms as in Schwarzer, Saha and Latombe 2005): within one call the base pose is fixed, and
-the arm's lever arms bound how far any robot point can be between two states (:func:`_ahead`). A
-pair certified by a distance with room to spare (a group sphere, bounding sphere or every cover
-sphere farther than needed by that room, from a part's bounding box, its box centres' distance
-bound, its planes or ball, or for a self pair the other sphere) stays free at every later state
-of the call its geometry cannot have moved that room from (half of it for a self pair: both
-sides move), so it is not tested there (:func:`_mark`); a state with nothing left to test is not
-even placed. The edge checks' states (1 cm of robot travel apart, issue 25 item 3) are mostly
-such states.
 """
 
 from __future__ import annotations
@@ -184,7 +173,7 @@ def _transformed(C, T, out):
 @nb.njit(cache=True)
 def _points_rows(out_i, r0, r1, rows, reach, W, radius, Ws, sub_start, sub_radius, joint, Wj, group_radius,
                  i, stamp, sub_joint, sub_local, F, T, Cs, points, keys, starts, lo, hi, cell, dims, field, field_lo, field_h,
-                 hull_start, hull_planes, cert, c0, s, s_slack, order, rank):  # fmt: skip
+                 hull_start, hull_planes):  # fmt: skip
     """Scene rows r0..r1 (sorted by arm joint) against one part's box centres: ``out_i[p]`` True where not certified.
 
     The box centres are a :class:`PointIndex`'s arrays; ``reach`` holds the boxes' half diagonal.
@@ -194,53 +183,37 @@ def _points_rows(out_i, r0, r1, rows, reach, W, radius, Ws, sub_start, sub_radiu
     one without by its bounding sphere's exact query; failing those, when every box centre within
     its bounding sphere's reach lies that far outside one of its hull's face planes
     (:func:`_points_outside_hull`).
-
-    A row certified at an earlier state ahead (``cert[i, c0 + p]``, :func:`_mark`) is passed
-    over; one certified here by a distance bound with room to spare marks the states ahead that
-    its geometry cannot reach the part from.
     """
-    group, group_bound = -2, 0.0
+    group, group_clear = -2, False
     if len(points) == 0:
         out_i[r0:r1] = False
         return False
     any_row = False
     for p in range(r0, r1):
-        if cert[i, c0 + p]:
-            out_i[p] = False
-            continue
         g = rows[p]
         if joint[g] != group:
             group = joint[g]
-            group_bound = _lower_bound(Wj[group], lo, hi, field, field_lo, field_h)
-        if group_bound > group_radius[group] + reach[p]:  # this row's own reach: a group's may differ
+            group_clear = (
+                _lower_bound(Wj[group], lo, hi, field, field_lo, field_h) > group_radius[group] + reach[p]
+            )
+        if group_clear:
             out_i[p] = False
-            _mark(cert, c0 + p, i, group_bound - group_radius[group] - reach[p], s, s_slack, order, rank)
             continue
         covered = sub_start[g + 1] - sub_start[g] > 1
         r = radius[g] + reach[p]
-        bound = _lower_bound(W[g], lo, hi, field, field_lo, field_h)
-        touch = bound <= r
-        if not touch:
-            _mark(cert, c0 + p, i, bound - r, s, s_slack, order, rank)
+        touch = _lower_bound(W[g], lo, hi, field, field_lo, field_h) <= r
         if touch and not covered:
             touch = _within(W[g], r, True, points, keys, starts, lo, cell, dims) >= 0.0
         elif touch:
             touch = False
             _cover_placed(g, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws)
-            least = (
-                np.inf
-            )  # the smallest room of the cover's spheres (0 where only the exact query clears one)
-            for u in range(sub_start[g], sub_start[g + 1]):
-                r = sub_radius[u] + reach[p]
-                room = _lower_bound(Ws[u], lo, hi, field, field_lo, field_h) - r
-                if not room > 0.0:
-                    room = 0.0
-                    if _within(Ws[u], r, True, points, keys, starts, lo, cell, dims) >= 0.0:
-                        touch = True
-                        break
-                least = min(least, room)
-            if not touch:  # the geometry lies in its cover's union: clear by the least room
-                _mark(cert, c0 + p, i, least, s, s_slack, order, rank)
+            for s in range(sub_start[g], sub_start[g + 1]):
+                r = sub_radius[s] + reach[p]
+                if _lower_bound(Ws[s], lo, hi, field, field_lo, field_h) <= r and (
+                    _within(Ws[s], r, True, points, keys, starts, lo, cell, dims) >= 0.0
+                ):
+                    touch = True
+                    break
         if touch:
             touch = not _points_outside_hull(g, W[g], radius[g] + reach[p], reach[p], joint, F, T, hull_start,
                                              hull_planes, points, keys, starts, lo, cell, dims)  # fmt: skip
@@ -303,7 +276,7 @@ def _shape_touches(c, r, kind, a, b, planes, balls):
 def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_start, sub_joint, sub_local,
                         sub_radius, group_local, group_radius, hull_start, hull_planes, vert_start, verts, T, scene_rows, scene_reach, parts, offs, all_points, all_keys, all_starts,
                         all_fields, geo, ints, halves, planes, balls, self_pairs, self_reach, self_runs, run_reach, self_table,
-                        tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off, tab_cert, start, out, s, s_slack, order, rank, cert):  # fmt: skip
+                        tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off, tab_cert, start, out):  # fmt: skip
     """Per state Q[i] (n,), which pairs its spheres do not certify free: ``out[i, p]`` (m, P + S) bool.
 
     The whole-edge check of issue 25 item 3: every state's spheres placed and tested in one call.
@@ -325,7 +298,7 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
     F = np.empty((Q.shape[1], 3, 4))
     group_joint = np.arange(J)
     Cj, Wj = np.empty((J, 3)), np.empty((J, 3))
-    R3, t = np.empty((3, 3)), np.empty(3)
+    R, t = np.empty((3, 3)), np.empty(3)
     Cg, Cs = np.empty((G, 3)), np.empty((K, 3))
     W, Ws = np.empty((G, 3)), np.empty((K, 3))
     stamp = np.full(G, -1)  # the state each geometry's cover spheres were last placed for
@@ -341,37 +314,20 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
         )
         for p in range(parts[q, 3], parts[q, 4]):
             part_reach[q] = max(part_reach[q], reach[p])
-    NQ, R = parts.shape[0], self_runs.shape[0]
-    c_rows, c_runs, c_pairs = NQ, NQ + P, NQ + P + R  # the columns of ``cert``
     for i in range(start, Q.shape[0]):
+        _joint_frames(Q[i], placements, axes, kinds, F, R, t)
+        _place(joint, local, F, Cg)
+        _transformed(Cg, T, W)
+        _place(group_joint, group_local, F, Cj)
+        _transformed(Cj, T, Wj)
         out_i = out[i]
         any_pair = False
-        placed = False
-        for q in range(NQ):
+        for q in range(parts.shape[0]):
             kind, a, b, r0, r1 = parts[q, 0], parts[q, 1], parts[q, 2], parts[q, 3], parts[q, 4]
-            left = not cert[i, q]
-            if left:
-                left = False
-                for p in range(r0, r1):
-                    if not cert[i, c_rows + p]:
-                        left = True
-                        break
-            if not left:  # the part, or each of its rows, certified at a state behind
-                out_i[r0:r1] = False
+            if kind == 0 and _part_far(r0, r1, scene_rows, joint, Wj, group_radius, part_reach[q], geo[q]):
+                out_i[r0:r1] = False  # every row's group sphere clear of the part's bounding box
                 continue
-            if not placed:
-                placed = True
-                _joint_frames(Q[i], placements, axes, kinds, F, R3, t)
-                _place(joint, local, F, Cg)
-                _transformed(Cg, T, W)
-                _place(group_joint, group_local, F, Cj)
-                _transformed(Cj, T, Wj)
             if kind == 0:
-                gap = _part_gap(r0, r1, scene_rows, joint, Wj, group_radius, part_reach[q], geo[q])
-                if gap > 0.0:
-                    out_i[r0:r1] = False  # every row's group sphere clear of the part's bounding box
-                    _mark(cert, q, i, gap, s, s_slack, order, rank)
-                    continue
                 pts = all_points[offs[q, 0] : offs[q + 1, 0]]
                 keys = all_keys[offs[q, 1] : offs[q + 1, 1]]
                 starts = all_starts[offs[q, 2] : offs[q + 1, 2]]
@@ -386,84 +342,43 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
                 dims = ints[q, 0:3]
                 any_pair |= _points_rows(out_i, r0, r1, scene_rows, reach, W, radius, Ws, sub_start, sub_radius,
                                          joint, Wj, group_radius, i, stamp, sub_joint, sub_local, F, T, Cs, pts, keys, starts, lo, hi, cell, dims, field,
-                                         field_lo, field_h, hull_start, hull_planes, cert, c_rows, s, s_slack, order, rank)  # fmt: skip
+                                         field_lo, field_h, hull_start, hull_planes)  # fmt: skip
                 continue
-            group, group_gap = -2, 0.0
+            group, group_clear = -2, False
             for p in range(r0, r1):
-                if cert[i, c_rows + p]:
-                    out_i[p] = False
-                    continue
                 g = scene_rows[p]
                 if joint[g] != group:  # the rows of one arm joint together: its group sphere first
                     group = joint[g]
-                    group_gap = _shape_gap(
-                        Wj[group], group_radius[group] + part_reach[q], kind, a, b, planes, balls
-                    )
-                if group_gap > 0.0:
+                    group_clear = not _shape_touches(Wj[group], group_radius[group] + part_reach[q], kind, a, b,
+                                                     planes, balls)  # fmt: skip
+                if group_clear:
                     out_i[p] = False
-                    _mark(cert, c_rows + p, i, group_gap, s, s_slack, order, rank)
                     continue
-                own = _shape_gap(W[g], radius[g] + reach[p], kind, a, b, planes, balls)
-                touch = not own > 0.0
-                if not touch:
-                    _mark(cert, c_rows + p, i, own, s, s_slack, order, rank)
+                touch = _shape_touches(W[g], radius[g] + reach[p], kind, a, b, planes, balls)
                 if touch and sub_start[g + 1] - sub_start[g] > 1:
                     touch = False
                     _cover_placed(g, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws)
-                    least = np.inf
-                    for u in range(sub_start[g], sub_start[g + 1]):
-                        room = _shape_gap(Ws[u], sub_radius[u] + reach[p], kind, a, b, planes, balls)
-                        if not room > 0.0:
+                    for s in range(sub_start[g], sub_start[g + 1]):
+                        if _shape_touches(Ws[s], sub_radius[s] + reach[p], kind, a, b, planes, balls):
                             touch = True
                             break
-                        least = min(least, room)
-                    if not touch:  # the geometry lies in its cover's union
-                        _mark(cert, c_rows + p, i, least, s, s_slack, order, rank)
                 if touch and kind == 1:
                     touch = not _vertices_outside(
                         g, W[g], reach[p], joint, F, T, vert_start, verts, planes, a, b
                     )
                 out_i[p] = touch
                 any_pair |= touch
-        for run in range(R):
+        for run in range(self_runs.shape[0]):
             g, j, r0, r1 = self_runs[run, 0], self_runs[run, 1], self_runs[run, 2], self_runs[run, 3]
-            left = not cert[i, c_runs + run]
-            if left:
-                left = False
-                for p in range(r0, r1):
-                    if not cert[i, c_pairs + p]:
-                        left = True
-                        break
-            if not left:
+            if not _near(Cg, g, Cj, j, radius[g] + group_radius[j] + run_reach[run]):
                 out_i[P + r0 : P + r1] = False
-                continue
-            if not placed:
-                placed = True
-                _joint_frames(Q[i], placements, axes, kinds, F, R3, t)
-                _place(joint, local, F, Cg)
-                _transformed(Cg, T, W)
-                _place(group_joint, group_local, F, Cj)
-                _transformed(Cj, T, Wj)
-            gap = _gap(Cg, g, Cj, j, radius[g] + group_radius[j] + run_reach[run])
-            if gap > 0.0:  # both sides move: each at most the travel, so half the gap each way
-                out_i[P + r0 : P + r1] = False
-                _mark(cert, c_runs + run, i, gap / 2, s, s_slack, order, rank)
                 continue
             for p in range(r0, r1):
-                if cert[i, c_pairs + p]:
-                    out_i[P + p] = False
-                    continue
                 g, h = self_pairs[p, 0], self_pairs[p, 1]
-                gap = _gap(Cg, g, Cg, h, radius[g] + radius[h] + self_reach[p])
-                touch = not gap > 0.0
-                if not touch:
-                    _mark(cert, c_pairs + p, i, gap / 2, s, s_slack, order, rank)
+                touch = _near(Cg, g, Cg, h, radius[g] + radius[h] + self_reach[p])
                 if touch and self_table[p] >= 0:
-                    room = _table_room(Q[i], self_table[p], tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off,
-                                       tab_cert)  # fmt: skip
-                    touch = not room > 0.0
-                    if not touch:  # the hulls' distance less the margin, at least
-                        _mark(cert, c_pairs + p, i, room / 2, s, s_slack, order, rank)
+                    touch = not _table_clear(Q[i], self_table[p], tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off,
+                                             tab_cert)  # fmt: skip
                 if touch:
                     touch = _covers_near(g, h, i, self_reach[p], Cg, radius, stamp, sub_start, sub_joint, sub_local,
                                          sub_radius, F, T, Cs, Ws, near_h)  # fmt: skip
@@ -472,17 +387,11 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
                                     sub_radius, F, T, Cs, Ws, hull_start, hull_planes, hull_hint[p, 0])  # fmt: skip
                     if k >= 0:
                         hull_hint[p, 0], touch = k, False
-                        room = _plane_room(g, h, self_reach[p], joint, Cg, radius, sub_start, sub_radius, F, Cs,
-                                           hull_planes, k)  # fmt: skip
-                        _mark(cert, c_pairs + p, i, room / 2, s, s_slack, order, rank)
                     else:
                         k = _hull_clear(h, g, i, self_reach[p], joint, Cg, radius, stamp, sub_start, sub_joint,
                                         sub_local, sub_radius, F, T, Cs, Ws, hull_start, hull_planes, hull_hint[p, 1])  # fmt: skip
                         if k >= 0:
                             hull_hint[p, 1], touch = k, False
-                            room = _plane_room(h, g, self_reach[p], joint, Cg, radius, sub_start, sub_radius, F, Cs,
-                                               hull_planes, k)  # fmt: skip
-                            _mark(cert, c_pairs + p, i, room / 2, s, s_slack, order, rank)
                 out_i[P + p] = touch
                 any_pair |= touch
         if any_pair:
@@ -491,23 +400,22 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
 
 
 @nb.njit(cache=True, inline="always")
-def _part_gap(r0, r1, rows, joint, Wj, group_radius, reach, geo):
-    """How much farther [m] than ``reach`` the group sphere of every row r0..r1's arm joint is from a point part's bounding box.
+def _part_far(r0, r1, rows, joint, Wj, group_radius, reach, geo):
+    """Whether the group sphere of every row r0..r1's arm joint is farther than ``reach`` from a point part's bounding box.
 
-    Positive: every row is clear. ``geo[0:3]``, ``geo[3:6]``: the box (the lowest and highest
-    box centre); ``reach`` at least every row's. :func:`_points_rows` certifies such rows by the
-    same box distance (the first term of :func:`~baseplace.world.point_index._lower_bound`), so
-    this early out changes no answer: it spares the part's array views and the call (about 1 us
-    per part and state). The smallest of the groups' room is the gap the rows keep ahead (:func:`_mark`).
+    ``geo[0:3]``, ``geo[3:6]``: the box (the lowest and highest box centre); ``reach`` at least
+    every row's. :func:`_points_rows` certifies such rows by the same box distance (the first
+    term of :func:`~baseplace.world.point_index._lower_bound`), so this early out changes no
+    answer: it spares the part's array views and the call (about 1 us per part and state).
     """
-    group, gap = -2, np.inf
+    group = -2
     for p in range(r0, r1):
         j = joint[rows[p]]
         if j == group:
             continue
         group = j
         if j < 0:
-            return -np.inf
+            return False
         d2 = 0.0
         for k in range(3):
             c = Wj[j, k]
@@ -515,63 +423,10 @@ def _part_gap(r0, r1, rows, joint, Wj, group_radius, reach, geo):
                 d2 += (geo[k] - c) ** 2
             elif c > geo[3 + k]:
                 d2 += (c - geo[3 + k]) ** 2
-        gap = min(gap, math.sqrt(d2) - (group_radius[j] + reach))
-        if not gap > 0.0:
-            return gap
-    return gap
-
-
-@nb.njit(cache=True, inline="always")
-def _shape_gap(c, r, kind, a, b, planes, balls):
-    """How much farther [m] than r the point c (3,) is from a convex part or a bounding ball (a lower bound; <= 0: not clear).
-
-    Kind 1: the hull planes a..b (inside <= 0): the largest signed distance to them; kind 2: the
-    ball ``balls[a]`` (centre, radius). Positive exactly where :func:`_shape_touches` is False.
-    """
-    if kind == 1:
-        best = -np.inf
-        for h in range(a, b):
-            best = max(best, planes[h, 0] * c[0] + planes[h, 1] * c[1] + planes[h, 2] * c[2] + planes[h, 3])
-        return best - r
-    dx, dy, dz = c[0] - balls[a, 0], c[1] - balls[a, 1], c[2] - balls[a, 2]
-    return math.sqrt(dx * dx + dy * dy + dz * dz) - (r + balls[a, 3])
-
-
-@nb.njit(cache=True, inline="always")
-def _gap(A, a, B, b, reach):
-    """How much farther [m] than ``reach`` A[a] and B[b] are apart (<= 0: not farther)."""
-    dx, dy, dz = A[a, 0] - B[b, 0], A[a, 1] - B[b, 1], A[a, 2] - B[b, 2]
-    return math.sqrt(dx * dx + dy * dy + dz * dz) - reach
-
-
-@nb.njit(cache=True)
-def _mark(cert, col, i, gap, s, s_slack, order, rank):
-    """Certify column ``col`` at every state after i that no robot point can have moved ``gap`` [m] from, by conservative advancement.
-
-    ``s`` (m,): each state's position on a line such that no point of the robot is farther
-    apart between states u and v than ``|s[u] - s[v]| + s_slack`` (the joint changes times the
-    lever arms, :meth:`StateFilter.first_colliding`); ``order`` sorts the states by ``s``,
-    ``rank`` is each state's place in it. A pair certified at state i with ``gap`` to spare
-    (the sphere clear of the part, or of the other sphere, by ``gap`` more than its margin)
-    stays certified wherever its robot points cannot have moved that far (for a self pair the
-    caller halves the gap: both sides move). The idea of conservative advancement (Mirtich 1996;
-    the bound from the joints' lever arms as in Schwarzer, Saha and Latombe 2005). The marks go
-    only to states after i (the states before are decided).
-    """
-    e = min(gap, 1e6) - s_slack
-    if not e > 0.0:
-        return
-    m, si = order.shape[0], s[i]
-    k = rank[i] + 1
-    while k < m and s[order[k]] - si < e:
-        if order[k] > i:
-            cert[order[k], col] = True
-        k += 1
-    k = rank[i] - 1
-    while k >= 0 and si - s[order[k]] < e:
-        if order[k] > i:
-            cert[order[k], col] = True
-        k -= 1
+        r = group_radius[j] + reach
+        if not d2 > r * r:
+            return False
+    return True
 
 
 @nb.njit(cache=True)
@@ -631,35 +486,6 @@ def _hull_clear(g, h, i, reach, joint, Cg, radius, stamp, sub_start, sub_joint, 
         if k < 0:
             return -1
     return k
-
-
-@nb.njit(cache=True)
-def _plane_room(g, h, reach, joint, Cg, radius, sub_start, sub_radius, F, Cs, planes, k):
-    """How much farther [m] than ``reach`` geometry h lies outside plane k of geometry g's hull (:func:`_hull_clear` found it).
-
-    By h's bounding sphere when that is clear of the plane, else by its cover's spheres (placed
-    by :func:`_hull_clear`); 0 when neither shows room by this one plane.
-    """
-    j = joint[g]
-    room = -_plane_depth(Cg[h], j, F, planes, k) - radius[h] - reach
-    if room > 0.0 or sub_start[h + 1] - sub_start[h] <= 1:
-        return max(room, 0.0)
-    least = np.inf
-    for u in range(sub_start[h], sub_start[h + 1]):
-        least = min(least, -_plane_depth(Cs[u], j, F, planes, k) - sub_radius[u] - reach)
-    return max(least, 0.0)
-
-
-@nb.njit(cache=True, inline="always")
-def _plane_depth(c, j, F, planes, k):
-    """Minus the signed distance of the point c (3,) (the arm's base frame) to plane k of joint j's frame (-1: the base)."""
-    x, y, z = c[0], c[1], c[2]
-    if j >= 0:  # into the joint's frame: R^T (c - t)
-        dx, dy, dz = x - F[j, 0, 3], y - F[j, 1, 3], z - F[j, 2, 3]
-        x = F[j, 0, 0] * dx + F[j, 1, 0] * dy + F[j, 2, 0] * dz
-        y = F[j, 0, 1] * dx + F[j, 1, 1] * dy + F[j, 2, 1] * dz
-        z = F[j, 0, 2] * dx + F[j, 1, 2] * dy + F[j, 2, 2] * dz
-    return -(planes[k, 0] * x + planes[k, 1] * y + planes[k, 2] * z + planes[k, 3])
 
 
 @nb.njit(cache=True)
@@ -733,12 +559,6 @@ def _table_clear(q, t, tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off, tab
     Coal's distance at the nearest grid node, less how far the two geometries can have moved
     relative to each other since (lever arm times joint change, per joint), is above the margin.
     """
-    return _table_room(q, t, tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off, tab_cert) > 0.0
-
-
-@nb.njit(cache=True, inline="always")
-def _table_room(q, t, tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off, tab_cert):
-    """How much farther [m] than the margin self pair table t shows the pair at arm state q (n,), at least (:func:`_table_clear`)."""
     index, slack = 0, 0.0
     for d in range(2):
         j = tab_joint[t, d]
@@ -747,7 +567,7 @@ def _table_room(q, t, tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off, tab_
         u = min(max(round((q[j] - tab_lo[t, d]) / tab_step[t, d]), 0), tab_n[t, d] - 1)
         slack += tab_rho[t, d] * abs(q[j] - (tab_lo[t, d] + u * tab_step[t, d]))
         index = index * tab_n[t, d] + u
-    return tab_cert[tab_off[t] + index] - slack
+    return tab_cert[tab_off[t] + index] > slack
 
 
 @nb.njit(cache=True, inline="always")
@@ -1258,7 +1078,7 @@ class StateFilter:
                     Q, a.placements, a.axes, a.kinds, self.joint, self.local, self.radius, *self._cover,
                     *self._groups, *no_hulls, np.eye(4), self._scene_rows[:0].copy(), self._scene_row_reach[:0].copy(),
                     self._scene_parts[0][:0].copy(), *self._scene_parts[1:], self._self_pairs, self._self_reach, *self._self_runs,
-                    *none, i + 1, out, *_ahead(Q, None, len(self._self_runs[0]) + len(self._self_pairs)),
+                    *none, i + 1, out,
                 )  # fmt: skip
                 i = len(Q) if i < 0 else i
             tables = {}
@@ -1282,21 +1102,12 @@ class StateFilter:
         """Coal's verdict for arm joint values (n,) at base pose (4, 4): the robot touches the scene or itself."""
         return self.first_colliding(np.asarray(q_arm, dtype=float)[None], T_world_base) == 0
 
-    def first_colliding(
-        self, Q_arm: ArrayLike, T_world_base: ArrayLike, levers: ArrayLike | None = None
-    ) -> int:
+    def first_colliding(self, Q_arm: ArrayLike, T_world_base: ArrayLike) -> int:
         """The index of the first of the states Q_arm (m, n) that touches the scene or itself, or -1.
 
         Coal's verdict on each state, in order: one compiled call certifies the states' pairs by
         spheres (:func:`_uncertified_states`) up to the first state with pairs left over; only
         that state goes to coal, with only those pairs, and the call goes on after it.
-
-        ``levers`` (n,): per arm joint, how far [m] a point of the robot's collision geometries
-        can be from its axis (``baseplace.placement.motion.lever_arms``: along a straight joint
-        line a -> b no point moves more than ``sum(|b - a| * levers)``). Given, a pair certified
-        with room to spare stays certified, untested, at the states its geometries cannot have
-        crossed that room from (:func:`_mark`, :func:`_ahead`); the verdicts are the same. A
-        bound that is too small makes the check unsound: pass only lever arms of this robot.
         """
         Q = np.ascontiguousarray(np.atleast_2d(np.asarray(Q_arm, dtype=float)))
         T = np.asarray(T_world_base, dtype=float)
@@ -1312,10 +1123,9 @@ class StateFilter:
         P = len(self._scene_rows)
         out = np.empty((len(Q), P + len(self._self_pairs)), dtype=np.bool_)
         robot, scene_and_self = self._kernel_args
-        ahead = _ahead(Q, levers, self._n_columns)
         i = -1
         while True:
-            i = _uncertified_states(Q, *robot, self._T_world_armbase, *scene_and_self, i + 1, out, *ahead)  # type: ignore[call-arg]
+            i = _uncertified_states(Q, *robot, self._T_world_armbase, *scene_and_self, i + 1, out)  # type: ignore[call-arg]
             if i < 0:
                 return -1
             self.coal_states += 1
@@ -1343,8 +1153,7 @@ class StateFilter:
         P = len(self._scene_rows)
         out = np.empty((1, P + len(self._self_pairs)), dtype=np.bool_)
         robot, scene_and_self = self._kernel_args
-        i = _uncertified_states(q[None], *robot, T_world_armbase, *scene_and_self, 0, out,  # type: ignore[call-arg]
-                                *_ahead(q[None], None, self._n_columns))  # fmt: skip
+        i = _uncertified_states(q[None], *robot, T_world_armbase, *scene_and_self, 0, out)  # type: ignore[call-arg]
         rows = np.flatnonzero(out[0]) if i == 0 else np.zeros(0, dtype=np.int64)
         scene += [int(p) for p in self._scene_row_pair[rows[rows < P]]]
         own = [int(p) for p in self._self_index[rows[rows >= P] - P]]
@@ -1352,16 +1161,6 @@ class StateFilter:
         touching_scene = list(self._scene_touching(sorted(set(scene)), q_full, T)) if scene else []
         touching_self = list(self._self_touching(own, q_full)) if own else []
         return touching_scene, touching_self
-
-    @property
-    def _n_columns(self) -> int:
-        """The columns of :func:`_uncertified_states`'s certificates ahead: parts, scene rows, self runs, self pairs."""
-        return (
-            len(self._scene_parts[0])
-            + len(self._scene_rows)
-            + len(self._self_runs[0])
-            + len(self._self_pairs)
-        )
 
     @property
     def _kernel_args(self) -> tuple[tuple[object, ...], tuple[object, ...]]:
@@ -1436,9 +1235,7 @@ class StateFilter:
             if q_full is not None and self._scene_coal(static[s], q_full, T[s]):
                 hit[s] = True
                 continue
-            one = Q[s : s + 1]
-            if _uncertified_states(one, *robot, T_armbase[s], *scene_and_self, 0, out,  # type: ignore[call-arg]
-                                   *_ahead(one, None, self._n_columns)) < 0:  # fmt: skip
+            if _uncertified_states(Q[s : s + 1], *robot, T_armbase[s], *scene_and_self, 0, out) < 0:  # type: ignore[call-arg]
                 continue
             self.coal_states += 1
             q_full = self._full(Q[s]) if q_full is None else q_full
@@ -1491,41 +1288,6 @@ def _transformed_poses(C, T, out):
         for k in range(C.shape[0]):
             for a in range(3):
                 out[s, k, a] = T[s, a, 0] * C[k, 0] + T[s, a, 1] * C[k, 1] + T[s, a, 2] * C[k, 2] + T[s, a, 3]
-
-
-def _ahead(Q: FloatArray, levers: ArrayLike | None, n_columns: int) -> tuple[object, ...]:
-    """The arguments of :func:`_uncertified_states` for its certificates ahead (:func:`_mark`): s, s_slack, order, rank, cert.
-
-    ``s`` (m,) places the states Q (m, n) on a line such that no robot point is farther apart
-    between states u and v than ``|s[u] - s[v]| + s_slack`` [m]: along a straight joint line
-    (the edge checks' states, in any order) the position along it times the line's
-    ``|b - a| @ levers``, what is off the line added to ``s_slack``; else the travel summed
-    state to state in their order (the triangle inequality). Without ``levers`` the states are
-    spaced far beyond any gap (:func:`_mark` caps them at 1e6 m): no certificate reaches another.
-    ``cert`` (m, n_columns) starts all False.
-    """
-    m = len(Q)
-    cert = np.zeros((m, n_columns), dtype=np.bool_)
-    order = np.arange(m, dtype=np.int64)
-    if levers is None or m < 2:
-        return np.arange(m, dtype=float) * 1e9, 0.0, order, order.copy(), cert
-    L = np.asarray(levers, dtype=float)
-    D = Q - Q[0]
-    k = int(np.argmax(np.abs(D) @ L))
-    v = D[k]
-    if not np.any(v):  # every state the same
-        return np.zeros(m), 0.0, order, order.copy(), cert
-    f = D @ v / (v @ v)
-    off = float(np.max(np.abs(D - np.outer(f, v)) @ L))
-    s, slack = f * float(np.abs(v) @ L), 2 * off
-    if slack > 1e-6:  # not one line
-        s = np.concatenate([[0.0], np.cumsum(np.abs(np.diff(Q, axis=0)) @ L)])
-        slack = 0.0
-    slack += 1e-9 + 1e-12 * float(np.max(np.abs(s)))  # rounding in s
-    order = np.argsort(s, kind="stable").astype(np.int64)
-    rank = np.empty(m, dtype=np.int64)
-    rank[order] = np.arange(m)
-    return s, slack, order, rank, cert
 
 
 def _touching(
