@@ -184,7 +184,7 @@ def _points_rows(out_i, r0, r1, rows, reach, W, radius, Ws, sub_start, sub_radiu
     its bounding sphere's reach lies that far outside one of its hull's face planes
     (:func:`_points_outside_hull`).
     """
-    group, group_clear = -2, False
+    group, group_bound = -2, 0.0
     if len(points) == 0:
         out_i[r0:r1] = False
         return False
@@ -193,10 +193,8 @@ def _points_rows(out_i, r0, r1, rows, reach, W, radius, Ws, sub_start, sub_radiu
         g = rows[p]
         if joint[g] != group:
             group = joint[g]
-            group_clear = (
-                _lower_bound(Wj[group], lo, hi, field, field_lo, field_h) > group_radius[group] + reach[p]
-            )
-        if group_clear:
+            group_bound = _lower_bound(Wj[group], lo, hi, field, field_lo, field_h)
+        if group_bound > group_radius[group] + reach[p]:  # each row's own reach: a group's rows may differ
             out_i[p] = False
             continue
         covered = sub_start[g + 1] - sub_start[g] > 1
