@@ -621,19 +621,30 @@ class _Part:
         """The pair indices of this part that the bounding spheres (centres (G, 3), world frame) do not clear."""
         if len(self.robot_a) == 0:
             return self.pair_a
-        C = C_world[self.robot_a]
+        return self.pair_a[~self.clear(C_world[self.robot_a])]
+
+    def clear(self, C: FloatArray, copies: int = 1) -> NDArray[np.bool_]:
+        """Whether each of this part's pairs' spheres, centred at C (copies * P, 3) [m], clears the part.
+
+        C holds the P pairs' centres ``copies`` times over (one block per base pose,
+        :meth:`StateFilter.colliding_poses`), in the order of the pairs.
+        """
+
+        def tiled(reach: FloatArray) -> FloatArray:  # each pair's reach, once per block of C
+            return reach if copies == 1 else np.tile(reach, copies)
+
         if self._arrays:
             free = np.ones(len(C), dtype=bool)
+            buf = self._free if copies == 1 else np.empty(len(C), dtype=np.bool_)
             for arrays, reach in self._arrays:
-                _clear(self._free, C, reach, *arrays)
-                free &= self._free
-        elif self.planes is not None:
-            free = np.max(C @ self.planes[:, :3].T + self.planes[:, 3], axis=1) > self.reach
-        else:
-            assert self.sphere is not None
-            centre, r = self.sphere
-            free = np.linalg.norm(C - centre, axis=1) > self.reach + r
-        return self.pair_a[~free]
+                _clear(buf, C, tiled(reach), *arrays)
+                free &= buf
+            return free
+        if self.planes is not None:
+            return np.max(C @ self.planes[:, :3].T + self.planes[:, 3], axis=1) > tiled(self.reach)
+        assert self.sphere is not None
+        centre, r = self.sphere
+        return np.linalg.norm(C - centre, axis=1) > tiled(self.reach) + r
 
 
 _TABLES: weakref.WeakKeyDictionary[Robot, dict[tuple[str, bytes, bytes], tuple[NDArray[np.generic], ...]]] = (
@@ -1250,7 +1261,7 @@ class StateFilter:
 
         :meth:`_Part.uncertified` for all poses at once: those geometries' sphere centres (fixed
         in the arm's base frame) placed by every pose (:func:`_transformed_poses`, the arithmetic
-        of :func:`_transformed`), then one compiled test per scene part's index over all of them.
+        of :func:`_transformed`), then one :meth:`_Part.clear` per scene part over all of them.
         """
         S = len(T_world_armbase)
         left: list[list[int]] = [[] for _ in range(S)]
@@ -1260,20 +1271,7 @@ class StateFilter:
             G = len(part.robot_a)
             if G == 0:
                 continue
-            C = np.ascontiguousarray(W[:, part.robot_a].reshape(-1, 3))
-            reach = np.tile(part.reach, S)
-            if part._arrays:
-                free = np.ones(len(C), dtype=bool)
-                buf = np.empty(len(C), dtype=np.bool_)
-                for arrays, part_reach in part._arrays:
-                    _clear(buf, C, np.tile(part_reach, S), *arrays)
-                    free &= buf
-            elif part.planes is not None:
-                free = np.max(C @ part.planes[:, :3].T + part.planes[:, 3], axis=1) > reach
-            else:
-                assert part.sphere is not None
-                centre, r = part.sphere
-                free = np.linalg.norm(C - centre, axis=1) > reach + r
+            free = part.clear(np.ascontiguousarray(W[:, part.robot_a].reshape(-1, 3)), S)
             for s, k in zip(*np.nonzero(~free.reshape(S, G)), strict=True):
                 left[s].append(int(part.pair_a[k]))
         return left
