@@ -11,8 +11,9 @@ and what does one check cost?
   with 3 mm noise), plus a floor at z = 0 (``with_floor``), as ``baseplace place --floor 0`` sees
   it. Development seeds :data:`SEEDS` (dev data in every experiment here; none of the held-out
   seeds of docs/protocols/execution_table_grid.md, 11-13, nor those of earlier runs, 3-10).
-  ``--split held-out`` runs protocol v1 (docs/protocols/motion_verdicts_v1.md) on its held-out
-  seeds :data:`HELD_OUT`, the product against the reference only.
+  ``--split held-out`` runs a protocol of :data:`PROTOCOLS` (``--protocol``, default the newest,
+  v2: docs/protocols/motion_verdicts_v2.md) on its held-out seeds, the product against the
+  reference only.
 * Grasps: :data:`GRASPS` of the 32 grasps ``TableGridSettings.grasps`` makes at the *estimate*
   (16 side, 16 top-down 2 cm under the top), one target per query.
 * Inputs: the product's own: ``place`` with the pose-only checks (footprint, IK, collision; no
@@ -87,9 +88,13 @@ from common import report
 
 SEEDS = (0, 1, 2)
 """Development seeds of the table grid (see the module docstring)."""
-HELD_OUT = (40, 41, 42, 43, 44, 45, 46, 47, 48, 49)
-"""Held-out seeds of protocol v1 (:data:`PROTOCOL_FILE`), run once."""
-PROTOCOL_FILE = "docs/protocols/motion_verdicts_v1.md"
+PROTOCOLS: dict[int, tuple[str, tuple[int, ...]]] = {
+    1: ("docs/protocols/motion_verdicts_v1.md", tuple(range(40, 50))),
+    2: ("docs/protocols/motion_verdicts_v2.md", tuple(range(50, 70))),
+}
+"""Per protocol version: its file and its held-out seeds, each set run once (v1's are spent)."""
+PROTOCOL = max(PROTOCOLS)
+"""The protocol ``--split held-out`` runs unless ``--protocol`` names another."""
 CELLS = ((0, 0), (1, 0), (2, 0), (1, 1))
 GRASPS = (0, 2, 4, 6, 8, 20)
 """Indices into ``TableGridSettings.grasps``: side grasps approaching along yaw 0, 45, 90, 135 and
@@ -414,7 +419,9 @@ def figures(rows: list[dict[str, Any]]) -> dict[str, Any]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--split", choices=["dev", "held-out"], default="dev",
-                        help=f"dev seeds {list(SEEDS)} or protocol v1's held-out seeds {list(HELD_OUT)}")  # fmt: skip
+                        help=f"dev seeds {list(SEEDS)} or the held-out seeds of --protocol")  # fmt: skip
+    parser.add_argument("--protocol", type=int, choices=sorted(PROTOCOLS), default=PROTOCOL,
+                        help="which protocol's file and held-out seeds (docs/protocols/motion_verdicts_vN.md)")  # fmt: skip
     parser.add_argument(
         "--seeds", type=int, nargs="+", default=None, help="table-grid dev seeds (dev split only)"
     )
@@ -430,10 +437,11 @@ def main() -> None:
     parser.add_argument("--checkers", nargs="+", choices=list(CHECKERS), default=["product", "product_500", "reference"],
                         help="which motion checkers run on each placement (module docstring)")  # fmt: skip
     args = parser.parse_args()
+    protocol_path, protocol_seeds = PROTOCOLS[args.protocol]
     if args.split == "held-out":
         if args.seeds is not None or args.cells != len(CELLS) or args.max_checks is not None:
             parser.error(
-                "the held-out split runs protocol v1 as written: no --seeds, --cells or --max-checks"
+                f"the held-out split runs protocol v{args.protocol} as written: no --seeds, --cells or --max-checks"
             )
         if (
             args.checkers != ["product", "reference"]
@@ -441,16 +449,17 @@ def main() -> None:
             or args.per_grasp != PER_GRASP
         ):
             parser.error(
-                "the held-out split runs protocol v1 as written: --checkers product reference, default grasps and --per-grasp"
+                f"the held-out split runs protocol v{args.protocol} as written: --checkers product reference, default grasps and --per-grasp"
             )
-        args.seeds = list(HELD_OUT)
+        args.seeds = list(protocol_seeds)
     elif args.seeds is None:
         args.seeds = list(SEEDS)
-    held_out = {*range(3, 38), *HELD_OUT} if args.split == "dev" else set()
+    every_held_out = {seed for _, seeds in PROTOCOLS.values() for seed in seeds}
+    held_out = {*range(3, 38), *every_held_out} if args.split == "dev" else set()
     if held_out & set(args.seeds):
         parser.error(f"seeds {sorted(held_out & set(args.seeds))} are held out by an experiment")
     try:
-        protocol_file = fixed_protocol(PROTOCOL_FILE, args.split)
+        protocol_file = fixed_protocol(protocol_path, args.split)
     except InputError as e:
         parser.error(str(e))
     load_start = os.getloadavg()
@@ -535,7 +544,8 @@ def main() -> None:
             "reference": dataclasses.asdict(REFERENCE), "recheck_resolution_divisor": RECHECK,
             "checkers": {n: {**dataclasses.asdict(CHECKERS[n][0]), "every_pair_to_coal": CHECKERS[n][1]}
                          for n in args.checkers},
-            "split": args.split, "load_average": {"start": load_start, "end": os.getloadavg()},
+            "split": args.split, "protocol_version": args.protocol if args.split == "held-out" else None,
+            "load_average": {"start": load_start, "end": os.getloadavg()},
             "wall_s": round(time.perf_counter() - t_run, 1),
         },
         "summary": summary,
