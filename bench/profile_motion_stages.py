@@ -17,6 +17,12 @@ check's wall time is split by wrapping the checker's and the state filter's meth
 
 Also verdicts: the number found, and each check whose verdict differs from the file's ``product``.
 ``--cprofile N``: cProfile the first N checks instead and print the top functions.
+``--kernel-split``: also record the state batches the timed checks hand to
+``StateFilter.first_colliding`` (up to the first state that touches, as the check took them) and
+time the compiled pre-filter on every state of them (going on after each state it leaves to coal,
+without coal) with the scene parts, the self pairs, both or
+neither: the pre-filter's cost per state and its split (development only; no verdict is taken
+from it).
 
 Usage: python bench/profile_motion_stages.py [--results motion_verdicts_s12_final_a] [--repeat 1]
 """
@@ -36,6 +42,7 @@ from typing import Any
 import numpy as np
 
 import baseplace.world.state_filter as state_filter
+from baseplace.geometry.poses import FloatArray
 from baseplace.placement.motion import MotionChecker, MotionSettings
 from baseplace.placement.pipeline import PlaceSettings, scene_checks, with_floor
 from baseplace.placement.scene_cache import SceneCache
@@ -102,12 +109,63 @@ def instrument(timers: Timers) -> Callable[[MotionChecker], None]:
     return per_checker
 
 
+def record_batches(timers: Timers) -> list[tuple[Any, FloatArray, FloatArray]]:
+    """Per call of ``StateFilter.first_colliding`` while ``timers.active``: the filter, the states it checked, the base pose."""
+    batches: list[tuple[Any, FloatArray, FloatArray]] = []
+    inner = state_filter.StateFilter.first_colliding
+
+    def recorded(self: Any, Q: Any, T: Any) -> int:
+        i = inner(self, Q, T)
+        if timers.active:  # the states checked: up to the first that touches
+            Q = np.array(Q, dtype=float, ndmin=2)
+            batches.append((self, Q if i < 0 else Q[: i + 1], np.array(T, dtype=float)))
+        return i
+
+    state_filter.StateFilter.first_colliding = recorded  # type: ignore[method-assign]
+    return batches
+
+
+SPLIT = {"full": (), "scene only": ("self",), "self only": ("scene",), "neither": ("scene", "self")}
+"""The pre-filter's variants: which of its two halves is left out (no scene parts, no self runs)."""
+
+
+def print_kernel_split(batches: list[tuple[Any, FloatArray, FloatArray]], checks: int) -> None:
+    """The pre-filter's time per state over every recorded state, per variant of :data:`SPLIT` (twice, alternated)."""
+    states = sum(len(Q) for _, Q, _ in batches)
+    times: defaultdict[str, list[float]] = defaultdict(list)
+    for _ in range(2):
+        for name, off in SPLIT.items():
+            t = 0.0
+            for f, Q, T in batches:
+                robot, after = f._kernel_args
+                after = list(after)
+                if "scene" in off:  # no scene parts (``parts``, the third argument after the base pose)
+                    after[2] = after[2][:0]
+                if "self" in off:  # no self runs
+                    after[15] = after[15][:0]
+                out = np.empty((len(Q), len(f._scene_rows) + len(f._self_pairs)), dtype=np.bool_)
+                T_arm = T @ f._T_base_armbase
+                i, t0 = -1, time.perf_counter()
+                while i < len(Q) - 1:
+                    i = state_filter._uncertified_states(Q, *robot, T_arm, *after, i + 1, out)
+                    if i < 0:
+                        break
+                t += time.perf_counter() - t0
+            times[name].append(t / states * 1e6)
+    print(f"pre-filter on every recorded state: {states} states, {states / checks:.0f} per check")
+    for name, ts in times.items():
+        print(f"  {name:12s} us/state {min(ts):6.2f} (runs {', '.join(f'{x:.2f}' for x in ts)})")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--results", default="motion_verdicts_s12_final_a", help="bench/results/NAME.json")
     parser.add_argument("--repeat", type=int, default=1, help="check each input this often (times: the last)")
     parser.add_argument("--cprofile", type=int, default=0, help="cProfile the first N checks instead")
     parser.add_argument("--uninstrumented", action="store_true", help="no stage timers (wall times only)")
+    parser.add_argument(
+        "--kernel-split", action="store_true", help="time the pre-filter per state, split (docstring)"
+    )
     args = parser.parse_args()
     rows = json.loads((RESULTS / f"{args.results}.json").read_text())["checks"]
     held_out = {*range(3, 38), *(seed for _, seeds in PROTOCOLS.values() for seed in seeds)}
@@ -121,6 +179,7 @@ def main() -> None:
     s = TableGridSettings()
     timers = Timers()
     per_checker = None if args.uninstrumented or args.cprofile else instrument(timers)
+    batches = record_batches(timers) if args.kernel_split else None
     models: dict[tuple[Any, ...], Any] = {}
     walls, cpus, found, changed = [], [], 0, []
     profile = cProfile.Profile() if args.cprofile else None
@@ -159,6 +218,8 @@ def main() -> None:
     w = np.array(walls)
     print(f"{len(w)} checks, found {found}; ms median {np.median(w):.2f} p90 {np.quantile(w, 0.9):.2f} "
           f"mean {w.mean():.2f}; cpu ms median {np.median(cpus):.2f} mean {np.mean(cpus):.2f}; verdicts changed against the file: {changed}")  # fmt: skip
+    if batches is not None:
+        print_kernel_split(batches, len(w))
     if timers.s:
         total = w.sum() / 1e3
         print(f"{'stage':16s} {'ms/check':>9s} {'share':>6s} {'calls/check':>11s} {'us/call':>8s}")
