@@ -403,8 +403,11 @@ class Environment:
         """
         T = np.asarray(T_world_base, dtype=float)
         Q = np.asarray(Q_arm, dtype=float)
-        if T.ndim != 3 or T.shape[1:] != (4, 4) or not np.all(np.isfinite(T)):
-            raise InputError("base poses must be finite (S, 4, 4) matrices")
+        if T.ndim != 3 or T.shape[1:] != (4, 4):
+            raise InputError(f"base poses must be (S, 4, 4) matrices, got shape {T.shape}")
+        bad = np.flatnonzero(~np.isfinite(T).all(axis=(1, 2)))
+        if len(bad):
+            raise InputError(f"base poses must be finite: {len(bad)} of {len(T)} are not, first at {bad[0]}")
         if Q.ndim != 2 or len(Q) != len(T) or Q.shape[1] != arm.n_joints:
             raise InputError(
                 f"need one arm state ({arm.n_joints},) per base pose, got {Q.shape} for {len(T)} poses"
