@@ -20,7 +20,7 @@ from baseplace.placement.robustness import BaseErrorModel, RobustnessEstimator, 
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.world.environment import Environment
 from baseplace.world.state_filter import StateFilter
-from test_state_filter import SCENES, _environments, _states
+from test_state_filter import SCENES, _environments, _states, scene_models
 
 
 def _pair_set(env, arm, T_base, states, rng, random=300, pairs=60, depth=12):
@@ -56,13 +56,9 @@ def pose_pairs(tiago):
     """Per table scene and collision model (transit, approach): (environment, Q, T, coal's verdicts)."""
     rng = np.random.default_rng(11)
     arm = tiago.arm()
-    out = []
-    for scene_seed, cell, grasp, offset, yaw in SCENES:
-        target, transit, approach = _environments(tiago, scene_seed, cell, grasp)
-        T_base, states = _states(tiago, target, offset, yaw, rng)
-        for env in (transit, approach):
-            out.append((env, *_pair_set(env, arm, T_base, states, rng)))
-    return out
+    return [
+        (env, *_pair_set(env, arm, T_base, states, rng)) for env, T_base, states in scene_models(tiago, rng)
+    ]
 
 
 def test_batched_verdicts_are_coals(tiago, pose_pairs):
