@@ -260,6 +260,9 @@ class Environment:
         arm_ids = set(arm_geometry_ids(robot, self.geom)) if set(ARM_ONLY) & set(groups) else set()
         self.env_ids: list[int] = []
         self._margin: dict[int, float] = {}  # per scene geometry: the security margin of its pairs
+        self.parts: dict[int, VoxelMap | SupportPlane] = {}
+        """Per geometry id of a group's part: the part it was built from (its kind: the smoothed or raw
+        point cells of :mod:`~baseplace.world.sensor_resolution`, coarse voxels, the exact plane)."""
         margins: list[float] = []  # per collision pair
         for name, group in [*groups.items(), (GRASPED, grasped)]:
             for part in () if group is None else group_parts(group):
@@ -271,6 +274,7 @@ class Environment:
                     geometry = _octree(part)
                 gid = self.geom.addGeometryObject(pin.GeometryObject(name, 0, pin.SE3.Identity(), geometry))
                 self.env_ids.append(gid)
+                self.parts[gid] = part
                 self._margin[gid] = margin(part, self.clearance, plane_clearance)
                 for k in range(n_robot):  # the hand may touch the object; only the arms, the floor
                     if (name != GRASPED or k not in self.hand_ids) and (name not in ARM_ONLY or k in arm_ids):
