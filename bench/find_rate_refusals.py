@@ -11,7 +11,7 @@ the hand, which may touch it), and the model's clearance there (the security mar
 coal's distance to the part, the plane's height above the true table top). A refusal with no
 collision (the reaching motion) is listed with its failure counts.
 
-Usage: python bench/find_rate_refusals.py --from a.json [b.json ...] --out bench/results/x.json
+Usage: python bench/find_rate_refusals.py --from a.json [b.json ...] --out bench/results/x.json [--seeds 25038]
 (``--from``: results files of find_rate.py / find_rate_dev_extra.py on dev seeds: their oracle
 verdicts are reused, their scenes must match the generator's.)
 """
@@ -208,6 +208,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--from", dest="sources", nargs="+", required=True, help="dev results files")
     parser.add_argument("--out", required=True)
+    parser.add_argument("--seeds", type=int, nargs="+", default=None, help="only these scenes of the sources")
     args = parser.parse_args(argv)
     clock = RunClock()
     verdicts: dict[int, dict[str, Any]] = {}
@@ -216,6 +217,11 @@ def main(argv: list[str] | None = None) -> int:
             verdicts[r["scene"]["seed"]] = r
     if any(seed >= min(SEEDS.held_out) for seed in verdicts):
         raise InputError("development seeds only: a source file holds held-out scenes")
+    if args.seeds is not None:
+        missing = sorted(set(args.seeds) - set(verdicts))
+        if missing:
+            raise InputError(f"seeds {missing} are not in the source files")
+        verdicts = {seed: verdicts[seed] for seed in args.seeds}
     seen: list[tuple[Environment, np.ndarray, np.ndarray]] = []
     checked = Verifier.collisions
 
