@@ -139,6 +139,16 @@ def _place(tiago, tiago_map, point, top, neighbour_y, grasped="auto", **settings
                  grasped=grasped)  # fmt: skip
 
 
+def _contact_groups(point, top: float, neighbour_y: float):
+    """(groups, grasped object's group) of :func:`~baseplace.world.environment.contact_groups` on the scene's cloud."""
+    cloud = _cloud(point, top, neighbour_y, np.random.default_rng(7))
+    obj = find_grasped_object(cloud, point)
+    assert obj is not None
+    voxels = VoxelMap.from_points(cloud)
+    groups, object_group = contact_groups(voxels, voxels, obj, cloud)
+    return groups, object_group
+
+
 def _hand_links(robot) -> set[str]:
     model = robot.model
     last = model.getJointId(robot.arm().joint_names[-1])
@@ -251,11 +261,7 @@ def test_the_clearance_decides_whether_the_hand_16mm_over_the_plane_touches_it(t
     """The security margin reaches the exact plane: the hand 16 mm over the true top (the oracle)
     touches ``support_plane`` at a 20 mm clearance and not at 10 mm."""
     _, q_full, point, top, y = grasp_scene
-    cloud = _cloud(point, top, y, np.random.default_rng(7))
-    obj = find_grasped_object(cloud, point)
-    assert obj is not None
-    voxels = VoxelMap.from_points(cloud)
-    groups, object_group = contact_groups(voxels, voxels, obj, cloud)
+    groups, object_group = _contact_groups(point, top, y)
     assert isinstance(groups[SUPPORT_PLANE], SupportPlane)
     arm, hand = tiago.arm(), _hand_links(tiago)
 
@@ -285,11 +291,7 @@ def test_each_scene_geometry_keeps_the_part_it_was_built_from(tiago, grasp_scene
     """``Environment.parts``: per scene geometry its group's part, so a report can say what a link touched
     (smoothed or raw point cells, the exact plane); checked against the groups and coal's own cells."""
     _, _, point, top, y = grasp_scene
-    cloud = _cloud(point, top, y, np.random.default_rng(7))
-    obj = find_grasped_object(cloud, point)
-    assert obj is not None
-    voxels = VoxelMap.from_points(cloud)
-    groups, object_group = contact_groups(voxels, voxels, obj, cloud)
+    groups, object_group = _contact_groups(point, top, y)
     env = Environment(tiago, groups, grasped=object_group, clearance=0.01)
     built = [(name, part) for name, g in [*groups.items(), (GRASPED, object_group)] for part in group_parts(g)
              if len(part)]  # fmt: skip
