@@ -416,7 +416,8 @@ def figures(rows: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
+    """Run the bench on the command line ``argv`` (default ``sys.argv[1:]``); refusals exit 2 before any work."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--split", choices=["dev", "held-out"], default="dev",
                         help=f"dev seeds {list(SEEDS)} or the held-out seeds of --protocol")  # fmt: skip
@@ -436,7 +437,7 @@ def main() -> None:
     parser.add_argument("--name", default="motion_verdicts_dev", help="results file bench/results/NAME.json")
     parser.add_argument("--checkers", nargs="+", choices=list(CHECKERS), default=["product", "product_500", "reference"],
                         help="which motion checkers run on each placement (module docstring)")  # fmt: skip
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     protocol_path, protocol_seeds = PROTOCOLS[args.protocol]
     if args.split == "held-out":
         if args.seeds is not None or args.cells != len(CELLS) or args.max_checks is not None:

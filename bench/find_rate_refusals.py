@@ -3,14 +3,15 @@
 For every scene of the given dev seeds (25000-25059; the held-out seeds are refused) where the
 oracle of ``find_rate.py`` finds a placement and ``place`` does not, the first rejected candidates'
 collisions are classified: which robot link touched which part of ``place``'s model (the exact
-support plane; the cells of the obstacle group, each put to the true shape nearest to it: a
-neighbour, the table, the grasped bottle's own points, the floor), the link's TRUE clearance at
+support plane; the cells of the obstacle group, of the kind the model made them (:func:`cell_kind`:
+smoothed or raw 1.25 mm point cells, 5 mm raw cells, 25 mm voxels), each put to the true shape
+nearest to it: a neighbour, the table, the grasped bottle's own points, the floor), the link's TRUE clearance at
 that configuration (coal distance to the true shapes of the scene, the grasped bottle left out for
 the hand, which may touch it), and the model's clearance there (the security margin of the pair,
 coal's distance to the part, the plane's height above the true table top). A refusal with no
 collision (the reaching motion) is listed with its failure counts.
 
-Usage: python bench/find_rate_refusals.py --from a.json [b.json ...] --out bench/results/x.json
+Usage: python bench/find_rate_refusals.py --from a.json [b.json ...] --out bench/results/x.json [--seeds 25038]
 (``--from``: results files of find_rate.py / find_rate_dev_extra.py on dev seeds: their oracle
 verdicts are reused, their scenes must match the generator's.)
 """
@@ -38,7 +39,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from baseplace.errors import InputError
 from baseplace.placement.verify import Verifier
 from baseplace.robots.model import Robot
+from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import Environment, hand_geometry_ids
+from baseplace.world.sensor_resolution import RawCells, SupportPlane, SurfaceCells, is_fine
 from baseplace_experiments.results import RunClock, write_results
 from find_rate import SEEDS, Oracle, Scene, make_scene, refusal_reason, run_place
 
@@ -86,6 +89,24 @@ def nearest_shape(points: np.ndarray, scene: Scene) -> tuple[list[str], np.ndarr
     return [names[k] for k in best], D[best, np.arange(len(points))]
 
 
+def cell_kind(part: VoxelMap | SupportPlane | None) -> str:
+    """What the model's part holds, as the model marks it (:mod:`baseplace.world.sensor_resolution`).
+
+    ``smoothed``: points put onto their local surface (:class:`SurfaceCells`); ``raw``: points kept as
+    measured, in :data:`~baseplace.world.sensor_resolution.FINE` cells where the noise margin covers
+    their sampling (:class:`RawCells`), else in coarser cells (:data:`~baseplace.world.sensor_resolution.EDGE_CELL`);
+    ``voxels``: coarse voxels, no margin. The cell edge follows [mm].
+    """
+    if part is None or isinstance(part, SupportPlane):
+        return "support plane" if part is not None else "unknown"
+    size = f"{part.resolution * 1e3:g} mm"
+    if isinstance(part, SurfaceCells):
+        return f"smoothed {size}"
+    if isinstance(part, RawCells) or is_fine(part):
+        return f"raw {size}"
+    return f"voxels {size}"
+
+
 def classify_pair(env: Environment, k: int, gid: int, margin: float, T_world_root: np.ndarray,
                   scene: Scene) -> dict[str, Any]:  # fmt: skip
     """What part of the model the robot geometry ``k`` touched in the part ``gid``, and how far its cells lie
@@ -93,7 +114,8 @@ def classify_pair(env: Environment, k: int, gid: int, margin: float, T_world_roo
     g = env.geom.geometryObjects[k].geometry
     Tk = T_world_root @ env.geom_data.oMg[k].homogeneous
     part = env.geom.geometryObjects[gid].geometry
-    out: dict[str, Any] = {"group": env.geom.geometryObjects[gid].name, "margin_mm": round(margin * 1e3, 2)}
+    out: dict[str, Any] = {"group": env.geom.geometryObjects[gid].name, "cells": cell_kind(env.parts.get(gid)),
+                           "margin_mm": round(margin * 1e3, 2)}  # fmt: skip
     if isinstance(part, coal.OcTree):
         boxes = np.asarray(part.toBoxes())
         centres, size = boxes[:, :3], float(boxes[0, 3]) if len(boxes) else 0.0
@@ -176,7 +198,7 @@ def cause(rows: list[dict[str, Any]]) -> str:
             part = (
                 "support plane"
                 if "plane_top_above_true_table_mm" in r
-                else "+".join(sorted(r.get("touching_cells", {})))
+                else f"{r['cells']}: " + "+".join(sorted(r.get("touching_cells", {})))
             )
             return f"{r['link']} on {r['group']} ({part}): true clearance {r['true_clearance_mm']:.0f} mm"
     return "true contact"
@@ -186,6 +208,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--from", dest="sources", nargs="+", required=True, help="dev results files")
     parser.add_argument("--out", required=True)
+    parser.add_argument("--seeds", type=int, nargs="+", default=None, help="only these scenes of the sources")
     args = parser.parse_args(argv)
     clock = RunClock()
     verdicts: dict[int, dict[str, Any]] = {}
@@ -194,6 +217,11 @@ def main(argv: list[str] | None = None) -> int:
             verdicts[r["scene"]["seed"]] = r
     if any(seed >= min(SEEDS.held_out) for seed in verdicts):
         raise InputError("development seeds only: a source file holds held-out scenes")
+    if args.seeds is not None:
+        missing = sorted(set(args.seeds) - set(verdicts))
+        if missing:
+            raise InputError(f"seeds {missing} are not in the source files")
+        verdicts = {seed: verdicts[seed] for seed in args.seeds}
     seen: list[tuple[Environment, np.ndarray, np.ndarray]] = []
     checked = Verifier.collisions
 

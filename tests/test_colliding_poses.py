@@ -15,10 +15,12 @@ import numpy as np
 import pytest
 
 from baseplace.errors import InputError
+from baseplace.placement.motion import stowed_configuration
 from baseplace.placement.robustness import BaseErrorModel, RobustnessEstimator, RobustnessSettings, perturbed
 from baseplace.robots.ik import DampedLeastSquaresIK
+from baseplace.world.environment import Environment
 from baseplace.world.state_filter import StateFilter
-from test_state_filter import SCENES, _environments, _states
+from test_state_filter import SCENES, _environments, _states, scene_models
 
 
 def _pair_set(env, arm, T_base, states, rng, random=300, pairs=60, depth=12):
@@ -54,13 +56,9 @@ def pose_pairs(tiago):
     """Per table scene and collision model (transit, approach): (environment, Q, T, coal's verdicts)."""
     rng = np.random.default_rng(11)
     arm = tiago.arm()
-    out = []
-    for scene_seed, cell, grasp, offset, yaw in SCENES:
-        target, transit, approach = _environments(tiago, scene_seed, cell, grasp)
-        T_base, states = _states(tiago, target, offset, yaw, rng)
-        for env in (transit, approach):
-            out.append((env, *_pair_set(env, arm, T_base, states, rng)))
-    return out
+    return [
+        (env, *_pair_set(env, arm, T_base, states, rng)) for env, T_base, states in scene_models(tiago, rng)
+    ]
 
 
 def test_batched_verdicts_are_coals(tiago, pose_pairs):
@@ -101,6 +99,50 @@ def test_one_state_per_pose(tiago, pose_pairs):
         env.colliding_arm_poses(arm, Q[:3], T[:2])
     with pytest.raises(InputError):
         env.colliding_arm_poses(arm, Q[:1], T[0])
+
+
+@pytest.fixture()
+def bare(tiago):
+    """(environment with no obstacles, arm, two arm states (2, n), two base poses (2, 4, 4)): cheap inputs to refuse."""
+    arm = tiago.arm()
+    Q = np.stack([stowed_configuration(tiago, arm)] * 2)
+    return Environment(tiago, {}), arm, Q, np.stack([np.eye(4)] * 2)
+
+
+def _refusal(env, arm, Q, T) -> str:
+    """The one-line message of the InputError that colliding_arm_poses raises on (Q, T)."""
+    with pytest.raises(InputError) as caught:
+        env.colliding_arm_poses(arm, Q, T)
+    message = str(caught.value)
+    assert message and "\n" not in message
+    return message
+
+
+def test_refuses_a_count_mismatch(bare):
+    env, arm, Q, T = bare
+    message = _refusal(env, arm, np.vstack([Q, Q[:1]]), T)
+    assert f"one arm state ({arm.n_joints},) per base pose, got (3, {arm.n_joints}) for 2 poses" in message
+
+
+def test_refuses_a_wrong_number_of_joints(bare):
+    env, arm, Q, T = bare
+    message = _refusal(env, arm, Q[:, :-1], T)
+    assert f"one arm state ({arm.n_joints},) per base pose, got (2, {arm.n_joints - 1})" in message
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_refuses_a_non_finite_pose(bare, bad):
+    env, arm, Q, T = bare
+    T = T.copy()
+    T[1, 0, 3] = bad
+    assert "base poses must be finite: 1 of 2 are not, first at 1" in _refusal(env, arm, Q, T)
+
+
+@pytest.mark.parametrize("shape", [(4, 4), (2, 3, 4), (2, 4, 3), (1, 2, 4, 4)])
+def test_refuses_a_wrong_pose_shape(bare, shape):
+    env, arm, Q, _ = bare
+    message = _refusal(env, arm, Q[: shape[0]], np.zeros(shape))
+    assert f"base poses must be (S, 4, 4) matrices, got shape {shape}" in message
 
 
 def test_robustness_draws_get_coals_verdicts(tiago):

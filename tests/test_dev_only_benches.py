@@ -30,3 +30,13 @@ def test_find_rate_refusals_refuses_a_source_file_with_held_out_scenes(tmp_path)
     with pytest.raises(InputError, match="development seeds only"):
         main(["--from", str(source), "--out", str(tmp_path / "out.json")])
     assert not (tmp_path / "out.json").exists()
+
+
+def test_find_rate_refusals_refuses_a_seed_not_in_its_sources(tmp_path):
+    from find_rate_refusals import main
+
+    source = tmp_path / "dev.json"
+    source.write_text(json.dumps({"scenes": [{"scene": {"seed": 25000}}]}))
+    with pytest.raises(InputError, match=r"seeds \[25001\] are not in the source files"):
+        main(["--from", str(source), "--out", str(tmp_path / "out.json"), "--seeds", "25001"])
+    assert not (tmp_path / "out.json").exists()

@@ -19,9 +19,9 @@ from baseplace.placement.pipeline import PlaceSettings, object_checks, place, wi
 from baseplace.reachability.storage import save_map
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.terrain.voxels import VoxelMap
-from baseplace.world.environment import Environment, contact_groups
+from baseplace.world.environment import GRASPED, Environment, contact_groups
 from baseplace.world.grasped_object import GraspedObject, find_grasped_object
-from baseplace.world.sensor_resolution import SupportPlane
+from baseplace.world.sensor_resolution import RawCells, SupportPlane, SurfaceCells, group_parts
 from baseplace.world.support_plane import SUPPORT_PLANE
 from conftest import run_cli
 
@@ -139,6 +139,16 @@ def _place(tiago, tiago_map, point, top, neighbour_y, grasped="auto", **settings
                  grasped=grasped)  # fmt: skip
 
 
+def _contact_groups(point, top: float, neighbour_y: float):
+    """(groups, grasped object's group) of :func:`~baseplace.world.environment.contact_groups` on the scene's cloud."""
+    cloud = _cloud(point, top, neighbour_y, np.random.default_rng(7))
+    obj = find_grasped_object(cloud, point)
+    assert obj is not None
+    voxels = VoxelMap.from_points(cloud)
+    groups, object_group = contact_groups(voxels, voxels, obj, cloud)
+    return groups, object_group
+
+
 def _hand_links(robot) -> set[str]:
     model = robot.model
     last = model.getJointId(robot.arm().joint_names[-1])
@@ -251,11 +261,7 @@ def test_the_clearance_decides_whether_the_hand_16mm_over_the_plane_touches_it(t
     """The security margin reaches the exact plane: the hand 16 mm over the true top (the oracle)
     touches ``support_plane`` at a 20 mm clearance and not at 10 mm."""
     _, q_full, point, top, y = grasp_scene
-    cloud = _cloud(point, top, y, np.random.default_rng(7))
-    obj = find_grasped_object(cloud, point)
-    assert obj is not None
-    voxels = VoxelMap.from_points(cloud)
-    groups, object_group = contact_groups(voxels, voxels, obj, cloud)
+    groups, object_group = _contact_groups(point, top, y)
     assert isinstance(groups[SUPPORT_PLANE], SupportPlane)
     arm, hand = tiago.arm(), _hand_links(tiago)
 
@@ -279,3 +285,25 @@ def test_candidates_checks_keep_the_same_clearance(tiago, grasp_scene):
     assert given.environment.clearance == 0.02 and given.clearance_note == "given"
     with pytest.raises(InputError, match="clearance"):
         object_checks(tiago, "arm", None, cloud, obj, None, clearance=-0.01)
+
+
+def test_each_scene_geometry_keeps_the_part_it_was_built_from(tiago, grasp_scene):
+    """``Environment.parts``: per scene geometry its group's part, so a report can say what a link touched
+    (smoothed or raw point cells, the exact plane); checked against the groups and coal's own cells."""
+    _, _, point, top, y = grasp_scene
+    groups, object_group = _contact_groups(point, top, y)
+    env = Environment(tiago, groups, grasped=object_group, clearance=0.01)
+    built = [(name, part) for name, g in [*groups.items(), (GRASPED, object_group)] for part in group_parts(g)
+             if len(part)]  # fmt: skip
+    assert len(env.parts) == len(built)
+    for (gid, part), (name, given) in zip(env.parts.items(), built, strict=True):
+        assert part is given and env.geom.geometryObjects[gid].name == name
+        geometry = env.geom.geometryObjects[gid].geometry
+        if isinstance(part, SupportPlane):
+            assert isinstance(geometry, coal.ConvexBase) and geometry.num_points == 2 * len(part.hull)
+        else:
+            boxes = np.asarray(geometry.toBoxes())
+            assert len(boxes) == len(part)
+            np.testing.assert_allclose(boxes[:, 3], part.resolution)
+    kinds = {type(p) for p in env.parts.values()}
+    assert {SurfaceCells, RawCells, SupportPlane} <= kinds

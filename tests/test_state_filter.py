@@ -89,6 +89,19 @@ def _near_contact(env, arm, T_base, states, rng, pairs=120, depth=10):
     return np.array(out)
 
 
+def scene_models(tiago, rng):
+    """Per table scene of :data:`SCENES` and collision model (transit, approach): (environment, base pose, states).
+
+    The states (:func:`_states`) are drawn once per scene from ``rng``, lazily: a caller that draws
+    from ``rng`` for one model does so before the next scene's states are drawn.
+    """
+    for scene_seed, cell, grasp, offset, yaw in SCENES:
+        target, transit, approach = _environments(tiago, scene_seed, cell, grasp)
+        T_base, states = _states(tiago, target, offset, yaw, rng)
+        for env in (transit, approach):
+            yield env, T_base, states
+
+
 def table_scene_states(tiago, seed: int, every: int = 1, pairs: int = 120):
     """Per table scene and collision model (transit, approach): (environment, base pose, states (N, n)).
 
@@ -97,12 +110,9 @@ def table_scene_states(tiago, seed: int, every: int = 1, pairs: int = 120):
     rng = np.random.default_rng(seed)
     arm = tiago.arm()
     out = []
-    for scene_seed, cell, grasp, offset, yaw in SCENES:
-        target, transit, approach = _environments(tiago, scene_seed, cell, grasp)
-        T_base, states = _states(tiago, target, offset, yaw, rng)
-        for env in (transit, approach):
-            near = _near_contact(env, arm, T_base, states, rng, pairs)
-            out.append((env, T_base, np.vstack([states[::every], near])))
+    for env, T_base, states in scene_models(tiago, rng):
+        near = _near_contact(env, arm, T_base, states, rng, pairs)
+        out.append((env, T_base, np.vstack([states[::every], near])))
     return out
 
 

@@ -231,14 +231,12 @@ class MotionSettings:
             checks: without the bound (None) 5 of 54 motions found on the table-grid dev scenes
             passed through the robot's own scene model between checked states, none with it
             (bench/bench_motion_verdicts.py, ``motion_verdicts_point_dev.json``). Default 0.01:
-            since the state pre-filter (:mod:`baseplace.world.state_filter`) it costs about 5x
-            the check time (median 332 vs 69 ms there) and found the same 12 of 28 extra dev
-            find-rate scenes. Since the whole-line check (one compiled call per joint line,
-            :meth:`Environment.first_colliding_arm`): median 102 ms against main's 530 ms on the
-            72 table-grid dev checks, back to back on a loaded machine, false "no motion" 0 of 72
-            against main's 7 (``motion_verdicts_edge_dev.json``, ``..._edge_main_dev.json``); with
-            the self pairs in group-sphere runs: median 57 ms (p90 149), 0 of 72, against that
-            check's 72 ms back to back (``motion_verdicts_edge3_dev.json``, ``..._edge3_main_product_dev.json``).
+            it found the same 12 of 28 extra dev find-rate scenes, and became affordable
+            with the state pre-filter (:mod:`baseplace.world.state_filter`) and the whole-line
+            check (one compiled call per joint line, :meth:`Environment.first_colliding_arm`).
+            The check's time with it: the median of the 72 table-grid dev checks was 46.9 ms at stop 39
+            (``bench/results/motion_verdicts_s14q_final_a.json``, from
+            ``python bench/bench_motion_verdicts.py --checkers product``); measure again there.
         time_limit: OMPL planning time for one joint path [s]; no path in it rejects the placement.
         max_checks: also stop planning after this many state validity checks (None: no such
             limit). A budget that does not depend on the machine's load, for experiments on a

@@ -260,6 +260,9 @@ class Environment:
         arm_ids = set(arm_geometry_ids(robot, self.geom)) if set(ARM_ONLY) & set(groups) else set()
         self.env_ids: list[int] = []
         self._margin: dict[int, float] = {}  # per scene geometry: the security margin of its pairs
+        self.parts: dict[int, VoxelMap | SupportPlane] = {}
+        """Per geometry id of a group's part: the part it was built from (its kind: the smoothed or raw
+        point cells of :mod:`~baseplace.world.sensor_resolution`, coarse voxels, the exact plane)."""
         margins: list[float] = []  # per collision pair
         for name, group in [*groups.items(), (GRASPED, grasped)]:
             for part in () if group is None else group_parts(group):
@@ -271,6 +274,7 @@ class Environment:
                     geometry = _octree(part)
                 gid = self.geom.addGeometryObject(pin.GeometryObject(name, 0, pin.SE3.Identity(), geometry))
                 self.env_ids.append(gid)
+                self.parts[gid] = part
                 self._margin[gid] = margin(part, self.clearance, plane_clearance)
                 for k in range(n_robot):  # the hand may touch the object; only the arms, the floor
                     if (name != GRASPED or k not in self.hand_ids) and (name not in ARM_ONLY or k in arm_ids):
@@ -403,8 +407,11 @@ class Environment:
         """
         T = np.asarray(T_world_base, dtype=float)
         Q = np.asarray(Q_arm, dtype=float)
-        if T.ndim != 3 or T.shape[1:] != (4, 4) or not np.all(np.isfinite(T)):
-            raise InputError("base poses must be finite (S, 4, 4) matrices")
+        if T.ndim != 3 or T.shape[1:] != (4, 4):
+            raise InputError(f"base poses must be (S, 4, 4) matrices, got shape {T.shape}")
+        bad = np.flatnonzero(~np.isfinite(T).all(axis=(1, 2)))
+        if len(bad):
+            raise InputError(f"base poses must be finite: {len(bad)} of {len(T)} are not, first at {bad[0]}")
         if Q.ndim != 2 or len(Q) != len(T) or Q.shape[1] != arm.n_joints:
             raise InputError(
                 f"need one arm state ({arm.n_joints},) per base pose, got {Q.shape} for {len(T)} poses"
