@@ -13,7 +13,13 @@ out of its side), a bottle with a neck (4 cm body 14 cm high, 1.5 cm neck 6 cm a
 cylinder with a 1 cm band 6 mm proud (narrower than a patch), and a 3 cm cylinder seen from one
 side only.
 
-    python bench/shape_fits.py --out bench/results/shape_fits_s15.json
+With ``--scenes`` also the neighbour bottles of bench/find_rate.py's development scenes (seeds
+25000-25059; its held-out seeds are refused): the cloud through
+:func:`~baseplace.world.environment.contact_groups` with the true grasped bottle, and per true
+neighbour within reach of the fine cells whether a fitted shape stands at it, its u and how far the
+true neighbour lies outside it.
+
+    python bench/shape_fits.py --out bench/results/shape_fits_s15.json --scenes
 """
 
 from __future__ import annotations
@@ -127,9 +133,63 @@ def shapes() -> dict[str, tuple[np.ndarray, np.ndarray, dict[str, float]]]:
     return out
 
 
+def find_rate_scenes(seeds: range) -> dict[str, Any]:
+    """Per development scene of bench/find_rate.py, its true neighbours and the fits that replaced them."""
+    from baseplace.terrain.voxels import VoxelMap
+    from baseplace.world.environment import contact_groups
+    from baseplace.world.grasped_object import GraspedObject
+    from baseplace.world.neighbour_shapes import FittedShape
+    from baseplace.world.sensor_resolution import group_parts
+    from find_rate import SEEDS, make_scene
+
+    rows = []
+    for seed in seeds:
+        if seed in SEEDS.held_out:
+            raise SystemExit(f"seed {seed} is held out")
+        scene = make_scene(seed)
+        x, y, r, hb = scene.bottle
+        h = scene.table[2]
+        grasped = GraspedObject.cylinder([x, y, h + hb / 2], r, hb)
+        voxels = VoxelMap.from_points(scene.cloud)
+        groups, _ = contact_groups(voxels, voxels, grasped, scene.cloud)
+        fits = [p for g in groups.values() for p in group_parts(g) if isinstance(p, FittedShape)]
+        for k, (nx, ny, rn, hn) in enumerate(scene.neighbours):
+            mine = [f for f in fits if np.hypot(*(f.origin[:2] + f.axes[:2, :2] @ f.centre - [nx, ny])) < rn]
+            row: dict[str, Any] = {"seed": seed, "neighbour": k, "radius_mm": round(rn * 1e3, 1),
+                                   "height_mm": round(hn * 1e3, 1), "fitted": bool(mine)}  # fmt: skip
+            if mine:
+                f = mine[0]
+                a = np.linspace(0, 2 * np.pi, 90, endpoint=False)
+                Z = np.linspace(h, h + hn, 40)
+                A, ZZ = np.meshgrid(a, Z)
+                side = np.c_[nx + rn * np.cos(A.ravel()), ny + rn * np.sin(A.ravel()), ZZ.ravel()]
+                g = np.linspace(-rn, rn, 15)
+                X, Y = np.meshgrid(g, g)
+                inside = np.hypot(X, Y).ravel() <= rn
+                top = np.c_[nx + X.ravel()[inside], ny + Y.ravel()[inside], np.full(inside.sum(), h + hn)]
+                outside = float(f.signed_distance(np.concatenate([side, top])).max())
+                row.update({"kind": f.kind, "u_mm": round(f.error * 1e3, 2),
+                            "true_surface_outside_mm": round(outside * 1e3, 2),
+                            "u_covers_it": bool(outside <= f.error)})  # fmt: skip
+            rows.append(row)
+    fitted = [r for r in rows if r["fitted"]]
+    return {
+        "seeds": [seeds.start, seeds.stop - 1],
+        "neighbours": len(rows),
+        "fitted": len(fitted),
+        "u_mm": sorted(r["u_mm"] for r in fitted),
+        "true_surface_outside_mm_max": max((r["true_surface_outside_mm"] for r in fitted), default=None),
+        "u_covers_all": all(r["u_covers_it"] for r in fitted),
+        "rows": rows,
+    }
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", required=True)
+    parser.add_argument(
+        "--scenes", action="store_true", help="also bench/find_rate.py's dev scenes 25000-25059"
+    )
     args = parser.parse_args(argv)
     clock = RunClock()
     n = 3 * SIGMA
@@ -174,6 +234,9 @@ def main(argv: list[str] | None = None) -> int:
         }
         result["shapes"][name] = {"summary": summary, "draws": rows}
         print(name, summary, flush=True)
+    if args.scenes:
+        result["find_rate_dev_scenes"] = find_rate_scenes(range(25000, 25060))
+        print({k: v for k, v in result["find_rate_dev_scenes"].items() if k != "rows"}, flush=True)
     write_results(Path(args.out), {"benchmark": "shape_fits", **result}, clock)
     return 0
 
