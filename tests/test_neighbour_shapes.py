@@ -118,8 +118,8 @@ def test_a_mug_with_a_handle_is_rejected_and_its_cells_keep_c_minus_n(seed):
 def test_shapes_that_are_no_primitive_are_rejected(seed):
     """fit_neighbours on a neighbour alone (3 mm noise, n = 9 mm): the mug, a 5 cm bottle with a 1 cm
     band 6 mm proud (narrower than a patch: the rings catch it) and a bottle seen from one side are
-    rejected; the plain 4 cm cylinder is accepted, and it and the 10 cm box when accepted hold the
-    true surface within u < n of the fitted solid (the true surface sampled every 2 mm)."""
+    rejected; the plain 4 cm cylinder and the 10 cm box are accepted and hold the true surface within
+    u of the fitted solid (the true surface sampled every 2 mm), the cylinder's u below n."""
     from baseplace.world.support_plane import SupportSlab
     from test_clearance_bound import BOX_HALF
     from test_clearance_from_true_surface import _box_points
@@ -147,15 +147,14 @@ def test_shapes_that_are_no_primitive_are_rejected(seed):
         ("box", _box_points(XY, BOX_HALF), dense_box),
     ):
         found = fits(clean)
-        if name == "box" and not found:  # its u is no better than n (module docstring): cells
-            continue
         assert len(found) == 1, name
         shape = found[0][0]
         outside = float(shape.signed_distance(dense).max())
         assert outside <= shape.error, (
             f"{name}: the true surface lies {outside * 1e3:.1f} mm outside, u {shape.error * 1e3:.1f}"
         )
-        assert shape.error < n, f"{name}: u {shape.error * 1e3:.1f} mm is no better than a raw point's"
+        if name == "cylinder":  # a box's u exceeds n (its angle is not refined: module docstring)
+            assert shape.error < n, f"{name}: u {shape.error * 1e3:.1f} mm is no better than a raw point's"
 
 
 PALM = 0.0085
