@@ -117,7 +117,8 @@ def test_a_mug_with_a_handle_is_rejected_and_its_cells_keep_c_minus_n(seed):
 @pytest.mark.parametrize("seed", SEEDS)
 def test_shapes_that_are_no_primitive_are_rejected(seed):
     """fit_neighbours on a neighbour alone (3 mm noise, n = 9 mm): the mug, a 5 cm bottle with a 1 cm
-    band 6 mm proud (narrower than a patch: the rings catch it) and a bottle seen from one side are
+    band 6 mm proud (narrower than a patch: the rings catch it), a bottle seen from one side and a
+    4 cm bottle with a 1.5 cm neck (its neck's side lies over the footprint under the top) are
     rejected; the plain 4 cm cylinder and the 10 cm box are accepted and hold the true surface within
     u of the fitted solid (the true surface sampled every 2 mm), the cylinder's u below n."""
     from baseplace.world.support_plane import SupportSlab
@@ -138,7 +139,8 @@ def test_shapes_that_are_no_primitive_are_rejected(seed):
     )
     one = _side(XY, 0.03, TOP, TOP + 0.2)
     one = one[(one[:, 0] - XY[0] <= 0.005) | (one[:, 2] > TOP + 0.2 - 1e-9)]
-    for name, clean in (("mug", _mug_points()), ("band", band), ("one side", one)):
+    neck = np.concatenate([_side(XY, R, TOP, TOP + 0.14), _side(XY, 0.015, TOP + 0.14, TOP + 0.2)])
+    for name, clean in (("mug", _mug_points()), ("band", band), ("one side", one), ("neck", neck)):
         assert fits(clean) == [], name
     dense_cylinder = _side(XY, R, TOP, TOP + 0.2, 0.002)
     dense_box = _box([*(XY - BOX_HALF), TOP], [*(XY + BOX_HALF), TOP + 2 * BOX_HALF], 0.002)

@@ -19,6 +19,8 @@ minimum-area rectangle, each face's offset fitted to that face's points). A fit 
 * every point lies at most :data:`POINT_SIGMAS` sigma outside each face of the fitted surface (inside is free:
   the fitted solid covers it): a mug's handle, a box's corners beyond a cylinder, a cluster of two
   touching objects leave points outside and reject the fit;
+* no point lies over the footprint shrunk by :data:`POINT_SIGMAS` sigma lower than that under the
+  top: a prism shows nothing there (a bottle's neck, a mug's open top and inner wall do);
 * each patch of the surface (the side cut in :data:`SECTORS` sectors and bands :data:`PATCH` high,
   the top in one; and again in rings :data:`RING` high all around and in strips :data:`STRIP` wide
   over its height; those of at least :data:`PATCH_POINTS` points) has its points' mean outward
@@ -244,6 +246,9 @@ def accepted(shape: FittedShape, L: FloatArray) -> FittedShape | None:
     """
     sigma = _sigma(shape.noise_margin)
     if _signed(shape, L, euclidean=False).max() > POINT_SIGMAS * sigma:
+        return None
+    deep = _inner(shape, L, POINT_SIGMAS * sigma)  # a prism shows nothing under its top but its top
+    if np.any(L[deep, 2] < shape.height - POINT_SIGMAS * sigma):
         return None
     patches = _patches(shape, L)
     if patches is None:
