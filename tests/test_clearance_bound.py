@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from baseplace.terrain.voxels import VoxelMap
+from baseplace.world.neighbour_shapes import FittedShape
 from baseplace.world.sensor_resolution import (
     SupportPlane,
     derived_clearance,
@@ -108,6 +109,8 @@ def _parts(groups, clearance: float, plane_clearance: float | None):
         for part in group_parts(group):
             if isinstance(part, SupportPlane):
                 out.append((part.geometry(), margin(part, clearance, plane_clearance), "plane"))
+            elif isinstance(part, FittedShape):
+                out.append((part.geometry(), margin(part, clearance, plane_clearance), f"fitted {part.kind}"))
             elif len(part) and isinstance(part, VoxelMap):
                 kind = (
                     "denoised"
@@ -129,15 +132,32 @@ def _touches(parts, geometry, T) -> list[str]:
     return hit
 
 
-@pytest.fixture(scope="module", params=[(n, s) for n in range(len(NEIGHBOURS)) for s in SEEDS],
-                ids=lambda p: f"{NEIGHBOURS[p[0]].kind}{NEIGHBOURS[p[0]].size * 1e3:g}-{p[1]}")  # fmt: skip
-def scene(request):
-    neighbour = NEIGHBOURS[request.param[0]]
-    groups, plane = noisy_scene(neighbour.points, neighbour.footprint, request.param[1])
+def _fitted(groups) -> list[FittedShape]:
+    return [part for group in groups.values() for part in group_parts(group) if isinstance(part, FittedShape)]
+
+
+def _scene(index: int, seed: int, fit_shapes: bool):
+    neighbour = NEIGHBOURS[index]
+    groups, plane = noisy_scene(neighbour.points, neighbour.footprint, seed, fit_shapes)
     assert plane is not None
     n, _ = derived_clearance(plane)
     assert 2.7 * SIGMA <= n <= 3.3 * SIGMA  # 3 sigma of the plane's residuals
+    # the neighbour is a whole fitted shape when fitted (bench/shape_fits.py: 10 of 10 draws of each)
+    assert len(_fitted(groups)) == (1 if fit_shapes else 0)
     return neighbour, groups, plane, n
+
+
+@pytest.fixture(scope="module", params=[(n, s, f) for n in range(len(NEIGHBOURS)) for s in SEEDS for f in (True, False)],
+                ids=lambda p: f"{NEIGHBOURS[p[0]].kind}{NEIGHBOURS[p[0]].size * 1e3:g}-{p[1]}-{'fitted' if p[2] else 'cells'}")  # fmt: skip
+def scene(request):
+    return _scene(*request.param)
+
+
+@pytest.fixture(scope="module", params=[(n, s) for n in range(len(NEIGHBOURS)) for s in SEEDS],
+                ids=lambda p: f"{NEIGHBOURS[p[0]].kind}{NEIGHBOURS[p[0]].size * 1e3:g}-{p[1]}")  # fmt: skip
+def cells_scene(request):
+    """The scene with its neighbour as cells (not fitted): the denoised cells' own test."""
+    return _scene(*request.param, fit_shapes=False)
 
 
 def _sphere_at(q: np.ndarray, u: np.ndarray, distance: float, neighbour: Neighbour):
@@ -172,11 +192,11 @@ def test_every_element_kind_keeps_c_minus_n_from_the_true_surface(scene, more):
         assert _touches(parts, coal.Sphere(PROBE), T), f"a sphere over the table at {np.round(xy, 3)} is free"
 
 
-def test_the_denoised_cells_alone_keep_c_minus_n_where_no_raw_point_is(scene):
+def test_the_denoised_cells_alone_keep_c_minus_n_where_no_raw_point_is(cells_scene):
     """u of the denoised cells is their own measured error: on the sides, each sphere 0.5 mm nearer
     than c - n is refused by the denoised cells alone, unless a raw point (which leaves a hole in
     them and is kept at c itself) lies within 2 cm."""
-    neighbour, groups, _, n = scene
+    neighbour, groups, _, n = cells_scene
     c = n + MORE
     parts = _parts(groups, c, None)
     denoised = [p for p in parts if p[2] == "denoised"]

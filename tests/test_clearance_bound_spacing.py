@@ -151,12 +151,13 @@ class Shape:
 SHAPES = {"box": Shape("box"), "bottle": Shape("bottle")}
 
 
-@pytest.fixture(scope="module", params=[(k, s, n) for k in SHAPES for s in SPACINGS for n in NOISES],
-                ids=lambda p: f"{p[0]}-{p[1] * 1e3:g}mm-noise{p[2] * 1e3:g}mm")  # fmt: skip
+@pytest.fixture(scope="module", params=[(k, s, n, f) for k in SHAPES for s in SPACINGS for n in NOISES for f in (False, True)],
+                ids=lambda p: f"{p[0]}-{p[1] * 1e3:g}mm-noise{p[2] * 1e3:g}mm{'-fitted' if p[3] else ''}")  # fmt: skip
 def scene(request):
     """The grasped bottle on a table beside the neighbour, all sampled every ``step``, with ``noise``:
-    (neighbour, parts as Environment checks them, c, n)."""
-    kind, step, noise = request.param
+    (neighbour, parts as Environment checks them, c, n). ``-fitted``: the neighbour may be fitted as a
+    whole shape (:mod:`baseplace.world.neighbour_shapes`, the default), else it stays cells."""
+    kind, step, noise, fit_shapes = request.param
     shape = SHAPES[kind]
     g = np.arange(-0.3 + INSET * step, 0.3, step)
     X, Y = np.meshgrid(g, g)
@@ -167,7 +168,7 @@ def scene(request):
     points = clean + np.random.default_rng(SEED).normal(0.0, noise, clean.shape)
     voxels = VoxelMap.from_points(points)
     grasped = GraspedObject.cylinder([*BOTTLE, TOP + BOTTLE_HEIGHT / 2], BOTTLE_RADIUS, BOTTLE_HEIGHT)
-    groups, _ = contact_groups(voxels, voxels, grasped, points)
+    groups, _ = contact_groups(voxels, voxels, grasped, points, fit_shapes=fit_shapes)
     plane = support_plane(groups)
     assert plane is not None
     n, _ = derived_clearance(plane, noise=scene_noise(groups))
@@ -180,8 +181,9 @@ KNOWN_HOLE = {
     "box-12.5mm-noise0mm-edges-1mm", "box-12.5mm-noise0mm-faces-5mm", "box-12.5mm-noise3mm-edges-1mm",
     "bottle-12.5mm-noise0mm-edges-1mm", "bottle-12.5mm-noise3mm-faces-5mm",
 }  # fmt: skip
-"""The cases the model fails today (docs/placement.md, "A known limit: sparse clouds"): expected to fail,
-strictly, with every assert run. A fix that closes one makes it pass, which fails the suite until the
+"""The cases the cells model fails (docs/placement.md, "A known limit: sparse clouds"): expected to fail,
+strictly, with every assert run. With the neighbour fitted as a whole shape (the ``-fitted`` cases)
+all pass. A fix that closes one makes it pass, which fails the suite until the
 case leaves this set; a case that starts failing outside it fails the suite as any test does."""
 
 

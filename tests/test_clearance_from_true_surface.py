@@ -20,6 +20,7 @@ from baseplace.terrain.voxels import VoxelMap
 from baseplace.world import sensor_resolution
 from baseplace.world.environment import contact_groups, support_plane
 from baseplace.world.grasped_object import GraspedObject
+from baseplace.world.neighbour_shapes import FittedShape
 from baseplace.world.sensor_resolution import SupportPlane, derived_clearance, group_parts
 
 # Environment's security margin per part (before the allowance for denoised cells: the clearance)
@@ -58,10 +59,11 @@ def _box_points(centre, half: float, step: float = 0.01) -> np.ndarray:
     return np.unique(np.round(np.concatenate(parts), 9), axis=0)
 
 
-def noisy_scene(neighbour: np.ndarray, footprint, seed: int):
+def noisy_scene(neighbour: np.ndarray, footprint, seed: int, fit_shapes: bool = True):
     """(contact groups, the exact support plane or None) of the grasped bottle on a table beside
     ``neighbour`` (its true surface points; ``footprint`` tells the table points it stands on), all
-    sampled every centimetre with :data:`SIGMA` of Gaussian noise (also bench/sensor_resolution_probes.py)."""
+    sampled every centimetre with :data:`SIGMA` of Gaussian noise (also bench/sensor_resolution_probes.py);
+    ``fit_shapes`` False: the neighbour stays cells even where it fits a whole shape."""
     rng = np.random.default_rng(seed)
     X, Y = np.meshgrid(np.arange(-0.4, 0.4, 0.01), np.arange(-0.4, 0.4, 0.01))
     table = np.c_[X.ravel(), Y.ravel(), np.full(X.size, TOP)]
@@ -70,7 +72,7 @@ def noisy_scene(neighbour: np.ndarray, footprint, seed: int):
     points = clean + rng.normal(0.0, SIGMA, clean.shape)
     voxels = VoxelMap.from_points(points)
     grasped = GraspedObject.cylinder([*BOTTLE, TOP + HEIGHT / 2], RADIUS, HEIGHT)
-    groups, _ = contact_groups(voxels, voxels, grasped, points)
+    groups, _ = contact_groups(voxels, voxels, grasped, points, fit_shapes=fit_shapes)
     return groups, support_plane(groups)
 
 
@@ -85,7 +87,7 @@ def _model(neighbour: np.ndarray, footprint, seed: int, times: float = 1.0):
     parts = []
     for group in groups.values():
         for part in group_parts(group):
-            if isinstance(part, SupportPlane):
+            if isinstance(part, (SupportPlane, FittedShape)):  # exact convexes
                 parts.append((part.geometry(), _margin(part, clearance)))
             elif len(part):
                 octree = coal.makeOctree(np.ascontiguousarray(part.centres), part.resolution)

@@ -35,6 +35,7 @@ from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.grasped_object import GraspedObject, rows_in
 from baseplace.world.obstacles import Obstacle
 from baseplace.world.sensor_resolution import (
+    EXACT,
     Group,
     SupportPlane,
     check_clearance,
@@ -79,6 +80,7 @@ def contact_groups(
     grasped: GraspedObject | None,
     points: ArrayLike | None = None,
     floor: VoxelMap | None = None,
+    fit_shapes: bool = True,
 ) -> tuple[dict[str, Group], Group | None]:
     """Split the scene for :class:`Environment`: ({"support": ..., "obstacle": ...}, the object).
 
@@ -96,7 +98,8 @@ def contact_groups(
     become their points in fine cells (those on smooth surfaces put onto their local plane first),
     and the planar surface the object stands on, when the cloud fits a good plane
     (:func:`~baseplace.world.support_plane.fit_support_slab`), an exact plane (group
-    "support_plane"): :func:`~baseplace.world.sensor_resolution.fine_groups`.
+    "support_plane"): :func:`~baseplace.world.sensor_resolution.fine_groups`, which also fits the
+    neighbours standing on it as whole shapes unless ``fit_shapes`` is False.
     """
     floor = None if floor is None or len(floor) == 0 else floor
     if grasped is None:
@@ -118,7 +121,7 @@ def contact_groups(
     if points is None:
         return dict(groups), object_voxels
     slab = fit_support_slab(points, grasped.footprint_distance, grasped.bottom, voxels.resolution)
-    out, grasped_group = fine_groups(groups, object_voxels, points, grasped, slab)
+    out, grasped_group = fine_groups(groups, object_voxels, points, grasped, slab, fit_shapes=fit_shapes)
     if SUPPORT_PLANE in out and on_floor.sum() > (support & ~on_floor).sum():  # it stands on the floor
         out[FLOOR_PLANE] = out.pop(SUPPORT_PLANE)
     return out, grasped_group
@@ -268,7 +271,7 @@ class Environment:
             for part in () if group is None else group_parts(group):
                 if len(part) == 0:
                     continue
-                if isinstance(part, SupportPlane):
+                if isinstance(part, EXACT):  # the support plane, a fitted neighbour: exact convexes
                     geometry: coal.CollisionGeometry = part.geometry()
                 else:
                     geometry = _octree(part)
