@@ -56,7 +56,35 @@ VARIANTS: dict[str, MotionSettings] = {
     "restarts16": MotionSettings(approach_restarts=16),
     "restarts40": MotionSettings(approach_restarts=40),
     "reference": REFERENCE,
+    "seeded4": MotionSettings(),
+    "seeded8": MotionSettings(approach_restarts=8),
 }
+SEEDED = {"seeded4": 4, "seeded8": 4}
+"""Variants whose first restarts' IK starts from the grasp configuration (the first), then from it
+perturbed (:class:`SeededArm`), instead of uniform random configurations."""
+PERTURBATION = 0.3
+"""Standard deviation [rad or m, per joint] of the perturbed grasp configurations."""
+
+
+class SeededArm:
+    """The arm, whose first ``seeded`` samples (the restarts' IK starts) are the grasp configuration and
+    perturbations of it."""
+
+    def __init__(self, arm: Any, q_grasp: np.ndarray, seeded: int) -> None:
+        self._arm, self._q, self._left, self._first = arm, q_grasp, seeded, True
+
+    def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        if self._left <= 0:
+            return self._arm.sample(rng, n)
+        self._left -= 1
+        if self._first:
+            self._first = False
+            return self._q[None].copy()
+        q = self._q + rng.normal(0.0, PERTURBATION, size=self._q.shape)
+        return np.clip(q, self._arm.lower, self._arm.upper)[None]
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._arm, name)
 
 
 def restarts_counted(checker: MotionChecker) -> list[int]:
@@ -123,6 +151,8 @@ def main(argv: list[str] | None = None) -> int:
         out["file_product"] = {"found": row["product"]["found"], "reason": row["product"].get("reason")}
         for name in args.variants:
             checker = MotionChecker(robot, arm, transit, approach_env, VARIANTS[name])
+            if name in SEEDED:
+                checker.arm = SeededArm(arm, q, SEEDED[name])  # type: ignore[assignment]
             count = restarts_counted(checker)
             t = time.perf_counter()
             motion = checker.check(q, T_base, target, seed=seed)
