@@ -39,9 +39,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from baseplace.errors import InputError
 from baseplace.placement.verify import Verifier
 from baseplace.robots.model import Robot
-from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.environment import Environment, hand_geometry_ids
-from baseplace.world.sensor_resolution import RawCells, SupportPlane, SurfaceCells, is_fine
+from baseplace.world.neighbour_shapes import FittedShape
+from baseplace.world.sensor_resolution import Part, RawCells, SupportPlane, SurfaceCells, is_fine
 from baseplace_experiments.results import RunClock, write_results
 from find_rate import SEEDS, Oracle, Scene, make_scene, refusal_reason, run_place
 
@@ -89,14 +89,17 @@ def nearest_shape(points: np.ndarray, scene: Scene) -> tuple[list[str], np.ndarr
     return [names[k] for k in best], D[best, np.arange(len(points))]
 
 
-def cell_kind(part: VoxelMap | SupportPlane | None) -> str:
+def cell_kind(part: Part | None) -> str:
     """What the model's part holds, as the model marks it (:mod:`baseplace.world.sensor_resolution`).
 
     ``smoothed``: points put onto their local surface (:class:`SurfaceCells`); ``raw``: points kept as
     measured, in :data:`~baseplace.world.sensor_resolution.FINE` cells where the noise margin covers
     their sampling (:class:`RawCells`), else in coarser cells (:data:`~baseplace.world.sensor_resolution.EDGE_CELL`);
-    ``voxels``: coarse voxels, no margin. The cell edge follows [mm].
+    ``voxels``: coarse voxels, no margin. The cell edge follows [mm]. ``fitted cylinder`` or
+    ``fitted box``: a neighbour fitted as a whole shape (:class:`FittedShape`).
     """
+    if isinstance(part, FittedShape):
+        return f"fitted {part.kind}"
     if part is None or isinstance(part, SupportPlane):
         return "support plane" if part is not None else "unknown"
     size = f"{part.resolution * 1e3:g} mm"
@@ -144,6 +147,8 @@ def classify_pair(env: Environment, k: int, gid: int, margin: float, T_world_roo
                        round(float(np.max(tops[name] - z[[n == name for n in names]])) * 1e3, 1)]
                 for name in by if name in tops
             }  # fmt: skip
+    elif isinstance(env.parts.get(gid), FittedShape):  # a neighbour fitted as a whole shape: an exact convex
+        out["model_distance_mm"] = round(true_distance(g, Tk, part, np.eye(4)) * 1e3, 2)
     else:  # the exact support plane: a convex prism whose top face is the fitted plane
         out["model_distance_mm"] = round(true_distance(g, Tk, part, np.eye(4)) * 1e3, 2)
         verts = np.array([np.asarray(part.points(i)) for i in range(part.num_points)])
@@ -198,6 +203,8 @@ def cause(rows: list[dict[str, Any]]) -> str:
             part = (
                 "support plane"
                 if "plane_top_above_true_table_mm" in r
+                else r["cells"]
+                if r["cells"].startswith("fitted")
                 else f"{r['cells']}: " + "+".join(sorted(r.get("touching_cells", {})))
             )
             return f"{r['link']} on {r['group']} ({part}): true clearance {r['true_clearance_mm']:.0f} mm"

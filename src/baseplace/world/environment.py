@@ -37,6 +37,7 @@ from baseplace.world.obstacles import Obstacle
 from baseplace.world.sensor_resolution import (
     EXACT,
     Group,
+    Part,
     SupportPlane,
     check_clearance,
     fine_groups,
@@ -263,9 +264,10 @@ class Environment:
         arm_ids = set(arm_geometry_ids(robot, self.geom)) if set(ARM_ONLY) & set(groups) else set()
         self.env_ids: list[int] = []
         self._margin: dict[int, float] = {}  # per scene geometry: the security margin of its pairs
-        self.parts: dict[int, VoxelMap | SupportPlane] = {}
+        self.parts: dict[int, Part] = {}
         """Per geometry id of a group's part: the part it was built from (its kind: the smoothed or raw
-        point cells of :mod:`~baseplace.world.sensor_resolution`, coarse voxels, the exact plane)."""
+        point cells of :mod:`~baseplace.world.sensor_resolution`, coarse voxels, the exact plane, a
+        fitted neighbour)."""
         margins: list[float] = []  # per collision pair
         for name, group in [*groups.items(), (GRASPED, grasped)]:
             for part in () if group is None else group_parts(group):
