@@ -193,3 +193,25 @@ def test_a_palm_beyond_c_minus_n_plus_u_from_a_fitted_bottle_is_free():
                     assert bool(hit) != free, (
                         f"seed {seed}: a palm {true * 1e3:.1f} mm from the true bottle is {'refused by ' + str(hit) if hit else 'free'}"
                     )
+
+
+def test_the_clearance_note_states_each_fitted_neighbours_u():
+    """The JSON's clearance note names every fitted neighbour and its u (the margin c - n + u it keeps)."""
+    from baseplace.placement.pipeline import fitted_noted
+    from test_clearance_bound import NEIGHBOURS
+
+    neighbour = NEIGHBOURS[1]
+    groups, _ = noisy_scene(neighbour.points, neighbour.footprint, SEEDS[0])
+    (shape,) = _fitted(groups)
+    c, note, n = fitted_noted(groups, (0.009, "3 sigma", 0.009))
+    assert (c, n) == (0.009, 0.009)
+    assert (
+        note
+        == f"3 sigma; 1 neighbours fitted as whole shapes, kept c - n + u: {shape.kind} u {shape.error * 1e3:.1f} mm"
+    )
+    unfitted = {name: g for name, g in groups.items() if not isinstance(g, FittedShape)}
+    unfitted = {
+        name: tuple(p for p in group_parts(g) if not isinstance(p, FittedShape))
+        for name, g in unfitted.items()
+    }
+    assert fitted_noted(unfitted, (0.009, "3 sigma", 0.009)) == (0.009, "3 sigma", 0.009)

@@ -47,12 +47,14 @@ from baseplace.world.environment import (
     support_plane,
 )
 from baseplace.world.grasped_object import GraspedObject, find_grasped_object, rows_in
+from baseplace.world.neighbour_shapes import FittedShape
 from baseplace.world.obstacles import Obstacle, obstacles_key
 from baseplace.world.sensor_resolution import (
     Group,
     check_clearance,
     derived_clearance,
     derived_plane_clearance,
+    group_parts,
     scene_noise,
     surface_noise,
 )
@@ -347,6 +349,7 @@ def scene_checks(
             groups, object_voxels = contact_groups(terrain.voxels, voxels, obj, cache.points, floor)
             kept = clearance_of(groups, s.clearance, cache.points, obj)
             plane, kept = plane_clearance_of(groups, s.clearance, kept)
+            kept = fitted_noted(groups, kept)
             hand = Environment(robot, groups, grasped=object_voxels, hand_arm=arm_name, shapes=obstacles,
                                clearance=kept[0], plane_clearance=plane)  # fmt: skip
             # on the way to the pre-grasp the hand may not touch it either
@@ -417,6 +420,25 @@ def plane_clearance_of(
     return metres, (kept[0], f"{kept[1]}; from {note}: {metres * 1e3:.1f} mm", kept[2])
 
 
+def fitted_noted(groups: dict[str, Group], kept: tuple[float, str, float]) -> tuple[float, str, float]:
+    """``kept`` with the neighbours fitted as whole shapes noted: each one's kind and error u.
+
+    The robot keeps c - n + u from such a neighbour (:func:`~baseplace.world.sensor_resolution.margin`),
+    so the JSON's clearance note states every u in use (:mod:`baseplace.world.neighbour_shapes`).
+    """
+    shapes = [
+        part for group in groups.values() for part in group_parts(group) if isinstance(part, FittedShape)
+    ]
+    if not shapes:
+        return kept
+    each = ", ".join(f"{shape.kind} u {shape.error * 1e3:.1f} mm" for shape in shapes)
+    return (
+        kept[0],
+        f"{kept[1]}; {len(shapes)} neighbours fitted as whole shapes, kept c - n + u: {each}",
+        kept[2],
+    )
+
+
 @dataclass
 class ObjectChecks:
     """The checks of the seed-004 methods for one object, assembled once (see :func:`object_checks`).
@@ -473,6 +495,7 @@ def object_checks(
         if grasped is not None:
             kept = clearance_of(groups, clearance, np.zeros((0, 3)) if points is None else points, grasped)
         plane, kept = plane_clearance_of(groups, clearance, kept)
+        kept = fitted_noted(groups, kept)
         environment = Environment(robot, groups, grasped=object_voxels, hand_arm=hand_arm, shapes=obstacles,
                                   clearance=kept[0], plane_clearance=plane)  # fmt: skip
         return environment, groups, object_voxels, kept

@@ -59,7 +59,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from baseplace.geometry.poses import FloatArray
-from baseplace.world.support_plane import SupportSlab
+from baseplace.world.support_plane import CLEARANCE_SIGMAS, SupportSlab
 
 LINK = 0.02
 """Points closer than this [m] belong to one cluster: twice the 1 cm sampling of a neighbour."""
@@ -267,8 +267,6 @@ def accepted(shape: FittedShape, L: FloatArray) -> FittedShape | None:
 
 
 def _sigma(noise_margin: float) -> float:
-    from baseplace.world.sensor_resolution import CLEARANCE_SIGMAS
-
     return noise_margin / CLEARANCE_SIGMAS
 
 

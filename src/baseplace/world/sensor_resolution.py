@@ -76,7 +76,7 @@ from baseplace.geometry.poses import FloatArray
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.grasped_object import GraspedObject, rows_in
 from baseplace.world.neighbour_shapes import FittedShape, fit_neighbours
-from baseplace.world.support_plane import DEPTH, RADIUS, SUPPORT_PLANE, SupportSlab
+from baseplace.world.support_plane import CLEARANCE_SIGMAS, DEPTH, RADIUS, SUPPORT_PLANE, SupportSlab
 
 FINE = 0.00125
 """Cell edge [m] of the points near the object (each put onto its local plane first, :func:`denoised`):
@@ -121,8 +121,6 @@ OBJECT_SIGMAS = 4.0
 once in 740): the few hundred points of an object's top leave none behind, where each left behind
 is an obstacle cell at the hand's fingertips (bench/osrm_refusals_dev.py: 25 mm noise lifted the
 tops' points 10-24 mm past 12.5 mm and blocked 27 of 28 refused flat grasps)."""
-CLEARANCE_SIGMAS = 3.0
-"""The derived clearance is this many standard deviations of the scene's noise (:func:`derived_clearance`)."""
 MIN_CLEARANCE = 0.003
 """The derived clearance is at least this [m]: a sensor's quantisation and calibration error."""
 DEFAULT_CLEARANCE = 0.01

@@ -54,6 +54,10 @@ MAX_RESIDUAL = 0.01
 """A fit whose 99th percentile of the residuals above the plane exceeds this [m] is not a plane: no slab."""
 MIN_MARGIN = 0.003
 """The slab's top lies at least this far [m] above the fitted plane."""
+CLEARANCE_SIGMAS = 3.0
+"""The derived clearance is this many standard deviations of the scene's noise
+(:func:`~baseplace.world.sensor_resolution.derived_clearance`); here, below both the sensor-resolution
+model and the fitted neighbours (:mod:`~baseplace.world.neighbour_shapes`), which read it."""
 PLANE_SIGMAS = 4.0
 """Points within this many robust standard deviations of the fitted plane are its points."""
 FINE_PER_VOXEL = 5
