@@ -10,8 +10,9 @@ against the truth, u, and the largest distance [m] by which the true surface lie
 fitted solid (sampled densely; what u must cover). Shapes: cylinders of 3, 3.75 and 4.5 cm radius
 (20 cm high), a 10 cm box, a 4 cm box, a mug (a 4 cm cylinder 10 cm high with a 1 x 3 x 6 cm handle
 out of its side), a bottle with a neck (4 cm body 14 cm high, 1.5 cm neck 6 cm above it), a 5 cm
-cylinder with a 1 cm band 6 mm proud (narrower than a patch), and a 3 cm cylinder seen from one
-side only.
+cylinder with a 1 cm band 6 mm proud (narrower than a patch), a 3 cm cylinder seen from one
+side only, and a 4 cm cylinder with a 2 cm square bump 6 or 10 mm proud of its side (the fit's known
+limit: when such a bump is accepted, the true surface may lie beyond u).
 
 With ``--scenes`` also the neighbour bottles of bench/find_rate.py's development scenes (seeds
 25000-25059; its held-out seeds are refused): the cloud through
@@ -123,6 +124,14 @@ def shapes() -> dict[str, tuple[np.ndarray, np.ndarray, dict[str, float]]]:
         np.concatenate(band_dense),
         {"radius": 0.05, "top": 0.2},
     )
+    for proud in (0.006, 0.01):  # a 2 cm square feature proud of a 4 cm bottle's side: the fit's known limit
+        lo, hi = [AT[0] + 0.038, AT[1] - 0.01, TOP + 0.08], [AT[0] + 0.04 + proud, AT[1] + 0.01, TOP + 0.1]
+        bump = box_surface(lo, hi)
+        out[f"cylinder 40 mm, 2 cm bump {proud * 1e3:.0f} mm proud"] = (
+            np.concatenate([cylinder_points(AT, 0.04, TOP, TOP + 0.2), bump[bump[:, 0] > AT[0] + 0.04]]),
+            np.concatenate([cylinder_points(AT, 0.04, TOP, TOP + 0.2, 0.002), box_surface(lo, hi, 0.002)]),
+            {"radius": 0.04, "top": 0.2},
+        )
     one = cylinder_points(AT, 0.03, TOP, TOP + 0.2)
     seen = (one[:, 0] - AT[0] <= 0.005) | (one[:, 2] > TOP + 0.2 - 1e-9)
     out["cylinder 30 mm, one side seen"] = (
