@@ -38,15 +38,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from baseplace.errors import InputError
 from baseplace.placement.motion import MotionChecker, MotionSettings
-from baseplace.placement.pipeline import PlaceSettings, scene_checks, with_floor
-from baseplace.placement.scene_cache import SceneCache
 from baseplace.reachability.cache import resolve_map
 from baseplace.robots.model import Robot
 from baseplace_experiments.execution import ExecutionOracle, ExecutionSettings
-from baseplace_experiments.execution_experiment import trial_scene
 from baseplace_experiments.results import RunClock, write_results
 from baseplace_experiments.table_grid import RobotShapes, TableGridSettings, true_bottle, true_table
-from bench_motion_verdicts import PROTOCOLS, RECHECK, REFERENCE, check_seed, recheck, true_scene
+from bench_motion_verdicts import PROTOCOLS, RECHECK, REFERENCE, check_seed, recheck, row_models, true_scene
 
 RESULTS = Path(__file__).parent / "results"
 VARIANTS: dict[str, MotionSettings] = {
@@ -135,15 +132,9 @@ def main(argv: list[str] | None = None) -> int:
         key = (row["seed"], tuple(row["cell"]), row["grasp"])
         target = np.array(row["target"])
         if key not in models:
-            p_true, _, seen = trial_scene(row["seed"], tuple(row["cell"]), s)
-            points = with_floor(seen, 0.0)
-            cache = SceneCache(points)
-            checks = scene_checks(robot, arm.name, points, cache.terrain(None), target[None], PlaceSettings(),
-                                  "auto", cache)  # fmt: skip
-            product = checks.verifier.motion
-            assert product is not None
+            transit, approach_env, p_true = row_models(robot, arm.name, row)
             oracle = ExecutionOracle(shapes, true_table(s), true_bottle(p_true, s), true_step)
-            models[key] = (product.environment, product.approach_environment, oracle)
+            models[key] = (transit, approach_env, oracle)
         transit, approach_env, oracle = models[key]
         seed = check_seed(row["seed"], tuple(row["cell"]), row["grasp"], row["placement"])
         q, T_base = np.array(row["q_grasp"]), np.array(row["T_world_base"])

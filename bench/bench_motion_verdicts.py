@@ -190,6 +190,21 @@ def check_seed(seed: int, cell: tuple[int, int], grasp: int, k: int) -> int:
     return int(np.random.default_rng([seed, *cell, grasp, k]).integers(2**31 - 1))
 
 
+def row_models(
+    robot: Robot, arm_name: str, row: dict[str, Any]
+) -> tuple[Environment, Environment | None, FloatArray]:
+    """The product's two motion models (transit, approach) for a results row's scene and target, as
+    this bench builds them, and the true bottle's position (3,) (for the execution oracle)."""
+    p_true, _, seen = trial_scene(row["seed"], tuple(row["cell"]), TableGridSettings())
+    points = with_floor(seen, 0.0)
+    cache = SceneCache(points)
+    checks = scene_checks(robot, arm_name, points, cache.terrain(None), np.array(row["target"])[None],
+                          PlaceSettings(), "auto", cache)  # fmt: skip
+    product = checks.verifier.motion
+    assert product is not None
+    return product.environment, product.approach_environment, p_true
+
+
 class Recorder:
     """What one ``MotionChecker.check`` did: its approach, whether RRT ran and what it returned, and their times."""
 

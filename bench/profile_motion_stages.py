@@ -44,14 +44,10 @@ import numpy as np
 import baseplace.world.state_filter as state_filter
 from baseplace.geometry.poses import FloatArray
 from baseplace.placement.motion import MotionChecker, MotionSettings
-from baseplace.placement.pipeline import PlaceSettings, scene_checks, with_floor
-from baseplace.placement.scene_cache import SceneCache
 from baseplace.reachability.cache import resolve_map
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Robot
-from baseplace_experiments.execution_experiment import trial_scene
-from baseplace_experiments.table_grid import TableGridSettings
-from bench_motion_verdicts import PROTOCOLS, check_seed
+from bench_motion_verdicts import PROTOCOLS, check_seed, row_models
 
 RESULTS = Path(__file__).parent / "results"
 
@@ -176,7 +172,6 @@ def main() -> None:
     robot = Robot("tiago")
     rmap = resolve_map(robot, None).rmap
     arm = robot.arm(rmap.info.arm)
-    s = TableGridSettings()
     timers = Timers()
     per_checker = None if args.uninstrumented or args.cprofile else instrument(timers)
     batches = record_batches(timers) if args.kernel_split else None
@@ -188,14 +183,7 @@ def main() -> None:
         key = (row["seed"], tuple(row["cell"]), row["grasp"])
         target = np.array(row["target"])
         if key not in models:
-            _, _, seen = trial_scene(row["seed"], tuple(row["cell"]), s)
-            points = with_floor(seen, 0.0)
-            cache = SceneCache(points)
-            checks = scene_checks(robot, arm.name, points, cache.terrain(None), target[None], PlaceSettings(),
-                                  "auto", cache)  # fmt: skip
-            product = checks.verifier.motion
-            assert product is not None
-            models[key] = (product.environment, product.approach_environment)
+            models[key] = row_models(robot, arm.name, row)[:2]
         seed = check_seed(row["seed"], tuple(row["cell"]), row["grasp"], row["placement"])
         q, T_base = np.array(row["q_grasp"]), np.array(row["T_world_base"])
         for r in range(args.repeat):

@@ -26,7 +26,6 @@ true neighbour lies outside it.
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 from typing import Any
@@ -39,6 +38,7 @@ from baseplace_experiments.results import RunClock, write_results
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from test_clearance_from_true_surface import SIGMA, TOP, _box_points
+from test_neighbour_shapes import _box, _side
 
 DRAWS = tuple(range(2541, 2551))
 AT = np.array([0.2, 0.1])
@@ -50,33 +50,13 @@ def level_slab() -> SupportSlab:
     return SupportSlab(np.array([0.0, 0.0, TOP]), 0.01, 0.01, hull, 0.01, 10000, SIGMA)
 
 
-def cylinder_points(xy, r: float, z0: float, z1: float, step: float = 0.01, top: bool = True) -> np.ndarray:
-    """Side (and top) points of an upright cylinder from z0 to z1, about ``step`` apart."""
-    angles = np.linspace(0, 2 * math.pi, max(12, math.ceil(2 * math.pi * r / step)), endpoint=False)
-    A, Z = np.meshgrid(angles, np.linspace(z0, z1, max(2, round((z1 - z0) / step) + 1)))
-    side = np.c_[xy[0] + r * np.cos(A.ravel()), xy[1] + r * np.sin(A.ravel()), Z.ravel()]
-    if not top:
-        return side
-    g = np.arange(-r, r + 1e-9, step)
-    X, Y = np.meshgrid(g, g)
-    inside = np.hypot(X, Y).ravel() <= r
-    cap = np.c_[xy[0] + X.ravel()[inside], xy[1] + Y.ravel()[inside], np.full(inside.sum(), z1)]
-    return np.concatenate([side, cap])
+cylinder_points = _side
+"""Side (and top) points of an upright cylinder (tests/test_neighbour_shapes.py's)."""
 
 
 def box_surface(lo, hi, step: float = 0.01) -> np.ndarray:
-    """Points on an axis-aligned box's six faces, about ``step`` apart."""
-    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    grids = [np.linspace(lo[k], hi[k], max(2, round((hi[k] - lo[k]) / step) + 1)) for k in range(3)]
-    out = []
-    for k in range(3):
-        i, j = [a for a in range(3) if a != k]
-        U, V = np.meshgrid(grids[i], grids[j])
-        for value in (lo[k], hi[k]):
-            q = np.empty((U.size, 3))
-            q[:, i], q[:, j], q[:, k] = U.ravel(), V.ravel(), value
-            out.append(q)
-    return np.unique(np.round(np.concatenate(out), 9), axis=0)
+    """Points on an axis-aligned box's six faces, about ``step`` apart, each once."""
+    return np.unique(np.round(_box(lo, hi, step), 9), axis=0)
 
 
 def shapes() -> dict[str, tuple[np.ndarray, np.ndarray, dict[str, float]]]:
