@@ -217,27 +217,30 @@ def test_the_clearance_note_states_each_fitted_neighbours_u():
     assert fitted_noted(unfitted, (0.009, "3 sigma", 0.009)) == (0.009, "3 sigma", 0.009)
 
 
-BUMP = 0.008
+BUMP = 0.005
 """A feature this far [m] proud of a neighbour's side, 2 cm square: the fit's known limit."""
+BUMP_SEEDS = (2570,)
+"""The draw of ten (2561-2570) where that feature passes the acceptance test, tiles included, and lies
+beyond u: 5.4 mm outside the fit against u 4.7 mm (the others reject it or cover it)."""
 
 
 @pytest.mark.xfail(
     strict=True,
-    reason="the fit's known limit (neighbour_shapes' docstring): a 2 cm feature 8 mm proud passes "
-    "the acceptance test and lies beyond u (bench/shape_fits.py)",
+    reason="the fit's known limit (neighbour_shapes' docstring): a 2 cm feature 5 mm proud can pass "
+    "the acceptance test and lie beyond u (bench/shape_fits.py)",
 )
 def test_a_small_proud_feature_is_within_u_of_the_fitted_solid_or_rejected():
-    """A 4 cm neighbour bottle with a 2 x 2 cm bump 8 mm proud of its side: either the acceptance test
-    rejects it, or the fitted solid holds the whole true surface (the bump's faces sampled every 2 mm)
-    within its u, so that c - n + u keeps c - n from it. Three draws; the bump lies facing the grasped bottle."""
+    """A 4 cm, 20 cm tall neighbour bottle with a 2 x 2 cm bump 5 mm proud of its side: either the
+    acceptance test rejects it, or the fitted solid holds the whole true surface (the bump's faces
+    sampled every 2 mm) within its u, so that c - n + u keeps c - n from it. The bump faces the grasped bottle."""
     lo = np.array([XY[0] - R - BUMP, XY[1] - 0.01, TOP + 0.05])
     hi = np.array([XY[0] - R + 0.002, XY[1] + 0.01, TOP + 0.07])
     bump = _box(lo, hi)
     bump = bump[bump[:, 0] < XY[0] - R]
     dense = _box(lo, hi, 0.002)
-    points = np.concatenate([_side(XY, R, TOP, TOP + H), bump])
+    points = np.concatenate([_side(XY, R, TOP, TOP + 0.2), bump])
     beyond = []
-    for seed in SEEDS:
+    for seed in BUMP_SEEDS:
         groups, _ = noisy_scene(points, _footprint, seed)
         for shape in _fitted(groups):
             outside = float(shape.signed_distance(dense).max())
