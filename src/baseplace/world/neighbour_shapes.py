@@ -308,14 +308,19 @@ def _top(shape: FittedShape, L: FloatArray, rough: float, sigma: float) -> tuple
     return top, int(near.sum())
 
 
+def _box_frame(shape: FittedShape, L: FloatArray) -> FloatArray:
+    """(N, 2) the points ``L`` (plane coordinates) along a box's first side and across it, from its centre [m]."""
+    c, s = math.cos(shape.angle), math.sin(shape.angle)
+    v = L[:, :2] - shape.centre
+    return np.c_[v @ [c, s], v @ [-s, c]]
+
+
 def _inner(shape: FittedShape, L: FloatArray, inset: float) -> NDArray[np.bool_]:
     """(N,) the points ``L`` (plane coordinates) over the footprint shrunk by ``inset`` [m]."""
-    v = L[:, :2] - shape.centre
     if shape.kind == "cylinder":
+        v = L[:, :2] - shape.centre
         return np.asarray(np.hypot(v[:, 0], v[:, 1]) <= shape.size[0] - inset)
-    c, s = math.cos(shape.angle), math.sin(shape.angle)
-    q = np.abs(np.c_[v @ [c, s], v @ [-s, c]])
-    return np.asarray(np.all(q <= np.asarray(shape.size) - inset, axis=1))
+    return np.asarray(np.all(np.abs(_box_frame(shape, L)) <= np.asarray(shape.size) - inset, axis=1))
 
 
 def _circle(xy: FloatArray, sigma: float) -> tuple[FloatArray, float, float] | None:
@@ -413,9 +418,7 @@ def _signed(shape: FittedShape, L: FloatArray, euclidean: bool = True) -> FloatA
         radial = np.hypot(L[:, 0] - shape.centre[0], L[:, 1] - shape.centre[1]) - shape.size[0]
         out = np.c_[radial, axial]
     else:
-        c, s = math.cos(shape.angle), math.sin(shape.angle)
-        v = L[:, :2] - shape.centre
-        q = np.abs(np.c_[v @ [c, s], v @ [-s, c]]) - shape.size
+        q = np.abs(_box_frame(shape, L)) - shape.size
         out = np.c_[q, axial]
     if not euclidean:
         return np.asarray(out.max(axis=1), dtype=float)
@@ -456,8 +459,7 @@ def _patches(
         strips_around = max(1, round(2 * math.pi * shape.size[0] / STRIP))
         strip = np.minimum(np.floor((angle + math.pi) / (2 * math.pi) * strips_around), strips_around - 1)
     else:
-        c, s = math.cos(shape.angle), math.sin(shape.angle)
-        q = np.c_[v @ [c, s], v @ [-s, c]]
+        q = _box_frame(shape, L)
         scaled = q / np.asarray(shape.size)
         along_first = np.abs(scaled[:, 0]) >= np.abs(scaled[:, 1])
         face = np.where(along_first, np.where(q[:, 0] > 0, 0, 1), np.where(q[:, 1] > 0, 2, 3))
