@@ -226,7 +226,7 @@ beyond u: 5.4 mm outside the fit against u 4.7 mm (the others reject it or cover
 
 @pytest.mark.xfail(
     strict=True,
-    reason="the fit's known limit (neighbour_shapes' docstring): a 2 cm feature 5 mm proud can pass "
+    reason="the fit's known limit (fit_acceptance's docstring): a 2 cm feature 5 mm proud can pass "
     "the acceptance test and lie beyond u (bench/shape_fits.py)",
 )
 def test_a_small_proud_feature_is_within_u_of_the_fitted_solid_or_rejected():
