@@ -137,10 +137,9 @@ def _box(xy: FloatArray, sigma: float) -> tuple[FloatArray, tuple[float, float],
         q = hull @ R.T
         area = float(np.ptp(q[:, 0]) * np.ptp(q[:, 1]))
         if best is None or area < best[0]:
-            best = (area, a)
+            best = (area, a, R)
     assert best is not None
-    a = best[1]
-    R = np.array([[math.cos(a), math.sin(a)], [-math.sin(a), math.cos(a)]])
+    _, a, R = best
     q = xy @ R.T
     mid = (q.min(axis=0) + q.max(axis=0)) / 2
     q = q - mid
