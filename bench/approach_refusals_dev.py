@@ -52,17 +52,10 @@ from baseplace.errors import InputError
 from baseplace.placement.motion import MotionChecker, MotionSettings
 from baseplace.robots.model import Robot
 from baseplace_experiments.results import RunClock, write_results
-from bench_motion_verdicts import REFERENCE, recheck
+from bench_motion_verdicts import APPROACH_VARIANTS, recheck
 from find_rate import SEEDS, Oracle, Scene, make_scene, run_place
 
-VARIANTS: dict[str, MotionSettings] = {
-    "product": MotionSettings(),
-    "restarts8": MotionSettings(approach_restarts=8),
-    "restarts12": MotionSettings(approach_restarts=12),
-    "restarts16": MotionSettings(approach_restarts=16),
-    "restarts40": MotionSettings(approach_restarts=40),
-    "reference": REFERENCE,
-}
+VARIANTS: dict[str, MotionSettings] = APPROACH_VARIANTS
 """The checkers a refused check is run again with (``product``: the same settings, to see the verdict repeat)."""
 
 
