@@ -52,17 +52,10 @@ from baseplace.errors import InputError
 from baseplace.placement.motion import MotionChecker, MotionSettings
 from baseplace.robots.model import Robot
 from baseplace_experiments.results import RunClock, write_results
-from bench_motion_verdicts import REFERENCE, recheck
-from find_rate import SEEDS, Oracle, Scene, make_scene, run_place
+from bench_motion_verdicts import APPROACH_VARIANTS, recheck
+from find_rate import SEEDS, Oracle, Scene, make_scene, run_place, scenes_by_seed
 
-VARIANTS: dict[str, MotionSettings] = {
-    "product": MotionSettings(),
-    "restarts8": MotionSettings(approach_restarts=8),
-    "restarts12": MotionSettings(approach_restarts=12),
-    "restarts16": MotionSettings(approach_restarts=16),
-    "restarts40": MotionSettings(approach_restarts=40),
-    "reference": REFERENCE,
-}
+VARIANTS: dict[str, MotionSettings] = APPROACH_VARIANTS
 """The checkers a refused check is run again with (``product``: the same settings, to see the verdict repeat)."""
 
 
@@ -193,10 +186,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--variants", nargs="*", choices=list(VARIANTS), default=["reference"])
     args = parser.parse_args(argv)
     clock = RunClock()
-    verdicts: dict[int, dict[str, Any]] = {}
-    for path in args.sources:
-        for r in json.loads(Path(path).read_text())["scenes"]:
-            verdicts[r["scene"]["seed"]] = r
+    verdicts = scenes_by_seed(args.sources)
     seeds = sorted(
         seed
         for seed, r in verdicts.items()

@@ -43,16 +43,19 @@ from baseplace.robots.model import Robot
 from baseplace_experiments.execution import ExecutionOracle, ExecutionSettings
 from baseplace_experiments.results import RunClock, write_results
 from baseplace_experiments.table_grid import RobotShapes, TableGridSettings, true_bottle, true_table
-from bench_motion_verdicts import PROTOCOLS, RECHECK, REFERENCE, check_seed, recheck, row_models, true_scene
+from bench_motion_verdicts import (
+    APPROACH_VARIANTS,
+    PROTOCOLS,
+    RECHECK,
+    check_seed,
+    recheck,
+    row_models,
+    true_scene,
+)
 
 RESULTS = Path(__file__).parent / "results"
 VARIANTS: dict[str, MotionSettings] = {
-    "product": MotionSettings(),
-    "restarts8": MotionSettings(approach_restarts=8),
-    "restarts12": MotionSettings(approach_restarts=12),
-    "restarts16": MotionSettings(approach_restarts=16),
-    "restarts40": MotionSettings(approach_restarts=40),
-    "reference": REFERENCE,
+    **APPROACH_VARIANTS,
     "seeded4": MotionSettings(),
     "seeded8": MotionSettings(approach_restarts=8),
 }

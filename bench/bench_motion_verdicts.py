@@ -120,6 +120,13 @@ CHECKERS: dict[str, tuple[MotionSettings, bool]] = {
 """Per checker name: its settings, and whether every state goes to coal on every pair (the old check)."""
 RECHECK = 4
 """The reference path is re-checked at ``joint_resolution / RECHECK``."""
+APPROACH_VARIANTS: dict[str, MotionSettings] = {
+    "product": PRODUCT,
+    **{f"restarts{k}": MotionSettings(approach_restarts=k) for k in (8, 12, 16, 40)},
+    "reference": REFERENCE,
+}
+"""The product's checker with more approach restarts, and the reference: what the approach benches
+(approach_refusals_dev.py, approach_restarts_dev.py) run a refused check again with."""
 
 
 @dataclasses.dataclass

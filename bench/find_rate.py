@@ -442,6 +442,15 @@ def refusal_reason(method: dict[str, Any]) -> str:
     return "failures " + ", ".join(f"{k}={v}" for k, v in sorted(method["failures"].items()))
 
 
+def scenes_by_seed(paths: list[str]) -> dict[int, dict[str, Any]]:
+    """Each scene's row of these results files by its seed (a later file's row replaces an earlier one's)."""
+    out: dict[int, dict[str, Any]] = {}
+    for path in paths:
+        for r in json.loads(Path(path).read_text())["scenes"]:
+            out[r["scene"]["seed"]] = r
+    return out
+
+
 def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
     """Find rate (Wilson 95 %) over scenes the oracle solves, per kind and overall; FP; refusal reasons."""
     out: dict[str, Any] = {}
@@ -509,10 +518,7 @@ def main(argv: list[str] | None = None) -> int:
                 f"--seed {args.seed} is not a seed of the {args.seeds} split: {seeds[0]}-{seeds[-1]}"
             )
         seeds = (args.seed,)
-    earlier: dict[int, dict[str, Any]] = {}
-    if args.oracle_from:
-        for r in json.loads(Path(args.oracle_from).read_text())["scenes"]:
-            earlier[r["scene"]["seed"]] = r
+    earlier = scenes_by_seed([args.oracle_from] if args.oracle_from else [])
     robot = Robot("tiago")
     oracle = Oracle(robot)
     rows = []

@@ -38,7 +38,7 @@ from baseplace.errors import InputError
 from baseplace.placement.motion import MotionChecker
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Robot
-from find_rate import SEEDS, Oracle, make_scene, refusal_reason, run_place, summarise
+from find_rate import SEEDS, Oracle, make_scene, refusal_reason, run_place, scenes_by_seed, summarise
 
 EXTRA_DEV = tuple(range(25010, 25060))
 """Development seeds beyond the protocol's dev split; never the held-out ones."""
@@ -153,10 +153,7 @@ def main(argv: list[str] | None = None) -> int:
     held_out = sorted(set(args.seeds) & set(SEEDS.held_out))
     if held_out or any(seed >= min(SEEDS.held_out) for seed in args.seeds):
         raise InputError(f"development seeds only (below {min(SEEDS.held_out)}), got {args.seeds}")
-    earlier: dict[int, dict[str, Any]] = {}
-    if args.oracle_from:
-        for r in json.loads(Path(args.oracle_from).read_text())["scenes"]:
-            earlier[r["scene"]["seed"]] = r
+    earlier = scenes_by_seed([args.oracle_from] if args.oracle_from else [])
     recorder = ApproachRecorder()
     recorder.install()
     robot = Robot("tiago")

@@ -43,7 +43,7 @@ from baseplace.world.environment import Environment, hand_geometry_ids
 from baseplace.world.neighbour_shapes import FittedShape
 from baseplace.world.sensor_resolution import Part, RawCells, SupportPlane, SurfaceCells, is_fine
 from baseplace_experiments.results import RunClock, write_results
-from find_rate import SEEDS, Oracle, Scene, make_scene, refusal_reason, run_place
+from find_rate import SEEDS, Oracle, Scene, make_scene, refusal_reason, run_place, scenes_by_seed
 
 CANDIDATES = 3
 """Rejected candidates classified per scene (the hand's contacts repeat for every base pose)."""
@@ -218,10 +218,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, nargs="+", default=None, help="only these scenes of the sources")
     args = parser.parse_args(argv)
     clock = RunClock()
-    verdicts: dict[int, dict[str, Any]] = {}
-    for path in args.sources:
-        for r in json.loads(Path(path).read_text())["scenes"]:
-            verdicts[r["scene"]["seed"]] = r
+    verdicts = scenes_by_seed(args.sources)
     if any(seed >= min(SEEDS.held_out) for seed in verdicts):
         raise InputError("development seeds only: a source file holds held-out scenes")
     if args.seeds is not None:

@@ -12,6 +12,7 @@ against the scene's own parts at the security margin Environment gives each
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 
 import coal
 import numpy as np
@@ -120,6 +121,22 @@ def _parts(groups, clearance: float, plane_clearance: float | None):
                 octree = coal.makeOctree(np.ascontiguousarray(part.centres), part.resolution)
                 out.append((octree, margin(part, clearance, plane_clearance), kind))
     return out
+
+
+def _palms_facing(neighbour: Neighbour, gap: float) -> Iterator[tuple[coal.Box, coal.Transform3s, float]]:
+    """(cube, pose, true distance [m]) of a palm-sized cube (4 cm) facing ``neighbour``'s side ``gap`` [m]
+    from it, at three angles and three heights; coal on the true shape checks each is ``gap`` from it."""
+    for a in np.radians([-40, 0, 40]):
+        u = np.array([math.cos(a), math.sin(a), 0.0])
+        R = np.array([[u[0], -u[1], 0.0], [u[1], u[0], 0.0], [0.0, 0.0, 1.0]])
+        for z in (TOP + 0.06, TOP + 0.1, TOP + 0.14):
+            centre = np.r_[neighbour.xy + (neighbour.size + gap + 0.02) * u[:2], z]
+            cube, T = coal.Box(0.04, 0.04, 0.04), coal.Transform3s(R, centre)
+            true = coal.distance(
+                cube, T, neighbour.shape, neighbour.T, coal.DistanceRequest(), coal.DistanceResult()
+            )
+            assert true == pytest.approx(gap, abs=1e-4)
+            yield cube, T, true
 
 
 def _touches(parts, geometry, T) -> list[str]:
@@ -232,20 +249,12 @@ def test_a_palm_beside_a_neighbour_bottle_is_accepted_at_c_minus_n_plus_margin_a
         c = n = derived_clearance(plane)[0]  # the default: c - n = 0
         parts = _parts(groups, c, derived_plane_clearance(plane)[0])
         for gap, free in ((c - n + ACCEPT, True), (c - n - 0.003, False)):
-            for a in np.radians([-40, 0, 40]):
-                u = np.array([math.cos(a), math.sin(a), 0.0])
-                R = np.array([[u[0], -u[1], 0.0], [u[1], u[0], 0.0], [0.0, 0.0, 1.0]])
-                for z in (TOP + 0.06, TOP + 0.1, TOP + 0.14):
-                    centre = np.r_[neighbour.xy + (neighbour.size + gap + 0.02) * u[:2], z]
-                    cube, T = coal.Box(0.04, 0.04, 0.04), coal.Transform3s(R, centre)
-                    true = coal.distance(cube, T, neighbour.shape, neighbour.T, coal.DistanceRequest(),
-                                         coal.DistanceResult())  # fmt: skip
-                    assert true == pytest.approx(gap, abs=1e-4)
-                    hit = _touches(parts, cube, T)
-                    assert bool(hit) != free, (
-                        f"seed {seed}: a palm {true * 1e3:.1f} mm from the true neighbour "
-                        f"(c {c * 1e3:.1f}, n {n * 1e3:.1f} mm) is {'refused by ' + str(hit) if hit else 'free'}"
-                    )
+            for cube, T, true in _palms_facing(neighbour, gap):
+                hit = _touches(parts, cube, T)
+                assert bool(hit) != free, (
+                    f"seed {seed}: a palm {true * 1e3:.1f} mm from the true neighbour "
+                    f"(c {c * 1e3:.1f}, n {n * 1e3:.1f} mm) is {'refused by ' + str(hit) if hit else 'free'}"
+                )
 
 
 ACCEPT = 0.0135
