@@ -16,14 +16,13 @@ fits it:
 * each patch of the surface (the side cut in :data:`SECTORS` sectors and bands :data:`PATCH` high,
   the top in one; and again in rings :data:`RING` high all around and in strips :data:`STRIP` wide
   over its height; those of at least :data:`~baseplace.world.primitive_fits.PATCH_POINTS` points)
-  has its points' mean outward distance at most tau =
-  :data:`~baseplace.world.sensor_resolution.CLEARANCE_SIGMAS` sigma / sqrt(k) (k its points): a
-  deviation of the true surface broad enough to move a patch's mean.
+  has its points' mean outward distance at most tau = :data:`PATCH_SIGMAS` sigma / sqrt(k) (k its
+  points): a deviation of the true surface broad enough to move a patch's mean.
 
 The accepted fit's u (:attr:`~baseplace.world.fitted_shape.FittedShape.error`) is its 3 standard
 errors plus 2 tau_max: a patch that deviates outward by D passes with a mean D + e <= tau, and
-D <= tau + 3 sigma / sqrt(k) = 2 tau at 3 sigma of e. Features smaller than a patch in both
-directions (not a ring, not a strip) and less than :data:`POINT_SIGMAS` sigma proud (a bump of a few
+D <= tau + 3 sigma / sqrt(k) = 2 tau at 3 sigma of e (:data:`PATCH_SIGMAS` being 3). Features
+smaller than a patch in both directions (not a ring, not a strip) and less than :data:`POINT_SIGMAS` sigma proud (a bump of a few
 samples) pass every test: the fit assumes the neighbour is the primitive up to those; that is its
 limit, and there the clearance bound does not hold. The side is therefore also cut in :data:`TILE`
 square tiles (four offset grids), each tested at :data:`TILE_SIGMAS` (not in u). Measured at 3 mm
@@ -59,6 +58,9 @@ TILE = 0.02
 """The side is also cut in square tiles this wide [m], on four grids offset by half a tile (:func:`accepted`)."""
 TILE_POINTS = 4
 """Tiles of fewer points are not tested."""
+PATCH_SIGMAS = 3.0
+"""A patch's mean outward residual above this many sigma / sqrt(k) rejects the fit; u adds twice the
+largest such bound (the module docstring)."""
 TILE_SIGMAS = 4.0
 """A tile's mean outward residual above this many sigma / sqrt(k) rejects the fit: a small proud feature
 (bench/shape_fits.py: a 2 cm bump 10 mm proud of a 4 cm bottle accepted in 0 of 30 draws instead of 4, 6 mm
@@ -102,7 +104,7 @@ def accepted(shape: FittedShape, L: FloatArray) -> FittedShape | None:
         for k in np.unique(patch[patch >= 0]):
             mine = patch == k
             if mine.sum() >= PATCH_POINTS:
-                tau = 3 * sigma / math.sqrt(mine.sum())
+                tau = PATCH_SIGMAS * sigma / math.sqrt(mine.sum())
                 if residual[mine].mean() > tau:
                     return None
                 tau_max = max(tau_max, tau)
