@@ -108,7 +108,9 @@ PER_GRASP = 1
 TRIES = 60
 PRODUCT = MotionSettings()
 PRODUCT_500 = MotionSettings(time_limit=30.0, max_checks=500)
-REFERENCE = MotionSettings(time_limit=100.0, max_checks=50_000, approach_restarts=40)
+REFERENCE = MotionSettings(time_limit=100.0, max_checks=50_000, approach_restarts=40, search_step=None)
+"""100x the product's budget; it searches with its edges at the 1 cm point bound (``search_step``
+None), as every reference run did before the coarser search existed."""
 CHECKERS: dict[str, tuple[MotionSettings, bool]] = {
     "product": (PRODUCT, False),
     "product_500": (PRODUCT_500, False),

@@ -126,11 +126,11 @@ def test_bisection_order_visits_every_state_of_a_line_once():
     assert bisection_order(8)[:3] == [8, 4, 2]
 
 
-def test_planned_and_shortened_path_is_free_by_an_independent_check(tiago):
-    """A table in front of the robot blocks the straight joint line from stowed: RRTConnect plans
-    and the greedy shortcut shortens. Oracle: coal on the true table box (RobotShapes: its own
-    pinocchio geometry, no voxels), every state 1 cm of joint motion apart on every segment."""
-    from baseplace_experiments.table_grid import RobotShapes, TrueShape
+@pytest.fixture(scope="module")
+def table_goal(tiago):
+    """A table in front of the robot (its points as 25 mm voxels, and the true box 1 cm inside
+    them) and a free goal over it whose straight joint line from stowed is blocked."""
+    from baseplace_experiments.table_grid import TrueShape
 
     arm = tiago.arm()
     lo, hi = np.array([0.45, -0.6, 0.66]), np.array([1.2, 0.6, 0.72])
@@ -140,26 +140,64 @@ def test_planned_and_shortened_path_is_free_by_an_independent_check(tiago):
     T = np.eye(4)
     T[:3, 3] = (lo + hi) / 2
     table = TrueShape("table", coal.Box(*(hi - lo - 0.02)), T)  # 1 cm inside the sampled points
-    motion = MotionChecker(tiago, arm, env, settings=MotionSettings(time_limit=20.0))  # loaded CI machines
+    motion = MotionChecker(tiago, arm, env)
     rng = np.random.default_rng(5)
-    goal = None
-    for q in arm.sample(rng, 2000):  # a free goal over the table whose line from stowed is blocked
+    for q in arm.sample(rng, 2000):
         p = tcp_by_pinocchio(tiago, arm, q)[:3, 3]
         if not (0.6 < p[0] < 0.9 and abs(p[1]) < 0.3 and 0.85 < p[2] < 1.0):
             continue
         if motion._free(q, np.eye(4)) and not motion._line_free(motion.q_start, q, np.eye(4)):
-            goal = q
-            break
-    assert goal is not None
-    path, planned = motion.joint_path(goal, np.eye(4), seed=3)
-    assert planned and path is not None
-    np.testing.assert_allclose(path[0], motion.q_start)
-    np.testing.assert_allclose(path[-1], goal)
+            return env, table, q
+    raise AssertionError("no goal over the table")
+
+
+def _free_by_coal(tiago, path, table) -> None:
+    """Every state 1 cm of joint motion apart on every segment clears the true table (coal on its
+    own pinocchio geometry, no voxels)."""
+    from baseplace_experiments.table_grid import RobotShapes
+
     shapes = RobotShapes(tiago)
     for a, b in itertools.pairwise(path):
         steps = max(1, int(np.ceil(np.linalg.norm(b - a) / 0.01)))
         for s in np.linspace(0.0, 1.0, steps + 1):
             assert shapes.touching(a + s * (b - a), np.eye(4), [table]) is None
+
+
+def test_planned_and_shortened_path_is_free_by_an_independent_check(tiago, table_goal):
+    """A table in front of the robot blocks the straight joint line from stowed: RRTConnect plans
+    (searching at ``search_step``, kept at ``point_step``) and the greedy shortcut shortens.
+    Oracle: coal on the true table box, every state 1 cm of joint motion apart on every segment."""
+    env, table, goal = table_goal
+    motion = MotionChecker(tiago, tiago.arm(), env, settings=MotionSettings(time_limit=20.0))  # loaded CI
+    path, planned = motion.joint_path(goal, np.eye(4), seed=3)
+    assert planned and path is not None
+    np.testing.assert_allclose(path[0], motion.q_start)
+    np.testing.assert_allclose(path[-1], goal)
+    _free_by_coal(tiago, path, table)
+
+
+def test_a_search_path_that_touches_at_the_point_step_is_searched_again(tiago, table_goal):
+    """A search step of 1 m checks each of the search's edges at a state or two, so the path it
+    returns crosses the table; checked at ``point_step`` it is refused, and the search runs again at
+    ``point_step``: the path returned is free by the independent check, and the search ran twice.
+    Without the check of the search's path (its edges kept as searched), the test fails."""
+    env, table, goal = table_goal
+    settings = MotionSettings(time_limit=20.0, search_step=1.0)
+    motion = MotionChecker(tiago, tiago.arm(), env, settings=settings)
+    factors = []
+    rrt = motion._rrt
+
+    def counted(*args, **kwargs):  # type: ignore[no-untyped-def]
+        factors.append(motion._search_factor)
+        return rrt(*args, **kwargs)
+
+    motion._rrt = counted  # type: ignore[method-assign]
+    path, planned = motion.joint_path(goal, np.eye(4), seed=3)
+    assert planned and path is not None
+    assert factors == [100.0, 1.0]
+    _free_by_coal(tiago, path, table)
+    with pytest.raises(Exception, match="search_step"):
+        MotionSettings(search_step=0.0)
 
 
 def test_a_check_budget_stops_planning_before_the_time_limit(tiago, wall_scene):
