@@ -304,8 +304,8 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
     pairs come in runs of one geometry g against the geometries that one arm joint j moves
     (``self_runs`` (R, 4): g, j, the run's pairs r0..r1): a run is certified at once when g's
     bounding sphere is farther from j's group sphere than ``run_reach`` plus their radii. A self
-    pair whose first geometry lies in an anchor field's set (``anchor_of[p]`` >= 0, the ``anc_*``
-    arrays: :func:`_anchor_bound`) is certified with the whole set at once when the field's lower
+    pair whose first geometry lies in an anchor field's set (``anchor_of[p]`` >= 0, or
+    ``-2 - anchor`` where its table is asked instead; the ``anc_*`` arrays: :func:`_anchor_bound`) is certified with the whole set at once when the field's lower
     bound clears the second geometry's bounding sphere, or every sphere of its cover, by the
     largest reach of its pairs with the set (``anc_reach``); a run at once when it clears j's
     group sphere (``anc_group_reach``). Each answer is kept for the state.
@@ -397,7 +397,7 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
             if not _near(Cg, g, Cj, j, radius[g] + group_radius[j] + run_reach[run]):
                 out_i[P + r0 : P + r1] = False
                 continue
-            an = anchor_of[r0]  # every pair of a run has g first
+            an = anchor_of[r0]  # one g, one j: every pair of the run in the same set (or none)
             if an >= 0:
                 if anc_gstamp[an, j] != i:
                     anc_gstamp[an, j] = i
@@ -409,6 +409,7 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
             for p in range(r0, r1):
                 g, h = self_pairs[p, 0], self_pairs[p, 1]
                 touch = _near(Cg, g, Cg, h, radius[g] + radius[h] + self_reach[p])
+                an = anchor_of[p]
                 if touch and an >= 0:
                     if anc_stamp[an, h] != i:
                         anc_stamp[an, h] = i
@@ -1286,34 +1287,42 @@ class StateFilter:
         that frame) are fixed there whatever the arm's state, so one :func:`_anchor_field` on a
         grid over their bounding box (plus :data:`ANCHOR_BAND`) holds a lower bound of the
         distance to all of them, and one look-up per moved geometry serves all its pairs with the
-        set. A geometry whose every pair has a distance table (:meth:`_self_tables`: it nearly
-        touches the other in many states) is left out of the set; the kernel asks a pair's table
-        before the field. Values are rounded down to float32. Per geometry h (and per arm joint's
+        set. A pair with a distance table (:meth:`_self_tables`: its geometries nearly touch in
+        many states, where the field would serve in vain) is left to the table: ``-2 - a`` where
+        anchor a's field covers it (a run's look-up certifies all its pairs), and a run whose
+        first pair is such is not looked up at once. Values are rounded down to float32. Per geometry h (and per arm joint's
         group), the largest reach of its pairs with the set. The fields are kept per robot, arm,
         frame and set (:data:`_ANCHORS`); an arm with fewer than two joints, or a frame with no
         pairs, gets none.
         """
         G, J, S = len(self.joint), len(self._groups[1]), len(self._self_pairs)
         pairs, reach = self._self_pairs, self._self_reach
-        frames = [
-            f for f in ANCHOR_JOINTS if f < self.arm.n_joints - 1 and np.any(self.joint[pairs[:, 0]] == f)
-        ]
+        anchor_of = np.full(S, -1, dtype=np.int64)
+        frames: list[int] = []
+        reaches: list[FloatArray] = []  # per anchor, the largest reach per geometry h, then per joint group
+        for f in ANCHOR_JOINTS:
+            if f >= self.arm.n_joints - 1:
+                continue
+            mine = (self.joint[pairs[:, 0]] == f) & (self.joint[pairs[:, 1]] > f)
+            asked = mine & (np.asarray(self._tables[0]) < 0)
+            mine &= np.isin(pairs[:, 0], pairs[asked, 0])  # the set: the geometries with a pair it serves
+            if mine.any():
+                anchor_of[mine] = -2 - len(frames)  # covered by the field, left to the pair's table
+                anchor_of[mine & asked] = len(frames)
+                frames.append(f)
+                per = np.full(G + J, -np.inf)
+                for p in np.flatnonzero(mine):
+                    h = pairs[p, 1]
+                    per[h] = max(per[h], reach[p])
+                    per[G + self.joint[h]] = max(per[G + self.joint[h]], reach[p])
+                reaches.append(per)
         if not frames:
             return _no_anchors(S, G, J)
         plane_start, planes, vert_start, verts = self._hulls
-        anchor_of = np.full(S, -1, dtype=np.int64)
-        anc_reach, anc_group = np.full((len(frames), G), -np.inf), np.full((len(frames), J), -np.inf)
         fields = []
         kept = _ANCHORS.setdefault(self.robot, {})
         for a, f in enumerate(frames):
-            mine = (self.joint[pairs[:, 0]] == f) & (self.joint[pairs[:, 1]] > f)
-            members = np.unique(pairs[mine & (np.asarray(self._tables[0]) < 0), 0])
-            mine &= np.isin(pairs[:, 0], members)
-            anchor_of[mine] = a
-            for p in np.flatnonzero(mine):
-                h = pairs[p, 1]
-                anc_reach[a, h] = max(anc_reach[a, h], reach[p])
-                anc_group[a, self.joint[h]] = max(anc_group[a, self.joint[h]], reach[p])
+            members = np.unique(pairs[(anchor_of == a) | (anchor_of == -2 - a), 0])
             key = (self.arm.name, f, members.tobytes())
             if key not in kept:
                 boxes = np.array([[*verts[vert_start[g] : vert_start[g + 1]].min(axis=0),
@@ -1346,8 +1355,8 @@ class StateFilter:
             np.array([dims for *_, dims, _ in fields], dtype=np.int64),
             np.cumsum([0] + [len(v) for *_, v in fields], dtype=np.int64),
             np.concatenate([v for *_, v in fields]),
-            anc_reach,
-            anc_group,
+            np.array([per[:G] for per in reaches]),
+            np.array([per[G:] for per in reaches]),
         )
 
     def centres(self, q_arm: ArrayLike) -> FloatArray:
