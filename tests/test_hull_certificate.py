@@ -17,13 +17,18 @@ import pytest
 
 from baseplace.placement.motion import stowed_configuration
 from baseplace.world.environment import Environment
-from baseplace.world.state_filter import _uncertified_states
+from baseplace.world.state_filter import _no_anchors, _uncertified_states
 from test_state_filter import table_scene_states
 
 
 def _left(filt, q, T_world_armbase, hulls):
-    """Per pair (scene rows, then self pairs), whether the compiled call leaves it to coal at arm state q."""
+    """Per pair (scene rows, then self pairs), whether the compiled call leaves it to coal at arm state q.
+
+    Without the self pairs' anchor fields (tests/test_anchor_fields.py tests those): what the hulls add to the spheres.
+    """
     robot_args, scene_and_self = filt._kernel_args
+    S, G, J = len(filt._self_pairs), len(filt.joint), len(filt._groups[1])
+    scene_and_self = (*scene_and_self[:-10], *_no_anchors(S, G, J))
     if not hulls:  # the same call with no hull planes and no hull points
         G = len(filt.joint)
         empty = (np.zeros(G + 1, np.int64), np.zeros((0, 4)), np.zeros(G + 1, np.int64), np.zeros((0, 3)))

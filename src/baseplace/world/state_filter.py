@@ -55,8 +55,22 @@ TABLE_NODES = 4000
 TABLE_HARD = 0.1
 """A self pair gets a distance table when its spheres leave it to coal in this share of random
 configurations."""
+STOWED_SPREAD = 0.15
+"""Standard deviation [rad or m] per joint of the configurations near the stowed one that choose
+the self pairs' distance tables (:meth:`StateFilter._self_tables`)."""
 COVER_RADIUS = 0.03
 """A cover's pieces are cut no further once their sphere's radius is within this [m]."""
+ANCHOR_JOINTS = (-1, 0)
+"""The frames of the anchor fields (:func:`_anchor_field`): the arm's base (the geometries no arm
+joint moves) and arm joint 0's (those it moves with no other arm joint between)."""
+ANCHOR_STEP = 0.01
+"""Node spacing [m] of an anchor field (widened to stay within :data:`ANCHOR_NODES`)."""
+ANCHOR_BAND = 0.3
+"""An anchor field's grid reaches this far [m] beyond its geometries' bounding box."""
+ANCHOR_NODES = 4_000_000
+"""At most this many nodes in one anchor field."""
+ANCHOR_CAP = 0.5
+"""An anchor field's values are cut at this [m] (a lower bound still)."""
 
 
 def bounding_sphere(geometry: coal.CollisionGeometry) -> tuple[FloatArray, float]:
@@ -274,7 +288,8 @@ def _shape_touches(c, r, kind, a, b, planes, balls):
 def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_start, sub_joint, sub_local,
                         sub_radius, group_local, group_radius, hull_start, hull_planes, vert_start, verts, T, scene_rows, scene_reach, parts, offs, all_points, all_keys, all_starts,
                         all_fields, geo, ints, halves, planes, balls, self_pairs, self_reach, self_runs, run_reach, self_table,
-                        tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off, tab_cert, start, out):  # fmt: skip
+                        tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off, tab_cert, anchor_of, anc_joint, anc_box, anc_lo,
+                        anc_h, anc_dims, anc_off, anc_field, anc_reach, anc_group_reach, start, out):  # fmt: skip
     """Per state Q[i] (n,), which pairs its spheres do not certify free: ``out[i, p]`` (m, P + S) bool.
 
     The whole-edge check of issue 25 item 3: every state's spheres placed and tested in one call.
@@ -288,7 +303,12 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
     the pair's distance table (``self_table[p]`` >= 0, :func:`_table_clear`) clears it. The self
     pairs come in runs of one geometry g against the geometries that one arm joint j moves
     (``self_runs`` (R, 4): g, j, the run's pairs r0..r1): a run is certified at once when g's
-    bounding sphere is farther from j's group sphere than ``run_reach`` plus their radii.
+    bounding sphere is farther from j's group sphere than ``run_reach`` plus their radii. A self
+    pair whose first geometry lies in an anchor field's set (``anchor_of[p]`` >= 0, or
+    ``-2 - anchor`` where its table is asked instead; the ``anc_*`` arrays: :func:`_anchor_bound`) is certified with the whole set at once when the field's lower
+    bound clears the second geometry's bounding sphere, or every sphere of its cover, by the
+    largest reach of its pairs with the set (``anc_reach``); a run at once when it clears j's
+    group sphere (``anc_group_reach``). Each answer is kept for the state.
     Goes from state ``start`` and stops at the first state with any pair left (coal decides it,
     then the call goes on from the next): returns its index, or -1 when every state is certified.
     """
@@ -303,6 +323,12 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
     near_h = np.empty(K, dtype=np.bool_)
     # per self pair and hull (its first geometry's, its second's): the plane that last served
     hull_hint = np.full((self_pairs.shape[0], 2), -1, dtype=np.int64)
+    A = anc_joint.shape[0]
+    anc_stamp, anc_clear = np.full((A, G), -1), np.zeros((A, G), dtype=np.bool_)  # per anchor and geometry
+    anc_gstamp, anc_gclear = (
+        np.full((A, J), -1),
+        np.zeros((A, J), dtype=np.bool_),
+    )  # per anchor and joint group
     P = scene_rows.shape[0]
     reach = np.empty(P)
     part_reach = np.zeros(parts.shape[0])  # the largest of each part's rows
@@ -371,9 +397,26 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
             if not _near(Cg, g, Cj, j, radius[g] + group_radius[j] + run_reach[run]):
                 out_i[P + r0 : P + r1] = False
                 continue
+            an = anchor_of[r0]  # one g, one j: every pair of the run in the same set (or none)
+            if an >= 0:
+                if anc_gstamp[an, j] != i:
+                    anc_gstamp[an, j] = i
+                    anc_gclear[an, j] = _anchor_bound(Cj[j], an, F, anc_joint, anc_box, anc_lo, anc_h, anc_dims, anc_off,
+                                                     anc_field) > group_radius[j] + anc_group_reach[an, j]  # fmt: skip
+                if anc_gclear[an, j]:
+                    out_i[P + r0 : P + r1] = False
+                    continue
             for p in range(r0, r1):
                 g, h = self_pairs[p, 0], self_pairs[p, 1]
                 touch = _near(Cg, g, Cg, h, radius[g] + radius[h] + self_reach[p])
+                an = anchor_of[p]
+                if touch and an >= 0:
+                    if anc_stamp[an, h] != i:
+                        anc_stamp[an, h] = i
+                        anc_clear[an, h] = _anchor_clear(h, an, i, Cg, radius, stamp, sub_start, sub_joint, sub_local,
+                                                        sub_radius, F, T, Cs, Ws, anc_joint, anc_box, anc_lo, anc_h,
+                                                        anc_dims, anc_off, anc_field, anc_reach[an, h])  # fmt: skip
+                    touch = not anc_clear[an, h]
                 if touch and self_table[p] >= 0:
                     touch = not _table_clear(Q[i], self_table[p], tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off,
                                              tab_cert)  # fmt: skip
@@ -425,6 +468,105 @@ def _part_far(r0, r1, rows, joint, Wj, group_radius, reach, geo):
         if not d2 > r * r:
             return False
     return True
+
+
+@nb.njit(cache=True, inline="always")
+def _box_d2(x, y, z, box):
+    """The squared distance from the point (x, y, z) to the box (6,) (lo, hi)."""
+    d2 = 0.0
+    if x < box[0]:
+        d2 += (box[0] - x) ** 2
+    elif x > box[3]:
+        d2 += (x - box[3]) ** 2
+    if y < box[1]:
+        d2 += (box[1] - y) ** 2
+    elif y > box[4]:
+        d2 += (y - box[4]) ** 2
+    if z < box[2]:
+        d2 += (box[2] - z) ** 2
+    elif z > box[5]:
+        d2 += (z - box[5]) ** 2
+    return d2
+
+
+@nb.njit(cache=True, inline="always")
+def _anchor_bound(c, a, F, anc_joint, anc_box, anc_lo, anc_h, anc_dims, anc_off, anc_field):
+    """A lower bound [m] of the distance from the point c (3,) (the arm's base frame) to anchor a's geometries.
+
+    In the frame of arm joint ``anc_joint[a]`` (-1: the arm's base): the distance to the set's
+    bounding box ``anc_box[a]``, or, if more, the field's value at the nearest node less the
+    point's distance to that node (the field is a lower bound of a distance, which changes by at
+    most as much as the point moves: :func:`_anchor_field`).
+    """
+    x, y, z = c[0], c[1], c[2]
+    f = anc_joint[a]
+    if f >= 0:  # into the joint's frame: R^T (c - t)
+        dx, dy, dz = x - F[f, 0, 3], y - F[f, 1, 3], z - F[f, 2, 3]
+        x = F[f, 0, 0] * dx + F[f, 1, 0] * dy + F[f, 2, 0] * dz
+        y = F[f, 0, 1] * dx + F[f, 1, 1] * dy + F[f, 2, 1] * dz
+        z = F[f, 0, 2] * dx + F[f, 1, 2] * dy + F[f, 2, 2] * dz
+    d2 = _box_d2(x, y, z, anc_box[a])
+    h = anc_h[a]
+    n0, n1, n2 = anc_dims[a, 0], anc_dims[a, 1], anc_dims[a, 2]
+    u0 = min(max(round((x - anc_lo[a, 0]) / h), 0), n0 - 1)
+    u1 = min(max(round((y - anc_lo[a, 1]) / h), 0), n1 - 1)
+    u2 = min(max(round((z - anc_lo[a, 2]) / h), 0), n2 - 1)
+    ex, ey, ez = x - (anc_lo[a, 0] + u0 * h), y - (anc_lo[a, 1] + u1 * h), z - (anc_lo[a, 2] + u2 * h)
+    v = anc_field[anc_off[a] + (u0 * n1 + u1) * n2 + u2] - math.sqrt(ex * ex + ey * ey + ez * ez)
+    return max(math.sqrt(d2), v)
+
+
+@nb.njit(cache=True)
+def _anchor_clear(h, a, i, Cg, radius, stamp, sub_start, sub_joint, sub_local, sub_radius, F, T, Cs, Ws, anc_joint,
+                  anc_box, anc_lo, anc_h, anc_dims, anc_off, anc_field, reach):  # fmt: skip
+    """Whether geometry h at state i is farther than ``reach`` from every geometry of anchor a (:func:`_anchor_bound`).
+
+    By its bounding sphere, else by every sphere of its cover.
+    """
+    if (
+        _anchor_bound(Cg[h], a, F, anc_joint, anc_box, anc_lo, anc_h, anc_dims, anc_off, anc_field)
+        > radius[h] + reach
+    ):
+        return True
+    if sub_start[h + 1] - sub_start[h] <= 1:
+        return False
+    _cover_placed(h, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws)
+    for s in range(sub_start[h], sub_start[h + 1]):
+        if not _anchor_bound(Cs[s], a, F, anc_joint, anc_box, anc_lo, anc_h, anc_dims, anc_off, anc_field) > (
+            sub_radius[s] + reach
+        ):
+            return False
+    return True
+
+
+@nb.njit(cache=True)
+def _anchor_field(plane_start, planes, boxes, lo, h, dims, cap, out):
+    """Per grid node ``lo + h * (i, j, k)`` (``dims``), a lower bound [m] of its distance to a set of convex hulls, into ``out``.
+
+    Per hull m (its face planes ``planes[plane_start[m]:plane_start[m + 1]]``, unit normal and
+    offset, inside <= 0, and its bounding box ``boxes[m]``: lo, hi): the largest of the distance
+    to the box and the node's signed distances to the planes (each plane bounds a half-space
+    holding the hull, so the node is at least that far from it); the smallest over the hulls,
+    cut at ``cap``. Each is a largest or smallest of functions that change by at most as much as
+    the node moves, so the value at a node less a point's distance to it bounds the point's.
+    """
+    for i in range(dims[0]):
+        x = lo[0] + i * h
+        for j in range(dims[1]):
+            y = lo[1] + j * h
+            for k in range(dims[2]):
+                z = lo[2] + k * h
+                best = cap
+                for m in range(boxes.shape[0]):
+                    d = math.sqrt(_box_d2(x, y, z, boxes[m]))
+                    if d >= best:
+                        continue
+                    for p in range(plane_start[m], plane_start[m + 1]):
+                        d = max(d, planes[p, 0] * x + planes[p, 1] * y + planes[p, 2] * z + planes[p, 3])
+                        if d >= best:
+                            break
+                    best = min(best, d)
+                out[i, j, k] = best
 
 
 @nb.njit(cache=True)
@@ -675,6 +817,16 @@ _BOX_INDEXES: weakref.WeakKeyDictionary[coal.OcTree, list[tuple[PointIndex, floa
 """Per OcTree, the box indexes of :func:`_box_indexes` (they hold no reference to it)."""
 
 
+_Anchor = tuple[FloatArray, FloatArray, float, NDArray[np.int64], NDArray[np.float32]]
+"""An anchor field: its set's bounding box (6,), the grid's first node (3,), step, nodes per axis (3,), values (flat)."""
+
+
+_ANCHORS: weakref.WeakKeyDictionary[Robot, dict[tuple[str, int, bytes], _Anchor]] = (
+    weakref.WeakKeyDictionary()
+)
+"""Per robot, the anchor fields of :meth:`StateFilter._anchor_fields` by arm, frame and set (box, grid lo, step, dims, values)."""
+
+
 _HULLS: weakref.WeakKeyDictionary[Robot, dict[int, list[tuple[FloatArray, FloatArray]]]] = (
     weakref.WeakKeyDictionary()
 )
@@ -788,6 +940,22 @@ def _moved_planes(planes: FloatArray, T_frame_geometry: pin.SE3) -> FloatArray:
     normals = planes[:, :3] @ np.asarray(T_frame_geometry.rotation).T
     offsets = planes[:, 3] - normals @ np.asarray(T_frame_geometry.translation)
     return np.column_stack([normals, offsets])
+
+
+def _no_anchors(n_pairs: int, n_geometries: int, n_joints: int) -> tuple[NDArray[np.generic], ...]:
+    """The anchor arguments of :func:`_uncertified_states` with no field: no self pair is in one."""
+    return (
+        np.full(n_pairs, -1, dtype=np.int64),
+        np.zeros(0, dtype=np.int64),
+        np.zeros((0, 6)),
+        np.zeros((0, 3)),
+        np.zeros(0),
+        np.zeros((0, 3), dtype=np.int64),
+        np.zeros(1, dtype=np.int64),
+        np.zeros(0, dtype=np.float32),
+        np.zeros((0, n_geometries)),
+        np.zeros((0, n_joints)),
+    )
 
 
 def _no_tables(n_pairs: int) -> tuple[NDArray[np.generic], ...]:
@@ -988,6 +1156,7 @@ class StateFilter:
         self._tables = _no_tables(len(self._self_pairs))
         if self_check is not None and len(self._self_pairs):
             self._tables = self._self_tables()
+        self._anchors = self._anchor_fields()
         self._args: tuple[tuple[object, ...], tuple[object, ...]] | None = None
         self._q_reference = np.array(robot.q_reference, dtype=float)
         self._one_value = np.array(arm.q_index, dtype=np.int64) if all(w == 1 for w in arm.q_width) else None
@@ -1063,15 +1232,23 @@ class StateFilter:
         """Distance tables for the self pairs the spheres leave to coal often, packed for the kernel.
 
         Hard pairs: left to coal in at least :data:`TABLE_HARD` of 200 random configurations
-        (pairs of links that nearly touch near a shared joint: their spheres always overlap), by the
-        spheres alone: the hull planes are not asked, so the tables do not depend on them.
-        Kept per robot and arm (:data:`_TABLES`).
+        (pairs of links that nearly touch near a shared joint: their spheres always overlap), or of
+        200 configurations near the arm's stowed one (the spec's ``stowed`` values, each joint
+        moved by a normal draw of :data:`STOWED_SPREAD`: every motion starts there, the arm tucked
+        against the torso), by the spheres alone: the hull planes are not asked, so the tables do
+        not depend on them. Kept per robot and arm (:data:`_TABLES`).
         """
         key = (self.arm.name, self._self_pairs.tobytes(), self._self_reach.tobytes())
         kept = _TABLES.setdefault(self.robot, {})
         if key not in kept:
             a = self.arm
-            Q = np.ascontiguousarray(a.sample(np.random.default_rng(0), 200))
+            rng = np.random.default_rng(0)
+            Q = a.sample(rng, 200)
+            stowed = self.robot.spec.arm(a.name).stowed
+            if stowed is not None and len(stowed) == a.n_joints:
+                near = np.array(stowed, dtype=float) + rng.normal(0.0, STOWED_SPREAD, (200, a.n_joints))
+                Q = np.vstack([Q, np.clip(near, a.lower, a.upper)])
+            Q = np.ascontiguousarray(Q)
             none = _no_tables(len(self._self_pairs))
             G = len(self.joint)  # hard for the spheres alone, whatever the hulls certify
             no_hulls = (
@@ -1087,18 +1264,100 @@ class StateFilter:
                     Q, a.placements, a.axes, a.kinds, self.joint, self.local, self.radius, *self._cover,
                     *self._groups, *no_hulls, np.eye(4), self._scene_rows[:0].copy(), self._scene_row_reach[:0].copy(),
                     self._scene_parts[0][:0].copy(), *self._scene_parts[1:], self._self_pairs, self._self_reach, *self._self_runs,
-                    *none, i + 1, out,
+                    *none, *_no_anchors(len(self._self_pairs), G, len(self._groups[1])), i + 1, out,
                 )  # fmt: skip
                 i = len(Q) if i < 0 else i
             tables = {}
             assert self.self_check is not None
-            for p in np.flatnonzero(out.mean(axis=0) >= TABLE_HARD):
+            share = np.maximum(out[:200].mean(axis=0), out[200:].mean(axis=0) if len(Q) > 200 else 0.0)
+            for p in np.flatnonzero(share >= TABLE_HARD):
                 table = _distance_table(self.robot, a, self.self_check, int(self._self_index[p]),
                                         float(self._self_reach[p]))  # fmt: skip
                 if table is not None:
                     tables[int(p)] = table
             kept[key] = _pack_tables(len(self._self_pairs), tables)
         return kept[key]
+
+    def _anchor_fields(self) -> tuple[NDArray[np.generic], ...]:
+        """The anchor fields of :func:`_uncertified_states`, packed: per self pair its field or -1, then the fields.
+
+        Issue 25 item 3's state check, cheaper where the arm is tucked against the torso. Per frame
+        of :data:`ANCHOR_JOINTS` (the arm's base, arm joint 0's), the set of geometries that frame
+        carries and that come first in a self pair; their convex hulls (:func:`convex_hull`, in
+        that frame) are fixed there whatever the arm's state, so one :func:`_anchor_field` on a
+        grid over their bounding box (plus :data:`ANCHOR_BAND`) holds a lower bound of the
+        distance to all of them, and one look-up per moved geometry serves all its pairs with the
+        set. A pair with a distance table (:meth:`_self_tables`: its geometries nearly touch in
+        many states, where the field would serve in vain) is left to the table: ``-2 - a`` where
+        anchor a's field covers it (a run's look-up certifies all its pairs), and a run whose
+        first pair is such is not looked up at once. Values are rounded down to float32. Per geometry h (and per arm joint's
+        group), the largest reach of its pairs with the set. The fields are kept per robot, arm,
+        frame and set (:data:`_ANCHORS`); an arm with fewer than two joints, or a frame with no
+        pairs, gets none.
+        """
+        G, J, S = len(self.joint), len(self._groups[1]), len(self._self_pairs)
+        pairs, reach = self._self_pairs, self._self_reach
+        anchor_of = np.full(S, -1, dtype=np.int64)
+        frames: list[int] = []
+        reaches: list[FloatArray] = []  # per anchor, the largest reach per geometry h, then per joint group
+        for f in ANCHOR_JOINTS:
+            if f >= self.arm.n_joints - 1:
+                continue
+            mine = (self.joint[pairs[:, 0]] == f) & (self.joint[pairs[:, 1]] > f)
+            asked = mine & (np.asarray(self._tables[0]) < 0)
+            mine &= np.isin(pairs[:, 0], pairs[asked, 0])  # the set: the geometries with a pair it serves
+            if mine.any():
+                anchor_of[mine] = -2 - len(frames)  # covered by the field, left to the pair's table
+                anchor_of[mine & asked] = len(frames)
+                frames.append(f)
+                per = np.full(G + J, -np.inf)
+                for p in np.flatnonzero(mine):
+                    h = pairs[p, 1]
+                    per[h] = max(per[h], reach[p])
+                    per[G + self.joint[h]] = max(per[G + self.joint[h]], reach[p])
+                reaches.append(per)
+        if not frames:
+            return _no_anchors(S, G, J)
+        plane_start, planes, vert_start, verts = self._hulls
+        fields = []
+        kept = _ANCHORS.setdefault(self.robot, {})
+        for a, f in enumerate(frames):
+            members = np.unique(pairs[(anchor_of == a) | (anchor_of == -2 - a), 0])
+            key = (self.arm.name, f, members.tobytes())
+            if key not in kept:
+                boxes = np.array([[*verts[vert_start[g] : vert_start[g + 1]].min(axis=0),
+                                   *verts[vert_start[g] : vert_start[g + 1]].max(axis=0)] for g in members])  # fmt: skip
+                starts = np.cumsum(
+                    [0] + [plane_start[g + 1] - plane_start[g] for g in members], dtype=np.int64
+                )
+                hull = np.concatenate(
+                    [np.zeros((0, 4)), *[planes[plane_start[g] : plane_start[g + 1]] for g in members]]
+                )
+                box = np.concatenate([boxes[:, :3].min(axis=0), boxes[:, 3:].max(axis=0)])
+                lo, hi = box[:3] - ANCHOR_BAND, box[3:] + ANCHOR_BAND
+                step = ANCHOR_STEP
+                while np.prod(np.floor((hi - lo) / step) + 1) > ANCHOR_NODES:
+                    step *= 1.25
+                dims = (np.floor((hi - lo) / step) + 1).astype(np.int64)
+                value = np.empty(tuple(dims))
+                _anchor_field(starts, np.ascontiguousarray(hull), boxes, lo, step, dims, ANCHOR_CAP, value)
+                low = value.astype(np.float32)
+                up = low > value  # rounded up: the next float32 below
+                low[up] = np.nextafter(low[up], np.float32(-np.inf))
+                kept[key] = (box, lo, step, dims, low.ravel())
+            fields.append(kept[key])
+        return (
+            anchor_of,
+            np.array(frames, dtype=np.int64),
+            np.array([box for box, *_ in fields]),
+            np.array([lo for _, lo, *_ in fields]),
+            np.array([step for _, _, step, *_ in fields]),
+            np.array([dims for *_, dims, _ in fields], dtype=np.int64),
+            np.cumsum([0] + [len(v) for *_, v in fields], dtype=np.int64),
+            np.concatenate([v for *_, v in fields]),
+            np.array([per[:G] for per in reaches]),
+            np.array([per[G:] for per in reaches]),
+        )
 
     def centres(self, q_arm: ArrayLike) -> FloatArray:
         """(G, 3) the bounding spheres' centres in the arm's base frame at arm joint values (n,) [m]."""
@@ -1180,7 +1439,7 @@ class StateFilter:
                 (a.placements, a.axes, a.kinds, self.joint, self.local, self.radius, *self._cover, *self._groups,
                  *self._hulls),
                 (self._scene_rows, self._scene_row_reach, *self._scene_parts, self._self_pairs, self._self_reach,
-                 *self._self_runs, *self._tables),
+                 *self._self_runs, *self._tables, *self._anchors),
             )  # fmt: skip
         return self._args
 
