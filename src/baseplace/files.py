@@ -104,8 +104,9 @@ def _full(path: Path, what: str, reason: str, existed: bool) -> OutputError:
 def cache_root() -> Path:
     """The per-user cache: ``$BASEPLACE_CACHE`` or ``~/.cache/baseplace``.
 
-    It holds the generated FK kernels (``kernels/``), the default reachability maps (``maps/``)
-    and the segmented terrains (``terrain/``); create its folders with :func:`private_dir`.
+    It holds the generated FK kernels (``kernels/``), the default reachability maps (``maps/``),
+    the segmented terrains (``terrain/``) and arrays derived from the robots' geometry
+    (``fields/``, :mod:`baseplace.world.array_cache`); create its folders with :func:`private_dir`.
     """
     return Path(
         os.environ.get("BASEPLACE_CACHE") or os.path.join(os.path.expanduser("~"), ".cache", "baseplace")
