@@ -66,6 +66,8 @@ def main() -> None:
         str(cloud),
         "--target",
         target,
+        "--stand-on",
+        "any",  # the target is over a raised plane: the robot stands on it (not the default, ground)
         "--json",
     ]
     commands = {
