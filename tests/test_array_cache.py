@@ -87,3 +87,14 @@ def test_an_unwritable_cache_costs_a_warning_not_the_result(tmp_path, monkeypatc
     with pytest.warns(Warning, match="not cached"):
         out = cached_array("field", (3,), (2, 2), np.float32, lambda: value)
     np.testing.assert_array_equal(out, value)
+
+
+def test_an_edit_of_the_computing_code_computes_the_array_again(cache, monkeypatch):
+    """The key holds the source file of the function that computes the array (here this test file's)."""
+    value = np.ones((3,), dtype=np.float32)
+    compute, calls = _counted(value)
+    cached_array("field", (4,), (3,), np.float32, compute)
+    assert array_cache._source(compute) == open(__file__, "rb").read()
+    monkeypatch.setattr(array_cache, "_source", lambda f: b"an edited version of the code")
+    cached_array("field", (4,), (3,), np.float32, compute)
+    assert len(calls) == 2

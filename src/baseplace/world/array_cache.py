@@ -4,14 +4,17 @@ The state pre-filter's anchor fields (:mod:`~baseplace.world.state_filter`) take
 compute for TIAGo and depend only on the robot's collision geometry: a one-shot ``baseplace place``
 would pay that on every run. :func:`cached_array` keeps such an array under the per-user cache
 (:func:`~baseplace.files.cache_root`, ``fields/``) in NumPy's ``.npy`` format, named by a hash of
-everything it was computed from, and reads it back only after checking, before anything is
+everything it was computed from (its inputs, and the source file of the function that computes it:
+an edit of that code computes the array again), and reads it back only after checking, before anything is
 allocated, that the file holds exactly the array expected (its header's dtype and shape, its
 size); any other file is ignored and the array computed again. Never a pickle.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
+import inspect
 import os
 import tempfile
 from collections.abc import Callable, Sequence
@@ -31,7 +34,7 @@ HEADER_MAX = 4096
 
 def cached_array(
     name: str,
-    inputs: Sequence[NDArray[np.generic] | float | int | str],
+    inputs: Sequence[NDArray[np.generic] | float | int | str | bytes],
     shape: tuple[int, ...],
     dtype: np.dtype[np.generic] | type,
     compute: Callable[[], NDArray[np.generic]],
@@ -43,10 +46,11 @@ def cached_array(
         inputs: everything the array is computed from; their bytes, dtypes and shapes make the key.
         shape: the array's shape.
         dtype: its dtype (stored little-endian).
-        compute: makes the array when the cache does not hold it.
+        compute: makes the array when the cache does not hold it (a function, or a
+            :func:`functools.partial` of one, defined in a source file: its bytes are in the key).
     """
     dt = np.dtype(dtype).newbyteorder("<")
-    path = _directory() / f"{name}-{_key(name, inputs, shape, dt)}.npy"
+    path = _directory() / f"{name}-{_key(name, (*inputs, _source(compute)), shape, dt)}.npy"
     kept = _read(path, shape, dt)
     if kept is not None:
         return kept
@@ -61,9 +65,18 @@ def _directory() -> Path:
     return cache_root() / "fields"
 
 
+def _source(compute: Callable[[], NDArray[np.generic]]) -> bytes:
+    """The bytes of the source file that defines ``compute`` (through a :func:`functools.partial`)."""
+    func = compute.func if isinstance(compute, functools.partial) else compute
+    path = inspect.getsourcefile(func)
+    if path is None:
+        raise ValueError(f"{func!r} has no source file to key the cache by")
+    return Path(path).read_bytes()
+
+
 def _key(
     name: str,
-    inputs: Sequence[NDArray[np.generic] | float | int | str],
+    inputs: Sequence[NDArray[np.generic] | float | int | str | bytes],
     shape: tuple[int, ...],
     dt: np.dtype[np.generic],
 ) -> str:
