@@ -243,16 +243,26 @@ def test_a_palm_beside_a_neighbour_bottle_is_accepted_at_c_minus_n_plus_margin_a
     4.5 cm bottles: free from 9.5-11.0 mm, 13.0 and 18.0 mm where raw patches stay (main: 14.5-15.5 mm
     for the 4.5 cm bottle). With c = n + 6 mm: 16.5, 16.5 and 21.5 mm (main 20.5-21.5): a raw patch
     decides the last, and raw points keep c as before."""
-    neighbour = NEIGHBOURS[1]
-    for seed in SEEDS:
+    palms_free_beyond(NEIGHBOURS[1], SEEDS, ACCEPT)
+
+
+def palms_free_beyond(
+    neighbour: Neighbour, seeds: tuple[int, ...], accept: float, fitted: int | None = None
+) -> None:
+    """Per noise draw of ``neighbour`` (default settings: c = n), the palms of :func:`_palms_facing`
+    are free at a true clearance of c - n + ``accept`` and refused at c - n - 3 mm; with ``fitted``,
+    the scene model holds that many fitted neighbours."""
+    for seed in seeds:
         groups, plane = noisy_scene(neighbour.points, neighbour.footprint, seed)
+        if fitted is not None:
+            assert len(_fitted(groups)) == fitted
         c = n = derived_clearance(plane)[0]  # the default: c - n = 0
         parts = _parts(groups, c, derived_plane_clearance(plane)[0])
-        for gap, free in ((c - n + ACCEPT, True), (c - n - 0.003, False)):
+        for gap, free in ((c - n + accept, True), (c - n - 0.003, False)):
             for cube, T, true in _palms_facing(neighbour, gap):
                 hit = _touches(parts, cube, T)
                 assert bool(hit) != free, (
-                    f"seed {seed}: a palm {true * 1e3:.1f} mm from the true neighbour "
+                    f"seed {seed}: a palm {true * 1e3:.1f} mm from the true {neighbour.kind} "
                     f"(c {c * 1e3:.1f}, n {n * 1e3:.1f} mm) is {'refused by ' + str(hit) if hit else 'free'}"
                 )
 

@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from baseplace.world.neighbour_shapes import FittedShape, fit_neighbours
-from baseplace.world.sensor_resolution import derived_clearance, derived_plane_clearance, group_parts
-from test_clearance_bound import PROBE, _palms_facing, _parts, _touches
+from baseplace.world.sensor_resolution import derived_clearance, group_parts
+from test_clearance_bound import PROBE, _parts, _touches
 from test_clearance_from_true_surface import BOTTLE, SIGMA, TOP, noisy_scene
 
 SEEDS = (2561, 2562, 2563)
@@ -168,20 +168,9 @@ def test_a_palm_beyond_c_minus_n_plus_u_from_a_fitted_bottle_is_free():
     """A palm-sized cube (4 cm) facing a fitted 4.5 cm neighbour bottle (three heights, three angles):
     free at c - n + PALM from the true side (on the cells it is refused there: free only from 9.5-18 mm,
     tests/test_clearance_bound.py), refused at c - n - 3 mm."""
-    from test_clearance_bound import NEIGHBOURS
+    from test_clearance_bound import NEIGHBOURS, palms_free_beyond
 
-    neighbour = NEIGHBOURS[1]
-    for seed in SEEDS:
-        groups, plane = noisy_scene(neighbour.points, neighbour.footprint, seed)
-        assert len(_fitted(groups)) == 1
-        c = n = derived_clearance(plane)[0]
-        parts = _parts(groups, c, derived_plane_clearance(plane)[0])
-        for gap, free in ((c - n + PALM, True), (c - n - 0.003, False)):
-            for cube, T, true in _palms_facing(neighbour, gap):
-                hit = _touches(parts, cube, T)
-                assert bool(hit) != free, (
-                    f"seed {seed}: a palm {true * 1e3:.1f} mm from the true bottle is {'refused by ' + str(hit) if hit else 'free'}"
-                )
+    palms_free_beyond(NEIGHBOURS[1], SEEDS, PALM, fitted=1)
 
 
 def test_the_clearance_note_states_each_fitted_neighbours_u():
