@@ -819,16 +819,6 @@ _BOX_INDEXES: weakref.WeakKeyDictionary[coal.OcTree, list[tuple[PointIndex, floa
 """Per OcTree, the box indexes of :func:`_box_indexes` (they hold no reference to it)."""
 
 
-_Anchor = tuple[FloatArray, FloatArray, float, NDArray[np.int64], NDArray[np.float32]]
-"""An anchor field: its set's bounding box (6,), the grid's first node (3,), step, nodes per axis (3,), values (flat)."""
-
-
-_ANCHORS: weakref.WeakKeyDictionary[Robot, dict[tuple[str, int, bytes], _Anchor]] = (
-    weakref.WeakKeyDictionary()
-)
-"""Per robot, the anchor fields of :meth:`StateFilter._anchor_fields` by arm, frame and set (box, grid lo, step, dims, values)."""
-
-
 _PACKED_ANCHORS: weakref.WeakKeyDictionary[
     Robot, dict[tuple[str, bytes, bytes, bytes, bytes], tuple[NDArray[np.generic], ...]]
 ] = weakref.WeakKeyDictionary()
@@ -1316,10 +1306,11 @@ class StateFilter:
         set. A pair with a distance table (:meth:`_self_tables`: its geometries nearly touch in
         many states, where the field would serve in vain) is left to the table: ``-2 - a`` where
         anchor a's field covers it (a run's look-up certifies all its pairs), and a run whose
-        first pair is such is not looked up at once. Values are rounded down to float32. Per geometry h (and per arm joint's
-        group), the largest reach of its pairs with the set. The fields are kept per robot, arm,
-        frame and set (:data:`_ANCHORS`); an arm with fewer than two joints, or a frame with no
-        pairs, gets none.
+        first pair is such is not looked up at once. Values are rounded down to float32. Per
+        geometry h (and per arm joint's group), the largest reach of its pairs with the set. The
+        packed arrays are kept per robot, arm, pairs and tables (:data:`_PACKED_ANCHORS`), each
+        field on disk (:func:`~baseplace.world.array_cache.cached_array`); an arm with fewer than
+        two joints, or a frame with no pairs, gets none.
         """
         pairs, reach = self._self_pairs, self._self_reach
         key = (
@@ -1361,32 +1352,27 @@ class StateFilter:
             return _no_anchors(S, G, J)
         plane_start, planes, vert_start, verts = self._hulls
         fields = []
-        kept = _ANCHORS.setdefault(self.robot, {})
-        for a, f in enumerate(frames):
+        for a in range(len(frames)):
             members = np.unique(pairs[(anchor_of == a) | (anchor_of == -2 - a), 0])
-            key = (self.arm.name, f, members.tobytes())
-            if key not in kept:
-                boxes = np.array([[*verts[vert_start[g] : vert_start[g + 1]].min(axis=0),
-                                   *verts[vert_start[g] : vert_start[g + 1]].max(axis=0)] for g in members])  # fmt: skip
-                starts = np.cumsum(
-                    [0] + [plane_start[g + 1] - plane_start[g] for g in members], dtype=np.int64
-                )
-                hull = np.concatenate(
+            boxes = np.array([[*verts[vert_start[g] : vert_start[g + 1]].min(axis=0),
+                               *verts[vert_start[g] : vert_start[g + 1]].max(axis=0)] for g in members])  # fmt: skip
+            starts = np.cumsum([0] + [plane_start[g + 1] - plane_start[g] for g in members], dtype=np.int64)
+            hull = np.ascontiguousarray(
+                np.concatenate(
                     [np.zeros((0, 4)), *[planes[plane_start[g] : plane_start[g + 1]] for g in members]]
                 )
-                box = np.concatenate([boxes[:, :3].min(axis=0), boxes[:, 3:].max(axis=0)])
-                lo, hi = box[:3] - ANCHOR_BAND, box[3:] + ANCHOR_BAND
-                step = ANCHOR_STEP
-                while np.prod(np.floor((hi - lo) / step) + 1) > ANCHOR_NODES:
-                    step *= 1.25
-                dims = (np.floor((hi - lo) / step) + 1).astype(np.int64)
-                hull = np.ascontiguousarray(hull)
-                low = cached_array(  # 1.5 s for TIAGo: kept on disk for the next process
-                    "anchor_field", (starts, hull, boxes, lo, step, dims, ANCHOR_CAP), tuple(int(n) for n in dims),
-                    np.float32, functools.partial(_anchor_values, starts, hull, boxes, lo, step, dims),
-                )  # fmt: skip
-                kept[key] = (box, lo, step, dims, np.asarray(low, dtype=np.float32).ravel())
-            fields.append(kept[key])
+            )
+            box = np.concatenate([boxes[:, :3].min(axis=0), boxes[:, 3:].max(axis=0)])
+            lo, hi = box[:3] - ANCHOR_BAND, box[3:] + ANCHOR_BAND
+            step = ANCHOR_STEP
+            while np.prod(np.floor((hi - lo) / step) + 1) > ANCHOR_NODES:
+                step *= 1.25
+            dims = (np.floor((hi - lo) / step) + 1).astype(np.int64)
+            low = cached_array(  # 1.5 s for TIAGo: kept on disk for the next process
+                "anchor_field", (starts, hull, boxes, lo, step, dims, ANCHOR_CAP), tuple(int(n) for n in dims),
+                np.float32, functools.partial(_anchor_values, starts, hull, boxes, lo, step, dims),
+            )  # fmt: skip
+            fields.append((box, lo, step, dims, np.asarray(low, dtype=np.float32).ravel()))
         return (
             anchor_of,
             np.array(frames, dtype=np.int64),
