@@ -98,3 +98,38 @@ def test_an_edit_of_the_computing_code_computes_the_array_again(cache, monkeypat
     monkeypatch.setattr(array_cache, "_source", lambda f: b"an edited version of the code")
     cached_array("field", (4,), (3,), np.float32, compute)
     assert len(calls) == 2
+
+
+def test_a_state_filter_reads_its_robot_arrays_back_as_computed(cache, monkeypatch):
+    """The sphere covers, self distance tables and anchor fields: computed once, then read, never computed again."""
+    from baseplace.robots.model import Robot
+    from baseplace.world.environment import Environment
+    from baseplace.world.state_filter import sphere_cover
+
+    first_robot = Robot("tiago")  # a new robot: no array of it kept in this process
+    first = Environment(first_robot, {}).state_filter(first_robot.arm())
+    names = sorted(path.name.split("-")[0] for path in cache.glob("*.npy"))
+    n_tables = int((first._tables[0] >= 0).sum())
+    assert n_tables >= 3 and names.count("self_table") == n_tables
+    assert names.count("sphere_covers") == 1 and names.count("anchor_field") >= 1
+
+    def computed_again(path, value):
+        raise AssertionError(f"{path.name} was computed again")
+
+    monkeypatch.setattr(array_cache, "_write", computed_again)
+    second_robot = Robot("tiago")
+    second = Environment(second_robot, {}).state_filter(second_robot.arm())
+    for mine, read in [
+        (first._cover, second._cover),
+        (first._tables, second._tables),
+        (first._anchors, second._anchors),
+    ]:
+        for a, b in zip(mine, read, strict=True):
+            np.testing.assert_array_equal(a, b)
+    # the covers read back are sphere_cover's, geometry by geometry
+    starts, _, _, radii = second._cover
+    geometries = Environment(second_robot, {}, self_collision=False).geom.geometryObjects
+    for k in range(len(starts) - 1):
+        np.testing.assert_array_equal(
+            radii[starts[k] : starts[k + 1]], sphere_cover(geometries[k].geometry)[1]
+        )

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from baseplace.sim.scenes import SceneSettings, generate_scene
-from baseplace.world.sensor_resolution import MIN_CLEARANCE, derived_clearance, surface_noise
+from baseplace.world.sensor_resolution import MIN_CLEARANCE, chi2_quantile, derived_clearance, surface_noise
 
 
 def _plane(sigma: float, rng: np.random.Generator) -> np.ndarray:
@@ -43,3 +43,11 @@ def test_the_derived_clearance_without_a_plane_is_three_sigma_of_the_surfaces():
     assert metres == MIN_CLEARANCE and "at least 3 mm" in note
     metres, note = derived_clearance(None, np.zeros((3, 3)))
     assert note.startswith("default")
+
+
+@pytest.mark.parametrize("dof", [1, 2, 5, 13, 40])
+@pytest.mark.parametrize("q", [0.01, 0.2, 0.5, 0.95])
+def test_chi2_quantile_is_scipy_stats_chi2_ppf(q, dof):
+    from scipy.stats import chi2
+
+    assert chi2_quantile(q, dof) == pytest.approx(chi2.ppf(q, dof), rel=1e-12)

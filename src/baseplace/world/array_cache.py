@@ -1,8 +1,8 @@
 """Arrays derived from a robot's geometry, kept on disk between processes.
 
-The state pre-filter's anchor fields (:mod:`~baseplace.world.state_filter`) take about 1.5 s to
-compute for TIAGo and depend only on the robot's collision geometry: a one-shot ``baseplace place``
-would pay that on every run. :func:`cached_array` keeps such an array under the per-user cache
+The state pre-filter's anchor fields, self-pair distance tables and sphere covers
+(:mod:`~baseplace.world.state_filter`) take about 2 s to compute for TIAGo and depend only on the
+robot's collision geometry: a one-shot ``baseplace place`` would pay that on every run. :func:`cached_array` keeps such an array under the per-user cache
 (:func:`~baseplace.files.cache_root`, ``fields/``) in NumPy's ``.npy`` format, named by a hash of
 everything it was computed from (its inputs, and the source file of the function that computes it:
 an edit of that code computes the array again), and reads it back only after checking, before anything is

@@ -385,6 +385,17 @@ class SurfaceNoise:
                 f"{NOISE_QUANTILE:.0%} quantile of the local fits per direction")  # fmt: skip
 
 
+def chi2_quantile(q: float, dof: int) -> float:
+    """The ``q`` quantile of the chi-square distribution with ``dof`` degrees of freedom.
+
+    ``2 P^-1(dof / 2, q)``, P the regularised lower incomplete gamma function: what
+    ``scipy.stats.chi2.ppf`` returns, without importing ``scipy.stats`` (0.3 s of every ``place``).
+    """
+    from scipy.special import gammaincinv
+
+    return float(2.0 * gammaincinv(dof / 2, q))
+
+
 def surface_noise(points: ArrayLike, along_z: bool = True) -> SurfaceNoise | None:
     """The sensor noise of a cloud's surfaces (N, 3) [m] by direction, or None (too few points).
 
@@ -411,13 +422,12 @@ def surface_noise(points: ArrayLike, along_z: bool = True) -> SurfaceNoise | Non
     :func:`denoised` needs the noise across the local planes only.
     """
     from scipy.spatial import cKDTree
-    from scipy.stats import chi2
 
     p = np.asarray(points, dtype=float).reshape(-1, 3)
     k = NOISE_NEIGHBOURS
     if len(p) <= k:
         return None
-    scale = math.sqrt(chi2.ppf(NOISE_QUANTILE, k - 3) / (k - 3))
+    scale = math.sqrt(chi2_quantile(NOISE_QUANTILE, k - 3) / (k - 3))
 
     def read(local: FloatArray) -> float | None:
         return float(np.quantile(local, NOISE_QUANTILE) / scale) if len(local) >= NOISE_MIN_FITS else None
