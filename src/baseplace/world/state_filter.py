@@ -930,6 +930,7 @@ def _distance_table(
         np.array([M.homogeneous for _, M in parents]),
         np.array([j for j, _ in parents]),
         np.array([M.homogeneous for M in model.jointPlacements]),
+        np.concatenate([np.asarray(ref.joints[i].S).ravel() for i in range(1, model.njoints)]),  # the axes
         np.array(model.parents),
         " ".join(joint.shortname() for joint in model.joints),
         robot.q_reference,
