@@ -446,3 +446,23 @@ def test_every_job_endpoint_answers_the_clis_report_on_success_and_failure(
     post("/surface-samples", {"surface_map_id": "ffffffffffffffff"}, 404, "surface_samples", 2)
     post("/surface-samples", {"surface_map_id": out["surface_map_id"], "n": 0}, 422, "surface_samples", 2)
     assert client.get("/health").json()["status"] == "ok"
+
+
+def test_the_serve_commands_defaults_are_the_settings_defaults(monkeypatch):
+    """``baseplace serve`` with no option serves exactly ``ServeSettings()``: one copy of every default."""
+    from baseplace.cli import build_parser
+    from baseplace.serve import command, server
+
+    served: list[ServeSettings] = []
+    monkeypatch.setattr(server, "serve", served.append)
+    monkeypatch.delenv("BASEPLACE_TOKEN", raising=False)
+    assert command.cmd_serve(build_parser("serve").parse_args(["serve"])) == 0
+    assert served == [ServeSettings()]
+    # and an option still reaches its field
+    assert (
+        command.cmd_serve(
+            build_parser("serve").parse_args(["serve", "--max-inflight-mb", "300", "--robot", "pr2"])
+        )
+        == 0
+    )
+    assert served[1] == dataclasses.replace(ServeSettings(), max_inflight_bytes=300 * 2**20, robots=("pr2",))

@@ -29,6 +29,7 @@ from starlette.exceptions import HTTPException
 
 from baseplace.errors import BaseplaceError
 from baseplace.placement.deadline import Deadline, DeadlineExceeded, limited
+from baseplace.robots.defaults import DEFAULT_ROBOT
 from baseplace.serve import jobs
 from baseplace.serve.guard import CLIENT, Guard, authorized
 from baseplace.serve.state import ServeSettings, ServiceState, UnknownSceneError
@@ -108,7 +109,7 @@ class PlaceRequest(RobustnessFields):
     grasp_points: list[Pose] = Field([], max_length=16,
                                      description='instead of targets: poses of the point between the fingertips '
                                                  '"x y z roll pitch yaw" [m, rad] (TIAGo: 0.151 m ahead of the TCP)')  # fmt: skip
-    robot: str = Field("tiago", max_length=64, description="built-in robot name")
+    robot: str = Field(DEFAULT_ROBOT, max_length=64, description="built-in robot name")
     arm: str | None = Field(None, max_length=64, description="arm (default: the robot's default arm)")
     strategy: STRATEGIES = "MR"
     placements: int = Field(1, ge=1, le=20, description="M: placements to return")
@@ -170,7 +171,7 @@ class ExplainRequest(_Model):
     target: Pose | None = Field(None, description='TCP target "x y z roll pitch yaw" [m, rad]')
     grasp_point: Pose | None = Field(None, description="instead of target: the pose of the point between the "
                                      'fingertips "x y z roll pitch yaw" [m, rad]')  # fmt: skip
-    robot: str = Field("tiago", max_length=64, description="built-in robot name")
+    robot: str = Field(DEFAULT_ROBOT, max_length=64, description="built-in robot name")
     arm: str | None = Field(None, max_length=64, description="arm (default: the robot's default arm)")
     object: str = Field("auto", max_length=200, description='"auto", "none", "box x y z sx sy sz [yaw]" ...')
     resolution: float | None = Field(None, ge=0.005, le=1.0, description="height-map cell [m]")
@@ -191,7 +192,7 @@ class CandidatesRequest(RobustnessFields):
     object: str = Field(..., max_length=100, description='object position "x y z" [m]')
     robot_pose: str | None = Field(None, max_length=100, description='robot pose "x y yaw"')
     method: Literal["radial", "irm"] = "radial"
-    robot: str = Field("tiago", max_length=64)
+    robot: str = Field(DEFAULT_ROBOT, max_length=64)
     arm: str | None = Field(None, max_length=64)
     standoff: float | None = Field(None, ge=0.0, le=1.0)
     clearance: float | None = Field(None, ge=0.0, le=0.1, allow_inf_nan=False,
@@ -239,7 +240,7 @@ class PointRequest(RobustnessFields):
     selection: Literal["finger3d", "first", "nearest"] = "finger3d"
     scene_id: str | None = Field(None, max_length=64, description="a scene with a grid: also the candidates")
     robot_pose: str | None = Field(None, max_length=100, description='robot pose "x y yaw"')
-    robot: str = Field("tiago", max_length=64)
+    robot: str = Field(DEFAULT_ROBOT, max_length=64)
     arm: str | None = Field(None, max_length=64)
     seed: int = SEED
 
@@ -264,7 +265,7 @@ class ReachRequest(_Model):
 
     targets: list[Pose] = Field(..., min_length=1, max_length=10_000)
     bases: list[Pose] = Field(..., min_length=1, max_length=10_000, description='base poses "x y yaw"')
-    robot: str = Field("tiago", max_length=64)
+    robot: str = Field(DEFAULT_ROBOT, max_length=64)
     arm: str | None = Field(None, max_length=64)
 
 
@@ -274,7 +275,7 @@ class NavigateRequest(_Model):
     scene_id: str = Field(..., max_length=64)
     start: str = Field(..., max_length=100)
     goal: str = Field(..., max_length=100)
-    robot: str = Field("tiago", max_length=64)
+    robot: str = Field(DEFAULT_ROBOT, max_length=64)
     planner: Literal["rrt", "regions"] = "rrt"
     time_limit: float = Field(2.0, gt=0.0, le=20.0, description="planning time [s]")
     resolution: float | None = Field(None, ge=0.005, le=1.0)
@@ -287,7 +288,7 @@ class SurfaceMapRequest(_Model):
 
     polygon: str = Field(..., max_length=10_000, description='"x1,y1;x2,y2;..." [m]')
     height: float = Field(..., ge=-10.0, le=10.0, description="the surface's height [m]")
-    robot: str = Field("tiago", max_length=64)
+    robot: str = Field(DEFAULT_ROBOT, max_length=64)
     arms: str = Field("any", max_length=64)
     resolution: float = Field(0.05, ge=0.005, le=1.0)
     orientations: int = Field(16, ge=1, le=360)

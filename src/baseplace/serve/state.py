@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from baseplace.errors import BaseplaceError, InputError
+from baseplace.robots.defaults import DEFAULT_ROBOT
 from baseplace.serve.lanes import FairLane
 
 CLOUD_FORMATS = ("ply", "pcd", "npy", "xyz")
@@ -82,7 +83,7 @@ class ServeSettings:
     max_request_bytes: int = 64 * 1024 * 1024
     timeout_s: float = 30.0
     max_scenes: int = 16
-    robots: tuple[str, ...] = ("tiago",)
+    robots: tuple[str, ...] = (DEFAULT_ROBOT,)
     warm_up: bool = True
     kernel_threads: int = 1
     token: str | None = None
