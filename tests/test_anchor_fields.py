@@ -16,7 +16,8 @@ import pinocchio as pin
 from baseplace.placement.motion import stowed_configuration
 from baseplace.robots.spheres import _joint_frames
 from baseplace.world.environment import Environment
-from baseplace.world.state_filter import _anchor_bound, _no_anchors, _uncertified_states
+from baseplace.world.state_filter import _no_anchors
+from baseplace.world.state_kernel import _anchor_bound, _uncertified_states
 
 
 def _filter(tiago):

@@ -20,7 +20,8 @@ from baseplace.placement.scene_cache import SceneCache
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.spheres import _joint_frames
 from baseplace.world.environment import Environment
-from baseplace.world.state_filter import _table_clear, _uncertified_states, sphere_cover
+from baseplace.world.state_filter import sphere_cover
+from baseplace.world.state_kernel import _table_clear, _uncertified_states
 from baseplace_experiments.execution_experiment import trial_scene
 from baseplace_experiments.table_grid import TableGridSettings
 from test_state_filter import (  # the coal oracle; a geometry's extreme points

@@ -17,7 +17,8 @@ import pytest
 
 from baseplace.placement.motion import stowed_configuration
 from baseplace.world.environment import Environment
-from baseplace.world.state_filter import _no_anchors, _uncertified_states
+from baseplace.world.state_filter import _no_anchors
+from baseplace.world.state_kernel import _uncertified_states
 from test_state_filter import table_scene_states
 
 
