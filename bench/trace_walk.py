@@ -4,7 +4,8 @@ Runs the query in this process under a profiler hook (``sys.setprofile``, and
 ``threading.setprofile`` for the service's threads) that counts every Python ``call`` event whose
 code lies in the ``baseplace`` or ``baseplace_experiments`` packages. Import-time execution (a
 module's ``<module>`` code, run once when it is first imported) is counted apart from calls of
-functions; numba kernels and C code are not Python frames and never count.
+functions. A call of a numba kernel counts once, for the file that defines it (the hook sees
+the dispatcher's call); what the kernel runs compiled, and C code, never counts.
 
 * ``cli``: ``baseplace.cli.main(ARGV)`` in a fresh interpreter, the hook set before
   ``baseplace.cli`` is imported, so the walk includes the imports a command line pays.
