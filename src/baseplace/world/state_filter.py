@@ -328,10 +328,34 @@ _Table = tuple[list[int], FloatArray, FloatArray, list[int], FloatArray, FloatAr
 """A self pair's distance table: joints, lower, step, nodes per joint, lever arms, values (:func:`_distance_table`)."""
 
 
+def _reference_pose(
+    robot: Robot, self_check: tuple[pin.Model, pin.Data, pin.GeometryModel, pin.GeometryData]
+) -> tuple[pin.Data, pin.GeometryData, tuple[NDArray[np.generic] | str, ...]]:
+    """The self model at the robot's reference configuration, for all of a filter's :func:`_distance_table` calls.
+
+    Its joint and geometry placements, and the kinematic tree as part of a table's cache key: the
+    joints' placements, axes (motion subspaces), parents and kinds, and the reference values.
+    """
+    model, _, geom, _ = self_check
+    ref = model.createData()
+    pin.forwardKinematics(model, ref, robot.q_reference)
+    gref = pin.GeometryData(geom)
+    pin.updateGeometryPlacements(model, ref, geom, gref)
+    tree = (
+        np.array([M.homogeneous for M in model.jointPlacements]),
+        np.concatenate([np.asarray(ref.joints[i].S).ravel() for i in range(1, model.njoints)]),
+        np.array(model.parents),
+        " ".join(joint.shortname() for joint in model.joints),
+        np.asarray(robot.q_reference),
+    )
+    return ref, gref, tree
+
+
 def _distance_table(
     robot: Robot,
     arm: Arm,
     self_check: tuple[pin.Model, pin.Data, pin.GeometryModel, pin.GeometryData],
+    reference: tuple[pin.Data, pin.GeometryData, tuple[NDArray[np.generic] | str, ...]],
     pair: int,
     reach: float,
 ) -> _Table | None:
@@ -358,10 +382,7 @@ def _distance_table(
     joints = [i for i, j in enumerate(ids) if (j in supports[first]) != (j in supports[second])]
     if not 1 <= len(joints) <= 2 or any(arm.kinds[i] != 0 for i in joints):
         return None
-    ref = model.createData()
-    pin.forwardKinematics(model, ref, robot.q_reference)
-    gref = pin.GeometryData(geom)
-    pin.updateGeometryPlacements(model, ref, geom, gref)
+    ref, gref, tree = reference  # :func:`_reference_pose`
     rho = []
     for i in joints:
         moved = first if ids[i] in supports[first] else second
@@ -388,11 +409,7 @@ def _distance_table(
         *points,
         np.array([M.homogeneous for _, M in parents]),
         np.array([j for j, _ in parents]),
-        np.array([M.homogeneous for M in model.jointPlacements]),
-        np.concatenate([np.asarray(ref.joints[i].S).ravel() for i in range(1, model.njoints)]),  # the axes
-        np.array(model.parents),
-        " ".join(joint.shortname() for joint in model.joints),
-        robot.q_reference,
+        *tree,
         np.array(ids),
         np.array(joints),
         lo,
@@ -827,8 +844,9 @@ class StateFilter:
             tables = {}
             assert self.self_check is not None
             share = np.maximum(out[:200].mean(axis=0), out[200:].mean(axis=0) if len(Q) > 200 else 0.0)
+            reference = _reference_pose(self.robot, self.self_check)
             for p in np.flatnonzero(share >= TABLE_HARD):
-                table = _distance_table(self.robot, a, self.self_check, int(self._self_index[p]),
+                table = _distance_table(self.robot, a, self.self_check, reference, int(self._self_index[p]),
                                         float(self._self_reach[p]))  # fmt: skip
                 if table is not None:
                     tables[int(p)] = table
