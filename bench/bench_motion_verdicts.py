@@ -243,20 +243,6 @@ class Recorder:
         checker._rrt = recorded_rrt
 
 
-def refusal_reason(checker: MotionChecker, rec: Recorder) -> str:
-    """Why ``check`` returned None: the approach (IK walk or collision), a transit end state, or RRT."""
-    blocked = checker._blocked
-    if rec.approach is None:
-        return "approach_collision" if blocked is not None and blocked[1] == "approach" else "approach_ik"
-    if (
-        blocked is not None and blocked[1] == "transit"
-    ):  # the stowed start, or the pre-grasp (the approach's first)
-        return (
-            "transit_start_collision" if np.array_equal(blocked[0], checker.q_start) else "pregrasp_collision"
-        )
-    return "no_rrt_path" if rec.rrt_called else "other"
-
-
 def run_check(
     checker: MotionChecker, meter: Meter, q: FloatArray, T_base: FloatArray, target: FloatArray, seed: int
 ) -> tuple[dict[str, Any], Any]:
@@ -270,7 +256,7 @@ def run_check(
                            "approach_ms": round(rec.approach_s * 1e3, 2), "rrt_ms": round(rec.rrt_s * 1e3, 2),
                            **meter.snapshot()}  # fmt: skip
     if motion is None:
-        out["reason"] = refusal_reason(checker, rec)
+        out["reason"] = checker.last_failure  # the library's reason (MOTION_FAILURES)
         out["contacts"] = [list(c) for c in checker.last_contacts[:3]]
     else:
         out["planned"] = motion.planned

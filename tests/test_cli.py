@@ -320,6 +320,15 @@ def test_place_command(tmp_path):
     proc = run("place", "--cloud", str(cloud), "--target", "1.0 0.5 1.85 0 1.5708 0", "--map", str(map_file),
                "--tries", "20")  # fmt: skip
     assert_one_line_error(proc, 3, "no verified placement", "failures")
+    # A top-down grasp at 1.2 m: IK reaches it from some base poses, the pre-grasp 0.15 m above it from none
+    # (tests/test_motion.py); the error line and the JSON say why the motion failed.
+    proc = run("place", "--cloud", str(cloud), "--target", "1.0 0.5 1.2 0 1.5708 0", "--map", str(map_file),
+               "--tries", "20", "--json")  # fmt: skip
+    assert proc.returncode == 3, proc.stderr
+    out = json.loads(proc.stdout)
+    assert "no reaching motion: the straight approach leaves the arm's reach" in out["error"]
+    assert out["motion_failures"]["approach_ik"] > 0
+    assert sum(out["motion_failures"].values()) == out["failures"]["motion"]
     # A map of another robot is refused.
     assert_one_line_error(run("place", "--robot", "pr2", "--cloud", str(cloud), "--target", target, "--map",
                               str(map_file)), 2, "built for robot 'tiago'")  # fmt: skip

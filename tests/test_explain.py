@@ -115,6 +115,23 @@ def test_explain_through_the_cli_names_place_s_most_frequent_contact(tiago_map, 
     assert f"collision: link {worst['link']} touched {worst['touched']}" in text.stdout
 
 
+def test_explain_names_why_no_reaching_motion_was_found(tiago, tiago_map):
+    """A top-down grasp 1.2 m up, 0.6 m ahead of the base over a bare floor: IK solves it, the
+    pre-grasp 0.15 m above it is out of reach (tests/test_motion.py checks that with IK from 105
+    starts); explain said "no path found in time" for this before it named the reason."""
+    xs, ys = np.meshgrid(np.arange(-1.5, 2.5, 0.02), np.arange(-1.5, 2.5, 0.02))
+    floor = np.c_[xs.ravel(), ys.ravel(), np.zeros(xs.size)]
+    report = explain_job(ExplainJob("0.4 0.65 0", "1.0 0.5 1.2 0 1.5708 0", tiago_map, tiago,
+                                    cloud=CloudInput(points=floor)))  # fmt: skip
+    obj = _validated(report.to_json())
+    assert obj["ik"]["solved"] and not obj["collisions"]
+    assert obj["motion"]["checked"] and obj["motion"]["found"] is False
+    assert obj["motion"]["reason"] == "approach_ik" and obj["motion"]["contacts"] == []
+    assert obj["verdict"]["failed_check"] == "motion"
+    assert "the straight approach leaves the arm's reach or joint limits" in obj["verdict"]["summary"]
+    assert "no path found" not in obj["verdict"]["summary"]
+
+
 def test_a_reachable_target_ik_solves_and_pinocchio_puts_the_tcp_there(tiago, tiago_map):
     arm = tiago.arm()
     T_world_base = pose_from_xyz_rpy([0.4, -0.3, 0.0, 0.0, 0.0, 0.7])

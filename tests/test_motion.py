@@ -8,8 +8,14 @@ import pinocchio as pin
 import pytest
 
 from baseplace.geometry.poses import pose_from_xyz_rpy
-from baseplace.placement.motion import MotionChecker, MotionSettings, bisection_order, stowed_configuration
-from baseplace.placement.verify import Candidate, Verifier
+from baseplace.placement.motion import (
+    MOTION_FAILURES,
+    MotionChecker,
+    MotionSettings,
+    bisection_order,
+    stowed_configuration,
+)
+from baseplace.placement.verify import Candidate, Verifier, motion_failure_summary
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.terrain.polygons import footprint_outline
 from baseplace.terrain.voxels import VoxelMap
@@ -76,6 +82,43 @@ def test_caged_path_is_rejected_with_reason_motion(tiago, wall_scene):
     checked = Verifier(arm, DampedLeastSquaresIK(arm), env, target[None], {}, outline, motion=motion)
     assert checked.check(Candidate(np.eye(4), -1, 0.0), np.random.default_rng(0)) is None
     assert dict(checked.failures) == {"motion": 1}
+    # the reason: both ends of the transit are free (above), so RRTConnect ran out of time
+    assert motion.last_failure == "no_rrt_path" and dict(checked.motion_failures) == {"no_rrt_path": 1}
+    assert motion_failure_summary(checked.motion_failures) == (
+        "no reaching motion: no collision-free path to the pre-grasp within the time limit (1 candidates)"
+    )
+
+
+def test_a_grasp_whose_pregrasp_is_out_of_reach_is_refused_for_the_approach(tiago):
+    """A top-down grasp at 1.2 m that IK solves, whose pre-grasp 0.15 m above it IK solves from no start."""
+    arm = tiago.arm()
+    ik = DampedLeastSquaresIK(arm, restarts=20)
+    target = pose_from_xyz_rpy([0.6, -0.15, 1.2, 0.0, np.pi / 2, 0.0])
+    q = ik.solve(target, np.random.default_rng(0))
+    assert q is not None
+    np.testing.assert_allclose(tcp_by_pinocchio(tiago, arm, q), target, atol=1e-3)
+    motion = MotionChecker(tiago, arm, Environment(tiago, _empty()))
+    above = target.copy()
+    above[2, 3] += motion.pregrasp_distance  # no grasped object: the approach has its whole length
+    for seed in range(5):  # the oracle of "out of reach": IK from 5 x 21 starts
+        assert ik.solve(above, np.random.default_rng(seed)) is None
+    assert motion.check(q, np.eye(4), target) is None
+    assert motion.last_failure == "approach_ik" and motion.last_contacts == []
+    # a later motion found clears the reason
+    low = pose_from_xyz_rpy([0.6, -0.15, 1.0, 0.0, np.pi / 2, 0.0])
+    q_low = ik.solve(low, np.random.default_rng(0))
+    assert q_low is not None and motion.check(q_low, np.eye(4), low) is not None
+    assert motion.last_failure is None
+
+
+def test_every_motion_failure_has_a_phrase_and_is_in_the_result_schema():
+    import json
+    from importlib import resources
+
+    schema = json.loads(resources.files("baseplace.jobs").joinpath("result.schema.json").read_text())
+    codes = [c for c in schema["$defs"]["motion_failure"]["enum"] if c is not None]
+    assert sorted(codes) == sorted(MOTION_FAILURES)
+    assert all(phrase and "\n" not in phrase for phrase in MOTION_FAILURES.values())
 
 
 def test_same_scene_without_the_wall_passes_with_a_valid_motion(tiago, wall_scene):

@@ -112,7 +112,8 @@ class ExplainReport(Report):
         collisions: each contact of the IK solution: ``link``, ``touched`` (as ``place`` names it)
             and ``kind`` ("self", "scene" or "grasped_object").
         motion: ``checked`` (false: no scene, no IK solution, a colliding grasp or the check off),
-            ``found``, ``planned``, ``waypoints`` and ``contacts`` (what blocked it).
+            ``found``, ``planned``, ``waypoints``, ``contacts`` (what blocked it) and ``reason``
+            (why none was found, :data:`~baseplace.placement.motion.MOTION_FAILURES`; null otherwise).
         verdict: ``ok``, ``failed_check`` (``place``'s rejection reason: footprint, no_ik,
             collision, motion; null when ok) and ``summary`` (one line).
         object: the grasped object: requested, found, allowed.
@@ -211,12 +212,14 @@ def explain_job(job: ExplainJob, progress: Progress | None = None) -> ExplainRep
         "planned": None,
         "waypoints": None,
         "contacts": [],
+        "reason": None,
     }
     if ik.solved and contacts is None and verifier.motion is not None:
         found = verifier.motion.check(ik.q, T_base, T_target, seed=int(rng.integers(2**31 - 1)))
         motion = {"checked": True, "found": found is not None, "planned": None if found is None else found.planned,
                   "waypoints": None if found is None else len(found.waypoints),
-                  "contacts": [{"link": link, "touched": what} for link, what in verifier.motion.last_contacts]}  # fmt: skip
+                  "contacts": [{"link": link, "touched": what} for link, what in verifier.motion.last_contacts],
+                  "reason": verifier.motion.last_failure}  # fmt: skip
     t_checks = time.perf_counter()
     verdict = _verdict(
         value, footprint, ik_json, collisions, motion, points is not None or bool(obstacles), settings
@@ -331,12 +334,13 @@ def _verdict(value: dict[str, Any], footprint: dict[str, Any], ik: dict[str, Any
         why = "; ".join(f"link{'s' if len(links) > 1 else ''} {', '.join(links)} touched {what}"
                         for what, links in touched.items())  # fmt: skip
     elif motion["checked"] and not motion["found"]:
+        from baseplace.placement.motion import MOTION_FAILURES
+
         failed = "motion"
         blocked = motion["contacts"]
-        why = "no reaching motion from the stowed arm" + (
-            f": link {blocked[0]['link']} touched {blocked[0]['touched']}"
-            if blocked
-            else " (no path found in time)"
+        why = (
+            f"no reaching motion from the stowed arm: {MOTION_FAILURES.get(motion['reason'], motion['reason'])}"
+            + (f" (link {blocked[0]['link']} touched {blocked[0]['touched']})" if blocked else "")
         )
     if failed is not None:
         return {"ok": False, "failed_check": failed, "summary": f"refused: {why}; {where}"}

@@ -162,7 +162,7 @@ def place_job(job: PlaceJob, progress: inputs.Progress | None = None) -> PlaceRe
         raise InputError(f"unknown planner {job.planner!r}; valid: regions, rrt")
     png, mcap = job.check_outputs()  # outputs first: before the imports and any work
     from baseplace.placement.pipeline import PlaceSettings, place, with_floor
-    from baseplace.placement.verify import contact_summary, most_frequent_contact
+    from baseplace.placement.verify import contact_summary, most_frequent_contact, motion_failure_summary
     from baseplace.reachability.cache import resolve_map
     from baseplace.world.grasped_object import parse_grasped_object
     from baseplace.world.obstacles import check_clear_of, parse_obstacles
@@ -273,6 +273,7 @@ def place_job(job: PlaceJob, progress: inputs.Progress | None = None) -> PlaceRe
                 "allowed": None if result.grasped is None else result.grasped.to_json()},
         floor=job.floor, regions=len(result.terrain.segmentation.regions),
         clearance=clearance_record(result.clearance, result.clearance_note, result.noise_margin),
+        motion_failures=dict(result.motion_failures),
     )  # fmt: skip
     report.outputs.update(inputs.map_output(chosen))
     if png is not None:
@@ -299,10 +300,11 @@ def place_job(job: PlaceJob, progress: inputs.Progress | None = None) -> PlaceRe
             report,
         )
     if not rows:
-        worst = most_frequent_contact(result.contacts)
+        why = "".join(f"; {phrase}" for phrase in (most_frequent_contact(result.contacts),
+                                                   motion_failure_summary(result.motion_failures)) if phrase)  # fmt: skip
         raise NoResultError(
             f"no verified placement in {result.tries} tries with {settings.strategy} "
-            f"(failures: {dict(result.failures) or 'none'}{'; ' + worst if worst else ''}); "
+            f"(failures: {dict(result.failures) or 'none'}{why}); "
             f"try --tries, another --strategy, --object or check the target",
             report,
         )

@@ -220,6 +220,8 @@ class PlaceReport(Report):
         regions: number of planar regions.
         clearance: the clearance kept from the scene near the grasped object: ``metres`` and how
             it was ``derived`` ("given", "3 sigma of the support plane's residuals (...)", "default: ...").
+        motion_failures: of the candidates ``failures`` counts under "motion", how many per reason
+            the reaching-motion check gave (:data:`~baseplace.placement.motion.MOTION_FAILURES`).
     """
 
     kind: ClassVar[str] = "place"
@@ -233,6 +235,7 @@ class PlaceReport(Report):
     floor: float | None = None
     regions: int = 0
     clearance: dict[str, Any] | None = None
+    motion_failures: dict[str, int] = field(default_factory=dict)
 
 
 @dataclass

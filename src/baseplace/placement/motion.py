@@ -67,6 +67,15 @@ PREGRASP_MARGIN = 0.02
 """How far [m] behind the plane through the grasp's TCP (normal: the approach axis) the open hand's
 foremost collision geometry stands at the derived pre-grasp."""
 
+MOTION_FAILURES: dict[str, str] = {
+    "approach_ik": "the straight approach leaves the arm's reach or joint limits",
+    "approach_collision": "the straight approach touches the scene",
+    "pregrasp_collision": "the pre-grasp touches the scene",
+    "transit_start_collision": "the start configuration touches the scene",
+    "no_rrt_path": "no collision-free path to the pre-grasp within the time limit",
+}
+"""Why :meth:`MotionChecker.check` found no motion (:attr:`MotionChecker.last_failure`): code, and
+what it says, for an error line."""
 WALK_SUBDIVISIONS = 2
 """An approach step that fails is cut in halves at most this often (0.01 m steps down to 2.5 mm)."""
 WALK_LIMIT_GAIN = 0.01
@@ -389,6 +398,8 @@ class MotionChecker:
         """Why the last :meth:`check` failed, when a collision blocked it: (robot link, what it
         touched, tagged "during the approach" or "during the transit"); empty otherwise (IK, or
         no path found)."""
+        self.last_failure: str | None = None
+        """Why the last :meth:`check` found no motion, one of :data:`MOTION_FAILURES`; None after a motion."""
         self._blocked: tuple[FloatArray, str] | None = None
         self._search_factor = 1.0
         """``search_step / point_step`` while RRTConnect searches, else 1 (:meth:`edge_states`)."""
@@ -695,13 +706,23 @@ class MotionChecker:
         """
         deadline.check()  # one planning call per target: a request past its time limit stops before it
         t0 = time.perf_counter()
-        self.last_contacts, self._blocked = [], None
+        self.last_contacts, self.last_failure, self._blocked = [], None, None
         try:
             T_base = np.asarray(T_world_base, dtype=float)
             T_base_tcp = invert_transforms(T_base) @ np.asarray(T_world_tcp, dtype=float)
             approach = self.approach(q_grasp, T_base_tcp, T_base, seed)
-            path, planned = (None, False) if approach is None else self.joint_path(approach[0], T_base, seed)
-            if approach is None or path is None:
+            if approach is None:
+                self.last_failure = "approach_ik" if self._blocked is None else "approach_collision"
+                self._explain(T_base)
+                return None
+            self._blocked = None  # a walk that touched before a restart's walk went through
+            path, planned = self.joint_path(approach[0], T_base, seed)
+            if path is None:
+                if self._blocked is None:
+                    self.last_failure = "no_rrt_path"
+                else:  # an end of the transit: the start, or the pre-grasp (the approach's first state)
+                    start = np.array_equal(self._blocked[0], self.q_start)
+                    self.last_failure = "transit_start_collision" if start else "pregrasp_collision"
                 self._explain(T_base)
                 return None
             return ReachingMotion(path, approach, planned)
@@ -779,6 +800,7 @@ def with_start(settings: MotionSettings, q_start: ArrayLike | None) -> MotionSet
 
 
 __all__ = [
+    "MOTION_FAILURES",
     "PREGRASP_MARGIN",
     "MotionChecker",
     "MotionSettings",

@@ -141,6 +141,8 @@ class PlacementResult:
         clearance_note: how it was chosen ("given", "3 sigma of ...", "default: ...").
         noise_margin: the derived noise margin n [m] (3 sigma of the scene's noise): the robot keeps
             ``clearance`` - n from the true surface (:func:`~baseplace.world.sensor_resolution.margin`).
+        motion_failures: per reason the reaching-motion check gave
+            (:data:`~baseplace.placement.motion.MOTION_FAILURES`), the candidates rejected for it.
     """
 
     placements: list[Placement]
@@ -156,6 +158,7 @@ class PlacementResult:
     clearance: float = 0.0
     clearance_note: str = ""
     noise_margin: float = 0.0
+    motion_failures: Counter[str] = field(default_factory=Counter)
 
 
 def place(
@@ -288,7 +291,7 @@ def place(
     }
     return PlacementResult(placements, verifier.failures, tries, timings, terrain, osrm, verifier.contacts,
                            verifier.rejected, obj, note, checks.clearance, checks.clearance_note,
-                           checks.noise_margin)  # fmt: skip
+                           checks.noise_margin, verifier.motion_failures)  # fmt: skip
 
 
 @dataclass

@@ -17,7 +17,7 @@ import numpy as np
 from shapely.geometry import MultiPolygon, Polygon
 
 from baseplace.geometry.poses import FloatArray, invert_transforms
-from baseplace.placement.motion import MotionChecker
+from baseplace.placement.motion import MOTION_FAILURES, MotionChecker
 from baseplace.placement.verified import Candidate, Placement
 from baseplace.robots.ik import IKSolver
 from baseplace.robots.model import Arm
@@ -44,6 +44,8 @@ class Verifier:
             other than the hand, or "self: <link>").
         rejected: per rejected candidate, (x, y) [m], the reason and its first contact (or None).
         motion: the reaching-motion check, or None to skip it.
+        motion_failures: per reason the motion check gave (:data:`~baseplace.placement.motion.MOTION_FAILURES`),
+            the candidates rejected for it.
     """
 
     arm: Arm
@@ -56,6 +58,7 @@ class Verifier:
     contacts: Counter[tuple[str, str]] = field(default_factory=Counter)
     rejected: list[tuple[tuple[float, float], str, tuple[str, str] | None]] = field(default_factory=list)
     motion: MotionChecker | None = None
+    motion_failures: Counter[str] = field(default_factory=Counter)
 
     def check(self, candidate: Candidate, rng: np.random.Generator) -> Placement | None:
         """The verified placement, or None (the reason is counted in ``failures``)."""
@@ -85,6 +88,7 @@ class Verifier:
                 if motion is None:
                     blocked = self.motion.last_contacts
                     self.contacts.update(blocked)
+                    self.motion_failures[self.motion.last_failure or "unknown"] += 1
                     self._reject(T, "motion", blocked[0] if blocked else None)
                     return None
                 motions.append(motion)
@@ -119,6 +123,14 @@ class Verifier:
 def contact_summary(contacts: Counter[tuple[str, str]]) -> list[dict[str, object]]:
     """Contacts most frequent first, for JSON: [{"link": ..., "touched": ..., "candidates": n}]."""
     return [{"link": link, "touched": what, "candidates": n} for (link, what), n in contacts.most_common()]
+
+
+def motion_failure_summary(counts: Counter[str]) -> str:
+    """One phrase for an error line: why the reaching motion was not found, the two most frequent reasons."""
+    if not counts:
+        return ""
+    reasons = [f"{MOTION_FAILURES.get(code, code)} ({n} candidates)" for code, n in counts.most_common(2)]
+    return "no reaching motion: " + ", ".join(reasons)
 
 
 def most_frequent_contact(contacts: Counter[tuple[str, str]]) -> str:
