@@ -329,6 +329,10 @@ def test_place_command(tmp_path):
     assert "no reaching motion: the straight approach leaves the arm's reach" in out["error"]
     assert out["motion_failures"]["approach_ik"] > 0
     assert sum(out["motion_failures"].values()) == out["failures"]["motion"]
+    # a contact in the approach is named after the more frequent motion reasons
+    if "most often link" in out["error"]:
+        assert out["failures"]["motion"] > out["failures"].get("collision", 0)
+        assert out["error"].index("no reaching motion") < out["error"].index("most often link")
     # A map of another robot is refused.
     assert_one_line_error(run("place", "--robot", "pr2", "--cloud", str(cloud), "--target", target, "--map",
                               str(map_file)), 2, "built for robot 'tiago'")  # fmt: skip

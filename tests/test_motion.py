@@ -85,7 +85,7 @@ def test_caged_path_is_rejected_with_reason_motion(tiago, wall_scene):
     # the reason: both ends of the transit are free (above), so RRTConnect ran out of time
     assert motion.last_failure == "no_rrt_path" and dict(checked.motion_failures) == {"no_rrt_path": 1}
     assert motion_failure_summary(checked.motion_failures) == (
-        "no reaching motion: no collision-free path to the pre-grasp within the time limit (1 candidates)"
+        "no reaching motion: no collision-free path to the pre-grasp within the time limit (1 candidate)"
     )
 
 

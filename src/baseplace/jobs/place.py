@@ -300,8 +300,11 @@ def place_job(job: PlaceJob, progress: inputs.Progress | None = None) -> PlaceRe
             report,
         )
     if not rows:
-        why = "".join(f"; {phrase}" for phrase in (most_frequent_contact(result.contacts),
-                                                   motion_failure_summary(result.motion_failures)) if phrase)  # fmt: skip
+        phrases = [(result.failures["collision"], most_frequent_contact(result.contacts)),
+                   (result.failures["motion"], motion_failure_summary(result.motion_failures))]  # fmt: skip
+        why = "".join(
+            f"; {phrase}" for _, phrase in sorted(phrases, key=lambda p: -p[0]) if phrase
+        )  # the more frequent first
         raise NoResultError(
             f"no verified placement in {result.tries} tries with {settings.strategy} "
             f"(failures: {dict(result.failures) or 'none'}{why}); "

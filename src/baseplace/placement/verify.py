@@ -129,7 +129,7 @@ def motion_failure_summary(counts: Counter[str]) -> str:
     """One phrase for an error line: why the reaching motion was not found, the two most frequent reasons."""
     if not counts:
         return ""
-    reasons = [f"{MOTION_FAILURES.get(code, code)} ({n} candidates)" for code, n in counts.most_common(2)]
+    reasons = [f"{MOTION_FAILURES.get(code, code)} ({_candidates(n)})" for code, n in counts.most_common(2)]
     return "no reaching motion: " + ", ".join(reasons)
 
 
@@ -138,4 +138,8 @@ def most_frequent_contact(contacts: Counter[tuple[str, str]]) -> str:
     if not contacts:
         return ""
     (link, what), n = contacts.most_common(1)[0]
-    return f"most often link {link} touched {what} ({n} candidates)"
+    return f"most often link {link} touched {what} ({_candidates(n)})"
+
+
+def _candidates(n: int) -> str:
+    return f"{n} candidate" if n == 1 else f"{n} candidates"
