@@ -69,9 +69,9 @@ foremost collision geometry stands at the derived pre-grasp."""
 
 MOTION_FAILURES: dict[str, str] = {
     "approach_ik": "the straight approach leaves the arm's reach or joint limits",
-    "approach_collision": "the straight approach touches the scene",
-    "pregrasp_collision": "the pre-grasp touches the scene",
-    "transit_start_collision": "the start configuration touches the scene",
+    "approach_collision": "the straight approach touches the scene or the robot itself",
+    "pregrasp_collision": "the pre-grasp touches the scene or the robot itself",
+    "transit_start_collision": "the start configuration touches the scene or the robot itself",
     "no_rrt_path": "no collision-free path to the pre-grasp within the time limit",
 }
 """Why :meth:`MotionChecker.check` found no motion (:attr:`MotionChecker.last_failure`): code, and
