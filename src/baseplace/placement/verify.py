@@ -88,7 +88,8 @@ class Verifier:
                 if motion is None:
                     blocked = self.motion.last_contacts
                     self.contacts.update(blocked)
-                    self.motion_failures[self.motion.last_failure or "unknown"] += 1
+                    assert self.motion.last_failure is not None  # check sets it whenever it finds no motion
+                    self.motion_failures[self.motion.last_failure] += 1
                     self._reject(T, "motion", blocked[0] if blocked else None)
                     return None
                 motions.append(motion)
