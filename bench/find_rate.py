@@ -77,6 +77,18 @@ CHUNK = 256
 """Base poses per IK batch."""
 ON_FLOOR = 0.05
 """A returned base pose stands on the floor when its height is at most this [m] (else on the table top)."""
+APPROACH_STEP = 0.0025
+"""Protocol v2's oracle: the straight approach is walked back from the grasp in steps of this [m]."""
+APPROACH_MAX = 0.30
+"""Protocol v2's oracle: how far back [m] the hand may have to go before it touches nothing."""
+APPROACH_JOINT_STEP = 0.2
+"""Protocol v2's oracle: the largest joint change between two approach states [rad or m]."""
+PROTOCOLS = {
+    "v1": ("docs/protocols/find_rate_v1.md", SEEDS, False),
+    "v2": ("docs/protocols/find_rate_v2.md",
+           SeedSplit(dev=tuple(range(25000, 25060)), held_out=tuple(range(25200, 25300))), True),
+}  # fmt: skip
+"""Per protocol: its file, its seeds, and whether the oracle demands a straight approach (v2)."""
 
 
 @dataclass(frozen=True)
@@ -327,13 +339,82 @@ class Oracle:
                         return out
         return out
 
+    def approach(
+        self, q_grasp: np.ndarray, T_base: np.ndarray, T_tcp: np.ndarray, scene: Scene
+    ) -> dict[str, Any]:
+        """Whether the hand can come straight in to the grasp: protocol v2's approach check.
+
+        Walks the TCP back from the grasp (joints ``q_grasp`` (n,), TCP at ``T_tcp`` (4, 4) in the
+        world, base at ``T_base`` (4, 4)) along the arm's approach axis, :data:`APPROACH_STEP` at a
+        time, each state's IK seeded with the last state (and 4 small perturbations of it); pinocchio
+        FK must put the TCP on the line, no joint may change by more than :data:`APPROACH_JOINT_STEP`
+        between two states, and every state must touch nothing but the grasped bottle with the
+        hand (:meth:`contacts`). The approach exists once a state touches nothing at all (the
+        hand clear of the bottle) within :data:`APPROACH_MAX`. Returns ``ok``, the distance [m],
+        and the reason of a failure (``ik``, ``jump`` or the first contact that counts).
+        """
+        direction = T_tcp[:3, :3] @ self.arm.approach_axis
+        T_base_inv = invert_transforms(T_base)
+        jitter = np.random.default_rng(0).normal(0.0, 0.05, size=(4, self.arm.n_joints))
+        q = np.asarray(q_grasp, dtype=float)
+        for k in range(1, math.ceil(APPROACH_MAX / APPROACH_STEP - 1e-9) + 1):
+            T = T_tcp.copy()
+            T[:3, 3] -= k * APPROACH_STEP * direction
+            T_base_tcp = T_base_inv @ T
+            seeds = np.clip(np.vstack([q, q + jitter]), self.arm.lower, self.arm.upper)
+            q_next = self.ik.solve_from(T_base_tcp, seeds)
+            distance = round(k * APPROACH_STEP, 4)
+            if q_next is None or not self.reaches(q_next, T_base_tcp):
+                return {"ok": False, "distance": distance, "why": "ik"}
+            if float(np.max(np.abs(q_next - q))) > APPROACH_JOINT_STEP:
+                return {"ok": False, "distance": distance, "why": "jump"}
+            q = q_next
+            touched = self.contacts(q, T_base, scene, first=False)
+            hit = self.counting(touched)
+            if hit:
+                return {"ok": False, "distance": distance, "why": hit[0]}
+            if not touched:
+                return {"ok": True, "distance": distance, "why": None}
+        return {"ok": False, "distance": APPROACH_MAX, "why": "hand not clear"}
+
+    def hand_clear_pose(self, T_tcp: np.ndarray, scene: Scene) -> np.ndarray | None:
+        """The TCP pose (4, 4) back along the approach from ``T_tcp`` (4, 4) where the hand alone first
+        touches nothing (steps of :data:`APPROACH_STEP`), or None within :data:`APPROACH_MAX`."""
+        direction = T_tcp[:3, :3] @ self.arm.approach_axis
+        for k in range(1, math.ceil(APPROACH_MAX / APPROACH_STEP - 1e-9) + 1):
+            T = T_tcp.copy()
+            T[:3, 3] -= k * APPROACH_STEP * direction
+            if not self.hand_contacts(T, scene):
+                return T
+        return None
+
+    def _reachable(self, T_base_tcp: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """(N,) whether the (N, 4, 4) TCP poses have an IK solution (:data:`IK_STARTS` solves, FK-checked)."""
+        ok = np.zeros(len(T_base_tcp), dtype=bool)
+        for _ in range(IK_STARTS):
+            q, solved = self.ik.solve_batch(
+                T_base_tcp, rng, q_seed=rng.uniform(self.arm.lower, self.arm.upper)
+            )
+            for n in np.flatnonzero(solved & ~ok):
+                ok[n] = self.reaches(q[n], T_base_tcp[n])
+        return ok
+
     @staticmethod
     def counting(contacts: list[str]) -> list[str]:
         """The contacts that make a configuration collide (all but the hand on the grasped bottle)."""
         return [c for c in contacts if not c.endswith("(hand)")]
 
-    def search(self, scene: Scene, rng: np.random.Generator) -> dict[str, Any]:
-        """The first collision-free base pose of :data:`LEVELS`, or none; with what was tried."""
+    def search(self, scene: Scene, rng: np.random.Generator, approach: bool = False) -> dict[str, Any]:
+        """The first collision-free base pose of :data:`LEVELS`, or none; with what was tried.
+
+        With ``approach`` (protocol v2) a pose counts only when :meth:`approach` finds the straight
+        approach to its grasp configuration; the search goes on through every collision-free
+        configuration until one has it. The first collision-free configuration, with or without
+        an approach, is kept as the v1 verdict (``grasp_only``). The hand alone clears the bottle
+        at a distance back that holds for every base pose (it is rigid on the TCP); a pose whose
+        TCP has no IK solution there (:data:`IK_STARTS` random starts, drawn from a generator
+        of their own) cannot have the approach, and is not walked.
+        """
         T_grasp = pose_from_xyz_rpy(scene.grasp)
         T_tcp = T_grasp @ np.linalg.inv(self.T_tcp_grasp)
         gx, gy = T_grasp[0, 3], T_grasp[1, 3]
@@ -344,9 +425,14 @@ class Oracle:
         # the hand is rigid on the TCP (fingers at their reference values): at the grasp it lies where
         # it lies from every base pose, so one check decides whether any placement can exist
         hand = self.counting(self.hand_contacts(T_tcp, scene))
+        grasp_only: dict[str, Any] | None = None
+        walks: Counter[str] = Counter()
         if hand:
-            return {"found": False, "level": None, "poses_tried": 0, "ik_solutions": 0,
+            none = {"found": False, "level": None, "poses_tried": 0, "ik_solutions": 0,
                     "blocked_by": {}, "hand_at_grasp": hand, "seconds": round(time.perf_counter() - t0, 2)}  # fmt: skip
+            return {**none, "grasp_only": dict(none), "approaches_failed": {}} if approach else none
+        far_rng = np.random.default_rng(rng.bit_generator.seed_seq.spawn(1)[0])  # type: ignore[attr-defined]
+        T_far = self.hand_clear_pose(T_tcp, scene) if approach else None
         for level, (d, n_yaw) in enumerate(LEVELS):
             k = math.ceil(self.reach / d)
             g = np.arange(-k, k + 1) * d
@@ -369,6 +455,7 @@ class Oracle:
                 T_base[:, 0, 3], T_base[:, 1, 3] = chunk[:, 0], chunk[:, 1]
                 T_base_tcp = invert_transforms(T_base) @ T_tcp
                 tried += len(chunk)
+                far_ok: np.ndarray | None = None
                 for _ in range(IK_STARTS):  # each solve: a random first start, then its random restarts
                     q_seed = rng.uniform(self.arm.lower, self.arm.upper)
                     q, ok = self.ik.solve_batch(T_base_tcp, rng, q_seed=q_seed)
@@ -380,12 +467,33 @@ class Oracle:
                         if hit:
                             blocked[hit[0].split(" - ")[-1]] += 1
                             continue
-                        return {"found": True, "level": level, "base": [round(float(v), 4) for v in chunk[n]],
-                                "joints": np.round(q[n], 6).tolist(), "poses_tried": tried,
-                                "ik_solutions": solved, "blocked_by": dict(blocked),
-                                "seconds": round(time.perf_counter() - t0, 2)}  # fmt: skip
-        return {"found": False, "level": None, "poses_tried": tried, "ik_solutions": solved,
+                        verdict = {"found": True, "level": level, "base": [round(float(v), 4) for v in chunk[n]],
+                                   "joints": np.round(q[n], 6).tolist(), "poses_tried": tried,
+                                   "ik_solutions": solved, "blocked_by": dict(blocked),
+                                   "seconds": round(time.perf_counter() - t0, 2)}  # fmt: skip
+                        if not approach:
+                            return verdict
+                        grasp_only = grasp_only or verdict
+                        if T_far is None:
+                            walks["hand not clear"] += 1
+                            continue
+                        if far_ok is None:
+                            far_ok = self._reachable(invert_transforms(T_base) @ T_far, far_rng)
+                        if not far_ok[n]:
+                            walks["no ik where the hand clears"] += 1
+                            continue
+                        walk = self.approach(q[n], T_base[n], T_tcp, scene)
+                        if not walk["ok"]:
+                            walks[walk["why"]] += 1
+                            continue
+                        verdict["seconds"] = round(time.perf_counter() - t0, 2)
+                        return {**verdict, "approach_m": walk["distance"], "grasp_only": grasp_only,
+                                "approaches_failed": dict(walks)}  # fmt: skip
+        none = {"found": False, "level": None, "poses_tried": tried, "ik_solutions": solved,
                 "blocked_by": dict(blocked), "seconds": round(time.perf_counter() - t0, 2)}  # fmt: skip
+        if not approach:
+            return none
+        return {**none, "grasp_only": grasp_only or dict(none), "approaches_failed": dict(walks)}
 
 
 def unrounded(q: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, bool]:
@@ -499,6 +607,8 @@ def library_commit() -> dict[str, Any]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--protocol", choices=tuple(PROTOCOLS), default="v1",
+                        help="v1: the oracle checks the grasp configuration; v2: and the straight approach")  # fmt: skip
     parser.add_argument("--seeds", choices=("dev", "held-out"), required=True)
     parser.add_argument("--scenes", type=int, default=None, help="only the first N scenes of the split")
     parser.add_argument("--seed", type=int, default=None, help="only this seed of the split")
@@ -510,8 +620,9 @@ def main(argv: list[str] | None = None) -> int:
     harness = git_commit(
         Path(__file__).resolve().parent
     )  # this script's checkout; the library may be another
-    protocol = fixed_protocol(PROTOCOL_FILE, args.seeds, Path(__file__).resolve().parent)
-    seeds = SEEDS.seeds(args.seeds)[: args.scenes]
+    protocol_file, split, with_approach = PROTOCOLS[args.protocol]
+    protocol = fixed_protocol(protocol_file, args.seeds, Path(__file__).resolve().parent)
+    seeds = split.seeds(args.seeds)[: args.scenes]
     if args.seed is not None:
         if args.seed not in seeds:
             raise InputError(
@@ -530,7 +641,7 @@ def main(argv: list[str] | None = None) -> int:
                 raise InputError(f"--oracle-from: scene {seed} differs from this run's; run the oracle again")
             verdict = earlier[seed]["oracle"]
         else:
-            verdict = oracle.search(scene, np.random.default_rng([25, seed, 1]))
+            verdict = oracle.search(scene, np.random.default_rng([25, seed, 1]), approach=with_approach)
         method = run_place(scene, oracle)
         rows.append({"scene": record, "oracle": verdict, "method": method})
         print(seed, scene.kind, "oracle", verdict["found"], verdict["seconds"], "place", method["found"],
@@ -538,7 +649,7 @@ def main(argv: list[str] | None = None) -> int:
               flush=True)  # fmt: skip
     result = {
         "benchmark": "find_rate",
-        "protocol": {"file": PROTOCOL_FILE, "noise": NOISE, "levels": LEVELS, "ik_starts": IK_STARTS,
+        "protocol": {"file": protocol_file, "noise": NOISE, "levels": LEVELS, "ik_starts": IK_STARTS,
                      "ik_restarts": IK_RESTARTS, "oracle_reach_m": round(oracle.reach, 4),
                      "hand_links": oracle.hand_links, "settings": "place defaults, --object auto, default map"},
         "library": library_commit(),
@@ -547,7 +658,13 @@ def main(argv: list[str] | None = None) -> int:
         "summary": summarise(rows),
         "scenes": rows,
     }  # fmt: skip
-    whole = write_results(args.out, result, clock, seeds=SEEDS, split=args.seeds, used_seeds=list(seeds),
+    if with_approach:  # the same scenes and runs of place, against the v1 oracle (the grasp only)
+        result["protocol"]["approach"] = {"step_m": APPROACH_STEP, "max_m": APPROACH_MAX,
+                                          "joint_step": APPROACH_JOINT_STEP}  # fmt: skip
+        result["summary_grasp_only_oracle"] = summarise(
+            [{**r, "oracle": r["oracle"]["grasp_only"]} for r in rows]
+        )
+    whole = write_results(args.out, result, clock, seeds=split, split=args.seeds, used_seeds=list(seeds),
                           protocol_file=protocol)  # fmt: skip
     print(json.dumps(whole["summary"], indent=1))
     return 0

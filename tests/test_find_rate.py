@@ -102,3 +102,69 @@ def test_joints_rounded_past_a_limit_are_put_back_but_a_real_violation_stays(ora
     far = np.eye(4)
     far[:2, 3] = 4.0, 4.0
     assert oracle.contacts(kept, far, scene, first=False)[0] == "joint limits"
+
+
+def test_protocol_v2_has_its_own_file_and_fresh_held_out_seeds():
+    file, split, with_approach = find_rate.PROTOCOLS["v2"]
+    assert (ROOT / file).is_file() and with_approach
+    assert not set(split.dev) & set(split.held_out)
+    assert not set(split.held_out) & set(find_rate.SEEDS.held_out)  # v1's held-out scenes are not reused
+    assert len(split.held_out) == 100
+    assert find_rate.PROTOCOLS["v1"] == (find_rate.PROTOCOL_FILE, find_rate.SEEDS, False)
+
+
+def _pose(x, y, yaw):
+    T = np.eye(4)
+    T[:2, :2] = [[math.cos(yaw), -math.sin(yaw)], [math.sin(yaw), math.cos(yaw)]]
+    T[:2, 3] = x, y
+    return T
+
+
+def test_the_v2_oracle_walks_the_hand_straight_up_out_of_a_bottle(oracle):
+    scene = find_rate.make_scene(25001)  # top-down: the hand comes out of the bottle going up
+    verdict = oracle.search(scene, np.random.default_rng(0))
+    T_base = _pose(*verdict["base"])
+    T_tcp = find_rate.pose_from_xyz_rpy(scene.grasp) @ np.linalg.inv(oracle.T_tcp_grasp)
+    walk = oracle.approach(np.array(verdict["joints"]), T_base, T_tcp, scene)
+    assert walk["ok"] and 0.05 < walk["distance"] < find_rate.APPROACH_MAX
+    # the hand alone clears the bottle at the same distance back, whatever the base pose
+    T_clear = oracle.hand_clear_pose(T_tcp, scene)
+    assert T_clear is not None
+    back = float(np.linalg.norm(T_clear[:3, 3] - T_tcp[:3, 3]))
+    assert back == pytest.approx(walk["distance"], abs=1e-9)
+    assert not oracle.hand_contacts(T_clear, scene)
+    one_short = T_clear.copy()
+    one_short[:3, 3] += find_rate.APPROACH_STEP * (T_tcp[:3, :3] @ oracle.arm.approach_axis)
+    assert any("bottle" in c for c in oracle.hand_contacts(one_short, scene))
+    # the approach goes up, away from the table: the TCP's line, checked apart from the walk
+    direction = T_clear[:3, 3] - T_tcp[:3, 3]
+    assert direction[2] > 0.99 * np.linalg.norm(direction)
+
+
+def test_the_v2_oracle_refuses_an_approach_that_meets_a_shelf_or_leaves_the_reach(oracle):
+    scene = find_rate.make_scene(25001)
+    verdict = oracle.search(scene, np.random.default_rng(0))
+    q, T_base = np.array(verdict["joints"]), _pose(*verdict["base"])
+    T_tcp = find_rate.pose_from_xyz_rpy(scene.grasp) @ np.linalg.inv(oracle.T_tcp_grasp)
+    # a shelf 6 cm above the bottle's top: the hand, which must rise about 0.12 m to clear the
+    # bottle, meets it on the way out
+    shelf = find_rate.Solid("shelf", find_rate.coal.Box(0.4, 0.4, 0.02), T_tcp.copy())
+    shelf.T[:3, :3] = np.eye(3)
+    shelf.T[2, 3] = scene.table[2] + scene.bottle[3] + 0.07
+    solids = scene.solids
+
+    class Shelved(find_rate.Scene):
+        def solids(self):
+            obstacles, bottle, floor = solids()
+            return [*obstacles, shelf], bottle, floor
+
+    shelved = Shelved(**{f: getattr(scene, f) for f in scene.__dataclass_fields__})
+    walk = oracle.approach(q, T_base, T_tcp, shelved)
+    assert not walk["ok"] and walk["why"].endswith(" - shelf") and walk["distance"] < 0.115
+    assert oracle.approach(q, T_base, T_tcp, scene)["ok"]  # without the shelf it comes out
+    # a base pose 0.4 m further away: the grasp is not even reachable from there, so the walk
+    # fails on IK at its first step
+    far = T_base.copy()
+    far[:2, 3] += 0.4 * (far[:2, 3] - T_tcp[:2, 3]) / np.linalg.norm(far[:2, 3] - T_tcp[:2, 3])
+    walk = oracle.approach(q, far, T_tcp, scene)
+    assert not walk["ok"] and walk["why"] in ("ik", "jump") and walk["distance"] == find_rate.APPROACH_STEP
