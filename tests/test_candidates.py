@@ -572,7 +572,7 @@ def test_hand_pruning_loses_no_placement(tiago, tiago_map, table_scene):
     assert found and all(c.grasp is not None and c.grasp >= 8 for c in found)
     assert not hand_feasible(tiago, None, grasps[:8], env).any()
     verified, rejected = verify_candidates(tiago, None, found, grasps[:8], env, rng)
-    assert not verified and all(reason == "collision" for _, reason in rejected)
+    assert not verified and all(reason == "collision" and motion is None for _, reason, motion in rejected)
 
 
 def test_grasp_poses_top_offset_lifts_only_top_down_grasps():

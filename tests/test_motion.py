@@ -111,6 +111,48 @@ def test_a_grasp_whose_pregrasp_is_out_of_reach_is_refused_for_the_approach(tiag
     assert motion.last_failure is None
 
 
+def test_seed_004_candidates_refused_for_the_motion_carry_the_reason(tiago):
+    """verify_candidates (the candidates job's check) keeps the motion check's reason per position."""
+    from baseplace.geometry.poses import BasePose
+    from baseplace.placement.candidates import RadialCandidate
+    from baseplace.placement.irm_candidates import verify_candidates
+
+    arm = tiago.arm()
+    target = pose_from_xyz_rpy([0.6, -0.15, 1.2, 0.0, np.pi / 2, 0.0])  # the pre-grasp out of reach (above)
+    env = Environment(tiago, _empty())
+    motion = MotionChecker(tiago, arm, env)
+    near = RadialCandidate(BasePose(0.0, 0.0, 0.0), 0.6)
+    far = RadialCandidate(BasePose(-4.0, 0.0, 0.0), 4.6)  # no IK: nothing to move to
+    verified, rejected = verify_candidates(tiago, None, [near, far], target[None], env,
+                                           np.random.default_rng(0), motion)  # fmt: skip
+    assert not verified
+    assert [(c, why, reason) for c, why, reason in rejected] == [
+        (near, "motion", "approach_ik"),
+        (far, "no_ik", None),
+    ]
+    # without the motion check the near one passes: the refusal was the motion's
+    verified, rejected = verify_candidates(tiago, None, [near], target[None], env, np.random.default_rng(0))
+    assert len(verified) == 1 and not rejected
+
+
+def test_the_candidates_result_schema_takes_motion_failures_by_code_only():
+    import json
+    from importlib import resources
+
+    import jsonschema
+
+    schema = json.loads(resources.files("baseplace.jobs").joinpath("result.schema.json").read_text())
+    result = {"kind": "candidates", "version": 1, "candidates": [], "method": "radial", "object": [0, 0, 0],
+              "rejected": [], "path": None, "motion_failures": {"approach_ik": 3}}  # fmt: skip
+    branch = next(
+        b for b in schema["allOf"] if b["if"].get("properties", {}).get("kind") == {"const": "candidates"}
+    )
+    check = {"$defs": schema["$defs"], **branch["then"]}
+    jsonschema.validate(result, check)
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate({**result, "motion_failures": {"timeout": 1}}, check)
+
+
 def test_every_motion_failure_has_a_phrase_and_is_in_the_result_schema():
     import json
     from importlib import resources

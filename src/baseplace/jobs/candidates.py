@@ -146,6 +146,7 @@ def candidates_job(job: CandidatesJob, progress: inputs.Progress | None = None) 
     from baseplace.placement.object_search import search_around_object
     from baseplace.placement.pipeline import object_checks
     from baseplace.placement.robustness import RobustnessSettings
+    from baseplace.placement.verify import motion_failure_summary
     from baseplace.reachability.cache import resolve_map
     from baseplace.world.grasped_object import GraspedObject, find_grasped_object, parse_grasped_object
     from baseplace.world.obstacles import check_clear_of, parse_obstacles
@@ -210,6 +211,7 @@ def candidates_job(job: CandidatesJob, progress: inputs.Progress | None = None) 
                   "theta": round(settings.theta, 5), "k_obs": settings.k_obs, "grasp_standoff": standoff,
                   "reach_margin": reach_margin_json(irm_settings_for(robust)) if job.method == "irm" else None},
         clearance=clearance_record(checks.environment.clearance, checks.clearance_note, checks.noise_margin),
+        motion_failures=dict(found.motion_failures),
     )  # fmt: skip
     if png is not None:
         from baseplace.viz.candidates import plot_candidates
@@ -228,9 +230,11 @@ def candidates_job(job: CandidatesJob, progress: inputs.Progress | None = None) 
     report.timings_ms = {"load": (t_load - t0 - map_s) * 1e3, **inputs.map_timing(map_choice, map_s), "cloud": (t_search - t_load) * 1e3,
                          **found.timings_ms, "navigation": (now - t_nav) * 1e3, "total": (now - t0) * 1e3}  # fmt: skip
     if not ranked:
+        motion = motion_failure_summary(found.motion_failures)
         raise NoResultError(
             f"no verified candidate ({job.method}); {len(rejected)} positions rejected "
-            f"({', '.join(sorted({why for _, why in rejected})) or 'none tried'})",
+            f"({', '.join(sorted({why for _, why in rejected})) or 'none tried'})"
+            + (f"; {motion}" if motion else ""),
             report,
         )
     return report

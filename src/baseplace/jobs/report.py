@@ -253,6 +253,8 @@ class CandidatesReport(Report):
         object_shape: requested and allowed object shape.
         settings: the radial search's settings.
         clearance: as ``place``'s (:class:`PlaceReport`).
+        motion_failures: of the positions rejected for "motion", how many per reason the
+            reaching-motion check gave, as ``place``'s.
     """
 
     kind: ClassVar[str] = "candidates"
@@ -265,6 +267,7 @@ class CandidatesReport(Report):
     object_shape: dict[str, Any] = field(default_factory=dict)
     settings: dict[str, Any] = field(default_factory=dict)
     clearance: dict[str, Any] | None = None
+    motion_failures: dict[str, int] = field(default_factory=dict)
 
 
 @dataclass

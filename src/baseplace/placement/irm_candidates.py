@@ -374,14 +374,16 @@ def verify_candidates(
     environment: Environment,
     rng: np.random.Generator,
     motion: MotionChecker | None = None,
-) -> tuple[list[Placement], list[tuple[RadialCandidate | Placement, str]]]:
+) -> tuple[list[Placement], list[tuple[RadialCandidate | Placement, str, str | None]]]:
     """Run the shared verification on candidates of any method: IK for one of the grasps + collision.
 
     With ``motion``, the reaching motion to the grasp is checked too.
 
     Returns:
         (verified placements carrying their grasp index, joints and motion, rejected candidates with
-        the verifier's reason for the grasp that got furthest: "motion", "collision" or "no_ik").
+        the verifier's reason for the grasp that got furthest: "motion", "collision" or "no_ik",
+        and for "motion" the reaching-motion check's reason of the last grasp it refused
+        (:data:`~baseplace.placement.motion.MOTION_FAILURES`), else None).
     """
     G = np.asarray(grasps, dtype=float).reshape(-1, 4, 4)
     arm = robot.arm(arm_name)
@@ -390,19 +392,23 @@ def verify_candidates(
     verifiers = [Verifier(arm, ik, environment, g[None], {}, outline, motion=motion) for g in G]
     usable = np.flatnonzero(hand_feasible(robot, arm_name, G, environment))
     verified: list[Placement] = []
-    rejected: list[tuple[RadialCandidate | Placement, str]] = []
+    rejected: list[tuple[RadialCandidate | Placement, str, str | None]] = []
     for c in candidates:
         reasons: list[str] = [] if len(usable) else ["collision"]  # no grasp leaves the hand clear
+        motion_reason = None
         for k in usable:
             verifier = verifiers[k]
             placement = verifier.check(Candidate(c.T_world_base, -1, _reachability(c)), rng)
             if placement is not None:
                 verified.append(dataclasses.replace(placement, approach=_approach(c, int(k))))
                 break
+            if verifier.failures["motion"] and motion is not None:
+                motion_reason = motion.last_failure
             reasons.extend(verifier.failures.elements())
             verifier.failures.clear()
         else:
-            rejected.append((c, next((r for r in ("motion", "collision") if r in reasons), "no_ik")))
+            why = next((r for r in ("motion", "collision") if r in reasons), "no_ik")
+            rejected.append((c, why, motion_reason if why == "motion" else None))
     return verified, rejected
 
 

@@ -10,6 +10,7 @@ planner reaches).
 from __future__ import annotations
 
 import time
+from collections import Counter
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -40,6 +41,8 @@ class ObjectSearch:
         chosen: the first placement the grid planner reaches from the robot's pose, or None.
         navigated: whether paths were planned (a robot pose was given and a placement found).
         timings_ms: search (candidates and verification), robustness (score and ranking) [ms].
+        motion_failures: of the positions rejected for "motion", how many per reason the
+            reaching-motion check gave (:data:`~baseplace.placement.motion.MOTION_FAILURES`).
     """
 
     placements: list[Placement]
@@ -49,6 +52,7 @@ class ObjectSearch:
     chosen: Placement | None = None
     navigated: bool = False
     timings_ms: dict[str, float] = field(default_factory=dict)
+    motion_failures: Counter[str] = field(default_factory=Counter)
 
     def failures(self) -> dict[str, int]:
         """Rejections per reason, and ``no_path`` when no placement could be driven to."""
@@ -92,13 +96,15 @@ def search_around_object(
     """
     t0 = time.perf_counter()
     rejected: list[tuple[tuple[float, float], str]] = []
+    motion_failures: Counter[str] = Counter()
     if method == "radial":
         search = radial_search(p_o, settings, points, grid)
         rejected += [(r.xy, str(r.reason)) for r in search.rejected]
         verified, failed = verify_candidates(
             robot, rmap.info.arm, search.candidates, grasps, checks.environment, rng, checks.motion
         )
-        rejected += [((c.pose.x, c.pose.y), why) for c, why in failed]
+        rejected += [((c.pose.x, c.pose.y), why) for c, why, _ in failed]
+        motion_failures = Counter(reason for _, _, reason in failed if reason is not None)
     else:
         verified = irm_candidates(robot, rmap, p_o, grasps, checks.environment, grid, irm_settings_for(robustness), rng,
                                   checks.motion)  # fmt: skip
@@ -116,7 +122,7 @@ def search_around_object(
         ranked = [verified[i] for i in np.argsort(costs, kind="stable")]
     ranked_costs = motion_costs(ranked, p_o, BasePose(*start)).tolist() if ranked else []
     t2 = time.perf_counter()
-    out = ObjectSearch(ranked, ranked_costs, rejected)
+    out = ObjectSearch(ranked, ranked_costs, rejected, motion_failures=motion_failures)
     if robot_pose is not None and ranked:
         # seed 004 Algorithm 2 re-ranks by motion cost after each failure; the robustness order is kept
         result = pickup(ranked, p_o, BasePose(*robot_pose), GridNavigator(grid, settings.r_r),
