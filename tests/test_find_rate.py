@@ -168,3 +168,16 @@ def test_the_v2_oracle_refuses_an_approach_that_meets_a_shelf_or_leaves_the_reac
     far[:2, 3] += 0.4 * (far[:2, 3] - T_tcp[:2, 3]) / np.linalg.norm(far[:2, 3] - T_tcp[:2, 3])
     walk = oracle.approach(q, far, T_tcp, scene)
     assert not walk["ok"] and walk["why"] in ("ik", "jump") and walk["distance"] == find_rate.APPROACH_STEP
+
+
+def test_the_hand_gap_is_where_the_lowered_hand_starts_touching_the_table(oracle):
+    from find_rate_hand_gaps import hand_gap
+
+    scene = find_rate.make_scene(25022)  # side grasp: the little finger just above the table top
+    gap, between = hand_gap(oracle, scene)
+    assert between == "hand_little_flex_3_link - table" and 0.0 < gap < 0.005
+    T_tcp = find_rate.pose_from_xyz_rpy(scene.grasp) @ np.linalg.inv(oracle.T_tcp_grasp)
+    for drop, touches in ((gap - 0.0003, False), (gap + 0.0003, True)):
+        T = T_tcp.copy()
+        T[2, 3] -= drop  # straight down: the finger's lowest point meets the flat top first
+        assert any(c.endswith(" - table") for c in oracle.hand_contacts(T, scene)) is touches
