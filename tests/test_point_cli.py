@@ -150,6 +150,7 @@ def test_with_a_grid_the_candidates_to_pick_the_object_up(tmp_path):
         d = np.hypot(c["x"] - truth.centre[0], c["y"] - truth.centre[1])
         assert 0.4 < d < 1.0 and not (0.5 <= c["x"] <= 1.0 and abs(c["y"]) <= 0.5)
     assert obj["path"] is not None
+    assert obj["motion_failures"] == {}  # the field is there; with no motion check nothing is refused for it
     proc, obj = _point(files, "--occupancy", str(tmp_path / "grid.yaml"), "--map", str(tmp_path / "t.rmap"),
                        "--robustness-samples", "0", "--no-motion-check", "--png", str(tmp_path / "point.png"))  # fmt: skip
     picture = cv2.imread(obj["outputs"]["png"])

@@ -120,7 +120,8 @@ class PointReport(Report):
         selected: index into ``objects`` of the target, or None.
         object: the target: ``position`` and ``size`` [m], world frame, or None.
         candidates: base placements to pick it up, best first (with a grid), or None.
-        rejected, path: the candidates job's rejected positions and path.
+        rejected, path, motion_failures: the candidates job's rejected positions, path and
+            reaching-motion reasons (:class:`~baseplace.jobs.report.CandidatesReport`).
     """
 
     kind: ClassVar[str] = "point"
@@ -135,6 +136,7 @@ class PointReport(Report):
     candidates: list[dict[str, Any]] | None = None
     rejected: list[dict[str, Any]] = field(default_factory=list)
     path: list[list[float]] | None = None
+    motion_failures: dict[str, int] = field(default_factory=dict)
 
 
 def read_landmarks(path: str, width: int, height: int) -> np.ndarray | None:
@@ -337,9 +339,11 @@ def _candidates(job: PointJob, report: PointReport, points: np.ndarray, position
     except NoResultError as exc:
         report.failures, report.robot = dict(exc.report.failures), exc.report.robot
         report.rejected = list(getattr(exc.report, "rejected", []))
+        report.motion_failures = dict(getattr(exc.report, "motion_failures", {}))
         raise NoResultError(f"the object is at {np.round(position, 3).tolist()}: {exc}", report) from None
     report.robot = found.robot if isinstance(found.robot, RobotRef) else None
     report.candidates, report.rejected, report.path = found.candidates, found.rejected, found.path
+    report.motion_failures = dict(found.motion_failures)
     report.failures = dict(found.failures)
     report.outputs.update(found.outputs)
     report.timings_ms["candidates"] = (time.perf_counter() - t) * 1e3
