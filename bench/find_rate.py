@@ -43,6 +43,7 @@ import math
 import sys
 import time
 from collections import Counter
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -308,15 +309,16 @@ class Oracle:
 
     def hand_contacts(self, T_world_tcp: np.ndarray, scene: Scene) -> list[str]:
         """What the hand's geometries touch with the TCP at ``T_world_tcp`` (4, 4), whatever the base pose."""
-        q_arm = 0.5 * (self.arm.lower + self.arm.upper)
-        pin.framesForwardKinematics(
-            self.model, self.data, self.arm.to_pinocchio(q_arm, self.robot.q_reference)
-        )
-        pin.updateGeometryPlacements(self.model, self.data, self.geom, self.gdata,
-                                     self.arm.to_pinocchio(q_arm, self.robot.q_reference))  # fmt: skip
+        return self._touching(sorted(self.hand), self.hand_placed(T_world_tcp), scene, first=False)
+
+    def hand_placed(self, T_world_tcp: np.ndarray) -> np.ndarray:
+        """The root's world pose (4, 4) that puts the TCP on ``T_world_tcp`` (4, 4), with the geometries
+        placed (``self.gdata``) for a mid-range arm: the hand's are right whatever the arm, the rest not."""
+        q = self.arm.to_pinocchio(0.5 * (self.arm.lower + self.arm.upper), self.robot.q_reference)
+        pin.framesForwardKinematics(self.model, self.data, q)
+        pin.updateGeometryPlacements(self.model, self.data, self.geom, self.gdata, q)
         T_root_tcp = self.data.oMf[self._tcp].homogeneous
-        T_world_root = np.asarray(T_world_tcp, dtype=float) @ invert_transforms(T_root_tcp)
-        return self._touching(sorted(self.hand), T_world_root, scene, first=False)
+        return np.asarray(T_world_tcp, dtype=float) @ invert_transforms(T_root_tcp)
 
     def _touching(self, geoms: list[int], T_world_root: np.ndarray, scene: Scene, first: bool) -> list[str]:
         """Contacts of the posed geometries ``geoms`` (placements in ``self.gdata``) with the true shapes."""
@@ -353,13 +355,10 @@ class Oracle:
         hand clear of the bottle) within :data:`APPROACH_MAX`. Returns ``ok``, the distance [m],
         and the reason of a failure (``ik``, ``jump`` or the first contact that counts).
         """
-        direction = T_tcp[:3, :3] @ self.arm.approach_axis
         T_base_inv = invert_transforms(T_base)
         jitter = np.random.default_rng(0).normal(0.0, 0.05, size=(4, self.arm.n_joints))
         q = np.asarray(q_grasp, dtype=float)
-        for k in range(1, math.ceil(APPROACH_MAX / APPROACH_STEP - 1e-9) + 1):
-            T = T_tcp.copy()
-            T[:3, 3] -= k * APPROACH_STEP * direction
+        for k, T in self._back_along_approach(T_tcp):
             T_base_tcp = T_base_inv @ T
             seeds = np.clip(np.vstack([q, q + jitter]), self.arm.lower, self.arm.upper)
             q_next = self.ik.solve_from(T_base_tcp, seeds)
@@ -380,13 +379,19 @@ class Oracle:
     def hand_clear_pose(self, T_tcp: np.ndarray, scene: Scene) -> np.ndarray | None:
         """The TCP pose (4, 4) back along the approach from ``T_tcp`` (4, 4) where the hand alone first
         touches nothing (steps of :data:`APPROACH_STEP`), or None within :data:`APPROACH_MAX`."""
+        for _, T in self._back_along_approach(T_tcp):
+            if not self.hand_contacts(T, scene):
+                return T
+        return None
+
+    def _back_along_approach(self, T_tcp: np.ndarray) -> Iterator[tuple[int, np.ndarray]]:
+        """(k, TCP pose (4, 4)) k :data:`APPROACH_STEP` back from ``T_tcp`` along the approach axis, up to
+        :data:`APPROACH_MAX`: the one line :meth:`approach` walks and :meth:`hand_clear_pose` scans."""
         direction = T_tcp[:3, :3] @ self.arm.approach_axis
         for k in range(1, math.ceil(APPROACH_MAX / APPROACH_STEP - 1e-9) + 1):
             T = T_tcp.copy()
             T[:3, 3] -= k * APPROACH_STEP * direction
-            if not self.hand_contacts(T, scene):
-                return T
-        return None
+            yield k, T
 
     def _reachable(self, T_base_tcp: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """(N,) whether the (N, 4, 4) TCP poses have an IK solution (:data:`IK_STARTS` solves, FK-checked)."""
@@ -431,8 +436,10 @@ class Oracle:
             none = {"found": False, "level": None, "poses_tried": 0, "ik_solutions": 0,
                     "blocked_by": {}, "hand_at_grasp": hand, "seconds": round(time.perf_counter() - t0, 2)}  # fmt: skip
             return {**none, "grasp_only": dict(none), "approaches_failed": {}} if approach else none
-        far_rng = np.random.default_rng(rng.bit_generator.seed_seq.spawn(1)[0])  # type: ignore[attr-defined]
-        T_far = self.hand_clear_pose(T_tcp, scene) if approach else None
+        T_far = far_rng = None
+        if approach:  # the necessary condition's IK draws from a generator of its own (v1's draws unchanged)
+            far_rng = np.random.default_rng(rng.bit_generator.seed_seq.spawn(1)[0])  # type: ignore[attr-defined]
+            T_far = self.hand_clear_pose(T_tcp, scene)
         for level, (d, n_yaw) in enumerate(LEVELS):
             k = math.ceil(self.reach / d)
             g = np.arange(-k, k + 1) * d
@@ -478,6 +485,7 @@ class Oracle:
                             walks["hand not clear"] += 1
                             continue
                         if far_ok is None:
+                            assert far_rng is not None
                             far_ok = self._reachable(invert_transforms(T_base) @ T_far, far_rng)
                         if not far_ok[n]:
                             walks["no ik where the hand clears"] += 1

@@ -20,11 +20,10 @@ from typing import Any
 
 import coal
 import numpy as np
-import pinocchio as pin
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from baseplace.geometry.poses import invert_transforms, pose_from_xyz_rpy
+from baseplace.geometry.poses import pose_from_xyz_rpy
 from baseplace.robots.model import Robot
 from baseplace_experiments.results import RunClock, write_results
 from find_rate import Oracle, Scene, make_scene
@@ -33,10 +32,7 @@ from find_rate import Oracle, Scene, make_scene
 def hand_gap(oracle: Oracle, scene: Scene) -> tuple[float, str]:
     """The smallest distance [m] from the hand at the grasp to the table or a neighbour, and between what."""
     T_tcp = pose_from_xyz_rpy(scene.grasp) @ np.linalg.inv(oracle.T_tcp_grasp)
-    q = oracle.arm.to_pinocchio(0.5 * (oracle.arm.lower + oracle.arm.upper), oracle.robot.q_reference)
-    pin.framesForwardKinematics(oracle.model, oracle.data, q)
-    pin.updateGeometryPlacements(oracle.model, oracle.data, oracle.geom, oracle.gdata, q)
-    T_world_root = T_tcp @ invert_transforms(oracle.data.oMf[oracle._tcp].homogeneous)
+    T_world_root = oracle.hand_placed(T_tcp)  # as the oracle's own hand check poses the hand
     obstacles, _, _ = scene.solids()
     best = (np.inf, "")
     for k in sorted(oracle.hand):
