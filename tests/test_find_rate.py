@@ -181,3 +181,12 @@ def test_the_hand_gap_is_where_the_lowered_hand_starts_touching_the_table(oracle
         T = T_tcp.copy()
         T[2, 3] -= drop  # straight down: the finger's lowest point meets the flat top first
         assert any(c.endswith(" - table") for c in oracle.hand_contacts(T, scene)) is touches
+
+
+def test_an_unknown_protocol_is_refused_with_the_choices(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        find_rate.main(["--protocol", "v9", "--seeds", "dev", "--out", str(tmp_path / "x.json")])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "--protocol" in err and "'v1'" in err and "'v2'" in err and "v9" in err
+    assert not (tmp_path / "x.json").exists()
