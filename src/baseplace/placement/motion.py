@@ -60,7 +60,7 @@ from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Arm, Robot
 from baseplace.world.environment import GRASPED, Environment, HandFilter
 from baseplace.world.obstacles import Obstacle
-from baseplace.world.sensor_resolution import Group, group_size
+from baseplace.world.sensor_resolution import Group, group_size, object_obstacle
 from baseplace.world.state_filter import hull_points
 
 PREGRASP_MARGIN = 0.02
@@ -194,14 +194,15 @@ def transit_environment(
     ``groups`` and ``grasped`` are what the verification's :class:`Environment` was built from
     (:func:`~baseplace.world.environment.contact_groups`), its obstacles given by hand
     (``shapes``), its ``clearance`` and ``plane_clearance`` [m]; here the grasped object is one more
-    obstacle group, checked against every link, the hand's included. None when there is no grasped object: the
-    verification's environment already allows no contact.
+    obstacle group, checked against every link, the hand's included: its fitted whole shape where
+    one was accepted, else its cells (:func:`~baseplace.world.sensor_resolution.object_obstacle`).
+    None when there is no grasped object: the verification's environment already allows no contact.
     """
     if grasped is None or group_size(grasped) == 0:
         return None
     return Environment(
         robot,
-        {**groups, GRASPED: grasped},
+        {**groups, GRASPED: object_obstacle(grasped)},
         shapes=shapes,
         clearance=clearance,
         plane_clearance=plane_clearance,

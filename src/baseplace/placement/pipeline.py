@@ -352,7 +352,7 @@ def scene_checks(
             groups, object_voxels = contact_groups(terrain.voxels, voxels, obj, cache.points, floor)
             kept = clearance_of(groups, s.clearance, cache.points, obj)
             plane, kept = plane_clearance_of(groups, s.clearance, kept)
-            kept = fitted_noted(groups, kept)
+            kept = fitted_noted(groups, kept, object_voxels)
             hand = Environment(robot, groups, grasped=object_voxels, hand_arm=arm_name, shapes=obstacles,
                                clearance=kept[0], plane_clearance=plane)  # fmt: skip
             # on the way to the pre-grasp the hand may not touch it either
@@ -423,23 +423,30 @@ def plane_clearance_of(
     return metres, (kept[0], f"{kept[1]}; from {note}: {metres * 1e3:.1f} mm", kept[2])
 
 
-def fitted_noted(groups: dict[str, Group], kept: tuple[float, str, float]) -> tuple[float, str, float]:
-    """``kept`` with the neighbours fitted as whole shapes noted: each one's kind and error u.
+def fitted_noted(
+    groups: dict[str, Group], kept: tuple[float, str, float], grasped: Group | None = None
+) -> tuple[float, str, float]:
+    """``kept`` with the shapes fitted as whole shapes noted: each neighbour's kind and error u, and the object's.
 
     The robot keeps c - n + u from such a neighbour (:func:`~baseplace.world.sensor_resolution.margin`),
-    so the JSON's clearance note states every u in use (:mod:`baseplace.world.neighbour_shapes`).
+    and from the grasped object's shape in the transit (``grasped``, its group:
+    :func:`~baseplace.world.sensor_resolution.object_obstacle`), so the JSON's clearance note
+    states every u in use (:mod:`baseplace.world.neighbour_shapes`).
     """
     shapes = [
         part for group in groups.values() for part in group_parts(group) if isinstance(part, FittedShape)
     ]
-    if not shapes:
-        return kept
-    each = ", ".join(f"{shape.kind} u {shape.error * 1e3:.1f} mm" for shape in shapes)
-    return (
-        kept[0],
-        f"{kept[1]}; {len(shapes)} neighbours fitted as whole shapes, kept c - n + u: {each}",
-        kept[2],
-    )
+    own = [] if grasped is None else [p for p in group_parts(grasped) if isinstance(p, FittedShape)]
+    note = kept[1]
+    if shapes:
+        each = ", ".join(f"{shape.kind} u {shape.error * 1e3:.1f} mm" for shape in shapes)
+        note += f"; {len(shapes)} neighbours fitted as whole shapes, kept c - n + u: {each}"
+    if own:
+        note += (
+            f"; the grasped object fitted as a {own[0].kind} (u {own[0].error * 1e3:.1f} mm), "
+            "kept c - n + u in the transit"
+        )
+    return kept[0], note, kept[2]
 
 
 @dataclass
@@ -498,7 +505,7 @@ def object_checks(
         if grasped is not None:
             kept = clearance_of(groups, clearance, np.zeros((0, 3)) if points is None else points, grasped)
         plane, kept = plane_clearance_of(groups, clearance, kept)
-        kept = fitted_noted(groups, kept)
+        kept = fitted_noted(groups, kept, object_voxels)
         environment = Environment(robot, groups, grasped=object_voxels, hand_arm=hand_arm, shapes=obstacles,
                                   clearance=kept[0], plane_clearance=plane)  # fmt: skip
         return environment, groups, object_voxels, kept

@@ -44,6 +44,7 @@ from baseplace.world.sensor_resolution import (
     group_parts,
     group_size,
     margin,
+    object_contact,
 )
 from baseplace.world.state_filter import StateFilter
 from baseplace.world.support_plane import SUPPORT_PLANE, fit_support_slab
@@ -269,7 +270,8 @@ class Environment:
         point cells of :mod:`~baseplace.world.sensor_resolution`, coarse voxels, the exact plane, a
         fitted neighbour)."""
         margins: list[float] = []  # per collision pair
-        for name, group in [*groups.items(), (GRASPED, grasped)]:
+        contact = None if grasped is None else object_contact(grasped)  # cells: what the hand touches
+        for name, group in [*groups.items(), (GRASPED, contact)]:
             for part in () if group is None else group_parts(group):
                 if len(part) == 0:
                     continue

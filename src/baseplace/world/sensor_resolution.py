@@ -565,7 +565,9 @@ def fine_groups(
 
     Returns:
         The groups (each near voxel's points in fine cells of the same group, the object's points
-        in fine cells of the object, the plane's points as :data:`SUPPORT_PLANE`) and the object.
+        in fine cells of the object, the plane's points as :data:`SUPPORT_PLANE`) and the object:
+        its cells, led by its fitted whole shape when ``fit_shapes`` and one is accepted
+        (:func:`_object_shape`; :func:`object_contact` and :func:`object_obstacle` take either).
     """
     res = object_voxels.resolution
     p = np.asarray(points, dtype=float).reshape(-1, 3)
@@ -593,6 +595,9 @@ def fine_groups(
         if plane is not None:
             p, owner, is_object = p[~flat], owner[~flat], is_object[~flat]
     n = derived_clearance(plane, noise=noise)[0]
+    object_shape = None
+    if plane is not None and fit_shapes:
+        object_shape = _object_shape(p[is_object], plane.slab, n)
     shapes: list[tuple[str, FittedShape]] = []  # each fitted neighbour and the group of most of its points
     if plane is not None and fit_shapes:
         others = np.flatnonzero(~is_object)
@@ -616,6 +621,8 @@ def fine_groups(
             out["obstacle"] = _joined(out.get("obstacle"), *_cells(moved, smooth, mine_other, surface, reach))
         out[name] = _joined(out.get(name), coarse, *_cells(moved, smooth, mine, surface, reach))
     grasped_group = out.pop(_OBJECT)
+    if object_shape is not None:  # the object as a whole, where it is an obstacle (:func:`object_obstacle`)
+        grasped_group = (object_shape, *group_parts(grasped_group))
     for name, shape in shapes:
         out[name] = (*group_parts(out[name]), shape) if name in out else shape
     out = {name: g for name, g in out.items() if group_size(g)}
@@ -625,6 +632,40 @@ def fine_groups(
 
 
 _OBJECT = "\0object"
+
+
+def _object_shape(points: FloatArray, slab: SupportSlab, noise_margin: float) -> FittedShape | None:
+    """The grasped object's points (N, 3) [m] fitted as one whole shape standing on the plane, or None.
+
+    The points above the plane's band (``slab.margin``: below it they are the plane's, which the
+    exact plane stands for) are fitted and accepted as a neighbour's are
+    (:func:`~baseplace.world.neighbour_shapes.fit_neighbours`); the shape is taken only when one
+    accepted fit holds all of them (a handle, a second object touching it: no shape).
+    """
+    above = points[points[:, 2] - slab.height(points[:, :2]) > slab.margin]
+    fits = fit_neighbours(above, slab, noise_margin)
+    if len(fits) != 1 or len(fits[0][1]) != len(above):
+        return None
+    return fits[0][0]
+
+
+def object_contact(group: Group) -> Group:
+    """The grasped object's group where the hand may touch it: its cells, never its fitted shape.
+
+    At the grasp and in the approach the hand touches the measured surface: the cells of the
+    object's points (what only the hand may enter), as before any fit.
+    """
+    return tuple(part for part in group_parts(group) if not isinstance(part, FittedShape))
+
+
+def object_obstacle(group: Group) -> Group:
+    """The grasped object's group where nothing may touch it (the transit to the pre-grasp).
+
+    Its fitted shape when :func:`fine_groups` accepted one (kept at c - n + u, as a fitted
+    neighbour: :func:`margin`), which stands for all its points; else its cells.
+    """
+    shapes = [part for part in group_parts(group) if isinstance(part, FittedShape)]
+    return shapes[0] if shapes else group
 
 
 def denoised(points: ArrayLike, shift_limit: float | None = None) -> tuple[FloatArray, NDArray[np.bool_]]:
