@@ -88,8 +88,11 @@ PROTOCOLS = {
     "v1": ("docs/protocols/find_rate_v1.md", SEEDS, False),
     "v2": ("docs/protocols/find_rate_v2.md",
            SeedSplit(dev=tuple(range(25000, 25060)), held_out=tuple(range(25200, 25300))), True),
+    "v2-fresh": ("docs/protocols/find_rate_v2_fresh.md",
+                 SeedSplit(dev=tuple(range(25000, 25060)), held_out=tuple(range(25300, 25400))), True),
 }  # fmt: skip
-"""Per protocol: its file, its seeds, and whether the oracle demands a straight approach (v2)."""
+"""Per protocol: its file, its seeds, and whether the oracle demands a straight approach (v2, and
+v2-fresh: v2 on fresh held-out seeds, the library before and after a change)."""
 
 
 @dataclass(frozen=True)
@@ -616,7 +619,8 @@ def library_commit() -> dict[str, Any]:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--protocol", choices=tuple(PROTOCOLS), default="v1",
-                        help="v1: the oracle checks the grasp configuration; v2: and the straight approach")  # fmt: skip
+                        help="v1: the oracle checks the grasp configuration; v2: and the straight approach; "
+                             "v2-fresh: v2 on fresh held-out seeds")  # fmt: skip
     parser.add_argument("--seeds", choices=("dev", "held-out"), required=True)
     parser.add_argument("--scenes", type=int, default=None, help="only the first N scenes of the split")
     parser.add_argument("--seed", type=int, default=None, help="only this seed of the split")

@@ -113,6 +113,14 @@ def test_protocol_v2_has_its_own_file_and_fresh_held_out_seeds():
     assert find_rate.PROTOCOLS["v1"] == (find_rate.PROTOCOL_FILE, find_rate.SEEDS, False)
 
 
+def test_protocol_v2_fresh_runs_v2_on_held_out_seeds_no_find_rate_run_used():
+    file, split, with_approach = find_rate.PROTOCOLS["v2-fresh"]
+    _, v2, _ = find_rate.PROTOCOLS["v2"]
+    assert (ROOT / file).is_file() and with_approach
+    assert split.dev == v2.dev and len(split.held_out) == 100
+    assert not set(split.held_out) & (set(v2.held_out) | set(find_rate.SEEDS.held_out) | set(split.dev))
+
+
 def _pose(x, y, yaw):
     T = np.eye(4)
     T[:2, :2] = [[math.cos(yaw), -math.sin(yaw)], [math.sin(yaw), math.cos(yaw)]]
