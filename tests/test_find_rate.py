@@ -198,3 +198,20 @@ def test_an_unknown_protocol_is_refused_with_the_choices(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()[-1]
     assert "--protocol" in err and "'v1'" in err and "'v2'" in err and "v9" in err
     assert not (tmp_path / "x.json").exists()
+
+
+@pytest.mark.parametrize(
+    ("args", "says"),
+    [
+        (["--seeds", "held-out", "--noise", "0.004"], "dev split only"),
+        (["--seeds", "dev", "--noise", "-0.001"], "in (0, 0.05]"),
+        (["--seeds", "dev", "--noise", "nan"], "in (0, 0.05]"),
+    ],
+)
+def test_a_noise_off_the_protocol_is_for_dev_runs_only(tmp_path, capsys, args, says):
+    with pytest.raises(SystemExit) as exc:
+        find_rate.main(["--protocol", "v2", *args, "--out", str(tmp_path / "x.json")])
+    assert exc.value.code == 2
+    assert says in capsys.readouterr().err.strip().splitlines()[-1]
+    assert not (tmp_path / "x.json").exists()
+    assert find_rate.NOISE == 0.003  # the protocol's noise is left as it was
