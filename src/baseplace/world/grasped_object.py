@@ -235,12 +235,13 @@ class AutoSettings:
         depth: how far below the grasp point the object may reach [m].
         voxel_size: the collision voxels' edge [m]: the object keeps only the points in collision
             voxels that hold no other point.
-        shared: two points within ``link`` are linked only when at least this many other points
-            lie within ``link`` of both, or all but one of the fewer neighbours either has
-            (:func:`_shared_links`): one pair of noisy points across a gap does not join two
+        shared: a part of the cluster joined to the object only by links whose two points share
+            fewer than this many neighbours within ``link`` (and fewer than all but one of the
+            fewer either has: :func:`_shared_links`) is left out when it is an object's size
+            (:func:`_without_joined`): one pair of noisy points across a gap does not join two
             objects. At 4 mm noise single linkage joined a neighbour 3.1-3.5 cm from the bottle in
             3 of 30 find-rate dev scenes (25002, 25008, 25028), each through one pair of points
-            1.7-1.9 cm apart (session 20).
+            1.7-1.9 cm apart (session 20). 0: single linkage only.
     """
 
     link: float = 0.02
@@ -288,6 +289,7 @@ def grasped_cluster(
         The mask, or None when no point lies within ``seed_radius`` of the grasp point, the grasp
         point lies on the support itself, or the cluster is wider than ``max_size``.
     """
+    from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
 
@@ -313,7 +315,7 @@ def grasped_cluster(
     thin = local[keep]
     pairs = cKDTree(thin).query_pairs(s.link, output_type="ndarray")
     n = len(thin)
-    graph = _shared_links(pairs, n, s.shared)
+    graph = coo_matrix((np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])), shape=(n, n)).tocsr()
     seed = int(owner[start])
     z_seed = float(thin[seed, 2])
 
@@ -346,9 +348,44 @@ def grasped_cluster(
     mine = cluster(floor)
     if not mine.any() or _wider_than(thin[mine, :2], s.max_size):
         return None
+    if s.shared:
+        mine = _without_joined(mine, seed, graph, _shared_links(pairs, n, s.shared))
     chosen = mine[owner] & (local[:, 2] >= floor)
     out = np.zeros(len(p), dtype=bool)
     out[index[chosen]] = True
+    return out
+
+
+JOINED_PIECE = 60
+"""A part of the cluster this many thinned points large, joined to the seed's part only by links
+without shared neighbours, is another object (:func:`_without_joined`); a smaller one is the
+object's own noise and stays."""
+
+
+def _without_joined(mine: NDArray[np.bool_], seed: int, single: Any, shared: Any) -> NDArray[np.bool_]:
+    """The cluster ``mine`` (n,) less another object that only weak links join to the seed's part.
+
+    ``single``: every link (n, n); ``shared``: the links with shared neighbours
+    (:func:`_shared_links`). The seed's part under ``shared`` is the object when what it leaves of
+    ``mine`` holds a connected piece (under ``single``) of :data:`JOINED_PIECE` points or more: a
+    neighbour joined through a noisy pair. Otherwise ``mine`` stays whole, so a cluster single
+    linkage already keeps apart comes out exactly as before (and does not depend on which points
+    thinning kept).
+    """
+    from scipy.sparse.csgraph import connected_components
+
+    idx = np.flatnonzero(mine)
+    where = int(np.searchsorted(idx, seed))
+    _, labels = connected_components(shared[idx][:, idx], directed=False)
+    strong = labels == labels[where]
+    rest = idx[~strong]
+    if len(rest) < JOINED_PIECE:
+        return mine
+    _, pieces = connected_components(single[rest][:, rest], directed=False)
+    if np.bincount(pieces).max() < JOINED_PIECE:
+        return mine
+    out = np.zeros_like(mine)
+    out[idx[strong]] = True
     return out
 
 
