@@ -175,8 +175,8 @@ def _cylinder_cloud(x: float, y: float, r: float, z0: float, hb: float) -> np.nd
     return np.concatenate([side, top])
 
 
-def make_scene(seed: int) -> Scene:
-    """The scene of ``seed`` (docs/protocols/find_rate_v1.md, "Scenes")."""
+def make_scene(seed: int, noise: float = NOISE) -> Scene:
+    """The scene of ``seed`` (docs/protocols/find_rate_v1.md, "Scenes"); ``noise`` [m] per axis (dev runs only: ``--noise``)."""
     rng = np.random.default_rng([25, seed])
     kind = "side" if seed % 2 == 0 else "top-down"
     lx, ly, h = rng.uniform(0.8, 1.6), rng.uniform(0.6, 1.0), rng.uniform(0.70, 0.80)
@@ -223,7 +223,7 @@ def make_scene(seed: int) -> Scene:
     clean = [floor, _box_cloud(lx, ly, h), _cylinder_cloud(*centre, r, h, hb)]
     clean += [_cylinder_cloud(x, y, rn, h, hn) for x, y, rn, hn in neighbours]
     points = np.concatenate(clean)
-    cloud = points + rng.normal(0.0, NOISE, points.shape)
+    cloud = points + rng.normal(0.0, noise, points.shape)
     return Scene(
         seed, kind, (lx, ly, h), (float(centre[0]), float(centre[1]), r, hb), neighbours, grasp, cloud
     )
@@ -617,7 +617,6 @@ def library_commit() -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    global NOISE  # --noise (dev only) sets the scenes' noise for this run
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--protocol", choices=tuple(PROTOCOLS), default="v1",
                         help="v1: the oracle checks the grasp configuration; v2: and the straight approach; "
@@ -631,12 +630,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--oracle-from", default=None,
                         help="reuse the oracle's verdicts of an earlier results file of the same scenes")  # fmt: skip
     args = parser.parse_args(argv)
+    noise = NOISE if args.noise is None else args.noise
     if args.noise is not None:
         if args.seeds != "dev":
             parser.error("--noise is for the dev split only: a held-out run keeps its protocol's noise")
         if not (math.isfinite(args.noise) and 0.0 < args.noise <= 0.05):
             parser.error(f"--noise must be a noise level in metres in (0, 0.05], got {args.noise}")
-        NOISE = args.noise
     clock = RunClock()
     harness = git_commit(
         Path(__file__).resolve().parent
@@ -655,7 +654,7 @@ def main(argv: list[str] | None = None) -> int:
     oracle = Oracle(robot)
     rows = []
     for seed in seeds:
-        scene = make_scene(seed)
+        scene = make_scene(seed, noise)
         record = scene.record()
         if seed in earlier:
             if earlier[seed]["scene"] != record:
@@ -670,7 +669,7 @@ def main(argv: list[str] | None = None) -> int:
               flush=True)  # fmt: skip
     result = {
         "benchmark": "find_rate",
-        "protocol": {"file": protocol_file, "noise": NOISE, "levels": LEVELS, "ik_starts": IK_STARTS,
+        "protocol": {"file": protocol_file, "noise": noise, "levels": LEVELS, "ik_starts": IK_STARTS,
                      "ik_restarts": IK_RESTARTS, "oracle_reach_m": round(oracle.reach, 4),
                      "hand_links": oracle.hand_links, "settings": "place defaults, --object auto, default map"},
         "library": library_commit(),

@@ -131,3 +131,20 @@ def test_a_mug_with_a_handle_keeps_its_cells_in_the_transit():
     group, _, _ = _grasped(_mug_points(), mug, SEEDS[0])
     assert not any(isinstance(p, FittedShape) for p in group_parts(group))
     assert object_obstacle(group) is group
+
+
+def test_the_clearance_note_names_the_objects_shape_and_its_u():
+    """The JSON's clearance note states the object's fitted shape and u (the margin it keeps in the transit)."""
+    from baseplace.placement.pipeline import fitted_noted
+
+    group, n, _ = _grasped(_cylinder_points(BOTTLE), _bottle(), SEEDS[0])
+    shape = object_obstacle(group)
+    assert isinstance(shape, FittedShape)
+    kept = (n, "3 sigma", n)
+    assert fitted_noted({}, kept, group) == (
+        n,
+        f"3 sigma; the grasped object fitted as a cylinder (u {shape.error * 1e3:.1f} mm), kept c - n + u in the transit",
+        n,
+    )
+    unfitted, _, _ = _grasped(_cylinder_points(BOTTLE), _bottle(), SEEDS[0], fit_shapes=False)
+    assert fitted_noted({}, kept, unfitted) == kept

@@ -55,6 +55,7 @@ from baseplace.world.sensor_resolution import (
     derived_clearance,
     derived_plane_clearance,
     group_parts,
+    object_obstacle,
     scene_noise,
     surface_noise,
 )
@@ -436,14 +437,14 @@ def fitted_noted(
     shapes = [
         part for group in groups.values() for part in group_parts(group) if isinstance(part, FittedShape)
     ]
-    own = [] if grasped is None else [p for p in group_parts(grasped) if isinstance(p, FittedShape)]
+    own = None if grasped is None else object_obstacle(grasped)
     note = kept[1]
     if shapes:
         each = ", ".join(f"{shape.kind} u {shape.error * 1e3:.1f} mm" for shape in shapes)
         note += f"; {len(shapes)} neighbours fitted as whole shapes, kept c - n + u: {each}"
-    if own:
+    if isinstance(own, FittedShape):
         note += (
-            f"; the grasped object fitted as a {own[0].kind} (u {own[0].error * 1e3:.1f} mm), "
+            f"; the grasped object fitted as a {own.kind} (u {own.error * 1e3:.1f} mm), "
             "kept c - n + u in the transit"
         )
     return kept[0], note, kept[2]

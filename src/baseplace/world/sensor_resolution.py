@@ -596,10 +596,9 @@ def fine_groups(
             p, owner, is_object = p[~flat], owner[~flat], is_object[~flat]
     n = derived_clearance(plane, noise=noise)[0]
     object_shape = None
-    if plane is not None and fit_shapes:
-        object_shape = _object_shape(p[is_object], plane.slab, n)
     shapes: list[tuple[str, FittedShape]] = []  # each fitted neighbour and the group of most of its points
     if plane is not None and fit_shapes:
+        object_shape = _object_shape(p[is_object], plane.slab, n)
         others = np.flatnonzero(~is_object)
         fitted = np.zeros(len(p), dtype=bool)
         for shape, rows in fit_neighbours(p[others], plane.slab, n):
