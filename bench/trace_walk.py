@@ -52,6 +52,7 @@ class Walk:
         self.on = False
         self.calls: Counter[tuple[str, str, int]] = Counter()  # code run by calls once imported
         self.imports: Counter[tuple[str, str, int]] = Counter()  # code run while a module is imported
+        self.entries: set[tuple[str, str, str]] = set()  # (file, caller file:function, callee function)
         self.lock = threading.Lock()
 
     def hook(self, frame: FrameType, event: str, arg: Any) -> None:
@@ -66,8 +67,15 @@ class Walk:
         ):
             at = at.f_back
         key = (code.co_filename, code.co_qualname, code.co_firstlineno)
+        back = frame.f_back
         with self.lock:
             (self.calls if at is None else self.imports)[key] += 1
+            if at is None and back is not None and back.f_code.co_filename != code.co_filename:
+                caller = back.f_code
+                if caller.co_filename.startswith(self.roots):
+                    self.entries.add(
+                        (code.co_filename, f"{caller.co_filename}:{caller.co_qualname}", code.co_qualname)
+                    )
 
     def start(self) -> None:
         threading.setprofile(self.hook)
@@ -99,6 +107,9 @@ class Walk:
             for k in sorted(entered):
                 how = f"x{self.calls[k]}" if k in self.calls else "at import"
                 out["files"][rel(k[0])].append(f"{k[1]}:{k[2]} {how}")
+            out["entered_from"] = {rel(k[0]): [] for k in sorted(entered)}
+            for file, caller, callee in sorted(self.entries):
+                out["entered_from"][rel(file)].append(f"{callee} <- {rel(caller)}")
         return out
 
 
@@ -139,7 +150,9 @@ def run_service(walk: Walk, cloud: str, targets: list[str], seed: int, queries: 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument(
-        "--list", action="store_true", help="also list the files entered and the functions entered in each"
+        "--list",
+        action="store_true",
+        help="also list the files entered, the functions entered in each, and where each file is entered from",
     )
     sub = parser.add_subparsers(dest="front", required=True)
     cli = sub.add_parser("cli", help="baseplace ARGV in this process")
