@@ -19,6 +19,7 @@ from baseplace.world.environment import Environment, contact_groups
 from baseplace.world.grasped_object import GraspedObject
 from baseplace.world.sensor_resolution import FINE, PLANE_DEPTH, SupportPlane
 from baseplace.world.support_plane import RADIUS, SUPPORT_PLANE, fit_support_slab
+from conftest import SHARED
 
 RES = 0.025
 TARGET = [0.75, -0.15, 0.85, 0.0, 0.0, 0.0]  # side grasp in front of the base (as tests/test_motion.py)
@@ -153,8 +154,16 @@ def test_every_support_point_lies_in_a_cell_or_on_the_exact_plane(top):
     cells = [c for g in [*groups.values(), object_group] for c in _cells(g)]
     sets = _key_sets(cells)
     on_plane = _in_hull(table[:, :2], plane.hull) & (np.abs(table[:, 2] - top) <= 5 * sigma)
-    for p, flat in zip(table, on_plane, strict=True):  # each point is in a cell, or on the plane
-        assert flat or any(tuple(np.floor(p / r).astype(np.int64)) in keys for r, keys in sets.items())
+    # each point is on the plane, in a voxel, or moved onto its neighbours' plane (within 3 sigma) in a
+    # fine cell (where the surface is uneven, support_plane.uneven_points, its points stay such cells)
+    fine = cKDTree(np.concatenate([c.centres for c in cells if c.resolution <= FINE]))
+    reach = NOISE_REACH * 1.15 * sigma + FINE * np.sqrt(3) / 2
+    for p, flat in zip(table, on_plane, strict=True):
+        assert (
+            flat
+            or any(tuple(np.floor(p / r).astype(np.int64)) in keys for r, keys in sets.items() if r > FINE)
+            or fine.query(p)[0] <= reach
+        )
     # never more than the cloud was: every voxel is one of the cloud's, every fine cell holds a point
     # moved onto its neighbours' plane, so it lies within 3 sigma (15 % for the measured noise) of one
     original = {tuple(k) for k in VoxelMap.from_points(cloud, RES).keys}
@@ -180,7 +189,7 @@ def test_every_support_point_lies_in_a_cell_or_on_the_exact_plane(top):
 
 def test_a_surface_that_is_not_planar_is_no_plane_its_points_stay_cells():
     rng = np.random.default_rng(5)
-    table, cloud, obj = _scene(0.7, rng, sigma=0.012)  # 12 mm noise: 99th percentile above 1 cm
+    table, cloud, obj = _scene(0.7, rng, sigma=0.012)  # 12 mm noise: more than MAX_SIGMA (5 mm)
     groups, object_group = _models(cloud, obj, slab=True)
     plain, _ = _models(cloud, obj, slab=False)
     assert SUPPORT_PLANE not in groups
@@ -194,6 +203,112 @@ def test_a_surface_that_is_not_planar_is_no_plane_its_points_stay_cells():
         assert any(
             tuple(np.floor(p / r).astype(np.int64)) in keys for r, keys in sets.items() if r > FINE
         ) or (fine.query(p)[0] <= reach)
+
+
+@pytest.mark.parametrize("sigma", [0.002, 0.003, 0.004])
+def test_a_flat_table_is_a_plane_at_every_noise_the_band_holds(sigma):
+    """A flat table top is fitted within 1 mm of its true height at 2-4 mm of noise, ten draws each
+    (5 mm is MAX_SIGMA, the band's limit).
+    Until session 20 the 99th percentile of the residuals above the plane had to stay under 10 mm,
+    whatever the noise: at 4 mm noise it was refused in 28 of 30 dev scenes, at 5 mm in all
+    (bench/results/support_plane_ratios_dev.json)."""
+    for seed in range(10):
+        _, cloud, obj = _scene(0.7, np.random.default_rng(seed), sigma)
+        slab = fit_support_slab(cloud, obj.footprint_distance, obj.bottom, RES)
+        assert slab is not None, f"{sigma * 1e3:.0f} mm noise, seed {seed}: no plane"
+        assert np.all(np.abs(slab.height(slab.hull) - 0.7) < 1e-3)
+        assert abs(slab.sigma - sigma) < 0.2 * sigma  # the noise, read back
+
+
+def _mat(cloud: np.ndarray) -> np.ndarray:
+    """(N,) the table points of a 24 x 24 cm mat beside the object in :func:`_scene`'s cloud."""
+    return (np.abs(cloud[:, 0] - 0.62) < 0.12) & (np.abs(cloud[:, 1] + 0.3) < 0.12) & (cloud[:, 2] < 0.72)
+
+
+def test_a_mat_raised_above_the_noise_band_stays_cells_over_an_exact_plane():
+    """A mat raised 2 cm (3 mm noise): the table is still its plane, within 1 mm of the true top, and
+    the slab (up to about 4 sigma over the plane) takes at most the mat's noise tail, its points
+    2.7 sigma or more under the mat's top (0.35 %; at most 1 % here): the rest stay cells, obstacles
+    above the plane."""
+    for seed in range(5):
+        _, cloud, obj = _scene(0.7, np.random.default_rng(seed), 0.003)
+        mat = _mat(cloud)
+        raised = cloud + np.where(mat[:, None], [0.0, 0.0, 0.02], 0.0)
+        slab = fit_support_slab(raised, obj.footprint_distance, obj.bottom, RES)
+        assert slab is not None, f"seed {seed}: no plane"
+        assert np.all(np.abs(slab.height(slab.hull) - 0.7) < 1e-3)
+        assert slab.contains(raised[mat]).sum() <= max(1, 0.01 * mat.sum())
+
+
+@pytest.mark.parametrize("height", [0.006, 0.009, 0.012])
+@pytest.mark.parametrize("sigma", [0.002, 0.003, 0.004])
+def test_a_mat_raised_within_the_noise_band_is_never_taken_for_the_plane(height, sigma):
+    """A 24 x 24 cm mat (7 % of the fitted points) raised 6-12 mm at 2-4 mm noise, three draws each.
+    The fit alone passes such a mat (a 9 mm mat at 3 mm noise moves the 99th percentile above the
+    plane to 3.1-3.25 sigma, under P99_SIGMAS), so the plane's points are tested where they are:
+    - where the mat lies within the plane's band, every one of its points there is uneven
+      (uneven_points, with what stands more than two margins above the plane, as fine_groups
+      calls it);
+    - in the model the mat's true top (its grid points before the noise) has a cell within a sample
+      spacing (1 cm) plus 3 sigma (and the cell's half diagonal) throughout, where the exact plane
+      alone would leave up to 12 cm free."""
+    from baseplace.world.support_plane import uneven_points
+
+    (x0, _), (y0, _) = TABLE_XY
+    for seed in range(3):
+        _, cloud, obj = _scene(0.7, np.random.default_rng(seed), sigma)
+        mat = _mat(cloud)
+        raised = cloud + np.where(mat[:, None], [0.0, 0.0, height], 0.0)
+        slab = fit_support_slab(raised, obj.footprint_distance, obj.bottom, RES)
+        if slab is None:
+            continue
+        r = raised[:, 2] - slab.height(raised[:, :2])
+        d = obj.footprint_distance(raised[:, :2])
+        band = (d > 0) & (d <= RADIUS) & (np.abs(r) <= slab.margin)
+        uneven = uneven_points(slab, raised[band], raised[(d <= RADIUS) & (r > 2 * slab.margin)])
+        if height <= slab.margin:  # a mat above the band is cells but for its noise tail (checked below)
+            assert uneven[mat[band]].all(), f"seed {seed}: {int((~uneven[mat[band]]).sum())} mat points even"
+        groups, object_group = _models(raised, obj, slab=True)
+        assert SUPPORT_PLANE in groups
+        cells = [c for g in [*groups.values(), object_group] for c in _cells(g) if len(c)]
+        trees = [(cKDTree(c.centres), c.resolution * np.sqrt(3) / 2) for c in cells]
+        reach = 0.01 + NOISE_REACH * 1.15 * sigma
+        true = np.c_[
+            x0 + 0.01 * np.round((cloud[mat, 0] - x0) / 0.01),
+            y0 + 0.01 * np.round((cloud[mat, 1] - y0) / 0.01),
+            np.full(mat.sum(), 0.7 + height),
+        ]
+        true = true[obj.footprint_distance(true[:, :2]) <= RADIUS - RES]  # the rest is voxels
+        covered = np.zeros(len(true), dtype=bool)
+        for tree, half in trees:
+            covered |= tree.query(true)[0] <= reach + half
+        assert covered.all(), f"seed {seed}: the mat's top left to the plane at {true[~covered][:3]}"
+
+
+def test_a_real_table_is_mostly_its_plane():
+    """The PCL stereo table (0.7 mm noise; its cells' mean residuals reach 2.4 mm, the table's own
+    unevenness): the exact plane stands for at least 95 % of the plane's points (97.3 % measured)."""
+    from baseplace.terrain.io import load_cloud, load_transform
+    from baseplace.world.support_plane import uneven_points
+
+    mug = SHARED / "pointclouds" / "table_scene_mug_stereo_textured.pcd"
+    if not mug.exists():
+        pytest.skip("needs the shared PCL data")
+    sensor = load_cloud(mug).points
+    sensor = sensor[np.all(np.isfinite(sensor), axis=1)]
+    T = load_transform("0.0162 -0.8378 -0.5458")
+    world = sensor @ T[:3, :3].T + T[:3, 3]
+
+    def distance(xy: np.ndarray) -> np.ndarray:  # the mug's footprint: a 5 cm disc
+        return np.maximum(np.hypot(xy[:, 0] - 0.06, xy[:, 1] - 0.605) - 0.05, 0.0)
+
+    slab = fit_support_slab(world, distance, -0.529, RES)
+    assert slab is not None and slab.sigma < 0.001
+    r = world[:, 2] - slab.height(world[:, :2])
+    d = distance(world[:, :2])
+    plane = world[(d > 0) & (d <= RADIUS) & (np.abs(r) <= slab.margin)]
+    uneven = uneven_points(slab, plane)
+    assert uneven.mean() <= 0.05
 
 
 def _table_with_sides(top: float, rng: np.random.Generator, sigma: float = 0.003):
@@ -242,5 +357,12 @@ def test_the_plane_kept_beside_side_faces_loses_no_point():
         & (table[:, 2] <= top + 5 * sigma)
         & (table[:, 2] >= top - PLANE_DEPTH + 1e-3)
     )
+    # or moved onto its neighbours' plane (within 3 sigma) in a fine cell, where the surface is uneven
+    fine = cKDTree(np.concatenate([c.centres for c in cells if c.resolution <= FINE]))
+    reach = NOISE_REACH * 1.15 * sigma + FINE * np.sqrt(3) / 2
     for p, inside in zip(table, in_prism, strict=True):
-        assert inside or any(tuple(np.floor(p / r).astype(np.int64)) in keys for r, keys in sets.items())
+        assert (
+            inside
+            or any(tuple(np.floor(p / r).astype(np.int64)) in keys for r, keys in sets.items() if r > FINE)
+            or fine.query(p)[0] <= reach
+        )

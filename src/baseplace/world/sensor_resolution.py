@@ -76,7 +76,14 @@ from baseplace.geometry.poses import FloatArray
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.grasped_object import GraspedObject, rows_in
 from baseplace.world.neighbour_shapes import FittedShape, fit_neighbours
-from baseplace.world.support_plane import CLEARANCE_SIGMAS, DEPTH, RADIUS, SUPPORT_PLANE, SupportSlab
+from baseplace.world.support_plane import (
+    CLEARANCE_SIGMAS,
+    DEPTH,
+    RADIUS,
+    SUPPORT_PLANE,
+    SupportSlab,
+    uneven_points,
+)
 
 FINE = 0.00125
 """Cell edge [m] of the points near the object (each put onto its local plane first, :func:`denoised`):
@@ -500,9 +507,9 @@ def plane_sigma(slab: SupportSlab, noise: SurfaceNoise | None) -> float:
 
     The fit (:func:`~baseplace.world.support_plane.fit_support_slab`) keeps the points within 15 mm
     of the densest height layer and up to half a voxel above the object's bottom, and refuses a fit
-    whose 99th percentile exceeds 1 cm: with noise of more than about 5 mm its residuals are cut to
-    about +-10 mm, and their sigma saturates near 7 mm (6.8-7.7 mm read on seed 000's clouds with
-    25 mm noise). The surfaces' own noise (:func:`surface_noise`) is read without such a window.
+    whose sigma exceeds 5 mm (:data:`~baseplace.world.support_plane.MAX_SIGMA`): within that window
+    larger noise is cut off. The surfaces' own noise (:func:`surface_noise`) is read without such a
+    window.
     """
     return slab.sigma if noise is None else max(slab.sigma, noise.worst)
 
@@ -591,6 +598,8 @@ def fine_groups(
     if slab is not None:
         r = p[:, 2] - slab.height(p[:, :2])
         flat = ~is_object & (r <= slab.margin) & (r >= -slab.depth)
+        # where the surface is raised, its points stay cells; what stands on it has feet in its band
+        flat[flat] = ~uneven_points(slab, p[flat], p[r > 2 * slab.margin])
         plane = _plane(slab, p[flat])
         if plane is not None:
             p, owner, is_object = p[~flat], owner[~flat], is_object[~flat]
