@@ -131,6 +131,16 @@ def _key_sets(cells: list[VoxelMap]) -> dict[float, set[tuple[int, ...]]]:
     return out
 
 
+def _in_cells(points: np.ndarray, cells: list[VoxelMap], sigma: float) -> np.ndarray:
+    """Oracle: (N,) True for the points (N, 3) in a voxel, or moved onto their neighbours' plane (within
+    3 sigma, 15 % for the measured noise) in a fine cell."""
+    sets = _key_sets(cells)
+    voxel = np.array([any(tuple(np.floor(p / r).astype(np.int64)) in keys for r, keys in sets.items() if r > FINE)
+                      for p in points])  # fmt: skip
+    fine = cKDTree(np.concatenate([c.centres for c in cells if c.resolution <= FINE]))
+    return voxel | (fine.query(points)[0] <= NOISE_REACH * 1.15 * sigma + FINE * np.sqrt(3) / 2)
+
+
 def _in_hull(xy: np.ndarray, hull: np.ndarray) -> np.ndarray:
     """Oracle: inside the convex polygon (H, 2), either orientation (cross products of every edge)."""
     e = np.roll(hull, -1, axis=0) - hull
@@ -152,18 +162,10 @@ def test_every_support_point_lies_in_a_cell_or_on_the_exact_plane(top):
     assert np.all(np.abs(plane.slab.height(corners) - top) < 1e-3)
     assert plane.slab.sigma == pytest.approx(sigma, rel=0.15)  # the noise, measured robustly
     cells = [c for g in [*groups.values(), object_group] for c in _cells(g)]
-    sets = _key_sets(cells)
     on_plane = _in_hull(table[:, :2], plane.hull) & (np.abs(table[:, 2] - top) <= 5 * sigma)
-    # each point is on the plane, in a voxel, or moved onto its neighbours' plane (within 3 sigma) in a
-    # fine cell (where the surface is uneven, support_plane.uneven_points, its points stay such cells)
-    fine = cKDTree(np.concatenate([c.centres for c in cells if c.resolution <= FINE]))
-    reach = NOISE_REACH * 1.15 * sigma + FINE * np.sqrt(3) / 2
-    for p, flat in zip(table, on_plane, strict=True):
-        assert (
-            flat
-            or any(tuple(np.floor(p / r).astype(np.int64)) in keys for r, keys in sets.items() if r > FINE)
-            or fine.query(p)[0] <= reach
-        )
+    # each point is on the plane or in a cell (where the surface is uneven, support_plane.uneven_points,
+    # its points stay cells)
+    assert np.all(on_plane | _in_cells(table, cells, sigma))
     # never more than the cloud was: every voxel is one of the cloud's, every fine cell holds a point
     # moved onto its neighbours' plane, so it lies within 3 sigma (15 % for the measured noise) of one
     original = {tuple(k) for k in VoxelMap.from_points(cloud, RES).keys}
@@ -195,14 +197,7 @@ def test_a_surface_that_is_not_planar_is_no_plane_its_points_stay_cells():
     assert SUPPORT_PLANE not in groups
     assert set(groups) <= set(plain)
     cells = [c for g in [*groups.values(), object_group] for c in _cells(g)]
-    sets = _key_sets(cells)
-    # each point is in a voxel, or moved onto its neighbours' plane (within 3 sigma) in a fine cell
-    fine = cKDTree(np.concatenate([c.centres for c in cells if c.resolution <= FINE]))
-    reach = NOISE_REACH * 1.15 * 0.012 + FINE * np.sqrt(3) / 2
-    for p in table:
-        assert any(
-            tuple(np.floor(p / r).astype(np.int64)) in keys for r, keys in sets.items() if r > FINE
-        ) or (fine.query(p)[0] <= reach)
+    assert _in_cells(table, cells, 0.012).all()
 
 
 @pytest.mark.parametrize("sigma", [0.002, 0.003, 0.004])
@@ -351,18 +346,9 @@ def test_the_plane_kept_beside_side_faces_loses_no_point():
     assert isinstance(plane, SupportPlane)
     # each point of the top and of the side faces is in a cell or inside the plane's prism
     cells = [c for g in [*groups.values(), object_group] for c in _cells(g)]
-    sets = _key_sets(cells)
     in_prism = (
         _in_hull(table[:, :2], plane.hull)
         & (table[:, 2] <= top + 5 * sigma)
         & (table[:, 2] >= top - PLANE_DEPTH + 1e-3)
     )
-    # or moved onto its neighbours' plane (within 3 sigma) in a fine cell, where the surface is uneven
-    fine = cKDTree(np.concatenate([c.centres for c in cells if c.resolution <= FINE]))
-    reach = NOISE_REACH * 1.15 * sigma + FINE * np.sqrt(3) / 2
-    for p, inside in zip(table, in_prism, strict=True):
-        assert (
-            inside
-            or any(tuple(np.floor(p / r).astype(np.int64)) in keys for r, keys in sets.items() if r > FINE)
-            or fine.query(p)[0] <= reach
-        )
+    assert np.all(in_prism | _in_cells(table, cells, sigma))
