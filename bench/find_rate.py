@@ -90,9 +90,15 @@ PROTOCOLS = {
            SeedSplit(dev=tuple(range(25000, 25060)), held_out=tuple(range(25200, 25300))), True),
     "v2-fresh": ("docs/protocols/find_rate_v2_fresh.md",
                  SeedSplit(dev=tuple(range(25000, 25060)), held_out=tuple(range(25300, 25400))), True),
+    "v2-plane": ("docs/protocols/find_rate_v2_plane.md",
+                 SeedSplit(dev=tuple(range(25000, 25060)), held_out=tuple(range(25400, 25500))), True),
+    "v2-plane-4mm": ("docs/protocols/find_rate_v2_plane.md",
+                     SeedSplit(dev=tuple(range(25000, 25060)), held_out=tuple(range(25500, 25600))), True),
 }  # fmt: skip
 """Per protocol: its file, its seeds, and whether the oracle demands a straight approach (v2, and
-v2-fresh: v2 on fresh held-out seeds, the library before and after a change)."""
+v2-fresh and v2-plane: v2 on fresh held-out seeds, the library before and after a change)."""
+NOISES = {"v2-plane-4mm": 0.004}
+"""A protocol's noise per axis [m], where it is not :data:`NOISE`."""
 
 
 @dataclass(frozen=True)
@@ -620,17 +626,17 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--protocol", choices=tuple(PROTOCOLS), default="v1",
                         help="v1: the oracle checks the grasp configuration; v2: and the straight approach; "
-                             "v2-fresh: v2 on fresh held-out seeds")  # fmt: skip
+                             "v2-fresh, v2-plane, v2-plane-4mm (4 mm noise): v2 on fresh held-out seeds")  # fmt: skip
     parser.add_argument("--seeds", choices=("dev", "held-out"), required=True)
     parser.add_argument("--scenes", type=int, default=None, help="only the first N scenes of the split")
     parser.add_argument("--seed", type=int, default=None, help="only this seed of the split")
     parser.add_argument("--out", required=True, help="results JSON")
     parser.add_argument("--noise", type=float, default=None, metavar="METRES",
-                        help=f"dev split only: the cloud's noise per axis instead of the protocol's {NOISE} m")  # fmt: skip
+                        help="dev split only: the cloud's noise per axis instead of the protocol's")  # fmt: skip
     parser.add_argument("--oracle-from", default=None,
                         help="reuse the oracle's verdicts of an earlier results file of the same scenes")  # fmt: skip
     args = parser.parse_args(argv)
-    noise = NOISE if args.noise is None else args.noise
+    noise = NOISES.get(args.protocol, NOISE) if args.noise is None else args.noise
     if args.noise is not None:
         if args.seeds != "dev":
             parser.error("--noise is for the dev split only: a held-out run keeps its protocol's noise")

@@ -121,6 +121,21 @@ def test_protocol_v2_fresh_runs_v2_on_held_out_seeds_no_find_rate_run_used():
     assert not set(split.held_out) & (set(v2.held_out) | set(find_rate.SEEDS.held_out) | set(split.dev))
 
 
+@pytest.mark.parametrize("name", ["v2-plane", "v2-plane-4mm"])
+def test_protocol_v2_plane_runs_v2_on_held_out_seeds_no_find_rate_run_used(name):
+    file, split, with_approach = find_rate.PROTOCOLS[name]
+    used = set(find_rate.SEEDS.held_out)
+    for other in ("v2", "v2-fresh"):
+        used |= set(find_rate.PROTOCOLS[other][1].held_out)
+    assert (ROOT / file).is_file() and with_approach and len(split.held_out) == 100
+    assert split.dev == find_rate.PROTOCOLS["v2"][1].dev
+    assert not set(split.held_out) & (used | set(split.dev))
+    assert not set(find_rate.PROTOCOLS["v2-plane"][1].held_out) & set(
+        find_rate.PROTOCOLS["v2-plane-4mm"][1].held_out
+    )
+    assert find_rate.NOISES.get(name, find_rate.NOISE) == {"v2-plane": 0.003, "v2-plane-4mm": 0.004}[name]
+
+
 def _pose(x, y, yaw):
     T = np.eye(4)
     T[:2, :2] = [[math.cos(yaw), -math.sin(yaw)], [math.sin(yaw), math.cos(yaw)]]
