@@ -68,22 +68,29 @@ def test_a_noise_free_cloud_keeps_the_floor():
 
 
 def test_the_support_planes_sigma_is_not_truncated_by_its_fit():
-    """The fit keeps points within 15 mm of the densest layer and up to half a voxel above the object's
-    bottom, so with 25 mm of noise its residuals are cut to about +-10 mm and their sigma read 6.8-7.7 mm
-    (seed 000's dev scenes): the derived clearance must stand on the untrimmed noise."""
-    found = 0
+    """The fit keeps points within 15 mm of the densest layer (and up to half a voxel above the
+    object's bottom), so larger noise is cut off there: with 25 mm of noise the residuals read
+    6.8-7.7 mm (seed 000's dev scenes). Such a fit is refused (sigma above MAX_SIGMA, 5 mm; before
+    session 20 some passed the 10 mm percentile test with their sigma truncated). At 5 mm, the
+    band's limit, the sigma reads 4.8-5.0 mm; the derived clearance stands on the untrimmed noise
+    (the surfaces' noise near the object), within 5 %."""
     for seed in range(12):
         p = _box_on_table(0.025, 0.0, seed)
         obj = GraspedObject.box([0.0, 0.0, TABLE - 0.0025 + HEIGHT / 2], [2 * BOX, 2 * BOX, HEIGHT])
+        assert fit_support_slab(p, obj.footprint_distance, obj.bottom, 0.025) is None
+    found = 0
+    for seed in range(12):
+        p = _box_on_table(0.005, 0.0, seed)
+        obj = GraspedObject.box([0.0, 0.0, TABLE - 0.0025 + HEIGHT / 2], [2 * BOX, 2 * BOX, HEIGHT])
         slab = fit_support_slab(p, obj.footprint_distance, obj.bottom, 0.025)
-        if slab is None:  # the fit refuses most such clouds (99th percentile above 1 cm)
+        if slab is None:
             continue
         found += 1
-        assert slab.sigma < 0.015  # the truncation this test is about
+        assert slab.sigma < 0.005  # the truncation this test is about
         near = p[obj.footprint_distance(p[:, :2]) <= 0.5]
         metres, note = derived_clearance(SupportPlane(slab, slab.hull, slab.points), near)
-        assert metres / CLEARANCE_SIGMAS == pytest.approx(0.025, rel=0.2), note
-    assert found
+        assert metres / CLEARANCE_SIGMAS == pytest.approx(0.005, rel=0.05), note
+    assert found >= 10
 
 
 def _obstacle_cells_over(groups, obj, above: float) -> int:
