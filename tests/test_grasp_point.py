@@ -155,3 +155,20 @@ def test_explain_with_a_grasp_point_checks_the_tcp_target_behind_it(tiago, tiago
     assert r.returncode == 2 and r.stderr.strip().splitlines() == [
         "error: give --target (the TCP pose) or --grasp-point (the point between the fingertips), not both"
     ]
+
+
+def test_the_grasp_offset_and_the_stowed_joints_are_read_once_per_arm_and_kept_read_only(tiago):
+    """The grasp frame's offset is read from the URDF once per arm (not per query): the same array
+    each time, read only, so that no caller can change it for the next query; pinocchio FK of the
+    two frames is the oracle. The arm carries its spec's stowed joint values."""
+    from baseplace.placement.motion import stowed_configuration
+
+    T = tiago.T_tcp_grasp()
+    assert T is tiago.T_tcp_grasp(tiago.spec.default_arm) and not T.flags.writeable
+    with pytest.raises(ValueError):
+        T[0, 3] = 1.0
+    spec = tiago.spec.arm()
+    assert np.allclose(T, tiago.frame_pose(tiago.q_reference, spec.grasp_frame, relative_to=spec.tcp_frame))
+    arm = tiago.arm()
+    assert arm.stowed is not None and np.array_equal(arm.stowed, spec.stowed)
+    assert np.array_equal(stowed_configuration(tiago, arm), spec.stowed)

@@ -161,9 +161,8 @@ def _prismatic(model: object, joint: int) -> bool:
 
 def stowed_configuration(robot: Robot, arm: Arm) -> FloatArray:
     """The arm's stowed joint values (n,): its spec's (``ArmSpec.stowed``), else the reference values in limits."""
-    values = robot.spec.arm(arm.name).stowed
-    if values is not None and len(values) == arm.n_joints:
-        return np.array(values, dtype=float)
+    if arm.stowed is not None:
+        return np.array(arm.stowed, dtype=float)
     return np.clip(arm.from_pinocchio(robot.q_reference), arm.lower, arm.upper)
 
 

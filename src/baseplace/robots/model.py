@@ -108,6 +108,8 @@ class Arm:
         q_width: (n,) 1, or 2 for unbounded joints stored as (cos, sin).
         approach_axis: (3,) unit vector in the TCP frame pointing out of the hand (the spec's
             ``approach``, default x).
+        stowed: (n,) the spec's stowed joint values (``ArmSpec.stowed``), or None (none given, or
+            not one per joint).
     """
 
     robot_name: str
@@ -125,6 +127,7 @@ class Arm:
     q_index: NDArray[np.int64]
     q_width: NDArray[np.int64]
     approach_axis: FloatArray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0]))
+    stowed: FloatArray | None = None
 
     @property
     def n_joints(self) -> int:
@@ -182,6 +185,7 @@ class Robot:
         for joint in [*self.spec.joint_limits, *self.spec.reference]:
             self._joint_id(joint)
         self._arms: dict[str, Arm] = {}
+        self._tcp_grasp: dict[str, FloatArray] = {}
 
     @property
     def name(self) -> str:
@@ -304,6 +308,9 @@ class Robot:
             q_index=np.array(q_index, dtype=np.int64),
             q_width=np.array(q_width, dtype=np.int64),
             approach_axis=np.array(spec.approach_vector, dtype=float),
+            stowed=None
+            if spec.stowed is None or len(spec.stowed) != len(names)
+            else np.array(spec.stowed, dtype=float),
         )
 
     def T_tcp_grasp(self, arm_name: str | None = None) -> FloatArray:
@@ -314,6 +321,14 @@ class Robot:
         Raises:
             InputError: the grasp frame is not in the URDF, or moves relative to the TCP.
         """
+        key = self.spec.default_arm if arm_name is None else arm_name
+        if key not in self._tcp_grasp:  # read once per arm (read only)
+            T = self._read_tcp_grasp(key)
+            T.flags.writeable = False
+            self._tcp_grasp[key] = T
+        return self._tcp_grasp[key]
+
+    def _read_tcp_grasp(self, arm_name: str) -> FloatArray:
         spec = self.spec.arm(arm_name)
         if spec.grasp_frame is None:
             return np.eye(4)

@@ -818,9 +818,8 @@ class StateFilter:
             a = self.arm
             rng = np.random.default_rng(0)
             Q = a.sample(rng, 200)
-            stowed = self.robot.spec.arm(a.name).stowed
-            if stowed is not None and len(stowed) == a.n_joints:
-                near = np.array(stowed, dtype=float) + rng.normal(0.0, STOWED_SPREAD, (200, a.n_joints))
+            if a.stowed is not None:
+                near = a.stowed + rng.normal(0.0, STOWED_SPREAD, (200, a.n_joints))
                 Q = np.vstack([Q, np.clip(near, a.lower, a.upper)])
             Q = np.ascontiguousarray(Q)
             none = _no_tables(len(self._self_pairs))
