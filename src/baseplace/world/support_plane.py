@@ -23,8 +23,8 @@ table's side faces do near its edge.
 The checks of ``place`` no longer cut voxels down to the slab (issue 25): they take the fit's plane
 as an exact plane and its noise (:attr:`SupportSlab.sigma`) for the clearance
 (:mod:`baseplace.world.sensor_resolution`), except where the surface is raised within the plane's
-band (:func:`uneven_points`: a mat, a board), whose points stay cells. :func:`with_support_slab` stays for the experiments
-that measured the slab (``baseplace_experiments.execution_experiment``).
+band (:func:`uneven_points`: a mat, a board), whose points stay cells. :func:`with_support_slab`
+stays for the experiments that measured the slab (``baseplace_experiments.execution_experiment``).
 """
 
 from __future__ import annotations
@@ -217,9 +217,10 @@ def uneven_points(slab: SupportSlab, points: ArrayLike, standing: ArrayLike = ()
     uneven unless its mean is well below; one short of half the points it should hold reads the
     window twice as wide), and so is every cell within a quarter window of one whose mean is more
     than 3 standard errors above the plane; every point in an uneven cell is. A cell with no point
-    counted around it is not: its points are feet (below) or lie under the plane. A raised region wider than a window is uneven throughout and up to
-    its edges (a window half on it reads half its height); a narrower one is uneven when its height
-    times its share of the window exceeds about :data:`UNEVEN` / 3.
+    counted around it is not: its points are feet (below) or lie under the plane. A raised region
+    wider than a window is uneven throughout and up to its edges (a window half on it reads half its
+    height); a narrower one is uneven when its height times its share of the window exceeds about
+    :data:`UNEVEN` / 3.
 
     ``standing`` (M, 3): points of things standing on the plane (the caller's: those more than two
     margins above it). The cells holding one, and their neighbours, are their feet: the foot of a
@@ -261,10 +262,10 @@ def uneven_points(slab: SupportSlab, points: ArrayLike, standing: ArrayLike = ()
     s = np.where(short, uniform_filter(total, wide, mode="constant") * wide**2, s)
     m = np.maximum(n, 1.0)
     mean, error = s / m, sigma / np.sqrt(m)
-    uneven = (n >= 0.5) & (mean + 3.0 * error > UNEVEN)  # no point counted around: a foot, or under the plane
-    raised = uneven & (
-        mean > 3.0 * error
-    )  # evidently raised, not short of points: so is a quarter window around
+    # no point counted around: a foot, or under the plane
+    uneven = (n >= 0.5) & (mean + 3.0 * error > UNEVEN)
+    # evidently raised (not merely short of points): so is a quarter window around
+    raised = uneven & (mean > 3.0 * error)
     uneven |= maximum_filter(raised, side // 2 | 1, mode="constant")
     return np.asarray(uneven[ij[:, 0], ij[:, 1]], dtype=bool)
 
