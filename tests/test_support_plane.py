@@ -352,3 +352,13 @@ def test_the_plane_kept_beside_side_faces_loses_no_point():
         & (table[:, 2] >= top - PLANE_DEPTH + 1e-3)
     )
     assert np.all(in_prism | _in_cells(table, cells, sigma))
+
+
+def test_the_plane_is_taken_for_the_surface_only_within_half_the_smallest_plane_clearance():
+    """uneven_points' allowance (UNEVEN) is half the smallest clearance kept from the exact plane: a
+    hand that keeps MIN_CLEARANCE above the plane stays at least UNEVEN above the surface wherever the
+    plane stands for it."""
+    from baseplace.world.sensor_resolution import MIN_CLEARANCE
+    from baseplace.world.support_plane import UNEVEN
+
+    assert 0 < UNEVEN <= MIN_CLEARANCE / 2
