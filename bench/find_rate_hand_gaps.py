@@ -26,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from baseplace.geometry.poses import pose_from_xyz_rpy
 from baseplace.robots.model import Robot
 from baseplace_experiments.results import RunClock, write_results
-from find_rate import Oracle, Scene, make_scene
+from find_rate import NOISE, Oracle, Scene, make_scene
 
 
 def hand_gap(oracle: Oracle, scene: Scene) -> tuple[float, str]:
@@ -60,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
     for r in data["scenes"]:
         if not r["oracle"]["found"]:
             continue
-        scene = make_scene(r["scene"]["seed"])
+        scene = make_scene(r["scene"]["seed"], data["protocol"].get("noise", NOISE))  # the run's noise
         if scene.record() != r["scene"]:
             raise SystemExit(f"scene {scene.seed} differs from the results file's")
         gap, between = hand_gap(oracle, scene)
