@@ -29,20 +29,13 @@ OLD_LIMIT = 0.01
 
 
 def residual_stats(points: np.ndarray, distance, bottom: float, voxel: float = 0.025) -> tuple[float, float]:
-    """(robust sigma, 99th percentile above the plane) [m] of the plane's points, as the fit reads them."""
-    p = points[(points[:, 2] >= bottom - sp.DEPTH) & (points[:, 2] <= bottom + voxel / 2)]
-    d = distance(p[:, :2])
-    p = p[(d > 0) & (d <= sp.RADIUS)]
-    p = p[np.abs(p[:, 2] - sp.densest_height(p[:, 2])) <= sp.BAND]
-    A = np.c_[p[:, :2], np.ones(len(p))]
-    coeffs, *_ = np.linalg.lstsq(A, p[:, 2], rcond=None)
-    r = p[:, 2] - A @ coeffs
-    inlier = np.abs(r) <= max(3 * sp._robust_sigma(r), sp.MIN_MARGIN)
-    coeffs, *_ = np.linalg.lstsq(A[inlier], p[inlier, 2], rcond=None)
-    r = p[:, 2] - A @ coeffs
-    r = r[np.abs(r) <= max(sp.PLANE_SIGMAS * sp._robust_sigma(r[inlier]), sp.MIN_MARGIN)]
-    above = r[r > 0]
-    return sp._robust_sigma(r), float(np.percentile(above, 99))
+    """(robust sigma, 99th percentile above the plane) [m] of the plane's points, as the fit reads them
+    (:func:`~baseplace.world.support_plane.plane_points`, before its quality is judged)."""
+    fit = sp.plane_points(points, distance, bottom, voxel)
+    if fit is None:
+        raise SystemExit("too few points for a plane")
+    _, _, r = fit
+    return sp._robust_sigma(r), float(np.percentile(r[r > 0], 99))
 
 
 def main() -> None:

@@ -136,23 +136,18 @@ class SupportSlab:
                 "hull_vertices": len(self.hull)}  # fmt: skip
 
 
-def fit_support_slab(
+def plane_points(
     points: ArrayLike,
     distance: Callable[[FloatArray], FloatArray],
     bottom: float,
     voxel: float,
     radius: float = RADIUS,
-) -> SupportSlab | None:
-    """The slab of the planar surface an object stands on, or None when it is not a good plane.
+) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+    """The plane fitted under an object, before its quality is judged; None with too few points.
 
-    Args:
-        points: (N, 3) the cloud [m].
-        distance: horizontal distance (M,) [m] of xy points (M, 2) from the object's footprint
-            (0 inside it); points inside the footprint are not fitted (they are the object).
-        bottom: height [m] of the object's bottom; the surface is sought from :data:`DEPTH` below
-            it to half a voxel above it.
-        voxel: the voxel edge [m] the slab replaces; its bottom lies at least this far below the plane.
-        radius: points within this distance [m] of the footprint are fitted.
+    Returns (a, b, c) of z = a x + b y + c, the plane's points (P, 3) [m] and their vertical
+    residuals (P,) [m]. :func:`fit_support_slab`'s fit (its arguments): the densest height layer, least squares with one
+    trimmed refit, the points within :data:`PLANE_SIGMAS` robust sigmas of the plane.
     """
     p = np.asarray(points, dtype=float).reshape(-1, 3)
     p = p[np.all(np.isfinite(p), axis=1)]
@@ -182,11 +177,36 @@ def fit_support_slab(
     plane = np.abs(residual) <= max(PLANE_SIGMAS * _robust_sigma(residual[inlier]), MIN_MARGIN)
     if plane.sum() < MIN_POINTS:
         return None
-    p, residual = p[plane], residual[plane]
+    return coeffs, p[plane], residual[plane]
+
+
+def fit_support_slab(
+    points: ArrayLike,
+    distance: Callable[[FloatArray], FloatArray],
+    bottom: float,
+    voxel: float,
+    radius: float = RADIUS,
+) -> SupportSlab | None:
+    """The slab of the planar surface an object stands on, or None when it is not a good plane.
+
+    Args:
+        points: (N, 3) the cloud [m].
+        distance: horizontal distance (M,) [m] of xy points (M, 2) from the object's footprint
+            (0 inside it); points inside the footprint are not fitted (they are the object).
+        bottom: height [m] of the object's bottom; the surface is sought from :data:`DEPTH` below
+            it to half a voxel above it.
+        voxel: the voxel edge [m] the slab replaces; its bottom lies at least this far below the plane.
+        radius: points within this distance [m] of the footprint are fitted.
+    """
+    fit = plane_points(points, distance, bottom, voxel, radius)
+    if fit is None:
+        return None
+    coeffs, p, residual = fit
     # the plane's quality from the points above it: a point below it (the table's side faces within
     # BAND of its top, sampled near an edge) lies inside the exact plane's prism, so it cannot let a
-    # link in, while it would push a two-sided percentile over MAX_RESIDUAL at 3 mm noise
-    # (table-grid execution dev seeds 0-2: 4 of 5 bottles near the table's edge lost their plane)
+    # link in, while it would push a two-sided percentile over the limit (with the 10 mm limit before
+    # session 20, at 3 mm noise on table-grid execution dev seeds 0-2: 4 of 5 bottles near the
+    # table's edge lost their plane)
     above = residual[residual > 0]
     p99 = float(np.percentile(above, 99)) if len(above) else 0.0
     tilt = math.atan(math.hypot(coeffs[0], coeffs[1]))
