@@ -10,7 +10,9 @@ check's wall time is split by wrapping the checker's and the state filter's meth
 * ``approach``: the whole approach walk, of which ``walk_ik`` (the walk's IK steps,
   ``DampedLeastSquaresIK.solve_from``), ``approach_edges`` (the joint lines between walk steps in the
   approach model) and ``walk_stop`` (the transit-model test that ends a walk back early);
-* ``transit_ends`` (the start and pre-grasp states), ``transit_line`` (the straight joint line);
+* ``transit_ends`` (the start and pre-grasp states); the transit's joint lines by what asked for
+  them (:data:`LINE_CALLERS`): ``straight_line`` (tried first), ``rrt_edges`` (RRTConnect's, at
+  ``search_step``), ``shortcut_lines`` and ``path_recheck`` (the returned path at ``point_step``);
 * ``rrt`` (OMPL RRTConnect, with its shortcut), of which ``shortcut``;
 * across all stages: ``kernel`` (the compiled sphere pre-filter, ``_uncertified_states``),
   ``coal_scene`` / ``coal_self`` (the exact fallbacks, with their calls).
@@ -33,6 +35,7 @@ import argparse
 import cProfile
 import json
 import pstats
+import sys
 import time
 from collections import defaultdict
 from collections.abc import Callable
@@ -76,6 +79,17 @@ class Timers:
         setattr(owner, name, timed)
 
 
+LINE_CALLERS = {
+    "checkMotion": "rrt_edges",
+    "_shortcut": "shortcut_lines",
+    "<genexpr>": "path_recheck",
+    "joint_path": "straight_line",
+}
+"""A transit line's stage by the function that called ``MotionChecker._line_free``: RRTConnect's
+edges (checked at ``search_step``), the shortcut's lines, the re-check of the path RRTConnect
+returned at ``point_step`` (:meth:`MotionChecker._plan`) and the straight line tried first."""
+
+
 def instrument(timers: Timers) -> Callable[[MotionChecker], None]:
     """Wrap the module-level stages once; returns the per-checker wrapping."""
     timers.wrap(state_filter, "_uncertified_states", "kernel")
@@ -92,7 +106,9 @@ def instrument(timers: Timers) -> Callable[[MotionChecker], None]:
         inner_blocking = checker._blocking
 
         def blocking(a: Any, b: Any, T: Any, environment: Any) -> Any:
-            key = "transit_line" if environment is checker.environment else "approach_edges"
+            key = "approach_edges"
+            if environment is checker.environment:  # by what asked for the transit's line
+                key = LINE_CALLERS.get(sys._getframe(2).f_code.co_name, "transit_line")
             t = time.perf_counter()
             try:
                 return inner_blocking(a, b, T, environment)
