@@ -14,13 +14,15 @@ check's wall time is split by wrapping the checker's and the state filter's meth
   them (:data:`LINE_CALLERS`): ``straight_line`` (tried first), ``rrt_edges`` (RRTConnect's, at
   ``search_step``), ``shortcut_lines`` and ``path_recheck`` (the returned path at ``point_step``);
 * ``rrt`` (OMPL RRTConnect, with its shortcut), of which ``shortcut``;
-* across all stages: ``kernel`` (the compiled sphere pre-filter, ``_uncertified_states``),
+* across all stages: ``kernel`` (the compiled sphere pre-filter on given states,
+  ``_uncertified_states``), ``kernel_line`` (on a joint line's states, ``_uncertified_line``),
   ``coal_scene`` / ``coal_self`` (the exact fallbacks, with their calls).
 
 Also verdicts: the number found, and each check whose verdict differs from the file's ``product``.
 ``--cprofile N``: cProfile the first N checks instead and print the top functions.
 ``--kernel-split``: also record the state batches the timed checks hand to
-``StateFilter.first_colliding`` (up to the first state that touches, as the check took them) and
+``StateFilter.first_colliding`` (single states and the like: a joint line goes to
+``StateFilter.first_colliding_line`` since session 22 and is not recorded) (up to the first state that touches, as the check took them) and
 time the compiled pre-filter on every state of them (going on after each state it leaves to coal,
 without coal) with the scene parts, the self pairs, both or
 neither: the pre-filter's cost per state and its split (development only; no verdict is taken
@@ -93,6 +95,7 @@ returned at ``point_step`` (:meth:`MotionChecker._plan`) and the straight line t
 def instrument(timers: Timers) -> Callable[[MotionChecker], None]:
     """Wrap the module-level stages once; returns the per-checker wrapping."""
     timers.wrap(state_filter, "_uncertified_states", "kernel")
+    timers.wrap(state_filter, "_uncertified_line", "kernel_line")
     timers.wrap(state_filter.StateFilter, "_scene_coal", "coal_scene")
     timers.wrap(state_filter.StateFilter, "_self_coal", "coal_self")
     timers.wrap(DampedLeastSquaresIK, "solve_from", "walk_ik")

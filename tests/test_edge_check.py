@@ -9,6 +9,8 @@ the first coal finds, and a line it passes must have no state coal finds touchin
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -21,7 +23,7 @@ from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.spheres import _joint_frames
 from baseplace.world.environment import Environment
 from baseplace.world.state_filter import sphere_cover
-from baseplace.world.state_kernel import _table_clear, _uncertified_states
+from baseplace.world.state_kernel import _table_gap, _uncertified_states
 from baseplace_experiments.execution_experiment import trial_scene
 from baseplace_experiments.table_grid import TableGridSettings
 from test_state_filter import (  # the coal oracle; a geometry's extreme points
@@ -98,8 +100,94 @@ def test_motion_checker_blocks_where_a_state_by_state_check_does(tiago, table_li
         got = checker._blocking(a, b, T_base, transit)
         assert (got is None) == (expected is None)
         if got is not None:
-            np.testing.assert_array_equal(got, expected)
-        assert checker.state_checks - before == checked  # the max_checks budget counts as before
+            np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12)
+        # the max_checks budget counts the states asked: at most those the loop checked, and a itself
+        assert 0 < checker.state_checks - before <= checked + 1
+
+
+def test_line_checks_give_coals_verdict_at_every_state(tiago, table_lines):
+    """A line's check asks few pairs at few states, yet returns what coal on every pair of every state returns.
+
+    The oracle: coal on every pair (:meth:`Environment.colliding_arm_exact`) at each of the line's
+    states in bisection order (the first touching, or none). The line check
+    (:meth:`Environment.first_colliding_arm_line`) must return the same state, on lines at the
+    motion check's resolution in a noisy table scene, and must have skipped states on the free ones.
+    """
+    transit, approach, T_base, lines = table_lines
+    arm = tiago.arm()
+    checker = MotionChecker(tiago, arm, transit, approach, MotionSettings())
+    asked_free = states_free = blocked = 0
+    for env in (transit, approach):
+        for a, b in lines[::4]:
+            n = checker.edge_states(a, b)
+            expected = next(
+                (
+                    k
+                    for k in bisection_order(n)
+                    if env.colliding_arm_exact(arm, a + (b - a) * (k / n), T_base)
+                ),
+                -1,
+            )
+            k, asked = env.first_colliding_arm_line(
+                arm, a, b, n, float(np.abs(b - a) @ checker.levers), T_base
+            )
+            assert k == expected, f"line check says state {k} of {n}, coal {expected}, line {a} -> {b}"
+            blocked += k >= 0
+            if k < 0:
+                asked_free, states_free = asked_free + asked, states_free + n
+    print(f"{blocked} lines blocked; free lines: {asked_free} states asked of {states_free}")
+    assert blocked > 10 and states_free > 0
+    assert asked_free < 0.9 * states_free  # the gaps spare states, not only pairs
+
+
+def test_geometry_levers_bound_how_far_each_geometry_moves(tiago):
+    """Along a joint line, no point of a robot geometry moves farther than its lever bound, nor against another.
+
+    Oracle: pinocchio's placement of each geometry's hull points at 40 states of random lines (the
+    path length, summed over the steps, at most the bound), in the arm's base frame and, for each
+    pair of geometries, in the frame of the one nearer the arm's base.
+    """
+    from baseplace.world.state_filter import geometry_levers, hull_points
+
+    env = Environment(tiago, {}, self_collision=False)
+    arm = tiago.arm()
+    filt = env.state_filter(arm)
+    levers = geometry_levers(arm, filt.joint, filt.local, filt.radius)
+    geom, model = env.geom, tiago.model
+    data, gdata = model.createData(), pin.GeometryData(geom)
+    G = len(filt.joint)
+    hulls = [hull_points(geom.geometryObjects[k].geometry) for k in range(G)]
+    rng = np.random.default_rng(21)
+    worst, worst_pair = 0.0, 0.0
+    for a, b in zip(arm.sample(rng, 12), arm.sample(rng, 12), strict=True):
+        placed = []
+        for t in np.linspace(0.0, 1.0, 41):
+            pin.updateGeometryPlacements(
+                model, data, geom, gdata, arm.to_pinocchio(a + t * (b - a), tiago.q_reference)
+            )
+            placed.append([np.asarray(gdata.oMg[k].homogeneous) for k in range(G)])
+        dq = np.abs(b - a)
+        for g in range(G):
+            P = np.c_[hulls[g], np.ones(len(hulls[g]))]
+            path = sum(
+                np.linalg.norm((M1[g] @ P.T - M0[g] @ P.T)[:3], axis=0)
+                for M0, M1 in itertools.pairwise(placed)
+            )
+            bound = levers[g] @ dq
+            assert np.all(path <= bound + 1e-9), (g, float(path.max()), float(bound))
+            worst = max(worst, float(path.max() / bound) if bound > 0 else 0.0)
+        for g, h in rng.integers(G, size=(60, 2)):
+            if filt.joint[g] > filt.joint[h]:
+                g, h = h, g
+            P = np.c_[hulls[h], np.ones(len(hulls[h]))]
+            rel = [np.linalg.inv(M[g]) @ M[h] @ P.T for M in placed]  # h in g's frame
+            path = sum(np.linalg.norm((r1 - r0)[:3], axis=0) for r0, r1 in itertools.pairwise(rel))
+            moved = [d for d in range(arm.n_joints) if filt.joint[g] < d <= filt.joint[h]]
+            bound = float(levers[h, moved] @ dq[moved]) if moved else 0.0
+            assert np.all(path <= bound + 1e-9), (g, h, float(path.max()), bound)
+            worst_pair = max(worst_pair, float(path.max() / bound) if bound > 0 else 0.0)
+    print(f"largest path over its bound: {worst:.2f} per geometry, {worst_pair:.2f} per pair")
+    assert worst > 0.3  # the bounds hold, and are not far above the moves they bound
 
 
 def test_sphere_covers_hold_their_geometry(tiago):
@@ -155,11 +243,13 @@ def test_self_distance_tables_never_clear_a_pair_closer_than_its_margin(tiago):
         pin.forwardKinematics(model, data, arm.to_pinocchio(q, tiago.q_reference))
         pin.updateGeometryPlacements(model, data, geom, gdata)
         for p in np.flatnonzero(which >= 0):
-            if _table_clear(q, which[p], *tables):
+            gap = _table_gap(q, which[p], *tables)
+            if gap >= 0.0:
                 cleared += 1
                 pair = int(filt._self_index[p])
                 distance = pin.computeDistance(geom, gdata, pair).min_distance
-                assert distance > gdata.collisionRequests[pair].security_margin
+                # the gap: how much farther than the margin (a lower bound, used to skip states of a line)
+                assert distance > gdata.collisionRequests[pair].security_margin + gap
     assert cleared > 300  # the tables do certify
 
 

@@ -300,16 +300,14 @@ def test_a_check_budget_stops_planning_before_the_time_limit(tiago, wall_scene):
         return colliding(*args, **kwargs)
 
     env.colliding_arm = counting  # type: ignore[method-assign]
-    first_colliding = env.first_colliding_arm
+    first_colliding = env.first_colliding_arm_line
 
-    def counting_line(arm, Q, T):  # type: ignore[no-untyped-def]
-        i = first_colliding(
-            arm, Q, T
-        )  # a whole line's states, as checked one by one up to the first touching
-        counted[0] += len(Q) if i < 0 else i + 1
-        return i
+    def counting_line(arm, a, b, n, travel, T):  # type: ignore[no-untyped-def]
+        k, asked = first_colliding(arm, a, b, n, travel, T)  # a whole line: the states it asked
+        counted[0] += asked
+        return k, asked
 
-    env.first_colliding_arm = counting_line  # type: ignore[method-assign]
+    env.first_colliding_arm_line = counting_line  # type: ignore[method-assign]
     settings = MotionSettings(pregrasp_distance=0.03, time_limit=60.0, max_checks=200)
     motion = MotionChecker(tiago, arm, env, settings=settings)
     path, planned = motion.joint_path(q, np.eye(4), seed=1)

@@ -61,7 +61,7 @@ from baseplace.robots.model import Arm, Robot
 from baseplace.world.environment import GRASPED, Environment, HandFilter
 from baseplace.world.obstacles import Obstacle
 from baseplace.world.sensor_resolution import Group, group_size, object_obstacle
-from baseplace.world.state_filter import hull_points
+from baseplace.world.state_filter import bisection_order, hull_points
 
 PREGRASP_MARGIN = 0.02
 """How far [m] behind the plane through the grasp's TCP (normal: the approach axis) the open hand's
@@ -244,7 +244,7 @@ class MotionSettings:
             (bench/bench_motion_verdicts.py, ``motion_verdicts_point_dev.json``). Default 0.01:
             it found the same 12 of 28 extra dev find-rate scenes, and became affordable
             with the state pre-filter (:mod:`baseplace.world.state_filter`) and the whole-line
-            check (one compiled call per joint line, :meth:`Environment.first_colliding_arm`).
+            check (one compiled call per joint line, :meth:`Environment.first_colliding_arm_line`).
             The check's time with it: the median of the 72 table-grid dev checks was 46.9 ms at stop 39
             (``bench/results/motion_verdicts_s14q_final_a.json``, from
             ``python bench/bench_motion_verdicts.py --checkers product``); measure again there.
@@ -545,16 +545,19 @@ class MotionChecker:
         """The first state of the line a -> b (n,) that touches ``environment``, or None; a itself is not checked.
 
         The states (:meth:`edge_states`) are the same whatever the order; they are taken end
-        first, then in bisection order (midpoint, quarter points, ...), and handed to the
-        environment as one batch (:meth:`Environment.first_colliding_arm`); transit states count
-        towards ``max_checks`` up to the first that touches, as if checked one by one.
+        first, then in bisection order (midpoint, quarter points, ...), the whole line in one
+        compiled call (:meth:`Environment.first_colliding_arm_line`), which asks a pair at a state
+        only where its gaps at the states around do not already clear it (``lever_arms`` bound
+        the robot's move along the line): the verdict, and the state returned, are those of
+        checking every state. Transit states count towards ``max_checks`` as they are asked.
         """
         n = self.edge_states(a, b)
-        Q = a + np.outer(_bisection_fractions(n), b - a)
-        i = environment.first_colliding_arm(self.arm, Q, T_world_base)
+        k, asked = environment.first_colliding_arm_line(
+            self.arm, a, b, n, float(np.abs(b - a) @ self.levers), T_world_base
+        )
         if environment is self.environment:
-            self.state_checks += len(Q) if i < 0 else i + 1
-        return None if i < 0 else Q[i]
+            self.state_checks += asked
+        return None if k < 0 else a + (b - a) * (k / n)
 
     def _line_free(self, a: FloatArray, b: FloatArray, T_world_base: FloatArray) -> bool:
         """Whether the straight joint line a -> b (n,) of the transit is free (:meth:`_blocking`)."""
@@ -754,37 +757,6 @@ def _edge_validator_class() -> type:
 
 def _edge_validator(info: object, checker: MotionChecker, T_world_base: FloatArray) -> object:
     return _edge_validator_class()(info, checker, T_world_base)
-
-
-@functools.lru_cache(maxsize=4096)
-def _bisection_fractions(n: int) -> FloatArray:
-    """(n,) the fractions k / n of :func:`bisection_order`, for a line cut in n steps."""
-    out = np.array(bisection_order(n), dtype=float) / n
-    out.flags.writeable = False
-    return out
-
-
-def bisection_order(n: int) -> list[int]:
-    """The indices 1..n of the states of a line cut in n steps: n first, then by bisection.
-
-    The midpoint first, then the quarter points, and so on: every index once, the far end first
-    (as OMPL's discrete motion validator orders them), so a collision anywhere on the line is found
-    after few checks.
-    """
-    order, seen = [n], {0, n}
-    queue = [(0, n)]
-    while queue:
-        nxt = []
-        for lo, hi in queue:
-            if hi - lo < 2:
-                continue
-            mid = (lo + hi) // 2
-            if mid not in seen:
-                seen.add(mid)
-                order.append(mid)
-            nxt += [(lo, mid), (mid, hi)]
-        queue = nxt
-    return order
 
 
 def _contacts_of(environment: Environment, arm: Arm, q: FloatArray, T_world_base: FloatArray, stage: str

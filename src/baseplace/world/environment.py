@@ -403,6 +403,19 @@ class Environment:
         """
         return self.state_filter(arm).first_colliding(Q_arm, _base_pose(T_world_base))
 
+    def first_colliding_arm_line(
+        self, arm: Arm, a: ArrayLike, b: ArrayLike, n: int, travel: float, T_world_base: ArrayLike
+    ) -> tuple[int, int]:
+        """The first k (1..n) for which :meth:`colliding_arm` is True at ``a + k / n (b - a)``, or -1; and the states asked.
+
+        The same verdict as :meth:`first_colliding_arm` on those n states (taken far end first,
+        then by bisection), asking fewer pairs: ``travel`` [m] must bound how far any point of the
+        robot moves along the line (:meth:`StateFilter.first_colliding_line`).
+        """
+        return self.state_filter(arm).first_colliding_line(
+            np.asarray(a, dtype=float), np.asarray(b, dtype=float), n, travel, _base_pose(T_world_base)
+        )
+
     def colliding_arm_poses(self, arm: Arm, Q_arm: ArrayLike, T_world_base: ArrayLike) -> NDArray[np.bool_]:
         """(S,) :meth:`colliding_arm` for each pair of arm joint values Q_arm[s] (n,) and base pose T_world_base[s] (4, 4).
 

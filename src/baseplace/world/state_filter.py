@@ -41,7 +41,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import ConvexHull, QhullError
 
 from baseplace.geometry.poses import FloatArray
-from baseplace.robots.model import Arm, Robot
+from baseplace.robots.model import PRISMATIC, Arm, Robot
 from baseplace.world.array_cache import cached_array
 from baseplace.world.point_index import PointIndex, _clear
 from baseplace.world.state_kernel import (
@@ -49,9 +49,13 @@ from baseplace.world.state_kernel import (
     _arm_centres,
     _transformed,
     _transformed_poses,
+    _uncertified_line,
     _uncertified_states,
 )
 
+LINE_ENTRIES = 4_000_000
+"""A line's check (:meth:`StateFilter.first_colliding_line`) keeps a gap per pair and state: for
+lines of more states times pairs than this (32 MB) the states are checked one by one instead."""
 SLACK = 1e-6
 """Added [m] to every certified distance: rounding in coal's and this module's arithmetic."""
 HASH_CELL = 0.05
@@ -681,6 +685,8 @@ class StateFilter:
         """Per robot geometry g, its convex hull's face planes (starts (G + 1,), (H, 4) unit normal and
         offset, inside <= 0) and the points it is the hull of (starts (G + 1,), (V, 3)), in the
         frame of the arm joint that moves it (or the arm's base frame)."""
+        self._levers = geometry_levers(arm, self.joint, self.local, self.radius)
+        """(G, n) how far a point of each robot geometry moves per unit change of each arm joint, at most [m]."""
         self._groups = _group_spheres(self.joint, self.local, self.radius, arm.n_joints)
         """Per arm joint, a sphere (centres (n, 3) in its frame, radii (n,)) around the bounding
         spheres of every geometry it moves, with no other arm joint between."""
@@ -964,31 +970,74 @@ class StateFilter:
         """
         Q = np.ascontiguousarray(np.atleast_2d(np.asarray(Q_arm, dtype=float)))
         T = np.asarray(T_world_base, dtype=float)
-        key = T.tobytes()
-        if key != self._static_key:
-            self._static_key = key
-            self._T_world_armbase = T @ self._T_base_armbase
-            _transformed(self.centres(Q[0]), self._T_world_armbase, self._world)
-            todo = [p for part in self._static_parts for p in part.uncertified(self._world)]
-            self._static_hit = self._scene_coal(todo, self._full(Q[0]), T)
-        if self._static_hit:
+        if self._static_touching(Q[0], T):
             return 0
-        P = len(self._scene_rows)
-        out = np.empty((len(Q), P + len(self._self_pairs)), dtype=np.bool_)
+        out = np.empty((len(Q), len(self._scene_rows) + len(self._self_pairs)), dtype=np.bool_)
         robot, scene_and_self = self._kernel_args
         i = -1
         while True:
             i = _uncertified_states(Q, *robot, self._T_world_armbase, *scene_and_self, i + 1, out)  # type: ignore[call-arg]
-            if i < 0:
-                return -1
-            self.coal_states += 1
-            q_full = self._full(Q[i])
-            scene = self._scene_row_pair[np.flatnonzero(out[i, :P])]
-            if len(scene) and self._scene_coal(scene.tolist(), q_full, T):
+            if i < 0 or self._left_touching(Q[i], out[i], T):
                 return int(i)
-            own = self._self_index[np.flatnonzero(out[i, P:])]
-            if len(own) and self._self_coal(own, q_full):
-                return int(i)
+
+    def first_colliding_line(
+        self, a: FloatArray, b: FloatArray, n: int, travel: float, T_world_base: ArrayLike
+    ) -> tuple[int, int]:
+        """The first state ``a + k / n (b - a)`` (k = 1..n, far end first, then by bisection) that touches, or -1.
+
+        Coal's verdict on every one of the n states, as :meth:`first_colliding` gives it on them
+        (the same states, the same answer), with fewer pairs asked: ``travel`` [m] bounds how far
+        any point of the robot moves along the whole line (e.g. the lever-arm bound of
+        :func:`~baseplace.placement.motion.lever_arms`), so a pair that its spheres clear by a gap
+        at two states stays clear between them while the points move less than the gaps add up to
+        (:func:`_uncertified_line`). Also returns how many states were asked (a itself included:
+        its gaps are used, its verdict is not).
+        """
+        a = np.ascontiguousarray(a, dtype=float)
+        b = np.ascontiguousarray(b, dtype=float)
+        T = np.asarray(T_world_base, dtype=float)
+        if not (n >= 1 and math.isfinite(travel) and travel >= 0.0):
+            raise ValueError(f"a line needs n >= 1 states and a finite travel >= 0, got {n} and {travel}")
+        if self._static_touching(b, T):
+            return n, 1
+        M = len(self._scene_rows) + len(self._self_pairs)
+        if (n + 1) * M > LINE_ENTRIES:  # the gaps' table too large: every state, one by one
+            Q = a + np.outer(np.array(bisection_order(n), dtype=float) / n, b - a)
+            i = self.first_colliding(Q, T)
+            return (-1, n) if i < 0 else (bisection_order(n)[i], i + 1)
+        slack = np.empty((n + 1, M))
+        queue = np.empty((2 * n + 2, 4), dtype=np.int64)
+        pool = np.empty((n + 1) * M, dtype=np.int64)
+        ctl = np.zeros(5, dtype=np.int64)
+        out = np.empty((1, M), dtype=np.bool_)
+        robot, scene_and_self = self._kernel_args
+        while True:
+            k = _uncertified_line(a, b, n, float(travel), self._levers, *robot, self._T_world_armbase, *scene_and_self, slack,  # type: ignore[call-arg]
+                                  queue, pool, ctl, out)  # fmt: skip
+            if k < 0 or self._left_touching(a + (b - a) * (k / n), out[0], T):
+                return int(k), int(ctl[2])
+
+    def _static_touching(self, q_arm: FloatArray, T: FloatArray) -> bool:
+        """Whether the geometries no arm joint moves touch the scene at base pose T (kept per pose)."""
+        key = T.tobytes()
+        if key != self._static_key:
+            self._static_key = key
+            self._T_world_armbase = T @ self._T_base_armbase
+            _transformed(self.centres(q_arm), self._T_world_armbase, self._world)
+            todo = [p for part in self._static_parts for p in part.uncertified(self._world)]
+            self._static_hit = self._scene_coal(todo, self._full(q_arm), T)
+        return self._static_hit
+
+    def _left_touching(self, q_arm: FloatArray, left: NDArray[np.bool_], T: FloatArray) -> bool:
+        """Coal's verdict at arm state q_arm on the pairs the spheres left (``left``: scene rows, then self pairs)."""
+        self.coal_states += 1
+        P = len(self._scene_rows)
+        q_full = self._full(q_arm)
+        scene = self._scene_row_pair[np.flatnonzero(left[:P])]
+        if len(scene) and self._scene_coal(scene.tolist(), q_full, T):
+            return True
+        own = self._self_index[np.flatnonzero(left[P:])]
+        return bool(len(own)) and self._self_coal(own, q_full)
 
     def touching(self, q_arm: ArrayLike, T_world_base: ArrayLike) -> tuple[list[int], list[int]]:
         """Every pair coal finds touching at arm joint values (n,) and base pose (4, 4).
@@ -1121,6 +1170,52 @@ class StateFilter:
         return left
 
 
+def bisection_order(n: int) -> list[int]:
+    """The indices 1..n of the states of a line cut in n steps: n first, then by bisection.
+
+    The midpoint first, then the quarter points, and so on: every index once, the far end first
+    (as OMPL's discrete motion validator orders them), so a collision anywhere on the line is found
+    after few checks.
+    """
+    order, seen = [n], {0, n}
+    queue = [(0, n)]
+    while queue:
+        nxt = []
+        for lo, hi in queue:
+            if hi - lo < 2:
+                continue
+            mid = (lo + hi) // 2
+            if mid not in seen:
+                seen.add(mid)
+                order.append(mid)
+            nxt += [(lo, mid), (mid, hi)]
+        queue = nxt
+    return order
+
+
+def geometry_levers(arm: Arm, joint: NDArray[np.int64], local: FloatArray, radius: FloatArray) -> FloatArray:
+    """(G, n) per robot geometry and arm joint, how far a point of the geometry moves per unit change of the joint, at most [m].
+
+    Each geometry by its bounding sphere: moved by arm joint ``joint[g]`` (-1: by none, a row of
+    zeros), centre ``local[g]`` in that joint's frame, ``radius[g]``. A joint after ``joint[g]``
+    does not move it; a prismatic joint moves it by its change (1); a revolute joint j by its
+    change times the point's distance from j's axis, at most the distances between the joint
+    origins from j down to ``joint[g]`` (:attr:`Arm.placements`, a prismatic joint's travel added)
+    plus the sphere's centre's distance and radius, at any configuration. Along a joint line the
+    moves add up (as :func:`~baseplace.placement.motion.lever_arms` bounds them for the whole robot).
+    """
+    offset = np.linalg.norm(arm.placements[:, :3, 3], axis=1)
+    prismatic = arm.kinds == PRISMATIC
+    stroke = np.where(prismatic, np.maximum(np.abs(arm.lower), np.abs(arm.upper)), 0.0)
+    out = np.zeros((len(joint), arm.n_joints))
+    for g, m in enumerate(joint):
+        reach = float(np.linalg.norm(local[g])) + float(radius[g])
+        for j in range(m, -1, -1):  # from the geometry's joint up the chain (none when m < 0)
+            out[g, j] = 1.0 if prismatic[j] else reach
+            reach += offset[j] + stroke[j]
+    return out
+
+
 def _touching(
     check: tuple[pin.Model, pin.Data, pin.GeometryModel, pin.GeometryData],
     pairs: Iterable[int],
@@ -1133,4 +1228,12 @@ def _touching(
     return (int(i) for i in pairs if pin.computeCollision(geom, gdata, int(i)))
 
 
-__all__ = ["SLACK", "StateFilter", "bounding_sphere", "hull_points", "sphere_cover"]
+__all__ = [
+    "SLACK",
+    "StateFilter",
+    "bisection_order",
+    "bounding_sphere",
+    "geometry_levers",
+    "hull_points",
+    "sphere_cover",
+]

@@ -8,6 +8,11 @@ pair and each self pair free where a distance bound clears it: the scene's point
 pairs' distance tables and anchor fields. It stops at the first state with a pair left, which
 :class:`~baseplace.world.state_filter.StateFilter` hands to coal. Everything here reads arrays that
 the filter's setup packed; nothing here allocates more than per-call scratch space.
+
+:func:`_uncertified_line` checks the states of one joint line without asking every pair at every
+state: a pair certified by a distance bound keeps the margin while its geometries move less than
+the gap, so along a line whose every point's move is bounded (the lever arms) most pairs are asked
+at few states (conservative advancement). Both run the one state check of :func:`_uncertified`.
 """
 
 from __future__ import annotations
@@ -39,10 +44,10 @@ def _transformed(C, T, out):
 
 
 @nb.njit(cache=True)
-def _points_rows(out_i, r0, r1, rows, reach, W, radius, Ws, sub_start, sub_radius, joint, Wj, group_radius,
-                 i, stamp, sub_joint, sub_local, F, T, Cs, points, keys, starts, lo, hi, cell, dims, field, field_lo, field_h,
-                 hull_start, hull_planes):  # fmt: skip
-    """Scene rows r0..r1 (sorted by arm joint) against one part's box centres: ``out_i[p]`` True where not certified.
+def _points_rows(out_i, slack, ask, rows, reach, W, radius, Ws, sub_start, sub_radius, joint, Wj,
+                 group_radius, i, stamp, sub_joint, sub_local, F, T, Cs, points, keys, starts, lo, hi, cell, dims,
+                 field, field_lo, field_h, hull_start, hull_planes):  # fmt: skip
+    """Scene rows ``ask`` (one part's, sorted by arm joint) against the part's box centres: ``out_i[p]`` True where not certified.
 
     The box centres are a :class:`PointIndex`'s arrays; ``reach`` holds the boxes' half diagonal.
     The geometries an arm joint moves are certified together when the sphere around them all
@@ -50,40 +55,47 @@ def _points_rows(out_i, r0, r1, rows, reach, W, radius, Ws, sub_start, sub_radiu
     cover by its bounding sphere's distance bound alone or every cover sphere's exact query,
     one without by its bounding sphere's exact query; failing those, when every box centre within
     its bounding sphere's reach lies that far outside one of its hull's face planes
-    (:func:`_points_outside_hull`).
+    (:func:`_points_outside_hull`). A row certified by a distance bound gets by how much it clears
+    its reach in ``slack`` (0 for the other certificates, and where it is left).
     """
     group, group_bound = -2, 0.0
     if len(points) == 0:
-        out_i[r0:r1] = False
+        for p in ask:
+            out_i[p], slack[p] = False, np.inf  # nothing to touch
         return False
     any_row = False
-    for p in range(r0, r1):
+    for p in ask:
         g = rows[p]
         if joint[g] != group:
             group = joint[g]
             group_bound = _lower_bound(Wj[group], lo, hi, field, field_lo, field_h)
         if group_bound > group_radius[group] + reach[p]:  # each row's own reach: a group's rows may differ
-            out_i[p] = False
+            out_i[p], slack[p] = False, group_bound - (group_radius[group] + reach[p])
             continue
         covered = sub_start[g + 1] - sub_start[g] > 1
         r = radius[g] + reach[p]
-        touch = _lower_bound(W[g], lo, hi, field, field_lo, field_h) <= r
+        bound = _lower_bound(W[g], lo, hi, field, field_lo, field_h)
+        touch, gap = bound <= r, bound - r
         if touch and not covered:
-            touch = _within(W[g], r, True, points, keys, starts, lo, cell, dims) >= 0.0
+            touch, gap = _within(W[g], r, True, points, keys, starts, lo, cell, dims) >= 0.0, 0.0
         elif touch:
-            touch = False
+            touch, gap = False, np.inf
             _cover_placed(g, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws)
             for s in range(sub_start[g], sub_start[g + 1]):
                 r = sub_radius[s] + reach[p]
-                if _lower_bound(Ws[s], lo, hi, field, field_lo, field_h) <= r and (
-                    _within(Ws[s], r, True, points, keys, starts, lo, cell, dims) >= 0.0
-                ):
+                bound = _lower_bound(Ws[s], lo, hi, field, field_lo, field_h)
+                if bound > r:
+                    gap = min(gap, bound - r)
+                    continue
+                gap = 0.0  # an exact query: no distance
+                if _within(Ws[s], r, True, points, keys, starts, lo, cell, dims) >= 0.0:
                     touch = True
                     break
         if touch:
             touch = not _points_outside_hull(g, W[g], radius[g] + reach[p], reach[p], joint, F, T, hull_start,
                                              hull_planes, points, keys, starts, lo, cell, dims)  # fmt: skip
-        out_i[p] = touch
+            gap = 0.0
+        out_i[p], slack[p] = touch, 0.0 if touch else max(gap, 0.0)
         any_row |= touch
     return any_row
 
@@ -124,18 +136,299 @@ def _points_outside_hull(g, c, r, reach, joint, F, T, hull_start, hull_planes, p
 
 
 @nb.njit(cache=True, inline="always")
-def _shape_touches(c, r, kind, a, b, planes, balls):
-    """Whether the sphere (c (3,), r) is not certified clear of a convex part or a bounding ball.
+def _shape_gap(c, r, kind, a, b, planes, balls, gaps):
+    """By how much [m] the sphere (c (3,), r) is certified clear of a convex part or a bounding ball; -1 when it is not.
 
-    Kind 1: the hull planes a..b (inside <= 0); kind 2: the ball ``balls[a]`` (centre, radius).
+    Kind 1: the hull planes a..b (inside <= 0), certified when the centre lies more than r outside
+    one (the gap: how much more, at the plane it lies farthest outside with ``gaps``, else at the
+    first); kind 2: the ball ``balls[a]`` (centre, radius).
     """
-    if kind == 1:  # certified by the first plane the centre lies more than r outside
+    if kind == 1:
+        best = -np.inf
         for h in range(a, b):
-            if planes[h, 0] * c[0] + planes[h, 1] * c[1] + planes[h, 2] * c[2] + planes[h, 3] > r:
-                return False
-        return True
+            best = max(best, planes[h, 0] * c[0] + planes[h, 1] * c[1] + planes[h, 2] * c[2] + planes[h, 3])
+            if best > r and not gaps:
+                break
+        return best - r if best > r else -1.0
     dx, dy, dz = c[0] - balls[a, 0], c[1] - balls[a, 1], c[2] - balls[a, 2]
-    return not math.sqrt(dx * dx + dy * dy + dz * dz) > r + balls[a, 3]
+    d, reach = math.sqrt(dx * dx + dy * dy + dz * dz), r + balls[a, 3]
+    return max(d - reach, 0.0) if d > reach else -1.0
+
+
+@nb.njit(cache=True)
+def _workspace(n, G, K, J, S, A, parts, scene_reach, halves, self_runs):
+    """Scratch arrays of :func:`_uncertified`, for an arm of n joints (see there), each scene row's reach, each self pair's run."""
+    P = scene_reach.shape[0]
+    pair_run = np.empty(S, dtype=np.int64)
+    for run in range(self_runs.shape[0]):
+        pair_run[self_runs[run, 2] : self_runs[run, 3]] = run
+    reach = np.empty(P)
+    part_reach = np.zeros(parts.shape[0])  # the largest of each part's rows
+    for q in range(parts.shape[0]):
+        reach[parts[q, 3] : parts[q, 4]] = scene_reach[parts[q, 3] : parts[q, 4]] + halves[q] * (
+            parts[q, 0] == 0
+        )
+        for p in range(parts[q, 3], parts[q, 4]):
+            part_reach[q] = max(part_reach[q], reach[p])
+    return (
+        np.empty((n, 3, 4)),  # F: the arm joints' frames
+        np.arange(J),  # the joint groups' joints
+        np.empty((J, 3)),  # Cj, Wj: the joint groups' sphere centres, arm base and world
+        np.empty((J, 3)),
+        np.empty((3, 3)),
+        np.empty(3),
+        np.empty((G, 3)),  # Cg, Cs, W, Ws: the geometries' and cover spheres' centres
+        np.empty((K, 3)),
+        np.empty((G, 3)),
+        np.empty((K, 3)),
+        np.full(G, -1),  # the state each geometry's cover spheres were last placed for
+        np.empty(
+            K
+        ),  # per cover sphere, its gap to the other geometry's bounding sphere (:func:`_covers_gap`)
+        np.full((S, 2), -1, dtype=np.int64),  # per self pair and hull: the plane that last served
+        np.full((A, G), -1),  # per anchor and geometry: the state last asked, the gap (-1: not clear)
+        np.full((A, G), -1.0),
+        np.full((A, J), -1),  # per anchor and joint group: the state last asked, the gap (-1: not clear)
+        np.full((A, J), -1.0),
+        reach,
+        part_reach,
+        pair_run,
+    )
+
+
+@nb.njit(cache=True)
+def _uncertified(Q, a, b, n, travel, levers, placements, axes, kinds, joint, local, radius, sub_start, sub_joint,
+                 sub_local, sub_radius, group_local, group_radius, hull_start, hull_planes, vert_start, verts, T,
+                 scene_rows, scene_reach, parts, offs, all_points, all_keys, all_starts, all_fields, geo, ints, halves,
+                 planes, balls, self_pairs, self_reach, self_runs, run_reach, self_table, tab_joint, tab_lo, tab_step,
+                 tab_n, tab_rho, tab_off, tab_cert, anchor_of, anc_joint, anc_box, anc_lo, anc_h, anc_dims, anc_off,
+                 anc_field, anc_reach, anc_group_reach, line_slack, queue, pool, ctl, start, out):  # fmt: skip
+    """The one state check of :func:`_uncertified_states` (n = 0: the states ``Q[start:]``) and :func:`_uncertified_line` (n > 0: the line a -> b).
+
+    Per state, which of the pairs asked (``ask``, sorted) are left (``out_i``) and, on a line, by
+    how much [m] a distance bound certifies each clear of its margin (its gap: ``slack_i``; 0:
+    certified otherwise, or not at all). ``i`` numbers the state for the covers' and anchors'
+    caches. The arguments are those of the two, with dummies for the other's.
+    """
+    ws = _workspace(a.shape[0], joint.shape[0], sub_joint.shape[0], group_local.shape[0], self_pairs.shape[0],
+                    anc_joint.shape[0], parts, scene_reach, halves, self_runs)  # fmt: skip
+    F, group_joint, Cj, Wj, R, t, Cg, Cs, W, Ws, stamp, gap_h, hull_hint, anc_stamp, anc_gap, anc_gstamp, anc_ggap, \
+        reach, part_reach, pair_run = ws  # fmt: skip
+    P, M = scene_rows.shape[0], out.shape[1]
+    line = n > 0
+    ask_all = np.arange(M)
+    dense_slack = np.empty(M)
+    left = np.zeros(M, dtype=np.bool_)  # a line's state's pairs left
+    q = np.empty(a.shape[0])
+    step = np.empty(
+        M
+    )  # per pair, how far its geometries move against each other per step of the line, at most
+    if line:
+        G, N = joint.shape[0], a.shape[0]
+        moves = np.zeros(
+            (G, N + 1)
+        )  # per geometry, how far the arm joints up to each move its points per step
+        for g in range(G):
+            for d in range(N):
+                moves[g, d + 1] = moves[g, d] + abs(b[d] - a[d]) * levers[g, d] / n
+        for p in range(P):
+            step[p] = min(moves[scene_rows[p], N], travel / n)
+        for p in range(
+            self_pairs.shape[0]
+        ):  # only the joints between the two geometries move one against the other
+            g, h = self_pairs[p, 0], self_pairs[p, 1]
+            if joint[g] > joint[h]:
+                g, h = h, g
+            step[P + p] = moves[h, joint[h] + 1] - moves[h, joint[g] + 1]
+    k, i, seg_i, seg_j, c0, c, phase = start - 1, 0, 0, 0, 0, 0, 0
+    while True:
+        if not line:  # the next state of Q
+            k += 1
+            if k >= Q.shape[0]:
+                return -1
+            q_k, ask, gaps, slack_i, out_i, i = Q[k], ask_all, False, dense_slack, out[k], k
+        else:
+            phase = ctl[3]
+            if phase < 2:  # state 0 (its gaps only), then state n, every pair asked
+                if phase == 0:
+                    pool[:M] = ask_all
+                    ctl[4] = M
+                k, ask = phase * n, pool[:M]
+            else:  # the next segment with a pair whose gaps at its ends do not cover it: its midpoint
+                k = -1
+                while ctl[0] < ctl[1]:
+                    seg_i, seg_j = queue[ctl[0], 0], queue[ctl[0], 1]
+                    s0, s1 = queue[ctl[0], 2], queue[ctl[0], 2] + queue[ctl[0], 3]
+                    ctl[0] += 1
+                    if seg_j - seg_i < 2:
+                        continue
+                    c0 = c = ctl[4]
+                    for v in range(s0, s1):
+                        p = pool[v]
+                        if not line_slack[seg_i, p] + line_slack[seg_j, p] > (seg_j - seg_i) * step[p]:
+                            pool[c] = p
+                            c += 1
+                    if c > c0:
+                        ctl[4] = c
+                        k = (seg_i + seg_j) // 2
+                        break
+                if k < 0:
+                    return -1
+                ask = pool[c0:c]
+            for d in range(a.shape[0]):
+                q[d] = a[d] + (b[d] - a[d]) * (k / n)
+            q_k, gaps, slack_i, out_i, i = q, True, line_slack[k], left, ctl[2]
+        m = ask.shape[0]
+        if m == out_i.shape[0]:  # every pair asked
+            out_i[:] = False
+            slack_i[:] = 0.0
+        else:
+            for p in ask:
+                out_i[p], slack_i[p] = False, 0.0
+        _joint_frames(q_k, placements, axes, kinds, F, R, t)
+        _place(joint, local, F, Cg)
+        _transformed(Cg, T, W)
+        _place(group_joint, group_local, F, Cj)
+        _transformed(Cj, T, Wj)
+        any_pair = False
+        u = 0
+        for q_ in range(parts.shape[0]):
+            kind, pa, pb, r0, r1 = parts[q_, 0], parts[q_, 1], parts[q_, 2], parts[q_, 3], parts[q_, 4]
+            u0 = u
+            u = _past(ask, u, r0, r1, 0)
+            if u == u0:
+                continue
+            rows_q = ask[u0:u]
+            if kind == 0 and _part_far(rows_q, scene_rows, joint, Wj, group_radius, reach, geo[q_], slack_i):
+                continue  # every asked row's group sphere clear of the part's bounding box
+            if kind == 0:
+                pts = all_points[offs[q_, 0] : offs[q_ + 1, 0]]
+                keys = all_keys[offs[q_, 1] : offs[q_ + 1, 1]]
+                starts = all_starts[offs[q_, 2] : offs[q_ + 1, 2]]
+                field = all_fields[offs[q_, 3] : offs[q_ + 1, 3]].reshape(
+                    (ints[q_, 3], ints[q_, 4], ints[q_, 5])
+                )
+                lo, hi, cell, field_lo, field_h = (
+                    geo[q_, 0:3],
+                    geo[q_, 3:6],
+                    geo[q_, 6],
+                    geo[q_, 7:10],
+                    geo[q_, 10],
+                )
+                dims = ints[q_, 0:3]
+                any_pair |= _points_rows(out_i, slack_i, rows_q, scene_rows, reach, W, radius, Ws, sub_start, sub_radius,
+                                         joint, Wj, group_radius, i, stamp, sub_joint, sub_local, F, T, Cs, pts, keys,
+                                         starts, lo, hi, cell, dims, field, field_lo, field_h, hull_start, hull_planes)  # fmt: skip
+                continue
+            group, group_gap = -2, -1.0
+            for p in rows_q:
+                g = scene_rows[p]
+                if joint[g] != group:  # the rows of one arm joint together: its group sphere first
+                    group = joint[g]
+                    group_gap = _shape_gap(
+                        Wj[group], group_radius[group] + part_reach[q_], kind, pa, pb, planes, balls, gaps
+                    )
+                if group_gap >= 0.0:
+                    slack_i[p] = group_gap
+                    continue
+                gap = _shape_gap(W[g], radius[g] + reach[p], kind, pa, pb, planes, balls, gaps)
+                touch = gap < 0.0
+                if touch and sub_start[g + 1] - sub_start[g] > 1:
+                    touch, gap = False, np.inf
+                    _cover_placed(g, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws)
+                    for s in range(sub_start[g], sub_start[g + 1]):
+                        sub_gap = _shape_gap(
+                            Ws[s], sub_radius[s] + reach[p], kind, pa, pb, planes, balls, gaps
+                        )
+                        if sub_gap < 0.0:
+                            touch = True
+                            break
+                        gap = min(gap, sub_gap)
+                if touch and kind == 1:
+                    touch = not _vertices_outside(
+                        g, W[g], reach[p], joint, F, T, vert_start, verts, planes, pa, pb
+                    )
+                    gap = 0.0
+                out_i[p], slack_i[p] = touch, 0.0 if touch else gap
+                any_pair |= touch
+        while u < m:  # the self pairs asked, run by run
+            run = pair_run[ask[u] - P]
+            g, j, r0, r1 = self_runs[run, 0], self_runs[run, 1], self_runs[run, 2], self_runs[run, 3]
+            u0 = u
+            u = _past(ask, u, r0, r1, P)
+            gap = _gap(Cg, g, Cj, j, radius[g] + group_radius[j] + run_reach[run])
+            an = anchor_of[ask[u0] - P]  # one g, one j: every pair of the run in the same set (or none)
+            if gap < 0.0 and an >= 0:
+                if anc_gstamp[an, j] != i:
+                    anc_gstamp[an, j] = i
+                    bound = _anchor_bound(
+                        Cj[j], an, F, anc_joint, anc_box, anc_lo, anc_h, anc_dims, anc_off, anc_field
+                    )
+                    reach_j = group_radius[j] + anc_group_reach[an, j]
+                    anc_ggap[an, j] = bound - reach_j if bound > reach_j else -1.0
+                gap = anc_ggap[an, j]
+            if gap >= 0.0:
+                if gaps:
+                    for v in range(u0, u):
+                        slack_i[ask[v]] = gap
+                continue
+            for v in range(u0, u):
+                p = ask[v] - P
+                g, h = self_pairs[p, 0], self_pairs[p, 1]
+                gap = _gap(Cg, g, Cg, h, radius[g] + radius[h] + self_reach[p])
+                touch = gap < 0.0
+                an = anchor_of[p]
+                if touch and an >= 0:
+                    if anc_stamp[an, h] != i:
+                        anc_stamp[an, h] = i
+                        anc_gap[an, h] = _anchor_gap(h, an, i, Cg, radius, stamp, sub_start, sub_joint, sub_local,
+                                                     sub_radius, F, T, Cs, Ws, anc_joint, anc_box, anc_lo, anc_h,
+                                                     anc_dims, anc_off, anc_field, anc_reach[an, h])  # fmt: skip
+                    gap = anc_gap[an, h]
+                    touch = gap < 0.0
+                if touch and self_table[p] >= 0:
+                    gap = _table_gap(
+                        q_k, self_table[p], tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off, tab_cert
+                    )
+                    touch = gap < 0.0
+                if touch:
+                    gap = _covers_gap(g, h, i, self_reach[p], Cg, radius, stamp, sub_start, sub_joint, sub_local,
+                                      sub_radius, F, T, Cs, Ws, gap_h)  # fmt: skip
+                    touch = gap < 0.0
+                if touch:  # by g's hull, else h's; each tried first from the plane that served it last
+                    kh, gap = _hull_clear(g, h, i, self_reach[p], joint, Cg, radius, stamp, sub_start, sub_joint,
+                                         sub_local, sub_radius, F, T, Cs, Ws, hull_start, hull_planes, hull_hint[p, 0])  # fmt: skip
+                    if kh >= 0:
+                        hull_hint[p, 0], touch = kh, False
+                    else:
+                        kh, gap = _hull_clear(h, g, i, self_reach[p], joint, Cg, radius, stamp, sub_start, sub_joint,
+                                             sub_local, sub_radius, F, T, Cs, Ws, hull_start, hull_planes, hull_hint[p, 1])  # fmt: skip
+                        if kh >= 0:
+                            hull_hint[p, 1], touch = kh, False
+                out_i[ask[v]], slack_i[ask[v]] = touch, max(gap, 0.0)
+                any_pair |= touch
+        if not line:
+            if any_pair:
+                return k
+            continue
+        ctl[2] += 1
+        if phase == 0:
+            ctl[3] = 1
+            continue
+        if phase == 1:
+            ctl[3] = 2
+            queue[0, 0], queue[0, 1], queue[0, 2], queue[0, 3] = 0, n, 0, M
+            ctl[0], ctl[1] = 0, 1
+        else:
+            for e in range(2):
+                queue[ctl[1], 0], queue[ctl[1], 1] = (seg_i, k) if e == 0 else (k, seg_j)
+                queue[ctl[1], 2], queue[ctl[1], 3] = c0, c - c0
+                ctl[1] += 1
+        if any_pair:
+            out[0, :] = False
+            for p in ask:
+                out[0, p] = left[p]
+            return k
 
 
 @nb.njit(cache=True)
@@ -146,15 +439,15 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
                         anc_h, anc_dims, anc_off, anc_field, anc_reach, anc_group_reach, start, out):  # fmt: skip
     """Per state Q[i] (n,), which pairs its spheres do not certify free: ``out[i, p]`` (m, P + S) bool.
 
-    The whole-edge check of issue 25 item 3: every state's spheres placed and tested in one call.
-    Scene pairs ``p < P``: robot geometry ``scene_rows[p]``, grouped by scene part (``parts[q]``:
+    Every state's spheres placed and tested in one call (:func:`_uncertified`). Scene pairs ``p < P``:
+    robot geometry ``scene_rows[p]``, grouped by scene part (``parts[q]``:
     kind, a, b, and the part's rows r0..r1; kind 0: box centres in the point index q packed by
     :func:`_packed` (``offs`` .. ``ints``),
-    boxes ``halves[q]`` a half diagonal across (:func:`_points_rows`); kind 1, 2: :func:`_shape_touches`),
+    boxes ``halves[q]`` a half diagonal across (:func:`_points_rows`); kind 1, 2: :func:`_shape_gap`),
     certified when the geometry's bounding sphere or every sphere of its cover (``sub_*``) is
     clear by ``scene_reach[p]``; then the self pairs (S, 2), certified when the bounding spheres
-    or their covers (:func:`_covers_near`) are farther apart than ``self_reach`` plus their radii, or
-    the pair's distance table (``self_table[p]`` >= 0, :func:`_table_clear`) clears it. The self
+    or their covers (:func:`_covers_gap`) are farther apart than ``self_reach`` plus their radii, or
+    the pair's distance table (``self_table[p]`` >= 0, :func:`_table_gap`) clears it. The self
     pairs come in runs of one geometry g against the geometries that one arm joint j moves
     (``self_runs`` (R, 4): g, j, the run's pairs r0..r1): a run is certified at once when g's
     bounding sphere is farther from j's group sphere than ``run_reach`` plus their radii. A self
@@ -166,161 +459,90 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
     Goes from state ``start`` and stops at the first state with any pair left (coal decides it,
     then the call goes on from the next): returns its index, or -1 when every state is certified.
     """
-    G, K, J = joint.shape[0], sub_joint.shape[0], group_local.shape[0]
-    F = np.empty((Q.shape[1], 3, 4))
-    group_joint = np.arange(J)
-    Cj, Wj = np.empty((J, 3)), np.empty((J, 3))
-    R, t = np.empty((3, 3)), np.empty(3)
-    Cg, Cs = np.empty((G, 3)), np.empty((K, 3))
-    W, Ws = np.empty((G, 3)), np.empty((K, 3))
-    stamp = np.full(G, -1)  # the state each geometry's cover spheres were last placed for
-    near_h = np.empty(K, dtype=np.bool_)
-    # per self pair and hull (its first geometry's, its second's): the plane that last served
-    hull_hint = np.full((self_pairs.shape[0], 2), -1, dtype=np.int64)
-    A = anc_joint.shape[0]
-    anc_stamp, anc_clear = np.full((A, G), -1), np.zeros((A, G), dtype=np.bool_)  # per anchor and geometry
-    anc_gstamp, anc_gclear = (
-        np.full((A, J), -1),
-        np.zeros((A, J), dtype=np.bool_),
-    )  # per anchor and joint group
-    P = scene_rows.shape[0]
-    reach = np.empty(P)
-    part_reach = np.zeros(parts.shape[0])  # the largest of each part's rows
-    for q in range(parts.shape[0]):
-        reach[parts[q, 3] : parts[q, 4]] = scene_reach[parts[q, 3] : parts[q, 4]] + halves[q] * (
-            parts[q, 0] == 0
-        )
-        for p in range(parts[q, 3], parts[q, 4]):
-            part_reach[q] = max(part_reach[q], reach[p])
-    for i in range(start, Q.shape[0]):
-        _joint_frames(Q[i], placements, axes, kinds, F, R, t)
-        _place(joint, local, F, Cg)
-        _transformed(Cg, T, W)
-        _place(group_joint, group_local, F, Cj)
-        _transformed(Cj, T, Wj)
-        out_i = out[i]
-        any_pair = False
-        for q in range(parts.shape[0]):
-            kind, a, b, r0, r1 = parts[q, 0], parts[q, 1], parts[q, 2], parts[q, 3], parts[q, 4]
-            if kind == 0 and _part_far(r0, r1, scene_rows, joint, Wj, group_radius, part_reach[q], geo[q]):
-                out_i[r0:r1] = False  # every row's group sphere clear of the part's bounding box
-                continue
-            if kind == 0:
-                pts = all_points[offs[q, 0] : offs[q + 1, 0]]
-                keys = all_keys[offs[q, 1] : offs[q + 1, 1]]
-                starts = all_starts[offs[q, 2] : offs[q + 1, 2]]
-                field = all_fields[offs[q, 3] : offs[q + 1, 3]].reshape((ints[q, 3], ints[q, 4], ints[q, 5]))
-                lo, hi, cell, field_lo, field_h = (
-                    geo[q, 0:3],
-                    geo[q, 3:6],
-                    geo[q, 6],
-                    geo[q, 7:10],
-                    geo[q, 10],
-                )
-                dims = ints[q, 0:3]
-                any_pair |= _points_rows(out_i, r0, r1, scene_rows, reach, W, radius, Ws, sub_start, sub_radius,
-                                         joint, Wj, group_radius, i, stamp, sub_joint, sub_local, F, T, Cs, pts, keys, starts, lo, hi, cell, dims, field,
-                                         field_lo, field_h, hull_start, hull_planes)  # fmt: skip
-                continue
-            group, group_clear = -2, False
-            for p in range(r0, r1):
-                g = scene_rows[p]
-                if joint[g] != group:  # the rows of one arm joint together: its group sphere first
-                    group = joint[g]
-                    group_clear = not _shape_touches(Wj[group], group_radius[group] + part_reach[q], kind, a, b,
-                                                     planes, balls)  # fmt: skip
-                if group_clear:
-                    out_i[p] = False
-                    continue
-                touch = _shape_touches(W[g], radius[g] + reach[p], kind, a, b, planes, balls)
-                if touch and sub_start[g + 1] - sub_start[g] > 1:
-                    touch = False
-                    _cover_placed(g, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws)
-                    for s in range(sub_start[g], sub_start[g + 1]):
-                        if _shape_touches(Ws[s], sub_radius[s] + reach[p], kind, a, b, planes, balls):
-                            touch = True
-                            break
-                if touch and kind == 1:
-                    touch = not _vertices_outside(
-                        g, W[g], reach[p], joint, F, T, vert_start, verts, planes, a, b
-                    )
-                out_i[p] = touch
-                any_pair |= touch
-        for run in range(self_runs.shape[0]):
-            g, j, r0, r1 = self_runs[run, 0], self_runs[run, 1], self_runs[run, 2], self_runs[run, 3]
-            if not _near(Cg, g, Cj, j, radius[g] + group_radius[j] + run_reach[run]):
-                out_i[P + r0 : P + r1] = False
-                continue
-            an = anchor_of[r0]  # one g, one j: every pair of the run in the same set (or none)
-            if an >= 0:
-                if anc_gstamp[an, j] != i:
-                    anc_gstamp[an, j] = i
-                    anc_gclear[an, j] = _anchor_bound(Cj[j], an, F, anc_joint, anc_box, anc_lo, anc_h, anc_dims, anc_off,
-                                                     anc_field) > group_radius[j] + anc_group_reach[an, j]  # fmt: skip
-                if anc_gclear[an, j]:
-                    out_i[P + r0 : P + r1] = False
-                    continue
-            for p in range(r0, r1):
-                g, h = self_pairs[p, 0], self_pairs[p, 1]
-                touch = _near(Cg, g, Cg, h, radius[g] + radius[h] + self_reach[p])
-                an = anchor_of[p]
-                if touch and an >= 0:
-                    if anc_stamp[an, h] != i:
-                        anc_stamp[an, h] = i
-                        anc_clear[an, h] = _anchor_clear(h, an, i, Cg, radius, stamp, sub_start, sub_joint, sub_local,
-                                                        sub_radius, F, T, Cs, Ws, anc_joint, anc_box, anc_lo, anc_h,
-                                                        anc_dims, anc_off, anc_field, anc_reach[an, h])  # fmt: skip
-                    touch = not anc_clear[an, h]
-                if touch and self_table[p] >= 0:
-                    touch = not _table_clear(Q[i], self_table[p], tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off,
-                                             tab_cert)  # fmt: skip
-                if touch:
-                    touch = _covers_near(g, h, i, self_reach[p], Cg, radius, stamp, sub_start, sub_joint, sub_local,
-                                         sub_radius, F, T, Cs, Ws, near_h)  # fmt: skip
-                if touch:  # by g's hull, else h's; each tried first from the plane that served it last
-                    k = _hull_clear(g, h, i, self_reach[p], joint, Cg, radius, stamp, sub_start, sub_joint, sub_local,
-                                    sub_radius, F, T, Cs, Ws, hull_start, hull_planes, hull_hint[p, 0])  # fmt: skip
-                    if k >= 0:
-                        hull_hint[p, 0], touch = k, False
-                    else:
-                        k = _hull_clear(h, g, i, self_reach[p], joint, Cg, radius, stamp, sub_start, sub_joint,
-                                        sub_local, sub_radius, F, T, Cs, Ws, hull_start, hull_planes, hull_hint[p, 1])  # fmt: skip
-                        if k >= 0:
-                            hull_hint[p, 1], touch = k, False
-                out_i[P + p] = touch
-                any_pair |= touch
-        if any_pair:
-            return i
-    return -1
+    z = np.zeros(Q.shape[1])
+    return _uncertified(Q, z, z, 0, 0.0, np.zeros((joint.shape[0], Q.shape[1])), placements, axes, kinds, joint, local,
+                        radius, sub_start, sub_joint, sub_local, sub_radius, group_local, group_radius, hull_start,
+                        hull_planes, vert_start, verts, T, scene_rows, scene_reach, parts, offs, all_points, all_keys,
+                        all_starts, all_fields, geo, ints, halves, planes, balls, self_pairs, self_reach, self_runs,
+                        run_reach, self_table, tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off, tab_cert, anchor_of,
+                        anc_joint, anc_box, anc_lo, anc_h, anc_dims, anc_off, anc_field, anc_reach, anc_group_reach,
+                        np.zeros((1, out.shape[1])), np.zeros((1, 4), dtype=np.int64), np.zeros(1, dtype=np.int64),
+                        np.zeros(5, dtype=np.int64), start, out)  # fmt: skip
+
+
+@nb.njit(cache=True)
+def _uncertified_line(a, b, n, travel, levers, placements, axes, kinds, joint, local, radius, sub_start, sub_joint, sub_local,
+                      sub_radius, group_local, group_radius, hull_start, hull_planes, vert_start, verts, T, scene_rows, scene_reach, parts, offs, all_points, all_keys, all_starts,
+                      all_fields, geo, ints, halves, planes, balls, self_pairs, self_reach, self_runs, run_reach, self_table,
+                      tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off, tab_cert, anchor_of, anc_joint, anc_box, anc_lo,
+                      anc_h, anc_dims, anc_off, anc_field, anc_reach, anc_group_reach, slack, queue, pool, ctl, out):  # fmt: skip
+    """The states ``a + k / n (b - a)``, k = 1..n, of a joint line (n,): the next one with pairs left, or -1.
+
+    :func:`_uncertified_states`' verdict on every state of the line, without asking each pair at
+    each state. A point of robot geometry g moves at most ``levers[g] @ |b - a|`` [m] along the
+    whole line (``levers`` (G, n): per unit change of each arm joint, :func:`geometry_levers`), and
+    at most ``travel`` (a bound for the whole robot); so by that over n per step. Against another
+    robot geometry it moves only by the arm joints between the two (the arm is a chain: the joints
+    before both move them together). A pair certified at state k with a gap s (``slack[k]``,
+    :func:`_uncertified`) keeps its distance above the margin while its geometries move less than s
+    (against each other, for a self pair). The line is cut by bisection, far end first (state 0
+    is asked too, for its gaps only): a pair is asked
+    at a segment's midpoint only when its gaps at the segment's two ends do not add up to its
+    move along the segment, for then it is certified at every point of the segment (conservative
+    advancement, as in Schwarzer, Saha and Latombe 2005's adaptive edge checks); a segment one
+    step long is not cut (its two ends are the resolution, as in :func:`_uncertified_states`).
+    Every state asked with a pair left goes back to the caller (its pairs in ``out[0]``), which
+    decides it (coal) and calls again: ``slack`` (n + 1, P + S), ``queue`` (2 n + 2, 4: a
+    segment's ends and the pairs its parent asked, in ``pool``, at least (n + 1) (P + S) long),
+    and ``ctl`` (5,: queue head and tail, states asked, 0 before the first call, pool used) keep
+    the place. A pair left to coal at a state has no gap there.
+    """
+    return _uncertified(np.zeros((0, a.shape[0])), a, b, n, travel, levers, placements, axes, kinds, joint, local,
+                        radius, sub_start, sub_joint, sub_local, sub_radius, group_local, group_radius, hull_start,
+                        hull_planes, vert_start, verts, T, scene_rows, scene_reach, parts, offs, all_points, all_keys,
+                        all_starts, all_fields, geo, ints, halves, planes, balls, self_pairs, self_reach, self_runs,
+                        run_reach, self_table, tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off, tab_cert, anchor_of,
+                        anc_joint, anc_box, anc_lo, anc_h, anc_dims, anc_off, anc_field, anc_reach, anc_group_reach,
+                        slack, queue, pool, ctl, 0, out)  # fmt: skip
 
 
 @nb.njit(cache=True, inline="always")
-def _part_far(r0, r1, rows, joint, Wj, group_radius, reach, geo):
-    """Whether the group sphere of every row r0..r1's arm joint is farther than ``reach`` from a point part's bounding box.
+def _past(ask, u, r0, r1, offset):
+    """The first index from u of the sorted pairs ``ask`` at or past ``offset + r1``; ``ask[u]`` is not below ``offset + r0``.
 
-    ``geo[0:3]``, ``geo[3:6]``: the box (the lowest and highest box centre); ``reach`` at least
-    every row's. :func:`_points_rows` certifies such rows by the same box distance (the first
-    term of :func:`~baseplace.world.point_index._lower_bound`), so this early out changes no
-    answer: it spares the part's array views and the call (about 1 us per part and state).
+    At once when ``ask`` holds all of r0..r1 (every pair asked), else step by step.
     """
-    group = -2
-    for p in range(r0, r1):
+    v = u + r1 - r0
+    if v <= ask.shape[0] and ask[v - 1] == offset + r1 - 1:
+        return v
+    while u < ask.shape[0] and ask[u] < offset + r1:
+        u += 1
+    return u
+
+
+@nb.njit(cache=True, inline="always")
+def _part_far(ask, rows, joint, Wj, group_radius, reach, geo, slack):
+    """Whether the group sphere of every row in ``ask``'s arm joint is farther than its reach from a point part's bounding box.
+
+    ``geo[0:6]``: the box (the lowest and highest box centre). :func:`_points_rows` certifies
+    such rows by the same box distance (the first term of
+    :func:`~baseplace.world.point_index._lower_bound`), so this early out changes no answer: it
+    spares the part's array views and the call (about 1 us per part and state). Each row's gap
+    goes into ``slack`` as it is found (:func:`_points_rows` writes them all again when this does
+    not hold).
+    """
+    group, d = -2, 0.0
+    for p in ask:
         j = joint[rows[p]]
-        if j == group:
-            continue
-        group = j
         if j < 0:
             return False
-        d2 = 0.0
-        for k in range(3):
-            c = Wj[j, k]
-            if c < geo[k]:
-                d2 += (geo[k] - c) ** 2
-            elif c > geo[3 + k]:
-                d2 += (c - geo[3 + k]) ** 2
-        r = group_radius[j] + reach
-        if not d2 > r * r:
+        if j != group:
+            group = j
+            d = math.sqrt(_box_d2(Wj[j, 0], Wj[j, 1], Wj[j, 2], geo))
+        reach_p = group_radius[j] + reach[p]
+        if not d > reach_p:
             return False
+        slack[p] = d - reach_p
     return True
 
 
@@ -352,13 +574,7 @@ def _anchor_bound(c, a, F, anc_joint, anc_box, anc_lo, anc_h, anc_dims, anc_off,
     point's distance to that node (the field is a lower bound of a distance, which changes by at
     most as much as the point moves: :func:`_anchor_field`).
     """
-    x, y, z = c[0], c[1], c[2]
-    f = anc_joint[a]
-    if f >= 0:  # into the joint's frame: R^T (c - t)
-        dx, dy, dz = x - F[f, 0, 3], y - F[f, 1, 3], z - F[f, 2, 3]
-        x = F[f, 0, 0] * dx + F[f, 1, 0] * dy + F[f, 2, 0] * dz
-        y = F[f, 0, 1] * dx + F[f, 1, 1] * dy + F[f, 2, 1] * dz
-        z = F[f, 0, 2] * dx + F[f, 1, 2] * dy + F[f, 2, 2] * dz
+    x, y, z = _in_joint_frame(c, anc_joint[a], F)
     d2 = _box_d2(x, y, z, anc_box[a])
     h = anc_h[a]
     n0, n1, n2 = anc_dims[a, 0], anc_dims[a, 1], anc_dims[a, 2]
@@ -371,26 +587,25 @@ def _anchor_bound(c, a, F, anc_joint, anc_box, anc_lo, anc_h, anc_dims, anc_off,
 
 
 @nb.njit(cache=True)
-def _anchor_clear(h, a, i, Cg, radius, stamp, sub_start, sub_joint, sub_local, sub_radius, F, T, Cs, Ws, anc_joint,
-                  anc_box, anc_lo, anc_h, anc_dims, anc_off, anc_field, reach):  # fmt: skip
-    """Whether geometry h at state i is farther than ``reach`` from every geometry of anchor a (:func:`_anchor_bound`).
+def _anchor_gap(h, a, i, Cg, radius, stamp, sub_start, sub_joint, sub_local, sub_radius, F, T, Cs, Ws, anc_joint,
+                anc_box, anc_lo, anc_h, anc_dims, anc_off, anc_field, reach):  # fmt: skip
+    """By how much [m] geometry h at state i is farther than ``reach`` from every geometry of anchor a (:func:`_anchor_bound`); -1 when it is not shown to be.
 
-    By its bounding sphere, else by every sphere of its cover.
+    By its bounding sphere, else by every sphere of its cover (the least of theirs).
     """
-    if (
-        _anchor_bound(Cg[h], a, F, anc_joint, anc_box, anc_lo, anc_h, anc_dims, anc_off, anc_field)
-        > radius[h] + reach
-    ):
-        return True
+    bound = _anchor_bound(Cg[h], a, F, anc_joint, anc_box, anc_lo, anc_h, anc_dims, anc_off, anc_field)
+    if bound > radius[h] + reach:
+        return bound - (radius[h] + reach)
     if sub_start[h + 1] - sub_start[h] <= 1:
-        return False
+        return -1.0
     _cover_placed(h, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws)
+    gap = np.inf
     for s in range(sub_start[h], sub_start[h + 1]):
-        if not _anchor_bound(Cs[s], a, F, anc_joint, anc_box, anc_lo, anc_h, anc_dims, anc_off, anc_field) > (
-            sub_radius[s] + reach
-        ):
-            return False
-    return True
+        bound = _anchor_bound(Cs[s], a, F, anc_joint, anc_box, anc_lo, anc_h, anc_dims, anc_off, anc_field)
+        if not bound > sub_radius[s] + reach:
+            return -1.0
+        gap = min(gap, bound - (sub_radius[s] + reach))
+    return gap
 
 
 @nb.njit(cache=True)
@@ -424,62 +639,80 @@ def _anchor_field(plane_start, planes, boxes, lo, h, dims, cap, out):
 
 
 @nb.njit(cache=True)
-def _covers_near(
-    g, h, i, reach, Cg, radius, stamp, sub_start, sub_joint, sub_local, sub_radius, F, T, Cs, Ws, near_h
+def _covers_gap(
+    g, h, i, reach, Cg, radius, stamp, sub_start, sub_joint, sub_local, sub_radius, F, T, Cs, Ws, gap_h
 ):
-    """Whether self pair (g, h) at state i is not certified by its covers: True when some piece may be within ``reach``.
+    """By how much [m] self pair (g, h) at state i is certified farther apart than ``reach`` by its covers; -1 when it is not.
 
     Geometry g is the union of its cover's pieces, each in its sphere, and so is h. A piece of g
     is clear of a piece of h when g's piece's sphere is clear of h's bounding sphere, or h's
     piece's sphere is clear of g's bounding sphere, or the two pieces' spheres are clear of each
-    other; only the pairs of pieces near the other geometry's bounding sphere are compared.
+    other; only the pairs of pieces near the other geometry's bounding sphere are compared. The
+    gap: the least over the pairs of pieces, each by the test that cleared it.
     """
     _cover_placed(g, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws)
     _cover_placed(h, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws)
-    any_h = False
+    any_h, best = False, np.inf
     for u in range(sub_start[h], sub_start[h + 1]):
-        near_h[u] = _near(Cs, u, Cg, g, sub_radius[u] + radius[g] + reach)
-        any_h |= near_h[u]
+        gap_h[u] = _gap(Cs, u, Cg, g, sub_radius[u] + radius[g] + reach)
+        any_h |= gap_h[u] < 0.0
     if not any_h:
-        return False
+        for u in range(sub_start[h], sub_start[h + 1]):
+            best = min(best, gap_h[u])
+        return best
     for s in range(sub_start[g], sub_start[g + 1]):
-        if not _near(Cs, s, Cg, h, sub_radius[s] + radius[h] + reach):
+        e = _gap(Cs, s, Cg, h, sub_radius[s] + radius[h] + reach)
+        if e >= 0.0:
+            best = min(best, e)
             continue
         for u in range(sub_start[h], sub_start[h + 1]):
-            if near_h[u] and _near(Cs, s, Cs, u, sub_radius[s] + sub_radius[u] + reach):
-                return True
-    return False
+            e = gap_h[u]
+            if e < 0.0:
+                e = _gap(Cs, s, Cs, u, sub_radius[s] + sub_radius[u] + reach)
+                if e < 0.0:
+                    return -1.0
+            best = min(best, e)
+    return best
 
 
 @nb.njit(cache=True)
 def _hull_clear(g, h, i, reach, joint, Cg, radius, stamp, sub_start, sub_joint, sub_local, sub_radius, F, T, Cs, Ws,
                 hull_start, hull_planes, hint):  # fmt: skip
-    """A face plane of geometry g's convex hull that shows geometry h at state i farther than ``reach`` from it, or -1.
+    """A face plane of geometry g's convex hull that shows geometry h at state i farther than ``reach`` from it, and by how much [m]; or (-1, -1).
 
     g's hull faces (``hull_planes[hull_start[g]:hull_start[g + 1]]``, unit normal and offset in the
     frame of the arm joint that moves g, inside <= 0) each bound a half-space holding g, so a
     sphere whose centre lies more than its radius + ``reach`` outside any one of them is that far
     from g. h is clear when its bounding sphere is, or every sphere of its cover is (the plane
-    returned: the one that served the last). Tighter than sphere against sphere where g is large
-    and flat-sided (TIAGo's torso beside the arm). The planes are tried from ``hint`` on (the one
-    that served this pair at an earlier state, or -1), which changes no answer, only how soon it comes.
+    returned: the one that served the last; the gap: the least). Tighter than sphere against
+    sphere where g is large and flat-sided (TIAGo's torso beside the arm). The planes are tried
+    from ``hint`` on (the one that served this pair at an earlier state, or -1), which changes no
+    answer, only how soon it comes.
     """
     a, b = hull_start[g], hull_start[g + 1]
     if a == b:
-        return -1
+        return -1, -1.0
     j = joint[g]
     k = _outside_planes(Cg[h], radius[h] + reach, j, F, hull_planes, a, b, hint)
     if k >= 0:
-        return k
+        return k, _plane_value(Cg[h], j, F, hull_planes, k) - (radius[h] + reach)
     if sub_start[h + 1] - sub_start[h] <= 1:
-        return -1
+        return -1, -1.0
     _cover_placed(h, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws)
-    k = hint
+    k, gap = hint, np.inf
     for s in range(sub_start[h], sub_start[h + 1]):
         k = _outside_planes(Cs[s], sub_radius[s] + reach, j, F, hull_planes, a, b, max(k, a))
         if k < 0:
-            return -1
-    return k
+            return -1, -1.0
+        gap = min(gap, _plane_value(Cs[s], j, F, hull_planes, k) - (sub_radius[s] + reach))
+    return k, gap
+
+
+@nb.njit(cache=True, inline="always")
+def _plane_value(c, j, F, planes, k):
+    """The signed distance [m] of the point c (3,) (the arm's base frame) to plane k of joint j's frame (-1: the arm's base)."""
+    x, y, z = _in_joint_frame(c, j, F)
+    return planes[k, 0] * x + planes[k, 1] * y + planes[k, 2] * z + planes[k, 3]
 
 
 @nb.njit(cache=True)
@@ -518,12 +751,7 @@ def _outside_planes(c, r, j, F, planes, a, b, hint):
     The planes are tried from ``hint`` on (a plane that served a nearby point: the same face
     usually serves again), then from a.
     """
-    x, y, z = c[0], c[1], c[2]
-    if j >= 0:  # into the joint's frame: R^T (c - t)
-        dx, dy, dz = x - F[j, 0, 3], y - F[j, 1, 3], z - F[j, 2, 3]
-        x = F[j, 0, 0] * dx + F[j, 1, 0] * dy + F[j, 2, 0] * dz
-        y = F[j, 0, 1] * dx + F[j, 1, 1] * dy + F[j, 2, 1] * dz
-        z = F[j, 0, 2] * dx + F[j, 1, 2] * dy + F[j, 2, 2] * dz
+    x, y, z = _in_joint_frame(c, j, F)
     h0 = hint if a <= hint < b else a
     for n in range(b - a):
         k = h0 + n
@@ -532,6 +760,18 @@ def _outside_planes(c, r, j, F, planes, a, b, hint):
         if planes[k, 0] * x + planes[k, 1] * y + planes[k, 2] * z + planes[k, 3] > r:
             return k
     return -1
+
+
+@nb.njit(cache=True, inline="always")
+def _in_joint_frame(c, j, F):
+    """The point c (3,) of the arm's base frame in the frame of arm joint j (``F[j]``; -1: the arm's base itself)."""
+    x, y, z = c[0], c[1], c[2]
+    if j >= 0:  # R^T (c - t)
+        dx, dy, dz = x - F[j, 0, 3], y - F[j, 1, 3], z - F[j, 2, 3]
+        x = F[j, 0, 0] * dx + F[j, 1, 0] * dy + F[j, 2, 0] * dz
+        y = F[j, 0, 1] * dx + F[j, 1, 1] * dy + F[j, 2, 1] * dz
+        z = F[j, 0, 2] * dx + F[j, 1, 2] * dy + F[j, 2, 2] * dz
+    return x, y, z
 
 
 @nb.njit(cache=True, inline="always")
@@ -547,8 +787,8 @@ def _cover_placed(g, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws):
 
 
 @nb.njit(cache=True, inline="always")
-def _table_clear(q, t, tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off, tab_cert):
-    """Whether self pair table t certifies arm state q (n,) free (:func:`_distance_table`).
+def _table_gap(q, t, tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off, tab_cert):
+    """By how much [m] self pair table t certifies arm state q (n,) free (:func:`_distance_table`), or -1 when it does not.
 
     Coal's distance at the nearest grid node, less how far the two geometries can have moved
     relative to each other since (lever arm times joint change, per joint), is above the margin.
@@ -561,14 +801,18 @@ def _table_clear(q, t, tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off, tab
         u = min(max(round((q[j] - tab_lo[t, d]) / tab_step[t, d]), 0), tab_n[t, d] - 1)
         slack += tab_rho[t, d] * abs(q[j] - (tab_lo[t, d] + u * tab_step[t, d]))
         index = index * tab_n[t, d] + u
-    return tab_cert[tab_off[t] + index] > slack
+    cert = tab_cert[tab_off[t] + index]
+    return cert - slack if cert > slack else -1.0
 
 
 @nb.njit(cache=True, inline="always")
-def _near(A, a, B, b, reach):
-    """Whether A[a] and B[b] are not farther apart than ``reach``."""
+def _gap(A, a, B, b, reach):
+    """By how much [m] A[a] and B[b] are farther apart than ``reach`` (>= 0), or -1 when they are not."""
     dx, dy, dz = A[a, 0] - B[b, 0], A[a, 1] - B[b, 1], A[a, 2] - B[b, 2]
-    return dx * dx + dy * dy + dz * dz <= reach * reach
+    d2 = dx * dx + dy * dy + dz * dz
+    if d2 <= reach * reach:
+        return -1.0
+    return max(math.sqrt(d2) - reach, 0.0)
 
 
 @nb.njit(cache=True)
