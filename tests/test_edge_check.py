@@ -303,3 +303,22 @@ def test_every_self_pair_the_spheres_certify_is_free_by_coal(tiago):
             )
         certified += int((~left).sum())
     assert certified > 0.9 * len(states) * len(filt._self_pairs)
+
+
+def test_a_line_too_long_for_the_gaps_table_is_checked_state_by_state(tiago, table_lines, monkeypatch):
+    """Past LINE_ENTRIES gaps (states times pairs) the line's states go one by one: the same state returned."""
+    import baseplace.world.state_filter as state_filter
+
+    transit, approach, T_base, lines = table_lines
+    arm = tiago.arm()
+    checker = MotionChecker(tiago, arm, transit, approach, MotionSettings())
+    cases = [(a, b, checker.edge_states(a, b), float(np.abs(b - a) @ checker.levers)) for a, b in lines[::8]]
+    with_gaps = [transit.first_colliding_arm_line(arm, a, b, n, travel, T_base) for a, b, n, travel in cases]
+    monkeypatch.setattr(state_filter, "LINE_ENTRIES", 0)
+    one_by_one = [transit.first_colliding_arm_line(arm, a, b, n, travel, T_base) for a, b, n, travel in cases]
+    assert [k for k, _ in one_by_one] == [k for k, _ in with_gaps]
+    for (k, asked), (_, _, n, _) in zip(
+        one_by_one, cases, strict=True
+    ):  # every state up to the first touching
+        assert asked == (n if k < 0 else bisection_order(n).index(k) + 1)
+    assert any(k >= 0 for k, _ in with_gaps) and any(k < 0 for k, _ in with_gaps)
