@@ -218,11 +218,9 @@ def _uncertified(Q, a, b, n, travel, levers, placements, axes, kinds, joint, loc
     line = n > 0
     ask_all = np.arange(M)
     dense_slack = np.empty(M)
-    left = np.zeros(M, dtype=np.bool_)  # a line's state's pairs left
+    left = np.zeros(M if line else 0, dtype=np.bool_)  # a line's state's pairs left
     q = np.empty(a.shape[0])
-    step = np.empty(
-        M
-    )  # per pair, how far its geometries move against each other per step of the line, at most
+    step = np.empty(M if line else 0)  # per pair, how far its geometries move against each other per step
     if line:
         G, N = joint.shape[0], a.shape[0]
         moves = np.zeros(
