@@ -1002,9 +1002,9 @@ class StateFilter:
             return n, 1
         M = len(self._scene_rows) + len(self._self_pairs)
         if (n + 1) * M > LINE_ENTRIES:  # the gaps' table too large: every state, one by one
-            Q = a + np.outer(np.array(bisection_order(n), dtype=float) / n, b - a)
-            i = self.first_colliding(Q, T)
-            return (-1, n) if i < 0 else (bisection_order(n)[i], i + 1)
+            order = bisection_order(n)
+            i = self.first_colliding(a + np.outer(np.array(order, dtype=float) / n, b - a), T)
+            return (-1, n) if i < 0 else (order[i], i + 1)
         slack = np.empty((n + 1, M))
         queue = np.empty((2 * n + 2, 4), dtype=np.int64)
         pool = np.empty((n + 1) * M, dtype=np.int64)

@@ -128,7 +128,7 @@ def _points_outside_hull(g, c, r, reach, joint, F, T, hull_start, hull_planes, p
                     dx, dy, dz = points[p, 0] - T[0, 3], points[p, 1] - T[1, 3], points[p, 2] - T[2, 3]
                     for m in range(3):  # into the arm's base frame: T^-1 p
                         local[m] = T[0, m] * dx + T[1, m] * dy + T[2, m] * dz
-                    hint = _outside_planes(local, reach, j, F, hull_planes, a, b, hint)
+                    hint, _ = _outside_planes(local, reach, j, F, hull_planes, a, b, hint)
                     if hint < 0:
                         return False
                 u += 1
@@ -182,9 +182,8 @@ def _workspace(n, G, K, J, S, A, parts, scene_reach, halves, self_runs):
         np.empty((G, 3)),
         np.empty((K, 3)),
         np.full(G, -1),  # the state each geometry's cover spheres were last placed for
-        np.empty(
-            K
-        ),  # per cover sphere, its gap to the other geometry's bounding sphere (:func:`_covers_gap`)
+        # per cover sphere, its gap to the other geometry's bounding sphere (:func:`_covers_gap`)
+        np.empty(K),
         np.full((S, 2), -1, dtype=np.int64),  # per self pair and hull: the plane that last served
         np.full((A, G), -1),  # per anchor and geometry: the state last asked, the gap (-1: not clear)
         np.full((A, G), -1.0),
@@ -223,17 +222,15 @@ def _uncertified(Q, a, b, n, travel, levers, placements, axes, kinds, joint, loc
     step = np.empty(M if line else 0)  # per pair, how far its geometries move against each other per step
     if line:
         G, N = joint.shape[0], a.shape[0]
-        moves = np.zeros(
-            (G, N + 1)
-        )  # per geometry, how far the arm joints up to each move its points per step
+        # per geometry, how far the arm joints up to each move its points per step
+        moves = np.zeros((G, N + 1))
         for g in range(G):
             for d in range(N):
                 moves[g, d + 1] = moves[g, d] + abs(b[d] - a[d]) * levers[g, d] / n
         for p in range(P):
             step[p] = min(moves[scene_rows[p], N], travel / n)
-        for p in range(
-            self_pairs.shape[0]
-        ):  # only the joints between the two geometries move one against the other
+        # a self pair: only the joints between the two geometries move one against the other
+        for p in range(self_pairs.shape[0]):
             g, h = self_pairs[p, 0], self_pairs[p, 1]
             if joint[g] > joint[h]:
                 g, h = h, g
@@ -279,7 +276,8 @@ def _uncertified(Q, a, b, n, travel, levers, placements, axes, kinds, joint, loc
         m = ask.shape[0]
         if m == out_i.shape[0]:  # every pair asked
             out_i[:] = False
-            slack_i[:] = 0.0
+            if gaps:
+                slack_i[:] = 0.0
         else:
             for p in ask:
                 out_i[p], slack_i[p] = False, 0.0
@@ -484,11 +482,11 @@ def _uncertified_line(a, b, n, travel, levers, placements, axes, kinds, joint, l
     before both move them together). A pair certified at state k with a gap s (``slack[k]``,
     :func:`_uncertified`) keeps its distance above the margin while its geometries move less than s
     (against each other, for a self pair). The line is cut by bisection, far end first (state 0
-    is asked too, for its gaps only): a pair is asked
-    at a segment's midpoint only when its gaps at the segment's two ends do not add up to its
-    move along the segment, for then it is certified at every point of the segment (conservative
-    advancement, as in Schwarzer, Saha and Latombe 2005's adaptive edge checks); a segment one
-    step long is not cut (its two ends are the resolution, as in :func:`_uncertified_states`).
+    is asked too, for its gaps only): a pair is asked at a segment's midpoint only when its gaps
+    at the segment's two ends do not add up to its move along the segment, for then it is
+    certified at every point of the segment (conservative advancement, as in Schwarzer, Saha and
+    Latombe 2005's adaptive edge checks); a segment one step long is not cut (its two ends are the
+    resolution, as in :func:`_uncertified_states`).
     Every state asked with a pair left goes back to the caller (its pairs in ``out[0]``), which
     decides it (coal) and calls again: ``slack`` (n + 1, P + S), ``queue`` (2 n + 2, 4: a
     segment's ends and the pairs its parent asked, in ``pool``, at least (n + 1) (P + S) long),
@@ -691,26 +689,19 @@ def _hull_clear(g, h, i, reach, joint, Cg, radius, stamp, sub_start, sub_joint, 
     if a == b:
         return -1, -1.0
     j = joint[g]
-    k = _outside_planes(Cg[h], radius[h] + reach, j, F, hull_planes, a, b, hint)
+    k, gap = _outside_planes(Cg[h], radius[h] + reach, j, F, hull_planes, a, b, hint)
     if k >= 0:
-        return k, _plane_value(Cg[h], j, F, hull_planes, k) - (radius[h] + reach)
+        return k, gap
     if sub_start[h + 1] - sub_start[h] <= 1:
         return -1, -1.0
     _cover_placed(h, i, stamp, sub_start, sub_joint, sub_local, F, T, Cs, Ws)
     k, gap = hint, np.inf
     for s in range(sub_start[h], sub_start[h + 1]):
-        k = _outside_planes(Cs[s], sub_radius[s] + reach, j, F, hull_planes, a, b, max(k, a))
+        k, sub_gap = _outside_planes(Cs[s], sub_radius[s] + reach, j, F, hull_planes, a, b, max(k, a))
         if k < 0:
             return -1, -1.0
-        gap = min(gap, _plane_value(Cs[s], j, F, hull_planes, k) - (sub_radius[s] + reach))
+        gap = min(gap, sub_gap)
     return k, gap
-
-
-@nb.njit(cache=True, inline="always")
-def _plane_value(c, j, F, planes, k):
-    """The signed distance [m] of the point c (3,) (the arm's base frame) to plane k of joint j's frame (-1: the arm's base)."""
-    x, y, z = _in_joint_frame(c, j, F)
-    return planes[k, 0] * x + planes[k, 1] * y + planes[k, 2] * z + planes[k, 3]
 
 
 @nb.njit(cache=True)
@@ -744,7 +735,7 @@ def _vertices_outside(g, c, reach, joint, F, T, vert_start, verts, planes, a, b)
 
 @nb.njit(cache=True, inline="always")
 def _outside_planes(c, r, j, F, planes, a, b, hint):
-    """The index of a plane among a..b of joint j's frame (-1: the arm's base) that the point c (3,) (base frame) lies more than r outside, or -1.
+    """A plane among a..b of joint j's frame (-1: the arm's base) that the point c (3,) (base frame) lies more than r outside, and by how much more [m]; or (-1, -1).
 
     The planes are tried from ``hint`` on (a plane that served a nearby point: the same face
     usually serves again), then from a.
@@ -755,9 +746,10 @@ def _outside_planes(c, r, j, F, planes, a, b, hint):
         k = h0 + n
         if k >= b:
             k -= b - a
-        if planes[k, 0] * x + planes[k, 1] * y + planes[k, 2] * z + planes[k, 3] > r:
-            return k
-    return -1
+        v = planes[k, 0] * x + planes[k, 1] * y + planes[k, 2] * z + planes[k, 3]
+        if v > r:
+            return k, v - r
+    return -1, -1.0
 
 
 @nb.njit(cache=True, inline="always")
