@@ -131,7 +131,13 @@ def test_experiment_smoke_flat_scene(tiago):
         assert at == sorted(at) and at[-1] == r["success_rate"]  # success can only grow with the budget
         assert set(r["failures"]) <= {"no_ik", "collision", "footprint", "exhausted"}
         assert r["on_inclined_plane"] in (None, 0.0)  # a flat scene has no incline
-        assert set(r["collisions_touching"]) <= {"support", "obstacle", "grasped_object", "self"}
+        assert set(r["collisions_touching"]) <= {
+            "support",
+            "support_plane",
+            "obstacle",
+            "grasped_object",
+            "self",
+        }
     assert rows["MR"]["success_rate"] > 0  # a grasp on a flat scene is placeable (1 of 3 here)
 
 

@@ -5,7 +5,13 @@ The expected placements were recorded once from main's code by ``tests/make_plac
 strategies return; the refactor must reproduce them (poses in order, regions, reachability, joints,
 robustness counts) to 1e-9. The ``irm`` entry was recorded again when issue 25 changed the IRM
 search's order (positions before headings): that change is meant to return other placements; they
-pass the same FK and re-verification checks below.
+pass the same FK and re-verification checks below. The ``osrm_orm_floor`` entry (the flat-floor
+baseline, whose candidates are a random permutation of every floor cell above its threshold, so that
+one cell more or less reorders them all) was recorded again from efddfc7, the last commit whose CI
+passed, when a new machine with the registry's current packages gave it other placements with the
+code of efddfc7 itself (2026-11-28; the other 13 entries still agree to 1e-15). Older numpy, scipy,
+numba, OpenCV, pinocchio and example-robot-data, one at a time, and numba's generic CPU target did
+not bring the old entry back; the cause was not found.
 """
 
 from __future__ import annotations
