@@ -23,7 +23,7 @@ demo: $(STAMP)
 	$(BIN)/baseplace demo --out out
 
 # Two pytest workers (pytest-xdist), each taking whole test files so that a module's fixtures are
-# built once: 9 min instead of 16 on a fresh 2-core machine, where numba compiles every kernel.
+# built once; the README's "Quick start" gives the measured time.
 test: $(STAMP) lint browser
 	$(BIN)/python -m pytest -q -n 2 --dist loadfile
 
