@@ -192,19 +192,21 @@ def shoot_until(
     with any budget could come before that texture was drawn. Chromium is driven over its DevTools
     pipe (it reads commands on fd 3 and answers on fd 4, each message JSON ending in a NUL byte)."""
     to_child, from_child = os.pipe(), os.pipe()
-
-    def pipes_at_3_and_4() -> None:  # in the child, before exec: fds 3 and 4, inheritable
-        high = [fcntl.fcntl(fd, fcntl.F_DUPFD, 10) for fd in (to_child[0], from_child[1])]
-        os.dup2(high[0], 3)
-        os.dup2(high[1], 4)
-
-    env = {**os.environ, "HOME": str(tmp_path)}
-    command = [browser, *CHROMIUM_FLAGS, f"--user-data-dir={tmp_path / 'cdp'}", "--remote-debugging-pipe"]
-    quiet = subprocess.DEVNULL
-    proc = subprocess.Popen(command, env=env, stdin=quiet, stdout=quiet, stderr=quiet, close_fds=False,
-                            preexec_fn=pipes_at_3_and_4)  # fmt: skip
+    # the child's ends above 4, so that neither redirection below overwrites the other
+    child_in, child_out = (fcntl.fcntl(fd, fcntl.F_DUPFD_CLOEXEC, 10) for fd in (to_child[0], from_child[1]))
     os.close(to_child[0])
     os.close(from_child[1])
+    env = {**os.environ, "HOME": str(tmp_path)}
+    command = [browser, *CHROMIUM_FLAGS, f"--user-data-dir={tmp_path / 'cdp'}", "--remote-debugging-pipe"]
+    # bash (dash takes one-digit fds only) puts the pipes at fds 3 and 4 and execs Chromium; not a
+    # preexec_fn: the viewer's server threads are running, and Python code between fork and exec is
+    # not safe with threads.
+    at_3_and_4 = f'exec "$0" "$@" 3<&{child_in} 4>&{child_out}'
+    quiet = subprocess.DEVNULL
+    proc = subprocess.Popen(["bash", "-c", at_3_and_4, *command], env=env, stdin=quiet, stdout=quiet, stderr=quiet,
+                            pass_fds=(child_in, child_out))  # fmt: skip
+    os.close(child_in)
+    os.close(child_out)
     buffer, ids = b"", iter(range(1, 1_000_000))
 
     def call(method: str, session: str | None = None, **params: Any) -> dict[str, Any]:
