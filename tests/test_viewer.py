@@ -192,11 +192,11 @@ def shoot_until(
     with any budget could come before that texture was drawn. Chromium is driven over its DevTools
     pipe (it reads commands on fd 3 and answers on fd 4, each message JSON ending in a NUL byte)."""
     to_child, from_child = os.pipe(), os.pipe()
-    # the child's ends above 4, so that neither redirection below overwrites the other
+    # the child's ends at fd 10 or above, so that neither redirection below overwrites the other
     child_in, child_out = (fcntl.fcntl(fd, fcntl.F_DUPFD_CLOEXEC, 10) for fd in (to_child[0], from_child[1]))
     os.close(to_child[0])
     os.close(from_child[1])
-    env = {**os.environ, "HOME": str(tmp_path)}
+    env = {**os.environ, "HOME": str(tmp_path)}  # chromium writes caches and crash reports under HOME
     command = [browser, *CHROMIUM_FLAGS, f"--user-data-dir={tmp_path / 'cdp'}", "--remote-debugging-pipe"]
     # bash (dash takes one-digit fds only) puts the pipes at fds 3 and 4 and execs Chromium; not a
     # preexec_fn: the viewer's server threads are running, and Python code between fork and exec is
