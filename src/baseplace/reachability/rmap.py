@@ -384,45 +384,38 @@ def _poses(T: ArrayLike, name: str) -> FloatArray:
     return arr
 
 
-@nb.njit(cache=True, inline="always")
-def _plane_row(i, T_wt, xy, gamma, R0, n, d, origin, voxel_size, shape, nside, n_twist, pixel_phi,
-               offset, blocks, full, threshold, fill, filled, out):  # fmt: skip
-    c, s = math.cos(gamma[i]), math.sin(gamma[i])
-    B = np.empty((3, 4))
-    for a in range(3):  # R = R0 Rz(gamma): x' = c x0 + s y0, y' = -s x0 + c y0, z' = n
-        B[a, 0] = c * R0[a, 0] + s * R0[a, 1]
-        B[a, 1] = -s * R0[a, 0] + c * R0[a, 1]
-        B[a, 2] = R0[a, 2]
-    B[0, 3] = xy[i, 0]
-    B[1, 3] = xy[i, 1]
-    B[2, 3] = -(d + n[0] * xy[i, 0] + n[1] * xy[i, 1]) / n[2]
-    out[i] = _lookup_inverse(T_wt, B, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset, blocks,
-                             full, threshold, fill, filled)  # fmt: skip
-
-
-# The serial and the parallel kernels are separate functions: numba's on-disk cache is keyed by
-# function, not by the parallel flag, so one function compiled both ways would share one entry.
-@nb.njit(cache=True, parallel=True)
-def _lookup_plane(T_wt, xy, gamma, R0, n, d, origin, voxel_size, shape, nside, n_twist, pixel_phi,
-                  offset, blocks, full, threshold, fill, filled, out):  # fmt: skip
-    for i in nb.prange(xy.shape[0]):
-        _plane_row(i, T_wt, xy, gamma, R0, n, d, origin, voxel_size, shape, nside, n_twist,
-                   pixel_phi, offset, blocks, full, threshold, fill, filled, out)  # fmt: skip
+# The lookups compile their heavy body (the table value and its support test, inlined into a loop
+# over rows) once per kind of row: ``_batch_rows`` and ``_plane_rows``. The serial lookup calls
+# them on all rows; the parallel one on chunks of rows (one call per chunk, so their cost is
+# nothing beside the rows'). Inlining the body into each parallel and serial kernel instead
+# compiled it six times: 3.5 minutes of a cold start's kernel compilation, for no faster lookup.
+ROWS_PER_CHUNK = 256
 
 
 @nb.njit(cache=True)
-def _lookup_plane_serial(T_wt, xy, gamma, R0, n, d, origin, voxel_size, shape, nside, n_twist,
-                         pixel_phi, offset, blocks, full, threshold, fill, filled, out):  # fmt: skip
-    for i in range(xy.shape[0]):
-        _plane_row(i, T_wt, xy, gamma, R0, n, d, origin, voxel_size, shape, nside, n_twist,
-                   pixel_phi, offset, blocks, full, threshold, fill, filled, out)  # fmt: skip
+def _plane_rows(lo, hi, T_wt, xy, gamma, R0, n, d, origin, voxel_size, shape, nside, n_twist, pixel_phi,
+                offset, blocks, full, threshold, fill, filled, out):  # fmt: skip
+    """Rows ``lo:hi`` of :meth:`ReachabilityMap.inverse_on_plane`."""
+    B = np.empty((3, 4))
+    R = np.empty((3, 3))
+    scratch = _support_scratch()
+    for i in range(lo, hi):
+        c, s = math.cos(gamma[i]), math.sin(gamma[i])
+        for a in range(3):  # R = R0 Rz(gamma): x' = c x0 + s y0, y' = -s x0 + c y0, z' = n
+            B[a, 0] = c * R0[a, 0] + s * R0[a, 1]
+            B[a, 1] = -s * R0[a, 0] + c * R0[a, 1]
+            B[a, 2] = R0[a, 2]
+        B[0, 3] = xy[i, 0]
+        B[1, 3] = xy[i, 1]
+        B[2, 3] = -(d + n[0] * xy[i, 0] + n[1] * xy[i, 1]) / n[2]
+        px, py, pz = _base_to_target(T_wt, B, R)
+        out[i] = _table_value(R, px, py, pz, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset,
+                              blocks, full, threshold, fill, filled, scratch)  # fmt: skip
 
 
 @nb.njit(cache=True, inline="always")
-def _lookup_inverse(T_wt, B, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset, blocks, full,
-                    threshold, fill, filled):  # fmt: skip
-    """Value of ``inv(B) @ T_wt`` for a base pose B (rows 0-2 of a 4x4)."""
-    R = np.empty((3, 3))
+def _base_to_target(T_wt, B, R):
+    """``inv(B) @ T_wt`` for a base pose B (rows 0-2 of a 4x4): its rotation into R, its position returned."""
     dx, dy, dz = T_wt[0, 3] - B[0, 3], T_wt[1, 3] - B[1, 3], T_wt[2, 3] - B[2, 3]
     px = B[0, 0] * dx + B[1, 0] * dy + B[2, 0] * dz
     py = B[0, 1] * dx + B[1, 1] * dy + B[2, 1] * dz
@@ -430,13 +423,22 @@ def _lookup_inverse(T_wt, B, origin, voxel_size, shape, nside, n_twist, pixel_ph
     for a in range(3):
         for b in range(3):
             R[a, b] = B[0, a] * T_wt[0, b] + B[1, a] * T_wt[1, b] + B[2, a] * T_wt[2, b]
-    return _table_value(R, px, py, pz, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset, blocks,
-                        full, threshold, fill, filled)  # fmt: skip
+    return px, py, pz
+
+
+@nb.njit(cache=True, parallel=True)
+def _lookup_plane(T_wt, xy, gamma, R0, n, d, origin, voxel_size, shape, nside, n_twist, pixel_phi,
+                  offset, blocks, full, threshold, fill, filled, out):  # fmt: skip
+    n_rows = xy.shape[0]
+    for k in nb.prange((n_rows + ROWS_PER_CHUNK - 1) // ROWS_PER_CHUNK):
+        lo = k * ROWS_PER_CHUNK
+        _plane_rows(lo, min(lo + ROWS_PER_CHUNK, n_rows), T_wt, xy, gamma, R0, n, d, origin, voxel_size,
+                    shape, nside, n_twist, pixel_phi, offset, blocks, full, threshold, fill, filled, out)  # fmt: skip
 
 
 @nb.njit(cache=True, inline="always")
 def _table_value(R, px, py, pz, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset, blocks,
-                 full, threshold, fill, filled):  # fmt: skip
+                 full, threshold, fill, filled, scratch):  # fmt: skip
     """Reachability index of the pose (R, p) from the dense lookup tables.
 
     A reached cell's value where the pose's support reaches ``threshold`` (> 0; module docstring);
@@ -456,24 +458,31 @@ def _table_value(R, px, py, pz, origin, voxel_size, shape, nside, n_twist, pixel
     elif threshold <= 0.0:
         return value
     supported = _supported(R, px, py, pz, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset,
-                           blocks, full, threshold)  # fmt: skip
+                           blocks, full, threshold, scratch)  # fmt: skip
     return value if supported else 0.0
 
 
 @nb.njit(cache=True, inline="always")
+def _support_scratch():
+    """The arrays :func:`_supported` works in: 4 pixels then 8 twist bins, and their weights.
+
+    Allocated once per run of rows, not per pose.
+    """
+    return np.empty(12, dtype=np.int64), np.empty(12)
+
+
+@nb.njit(cache=True, inline="always")
 def _supported(R, px, py, pz, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset, blocks, full,
-               threshold):  # fmt: skip
+               threshold, scratch):  # fmt: skip
     """Whether the support of the pose (R, p) reaches ``threshold``.
 
     The support interpolates ``min(table value / full, 1)`` over the 8 voxel centres x 4 direction
     pixels x 2 twist bins around the pose (module docstring). Stops once the answer is certain.
     """
     z, phi, psi = zyz_angles(R)
-    pix = np.empty(4, dtype=np.int64)
-    pixel_w = np.empty(4)
+    cells, weights = scratch
+    pix, pixel_w, bins, bin_w = cells[:4], weights[:4], cells[4:], weights[4:]
     interp_weights_ring(nside, z, phi, pix, pixel_w)
-    bins = np.empty(8, dtype=np.int64)
-    bin_w = np.empty(8)
     for a in range(4):
         u = twist(z, phi, psi, pixel_phi[pix[a]]) * (n_twist / TWO_PI) - 0.5
         k = math.floor(u)
@@ -507,34 +516,33 @@ def _supported(R, px, py, pz, origin, voxel_size, shape, nside, n_twist, pixel_p
     return support >= threshold
 
 
-@nb.njit(cache=True, inline="always")
-def _batch_row(i, T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist, pixel_phi,
-               offset, blocks, full, threshold, fill, filled, out):  # fmt: skip
-    B = T_wb[i]
-    if invert:  # T_base_tcp = B^-1 T_wt
-        out[i] = _lookup_inverse(T_wt, B, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset,
-                                 blocks, full, threshold, fill, filled)  # fmt: skip
-    else:
-        out[i] = _table_value(
-            B[:3, :3], B[0, 3], B[1, 3], B[2, 3], origin, voxel_size, shape, nside, n_twist, pixel_phi,
-            offset, blocks, full, threshold, fill, filled,
-        )  # fmt: skip
+@nb.njit(cache=True)
+def _batch_rows(lo, hi, T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist, pixel_phi,
+                offset, blocks, full, threshold, fill, filled, out):  # fmt: skip
+    """Rows ``lo:hi``: the value of ``inv(T_wb[i]) @ T_wt`` (``invert``) or of ``T_wb[i]``."""
+    R = np.empty((3, 3))
+    scratch = _support_scratch()
+    for i in range(lo, hi):
+        B = T_wb[i]
+        if invert:  # T_base_tcp = B^-1 T_wt
+            px, py, pz = _base_to_target(T_wt, B, R)
+        else:
+            px, py, pz = B[0, 3], B[1, 3], B[2, 3]
+            for a in range(3):
+                for b in range(3):
+                    R[a, b] = B[a, b]
+        out[i] = _table_value(R, px, py, pz, origin, voxel_size, shape, nside, n_twist, pixel_phi, offset,
+                              blocks, full, threshold, fill, filled, scratch)  # fmt: skip
 
 
 @nb.njit(cache=True, parallel=True)
 def _lookup_batch(T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist, pixel_phi,
                   offset, blocks, full, threshold, fill, filled, out):  # fmt: skip
-    for i in nb.prange(T_wb.shape[0]):
-        _batch_row(i, T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist, pixel_phi,
-                   offset, blocks, full, threshold, fill, filled, out)  # fmt: skip
-
-
-@nb.njit(cache=True)
-def _lookup_batch_serial(T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist, pixel_phi,
-                         offset, blocks, full, threshold, fill, filled, out):  # fmt: skip
-    for i in range(T_wb.shape[0]):
-        _batch_row(i, T_wt, T_wb, invert, origin, voxel_size, shape, nside, n_twist, pixel_phi,
-                   offset, blocks, full, threshold, fill, filled, out)  # fmt: skip
+    n_rows = T_wb.shape[0]
+    for k in nb.prange((n_rows + ROWS_PER_CHUNK - 1) // ROWS_PER_CHUNK):
+        lo = k * ROWS_PER_CHUNK
+        _batch_rows(lo, min(lo + ROWS_PER_CHUNK, n_rows), T_wt, T_wb, invert, origin, voxel_size, shape,
+                    nside, n_twist, pixel_phi, offset, blocks, full, threshold, fill, filled, out)  # fmt: skip
 
 
 @nb.njit(cache=True)
@@ -544,9 +552,10 @@ def _value_one(T, grid_f, grid_i, pixel_phi, offset, blocks):
         for b in range(4):
             if not math.isfinite(T[a, b]):
                 return -1.0
-    return _table_value(T[:3, :3], T[0, 3], T[1, 3], T[2, 3], grid_f[:3], grid_f[3], grid_i[:3], grid_i[3],
-                        grid_i[4], pixel_phi, offset, blocks, grid_f[4], grid_f[5], grid_f[6],
-                        grid_f[7])  # fmt: skip
+    out = np.empty(1, dtype=np.float32)
+    _batch_rows(0, 1, T, T.reshape((1, 4, 4)), False, grid_f[:3], grid_f[3], grid_i[:3], grid_i[3],
+                grid_i[4], pixel_phi, offset, blocks, grid_f[4], grid_f[5], grid_f[6], grid_f[7], out)  # fmt: skip
+    return out[0]
 
 
 SERIAL_BELOW = 2048
@@ -555,6 +564,16 @@ more than the lookups, and under CPU load a parallel call waits for every worker
 query ran 6-13x slower with 2 threads on a loaded 2-core machine than on 1)."""
 
 _IDENTITY = np.eye(4)
+
+
+def _lookup_batch_serial(*args: object) -> None:
+    """:func:`_lookup_batch` on the calling thread."""
+    _batch_rows(0, len(args[1]), *args)  # type: ignore[arg-type]
+
+
+def _lookup_plane_serial(*args: object) -> None:
+    """:func:`_lookup_plane` on the calling thread."""
+    _plane_rows(0, len(args[1]), *args)  # type: ignore[arg-type]
 
 
 def _batch_kernel(n: int):
