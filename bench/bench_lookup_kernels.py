@@ -27,6 +27,9 @@ import time
 
 import numpy as np
 
+from common import report
+from find_rate import library_commit
+
 FIRST_CALLS = """
 import json, sys, time
 import numpy as np
@@ -104,17 +107,20 @@ def main() -> None:
     parser.add_argument("--map", required=True, help="a reachability map file (.rmap)")
     parser.add_argument("--repeat", type=int, default=15)
     parser.add_argument("--no-compile", action="store_true", help="skip the cold compile (minutes)")
+    parser.add_argument("--name", default="lookup_kernels", help="results file bench/results/NAME.json")
     args = parser.parse_args()
-    import baseplace
+    import numba
 
-    result = {
-        "library": os.path.dirname(baseplace.__file__),
-        "numba_threads": int(os.environ.get("NUMBA_NUM_THREADS", 0)),
+    result: dict[str, object] = {
+        "library": library_commit(),
+        "numba_threads": numba.config.NUMBA_NUM_THREADS,
+        "map": os.path.basename(args.map),
+        "repeat": args.repeat,
     }
     if not args.no_compile:
         result["compile_s"] = compile_times(args.map)
     result["run"] = run_times(args.map, args.repeat)
-    print(json.dumps(result, indent=1))
+    report(args.name, result)
 
 
 if __name__ == "__main__":
