@@ -388,7 +388,7 @@ def _poses(T: ArrayLike, name: str) -> FloatArray:
 # over rows) once per kind of row: ``_batch_rows`` and ``_plane_rows``. The serial lookup calls
 # them on all rows; the parallel one on chunks of rows (one call per chunk, so their cost is
 # nothing beside the rows'). Inlining the body into each parallel and serial kernel instead
-# compiled it six times: 3.5 minutes of a cold start's kernel compilation, for no faster lookup.
+# compiled it six times, about 2 minutes of a cold start (docs/maps.md, "Query rate and memory").
 ROWS_PER_CHUNK = 256
 
 
