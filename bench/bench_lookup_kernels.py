@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import statistics
 import subprocess
 import sys
 import tempfile
@@ -27,7 +26,7 @@ import time
 
 import numpy as np
 
-from common import report
+from common import median_time, report
 from find_rate import library_commit
 
 FIRST_CALLS = """
@@ -60,16 +59,8 @@ def compile_times(map_path: str) -> dict[str, float]:
     return {**times, "total": sum(times.values())}
 
 
-def median_ms(call, repeat: int) -> float:  # type: ignore[no-untyped-def]
-    times = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        call()
-        times.append(time.perf_counter() - t)
-    return statistics.median(times) * 1e3
-
-
 def run_times(map_path: str, repeat: int) -> dict[str, float]:
+    from baseplace.geometry.poses import BasePose
     from baseplace.reachability.storage import load_map
 
     rmap = load_map(map_path)
@@ -78,18 +69,15 @@ def run_times(map_path: str, repeat: int) -> dict[str, float]:
     target[:3, 3] = (0.6, 0.0, 0.8)  # a side grasp 0.8 m high, bases around it
     out = {}
     for n in (100_000, 10_000, 1_000):
-        yaw = rng.uniform(-np.pi, np.pi, n)
-        bases = np.tile(np.eye(4), (n, 1, 1))
-        bases[:, 0, 0] = bases[:, 1, 1] = np.cos(yaw)
-        bases[:, 1, 0] = np.sin(yaw)
-        bases[:, 0, 1] = -np.sin(yaw)
-        bases[:, :2, 3] = rng.uniform(-0.5, 1.7, (n, 2))
+        gamma = rng.uniform(-np.pi, np.pi, n)
+        xy = rng.uniform(-0.5, 1.7, (n, 2))
+        bases = BasePose.batch_matrix(np.column_stack([xy, gamma]))
         rmap.inverse(target, bases)
-        out[f"inverse_{n}_ms"] = median_ms(lambda b=bases: rmap.inverse(target, b), repeat)
-        xy, gamma = bases[:, :2, 3].copy(), yaw
+        out[f"inverse_{n}_ms"] = median_time(lambda b=bases: rmap.inverse(target, b), repeat) * 1e3
         rmap.inverse_on_plane(target, xy, gamma, (0, 0, 1), 0.0)
-        out[f"plane_{n}_ms"] = median_ms(
-            lambda xy=xy, g=gamma: rmap.inverse_on_plane(target, xy, g, (0, 0, 1), 0.0), repeat
+        out[f"plane_{n}_ms"] = (
+            median_time(lambda xy=xy, g=gamma: rmap.inverse_on_plane(target, xy, g, (0, 0, 1), 0.0), repeat)
+            * 1e3
         )
         out[f"reached_share_{n}"] = float(np.mean(rmap.inverse(target, bases) > 0))
     T = np.linalg.inv(bases[0]) @ target
