@@ -19,7 +19,8 @@ import json, sys, types
 from baseplace.cli import main
 code = main(sys.argv[1:])
 executed = sorted(n for n, m in sys.modules.items()
-                  if n.split(".")[0] in ("baseplace", "baseplace_experiments") and type(m) is types.ModuleType)
+                  if n.split(".")[0] in ("baseplace", "baseplace_experiments", "numba", "coal", "pinocchio")
+                  and type(m) is types.ModuleType)
 sys.stderr.write("\\n" + json.dumps({"code": code, "modules": executed}) + "\\n")
 """
 
@@ -40,12 +41,45 @@ def _modules(*argv: str) -> tuple[int, set[str]]:
 
 
 def test_place_imports_neither_the_service_nor_the_plugins_nor_other_jobs(tmp_path):
-    """A place that stops at its cloud (missing) has imported its job, not another command's."""
-    code, modules = _modules("place", "--cloud", str(tmp_path / "none.ply"), "--target", "1 0.5 0.75 0 1.5708 0",
-                             "--json")  # fmt: skip
+    """A place that stops at its cloud (corrupt: read after the pipeline's imports) has imported its job, not another command's."""
+    cloud = tmp_path / "corrupt.ply"
+    cloud.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nend_header\n\x00")
+    code, modules = _modules("place", "--cloud", str(cloud), "--target", "1 0.5 0.75 0 1.5708 0", "--json")
     assert code == 2
     assert "baseplace.jobs.place" in modules and "baseplace.placement.pipeline" in modules
     assert not modules & set(NOT_FOR_PLACE), sorted(modules & set(NOT_FOR_PLACE))
+
+
+HEAVY = {"baseplace.placement.pipeline", "baseplace.world.environment", "numba", "coal", "pinocchio"}
+"""What the pipeline imports (seconds): a mistyped argument is refused before any of it."""
+
+
+def test_a_mistyped_argument_is_refused_before_the_pipelines_imports(tmp_path):
+    """``PlaceJob.check_inputs`` and ``CandidatesJob.check_inputs`` run before the settings' imports."""
+    cloud = tmp_path / "scene.ply"
+    cloud.write_bytes(b"not read")
+    target = "1 0.5 0.75 0 1.5708 0"
+    mistakes = [
+        ("place", "--cloud", str(tmp_path / "none.ply"), "--target", target),  # no such cloud file
+        ("place", "--cloud", str(tmp_path / "scene.las"), "--target", target),  # no reader for the suffix
+        ("place", "--cloud", str(cloud), "--target", "1 0.5 0.75 0 1.5708"),  # 5 numbers
+        ("place", "--cloud", str(cloud), "--target", target, "--out", str(tmp_path / "p.txt")),
+        ("place", "--cloud", str(cloud), "--target", target, "--start", "1 2"),
+        ("candidates", "--object", "1 2", "--occupancy", str(tmp_path / "none.yaml")),
+        (
+            "candidates",
+            "--object",
+            "1 2 0.8",
+            "--occupancy",
+            str(tmp_path / "none.yaml"),
+            "--robot-pose",
+            "0 0",
+        ),
+    ]
+    for argv in mistakes:
+        code, modules = _modules(*argv)
+        assert code == 2, argv
+        assert not modules & HEAVY, (argv, sorted(modules & HEAVY))
 
 
 def test_serve_help_still_registers_the_service():

@@ -159,7 +159,7 @@ def _place(a: argparse.Namespace, progress: Progress) -> Any:
     job = place.PlaceJob(a.target or [], a.robot, a.arm, _cloud(a), a.occupancy, a.map, None, a.seed, a.start,
                          a.planner, a.object, a.floor, a.out, a.mcap, grasp_points=a.grasp_point or [],
                          obstacles=a.obstacle or [])  # fmt: skip
-    job.check_outputs()  # before the settings' imports (seconds)
+    job.check_inputs()  # before the settings' imports (seconds)
     from baseplace.placement.pipeline import PlaceSettings
 
     motion, robustness = motion_and_robustness(vars(a))
@@ -198,7 +198,7 @@ def _candidates(a: argparse.Namespace, progress: Progress) -> Any:
     job = candidates.CandidatesJob(a.object, a.occupancy, _cloud(a), a.robot_pose, a.method, a.robot, a.arm, a.map,
                                    a.standoff, a.seed, a.object_shape, None, None, a.png, a.mcap,
                                    obstacles=a.obstacle or [], clearance=a.clearance)  # fmt: skip
-    job.check_outputs()  # before the settings' imports (seconds)
+    job.check_inputs()  # before the settings' imports (seconds)
     job.motion, job.robustness = motion_and_robustness(vars(a))
     return candidates.candidates_job(job, progress)
 

@@ -96,15 +96,27 @@ class CandidatesJob:
             "obstacles": list(self.obstacles), "clearance": self.clearance,
         }  # fmt: skip
 
-    def check_outputs(self) -> tuple[Path | None, Path | None]:
-        """The PNG and MCAP outputs (and the fused cloud's), checked before any work.
+    def check_inputs(self) -> tuple[Path | None, Path | None, np.ndarray, np.ndarray | None]:
+        """The inputs that need no library beyond numpy, checked before any work; parsed.
 
-        Front ends call it before they build the settings, whose imports take seconds.
+        The method, the outputs (PNG, MCAP, the fused cloud's), the cloud files' names, the object's
+        position, the robot's pose and the object shape's yaw. Front ends call it before they build
+        the settings, whose imports take seconds, so that a mistyped argument is refused at once.
+
+        Returns:
+            The PNG and MCAP paths (None: not asked), the object "x y z" (3,) and the robot pose
+            "x y yaw" (3,) or None.
         """
+        if self.method not in ("radial", "irm"):
+            raise InputError(f"unknown method {self.method!r}; valid: irm, radial")
         inputs.out_path(self.cloud.fused_out, "--fused-out", (".bt",))
-        return inputs.out_path(self.png, "--png", inputs.PLOT_SUFFIXES), inputs.out_path(
-            self.mcap, "--mcap", (".mcap",)
-        )
+        png = inputs.out_path(self.png, "--png", inputs.PLOT_SUFFIXES)
+        mcap = inputs.out_path(self.mcap, "--mcap", (".mcap",))
+        self.cloud.check_paths()
+        p_o = inputs.parse_xyz(self.object, "--object")
+        robot_pose = None if self.robot_pose is None else inputs.base_xyyaw(self.robot_pose, "--robot-pose")
+        inputs.check_object_yaw(self.object_shape, "--object-shape")
+        return png, mcap, p_o, robot_pose
 
 
 def check_object(grid: Any, p_o: np.ndarray, reach: float) -> None:
@@ -133,9 +145,7 @@ def candidates_job(job: CandidatesJob, progress: inputs.Progress | None = None) 
         InputError: bad input (no grid, an object outside it or in an obstacle, an unwritable output).
         NoResultError: no verified candidate; ``report`` lists the rejected positions and why.
     """
-    if job.method not in ("radial", "irm"):
-        raise InputError(f"unknown method {job.method!r}; valid: irm, radial")
-    png, mcap = job.check_outputs()  # outputs first: before the imports and any work
+    png, mcap, p_o, robot_pose = job.check_inputs()  # first: before the imports and any work
     from baseplace.placement.candidates import RadialSettings
     from baseplace.placement.irm_candidates import (
         grasp_poses,
@@ -154,9 +164,6 @@ def candidates_job(job: CandidatesJob, progress: inputs.Progress | None = None) 
 
     t0 = time.perf_counter()
     robust = job.robustness or RobustnessSettings()
-    p_o = inputs.parse_xyz(job.object, "--object")
-    robot_pose = None if job.robot_pose is None else inputs.base_xyyaw(job.robot_pose, "--robot-pose")
-    inputs.check_object_yaw(job.object_shape, "--object-shape")
     shape = parse_grasped_object(job.object_shape, "--object-shape")
     obstacles = parse_obstacles(job.obstacles)
     check_clear_of(obstacles, p_o, ["--object"])

@@ -149,6 +149,13 @@ class CloudInput:
             return self.bag.path
         return " ".join(self.paths) if self.paths else "points"
 
+    def check_paths(self) -> None:
+        """Each cloud file has a suffix a reader knows and exists (nothing is read: :func:`~baseplace.terrain.io.check_cloud_path`)."""
+        from baseplace.terrain.io import check_cloud_path
+
+        for path in self.paths:
+            check_cloud_path(path)
+
     def echo(self) -> dict[str, Any]:
         """The inputs as given, for a report."""
         out: dict[str, Any] = {"cloud": list(self.paths) or None, "transform": list(self.transforms) or None}

@@ -95,15 +95,42 @@ class PlaceJob:
             "obstacles": list(self.obstacles),
         }  # fmt: skip
 
-    def check_outputs(self) -> tuple[FilePath | None, FilePath | None]:
-        """The PNG and MCAP outputs (and the fused cloud's), checked before any work.
+    def check_inputs(self) -> tuple[FilePath | None, FilePath | None, np.ndarray, np.ndarray | None]:
+        """The inputs that need no library beyond numpy, checked before any work; parsed.
 
-        Front ends call it before they build the settings, whose imports take seconds.
+        The planner, the outputs (PNG, MCAP, the fused cloud's), the cloud files' names, the targets
+        (or grasp points) and the start pose. Front ends call it before they build the settings,
+        whose imports take seconds, so that a mistyped argument is refused at once.
+
+        Returns:
+            The PNG and MCAP paths (None: not asked), the targets (T, 4, 4) as given (TCP or grasp
+            point poses) and the start "x y yaw" (3,) or None.
         """
+        if self.planner not in ("rrt", "regions"):
+            raise InputError(f"unknown planner {self.planner!r}; valid: regions, rrt")
         inputs.out_path(self.cloud.fused_out, "--fused-out", (".bt",))
-        return inputs.out_path(self.png, "--out", inputs.PLOT_SUFFIXES), inputs.out_path(
-            self.mcap, "--mcap", (".mcap",)
+        png = inputs.out_path(self.png, "--out", inputs.PLOT_SUFFIXES)
+        mcap = inputs.out_path(self.mcap, "--mcap", (".mcap",))
+        self.cloud.check_paths()
+        if self.targets and self.grasp_points:
+            raise InputError(
+                "give --target (the TCP pose) or --grasp-point (the point between the fingertips), not both"
+            )
+        if not self.targets and not self.grasp_points:
+            raise InputError('give at least one --target "x y z roll pitch yaw" (the TCP pose) '
+                             'or --grasp-point "x y z roll pitch yaw" (the point between the fingertips)')  # fmt: skip
+        option, given = (
+            ("--grasp-point", self.grasp_points) if self.grasp_points else ("--target", self.targets)
         )
+        targets = np.stack(
+            [
+                inputs.target_pose(t, option if len(given) == 1 else f"{option} {k}")
+                for k, t in enumerate(given)
+            ]
+        )
+        inputs.check_object_yaw(self.object, "--object")
+        start = None if self.start is None else inputs.base_xyyaw(self.start, "--start")
+        return png, mcap, targets, start
 
 
 def pose_text(T: np.ndarray) -> str:
@@ -158,9 +185,7 @@ def place_job(job: PlaceJob, progress: inputs.Progress | None = None) -> PlaceRe
         NoResultError: no verified placement, or none the base can drive to; ``report`` holds the
             failure counts and the contacts.
     """
-    if job.planner not in ("rrt", "regions"):
-        raise InputError(f"unknown planner {job.planner!r}; valid: regions, rrt")
-    png, mcap = job.check_outputs()  # outputs first: before the imports and any work
+    png, mcap, targets, start = job.check_inputs()  # first: before the imports and any work
     from baseplace.placement.pipeline import PlaceSettings, place, with_floor
     from baseplace.placement.verify import contact_summary, most_frequent_contact, motion_failure_summary
     from baseplace.reachability.cache import resolve_map
@@ -169,22 +194,9 @@ def place_job(job: PlaceJob, progress: inputs.Progress | None = None) -> PlaceRe
     from baseplace.world.sensor_resolution import clearance_record
 
     t0 = time.perf_counter()
-    if job.targets and job.grasp_points:
-        raise InputError(
-            "give --target (the TCP pose) or --grasp-point (the point between the fingertips), not both"
-        )
-    if not job.targets and not job.grasp_points:
-        raise InputError('give at least one --target "x y z roll pitch yaw" (the TCP pose) '
-                         'or --grasp-point "x y z roll pitch yaw" (the point between the fingertips)')  # fmt: skip
-    option, given = ("--grasp-point", job.grasp_points) if job.grasp_points else ("--target", job.targets)
-    targets = np.stack(
-        [inputs.target_pose(t, option if len(given) == 1 else f"{option} {k}") for k, t in enumerate(given)]
-    )
-    inputs.check_object_yaw(job.object, "--object")
     grasped = parse_grasped_object(job.object)
     obstacles = parse_obstacles(job.obstacles)
     settings = job.settings or PlaceSettings()
-    start = None if job.start is None else inputs.base_xyyaw(job.start, "--start")
     robot = inputs.load_robot(job.robot)
     if job.grasp_points:  # T_world_tcp = T_world_grasp T_grasp_tcp
         targets = targets @ np.linalg.inv(robot.T_tcp_grasp(job.arm))

@@ -96,6 +96,22 @@ class Cloud:
         return dataclasses.replace(self, points=self.points @ T[:3, :3].T + T[:3, 3])
 
 
+def check_cloud_path(path: str | Path) -> Path:
+    """``path`` if :func:`load_cloud` can read it: a known suffix and an existing file (nothing is read).
+
+    Raises:
+        InputError: unknown suffix or no such file.
+    """
+    path = Path(path)
+    if path.suffix.lower() not in _READERS:
+        raise InputError(
+            f"cannot read cloud {path}: unknown suffix {path.suffix!r}; valid: {choices(_READERS)}"
+        )
+    if not path.is_file():
+        raise InputError(f"cloud file {path} does not exist")
+    return path
+
+
 def load_cloud(path: str | Path) -> Cloud:
     """Read a point cloud, keeping its finite points.
 
@@ -115,14 +131,8 @@ def load_cloud(path: str | Path) -> Cloud:
     Raises:
         InputError: unknown suffix, missing, truncated or corrupt file, or no finite point.
     """
-    path = Path(path)
-    reader = _READERS.get(path.suffix.lower())
-    if reader is None:
-        raise InputError(
-            f"cannot read cloud {path}: unknown suffix {path.suffix!r}; valid: {choices(_READERS)}"
-        )
-    if not path.is_file():
-        raise InputError(f"cloud file {path} does not exist")
+    path = check_cloud_path(path)
+    reader = _READERS[path.suffix.lower()]
     try:
         _check_declared_size(path)  # before the format library allocates what the header declares
         points, colors, layout = reader(path)
