@@ -77,7 +77,7 @@ def test_an_rgb_depth_image_and_other_bad_files_are_one_line_errors(tmp_path):
     (tmp_path / "junk.png").write_bytes(b"not an image")
     with pytest.raises(InputError, match="corrupt"):
         load_rgb(tmp_path / "junk.png")
-    with pytest.raises(InputError, match="unknown format"):
+    with pytest.raises(InputError, match="unknown suffix '.bmp'"):
         load_rgb(tmp_path / "c.bmp")
 
 

@@ -95,7 +95,7 @@ BAD_INPUTS = {
     "scene generate": (["scene", "generate", "--out", "scene.txt"], "suffix"),
     "demo": (["demo", "--out", "demo.json/x"], "not a directory"),
     "point": (["point", "--rgb", "nowhere.png", "--depth", "d.png", "--intrinsics", "1 1 0 0", "--transform", "0 0 1"],
-              "not found"),
+              "does not exist"),
 }  # fmt: skip
 
 

@@ -147,6 +147,25 @@ def check_path_length(text: str | os.PathLike[str], what: str) -> str:
     return raw
 
 
+def check_input_file(path: str | os.PathLike[str], what: str, suffixes: Iterable[str]) -> Path:
+    """``path`` as a file to read as ``what``: a suffix among ``suffixes`` (any case) and an existing file.
+
+    Nothing is read; the path is shortened in the messages (it may come from a request).
+
+    Raises:
+        InputError: one line: an unknown suffix (with the valid ones), or no such file.
+    """
+    p = Path(path)
+    valid = sorted(suffixes)
+    if p.suffix.lower() not in valid:
+        raise InputError(
+            f"cannot read {what} {brief(str(p), 200)}: unknown suffix {p.suffix!r}; valid: {', '.join(valid)}"
+        )
+    if not p.is_file():
+        raise InputError(f"{what} file {brief(str(p), 200)} does not exist")
+    return p
+
+
 def check_output_path(
     text: str | os.PathLike[str], what: str = "--out", suffixes: Iterable[str] | None = None
 ) -> Path:

@@ -150,11 +150,12 @@ class CloudInput:
         return " ".join(self.paths) if self.paths else "points"
 
     def check_paths(self) -> None:
-        """Each cloud file has a suffix a reader knows and exists (nothing is read: :func:`~baseplace.terrain.io.check_cloud_path`)."""
-        from baseplace.terrain.io import check_cloud_path
+        """Each cloud file has a suffix a reader knows and exists (nothing is read)."""
+        from baseplace.guards import check_input_file
+        from baseplace.terrain.io import CLOUD_SUFFIXES
 
         for path in self.paths:
-            check_cloud_path(path)
+            check_input_file(path, "cloud", CLOUD_SUFFIXES)
 
     def echo(self) -> dict[str, Any]:
         """The inputs as given, for a report."""

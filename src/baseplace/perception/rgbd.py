@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from baseplace.errors import InputError, brief
-from baseplace.guards import check_alloc
+from baseplace.guards import check_alloc, check_input_file
 
 RGB_FORMATS = (".png", ".jpg", ".jpeg")
 DEPTH_FORMATS = (".png", ".npy")
@@ -122,17 +122,6 @@ def _fmt(values: Any) -> str:
     return " ".join(f"{float(v):.6g}" for v in values)
 
 
-def _check_file(path: str | Path, what: str, formats: tuple[str, ...]) -> Path:
-    p = Path(path)
-    if p.suffix.lower() not in formats:
-        raise InputError(
-            f"{what} {brief(str(p), 200)}: unknown format {p.suffix!r}; valid: {', '.join(formats)}"
-        )
-    if not p.is_file():
-        raise InputError(f"{what} not found: {brief(str(p), 200)}")
-    return p
-
-
 def _image_header(path: Path, what: str) -> tuple[int, int, int, str, str]:
     """(width, height, bands, Pillow mode, format) from the header; nothing decoded."""
     from PIL import Image, UnidentifiedImageError
@@ -182,7 +171,7 @@ def load_rgb(path: str | Path) -> NDArray[np.uint8]:
     """
     import cv2
 
-    p = _check_file(path, "RGB image", RGB_FORMATS)
+    p = check_input_file(path, "RGB image", RGB_FORMATS)
     width, height, bands, mode, fmt = _image_header(p, "RGB image")
     depth = 2 if mode.startswith("I;16") or mode in ("I", "F") else 1
     ratio = DEFLATE_MAX_RATIO if fmt == "PNG" else JPEG_MAX_RATIO
@@ -205,7 +194,7 @@ def load_depth(path: str | Path) -> NDArray[np.float32]:
     """
     import cv2
 
-    p = _check_file(path, "depth image", DEPTH_FORMATS)
+    p = check_input_file(path, "depth image", DEPTH_FORMATS)
     if p.suffix.lower() == ".npy":
         return _load_depth_npy(p)
     width, height, bands, mode, _ = _image_header(p, "depth image")

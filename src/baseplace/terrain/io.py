@@ -25,7 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError, brief, choices
 from baseplace.files import atomic_write
-from baseplace.guards import check_alloc
+from baseplace.guards import check_alloc, check_input_file
 
 FloatArray = NDArray[np.float64]
 ColorArray = NDArray[np.uint8]
@@ -96,22 +96,6 @@ class Cloud:
         return dataclasses.replace(self, points=self.points @ T[:3, :3].T + T[:3, 3])
 
 
-def check_cloud_path(path: str | Path) -> Path:
-    """``path`` if :func:`load_cloud` can read it: a known suffix and an existing file (nothing is read).
-
-    Raises:
-        InputError: unknown suffix or no such file.
-    """
-    path = Path(path)
-    if path.suffix.lower() not in _READERS:
-        raise InputError(
-            f"cannot read cloud {path}: unknown suffix {path.suffix!r}; valid: {choices(_READERS)}"
-        )
-    if not path.is_file():
-        raise InputError(f"cloud file {path} does not exist")
-    return path
-
-
 def load_cloud(path: str | Path) -> Cloud:
     """Read a point cloud, keeping its finite points.
 
@@ -131,7 +115,7 @@ def load_cloud(path: str | Path) -> Cloud:
     Raises:
         InputError: unknown suffix, missing, truncated or corrupt file, or no finite point.
     """
-    path = check_cloud_path(path)
+    path = check_input_file(path, "cloud", _READERS)
     reader = _READERS[path.suffix.lower()]
     try:
         _check_declared_size(path)  # before the format library allocates what the header declares
@@ -681,6 +665,8 @@ _READERS: dict[str, Callable[[Path], _Raw]] = {
     ".xyz": _read_xyz,
     ".txt": _read_xyz,
 }
+CLOUD_SUFFIXES = tuple(_READERS)
+"""The cloud file suffixes :func:`load_cloud` reads (any case)."""
 
 
 # --- writers ---
