@@ -62,6 +62,7 @@ def test_a_mistyped_argument_is_refused_before_the_pipelines_imports(tmp_path):
     mistakes = [
         ("place", "--cloud", str(tmp_path / "none.ply"), "--target", target),  # no such cloud file
         ("place", "--cloud", str(tmp_path / "scene.las"), "--target", target),  # no reader for the suffix
+        ("place", "--cloud", str(tmp_path / ("a" * 300 + ".ply")), "--target", target),  # too long for the OS
         ("place", "--cloud", str(cloud), "--target", "1 0.5 0.75 0 1.5708"),  # 5 numbers
         ("place", "--cloud", str(cloud), "--target", target, "--out", str(tmp_path / "p.txt")),
         ("place", "--cloud", str(cloud), "--target", target, "--start", "1 2"),

@@ -259,6 +259,7 @@ def test_truncated_or_foreign_octomap_is_an_input_error(tmp_path):
 
 def test_missing_file_and_unknown_suffix(tmp_path):
     _raises_one_line("does not exist", load_cloud, tmp_path / "nothing.pcd")
+    _raises_one_line("the limit is 255", load_cloud, tmp_path / ("a" * 300 + ".pcd"))  # not an OSError
     message = _raises_one_line("unknown suffix '.las'", load_cloud, tmp_path / "scan.las")
     assert ".bt, .npy, .pcd, .ply, .txt, .xyz" in message
 

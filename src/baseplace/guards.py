@@ -153,9 +153,10 @@ def check_input_file(path: str | os.PathLike[str], what: str, suffixes: Iterable
     Nothing is read; the path is shortened in the messages (it may come from a request).
 
     Raises:
-        InputError: one line: an unknown suffix (with the valid ones), or no such file.
+        InputError: one line: a path the OS cannot take (:func:`check_path_length`), an unknown
+            suffix (with the valid ones), or no such file.
     """
-    p = Path(path)
+    p = Path(check_path_length(path, what))
     valid = sorted(suffixes)
     if p.suffix.lower() not in valid:
         raise InputError(
