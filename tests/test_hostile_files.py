@@ -197,7 +197,25 @@ def test_long_image_name_gives_one_short_line(tmp_path):
     t0 = time.perf_counter()
     proc = cli("occupancy", str(yaml))
     assert proc.returncode == 2 and len(proc.stderr) < 1000, proc.stderr[:1000]
+    assert "over the 64 KiB limit" in proc.stderr, proc.stderr[:1000]  # refused before PyYAML parses it
     assert time.perf_counter() - t0 < 10
+    # a name that fits the YAML's limit but no file system's
+    yaml.write_text(f"image: {'a' * 5000}.png\nresolution: 0.05\norigin: [0, 0, 0]\nnegate: 0\n"
+                    "occupied_thresh: 0.65\nfree_thresh: 0.196\n")  # fmt: skip
+    proc = cli("occupancy", str(yaml))
+    assert proc.returncode == 2 and "'image' path is 5004 bytes long" in proc.stderr, proc.stderr[:1000]
+
+
+def test_a_file_name_longer_than_the_os_takes_is_one_line_for_every_reader(tmp_path):
+    """A 300-byte name (over the 255 bytes a component may have) given to readers that do not check it first."""
+    long = str(tmp_path / ("a" * 300))
+    for args in (["occupancy", f"{long}.yaml"], ["reach", "--map", f"{long}.rmap", "--target", "1 0.5 0.9 0 0 0",
+                 "--base", "0.2 0.6 1.05"], ["robot", "check", f"{long}.toml"], ["view", f"{long}.json"],
+                 ["surface-sample", "--map", f"{long}.smap"]):  # fmt: skip
+        proc = cli(*args)
+        assert proc.returncode == 2, (args[0], proc.stderr[-2000:])
+        message = proc.stderr[-2000:]
+        assert proc.stderr.count("\n") == 1 and "the file name is too long" in message, message
 
 
 @pytest.mark.parametrize(

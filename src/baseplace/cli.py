@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
 import importlib.util
 import json
 import os
@@ -23,7 +24,7 @@ from typing import TYPE_CHECKING, Any, NoReturn
 
 from baseplace import __version__
 from baseplace.argtypes import count, finite_float, in_radians, nonneg_int
-from baseplace.errors import BaseplaceError
+from baseplace.errors import BaseplaceError, brief
 from baseplace.jobs.inputs import DEFAULT_MAP_SAMPLES, Progress, motion_and_robustness
 from baseplace.robots.defaults import DEFAULT_ROBOT
 
@@ -732,11 +733,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         return exc.exit_code
     except OSError as exc:
         from baseplace.files import disk_full_reason, is_disk_full
+        from baseplace.guards import MAX_COMPONENT_BYTES, MAX_PATH_BYTES
 
-        if not is_disk_full(exc):
+        if is_disk_full(exc):
+            # a writer that does not go through baseplace.files: its message is a library's, maybe lines long
+            message = f"cannot write {exc.filename or 'an output'}: {disk_full_reason(exc)}; free some space"
+        elif exc.errno == errno.ENAMETOOLONG:  # a path given to a reader that does not check its length first
+            name = brief(os.fsdecode(exc.filename), 60) if isinstance(exc.filename, str | bytes) else "a path"
+            message = (f"{name}: the file name is too long (the limits are {MAX_COMPONENT_BYTES} bytes a "
+                       f"component and {MAX_PATH_BYTES} in all)")  # fmt: skip
+        else:
             raise
-        # a writer that does not go through baseplace.files: its message is a library's, maybe lines long
-        message = f"cannot write {exc.filename or 'an output'}: {disk_full_reason(exc)}; free some space"
         if as_json:
             _emit_error(KINDS.get(args.command), message, 2, _echo(args))
         sys.stderr.write(f"error: {message}\n")

@@ -41,6 +41,8 @@ from baseplace.guards import check_alloc, check_grid_size, check_path_length
 MODES = ("trinary", "scale", "raw")
 IMAGE_FORMATS = (".bmp", ".pgm", ".png")
 REQUIRED_KEYS = ("image", "resolution", "origin", "negate", "occupied_thresh", "free_thresh")
+MAX_YAML_BYTES = 64 << 10
+"""The largest map YAML read [bytes]: its keys and an image path of at most 4095 bytes fit many times."""
 OCCUPIED, FREE, UNKNOWN = 100, 0, -1
 LETHAL = 100  # nav2 costmap StaticLayer's default lethal_cost_threshold
 
@@ -212,6 +214,12 @@ def _number(doc: dict[str, Any], key: str, where: str) -> float:
 def _read_yaml(path: Path) -> dict[str, Any]:
     if not path.is_file():
         raise InputError(f"occupancy map YAML not found: {path}")
+    size = path.stat().st_size
+    if size > MAX_YAML_BYTES:  # before PyYAML, whose pure-Python parser takes about 1 s a megabyte
+        raise InputError(
+            f"{path}: a map YAML of {size} bytes is over the {MAX_YAML_BYTES >> 10} KiB limit "
+            f"(map_server's holds an image path and six numbers)"
+        )
     try:
         doc = yaml.safe_load(path.read_text())
     except yaml.MarkedYAMLError as e:
