@@ -99,8 +99,8 @@ class CandidatesJob:
     def check_inputs(self) -> tuple[Path | None, Path | None, np.ndarray, np.ndarray | None]:
         """The inputs that need no library beyond numpy, checked before any work; parsed.
 
-        The method, the outputs (PNG, MCAP, the fused cloud's), the cloud files' names, the object's
-        position, the robot's pose and the object shape's yaw. Front ends call it before they build
+        The method, the outputs (PNG, MCAP, the fused cloud's), the object's position, the robot's
+        pose, the object shape's yaw and, last, the cloud files' names. Front ends call it before they build
         the settings, whose imports take seconds, so that a mistyped argument is refused at once.
 
         Returns:
@@ -112,10 +112,10 @@ class CandidatesJob:
         inputs.out_path(self.cloud.fused_out, "--fused-out", (".bt",))
         png = inputs.out_path(self.png, "--png", inputs.PLOT_SUFFIXES)
         mcap = inputs.out_path(self.mcap, "--mcap", (".mcap",))
-        self.cloud.check_paths()
         p_o = inputs.parse_xyz(self.object, "--object")
         robot_pose = None if self.robot_pose is None else inputs.base_xyyaw(self.robot_pose, "--robot-pose")
         inputs.check_object_yaw(self.object_shape, "--object-shape")
+        self.cloud.check_paths()  # the files last: a mistyped option is named first
         return png, mcap, p_o, robot_pose
 
 

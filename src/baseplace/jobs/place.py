@@ -98,8 +98,8 @@ class PlaceJob:
     def check_inputs(self) -> tuple[FilePath | None, FilePath | None, np.ndarray, np.ndarray | None]:
         """The inputs that need no library beyond numpy, checked before any work; parsed.
 
-        The planner, the outputs (PNG, MCAP, the fused cloud's), the cloud files' names, the targets
-        (or grasp points) and the start pose. Front ends call it before they build the settings,
+        The planner, the outputs (PNG, MCAP, the fused cloud's), the targets (or grasp points), the
+        start pose and, last, the cloud files' names. Front ends call it before they build the settings,
         whose imports take seconds, so that a mistyped argument is refused at once.
 
         Returns:
@@ -111,7 +111,6 @@ class PlaceJob:
         inputs.out_path(self.cloud.fused_out, "--fused-out", (".bt",))
         png = inputs.out_path(self.png, "--out", inputs.PLOT_SUFFIXES)
         mcap = inputs.out_path(self.mcap, "--mcap", (".mcap",))
-        self.cloud.check_paths()
         if self.targets and self.grasp_points:
             raise InputError(
                 "give --target (the TCP pose) or --grasp-point (the point between the fingertips), not both"
@@ -130,6 +129,7 @@ class PlaceJob:
         )
         inputs.check_object_yaw(self.object, "--object")
         start = None if self.start is None else inputs.base_xyyaw(self.start, "--start")
+        self.cloud.check_paths()  # the files last: a mistyped option is named first
         return png, mcap, targets, start
 
 
