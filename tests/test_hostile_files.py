@@ -197,7 +197,7 @@ def test_long_image_name_gives_one_short_line(tmp_path):
     t0 = time.perf_counter()
     proc = cli("occupancy", str(yaml))
     assert proc.returncode == 2 and len(proc.stderr) < 1000, proc.stderr[:1000]
-    assert "over the 64 KiB limit" in proc.stderr, proc.stderr[:1000]  # refused before PyYAML parses it
+    assert "the limit is 65536 (64 KiB)" in proc.stderr, proc.stderr[:1000]  # refused before PyYAML parses it
     assert time.perf_counter() - t0 < 10
     # a name that fits the YAML's limit but no file system's
     yaml.write_text(f"image: {'a' * 5000}.png\nresolution: 0.05\norigin: [0, 0, 0]\nnegate: 0\n"
@@ -240,3 +240,50 @@ def test_surface_map_with_bad_numbers(tmp_path, field, value):
         f.attrs["sha256"] = short_text(digest(text, f["index"][()], f["value"][()]))
     result = probe("smap", path)
     assert str(result["outcome"]).startswith("error: "), result
+
+
+def _robot_file(path):
+    from baseplace.robots.spec import load_spec
+
+    return load_spec(path)
+
+
+def _map_yaml(path):
+    from baseplace.world.occupancy import load_occupancy
+
+    return load_occupancy(path)
+
+
+def _camera_info(path):
+    from baseplace.perception.rgbd import parse_intrinsics
+
+    return parse_intrinsics(str(path))
+
+
+@pytest.mark.parametrize(
+    ("suffix", "limit", "read"),
+    [(".yaml", 1 << 20, _robot_file), (".toml", 1 << 20, _robot_file), (".yaml", 64 << 10, _map_yaml),
+     (".yaml", 1 << 20, _camera_info)],
+    ids=["robot-yaml", "robot-toml", "map-yaml", "camera-info"],
+)  # fmt: skip
+def test_small_documents_over_their_limit_are_refused_before_the_parser(
+    tmp_path, monkeypatch, suffix, limit, read
+):
+    """Robot files, map YAMLs and CameraInfo files: the size is checked before PyYAML or tomllib sees a byte."""
+    import tomllib
+    import yaml
+
+    from baseplace.errors import InputError
+
+    def parser(*_):
+        raise AssertionError("the parser was called")
+
+    monkeypatch.setattr(yaml, "safe_load", parser)
+    monkeypatch.setattr(tomllib, "loads", parser)
+    path = tmp_path / f"big{suffix}"
+    path.write_bytes(b"#" * (limit + 1))
+    with pytest.raises(InputError, match=rf"big\{suffix} is {limit + 1} bytes; the limit is {limit} "):
+        read(path)
+    path.write_bytes(b"name: \xff\xfe\n")  # not UTF-8: one line, whatever the reader
+    with pytest.raises(InputError, match=rf"big\{suffix}: not UTF-8 text"):
+        read(path)

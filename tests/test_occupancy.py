@@ -275,7 +275,7 @@ def test_missing_and_unparsable_yaml(tmp_path):
     _raises(tmp_path / "nope.yaml", "not found", "nope.yaml")
     bad = tmp_path / "bad.yaml"
     bad.write_text("image: [unclosed\nresolution: 0.05\n")
-    _raises(bad, "cannot parse YAML")
+    _raises(bad, "cannot parse map YAML", "bad.yaml at line 2, column 11")
     for text in ("- a\n- b\n", "", "just a string\n"):
         bad.write_text(text)
         _raises(bad, "mapping", "image, resolution, origin")

@@ -10,6 +10,10 @@ point shares:
   (``$BASEPLACE_MAX_MEMORY_MB``, default 4096 MB).
 - :func:`check_output_path`: an output path is checked (length, component length, type,
   writability, suffix) before any work is done.
+
+Files read whole have their size checked before they are read (:func:`check_file_size`); the
+small YAML and TOML documents (robot files, map YAMLs, CameraInfo) are read by one function,
+:func:`read_document`, that does so and turns every parser error into one line.
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ import os
 import re
 from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 from baseplace.errors import InputError, brief
 
@@ -165,6 +170,70 @@ def check_input_file(path: str | os.PathLike[str], what: str, suffixes: Iterable
     if not p.is_file():
         raise InputError(f"{what} file {brief(str(p), 200)} does not exist")
     return p
+
+
+def _size_text(limit: int) -> str:
+    return f"{limit >> 20} MB" if limit >= 1 << 20 else f"{limit >> 10} KiB"
+
+
+def check_file_size(path: Path, what: str, limit: int, usual: str = "") -> None:
+    """Refuse the file ``what`` ("URDF", "map YAML") over ``limit`` bytes before it is read.
+
+    ``usual`` says, in the message, what such a file usually holds.
+
+    Raises:
+        InputError: one line with the size and the limit, or why the file cannot be read.
+    """
+    try:
+        size = path.stat().st_size
+    except OSError as exc:
+        raise InputError(f"cannot read {what} {path}: {exc.strerror or exc}") from None
+    if size > limit:
+        hint = f"; {usual}" if usual else ""
+        raise InputError(f"{what} {path} is {size} bytes; the limit is {limit} ({_size_text(limit)}){hint}")
+
+
+def read_document(path: Path, what: str, limit: int, usual: str = "") -> Any:
+    """The parsed contents of a small YAML or TOML file (``.toml`` is TOML, any other suffix YAML).
+
+    The size is checked first (:func:`check_file_size`): PyYAML's pure-Python parser takes about
+    a second a megabyte, and nests as deep as the text does.
+
+    Raises:
+        InputError: one line: the file cannot be read, is over ``limit`` bytes, is not UTF-8
+            text, or does not parse (with the line and column where the parser gives them).
+    """
+    check_file_size(path, what, limit, usual)
+    try:
+        raw = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise InputError(f"cannot parse {what} {path}: not UTF-8 text") from None
+    except OSError as exc:
+        raise InputError(f"cannot read {what} {path}: {exc.strerror or exc}") from None
+    if path.suffix.lower() == ".toml":
+        try:
+            import tomllib
+        except ModuleNotFoundError:  # Python 3.10
+            import tomli as tomllib  # type: ignore[no-redef]
+        try:
+            return tomllib.loads(raw)
+        except tomllib.TOMLDecodeError as exc:
+            raise InputError(f"cannot parse {what} {path}: {str(exc).strip() or 'not TOML'}") from None
+        except RecursionError:
+            raise InputError(f"cannot parse {what} {path}: nested too deeply") from None
+    import yaml
+
+    try:
+        return yaml.safe_load(raw)
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        problem = " ".join(str(exc.problem or exc.context).split())[:160]
+        raise InputError(f"cannot parse {what} {path}{at}: {problem}") from None
+    except yaml.YAMLError as exc:
+        raise InputError(f"cannot parse {what} {path}: {' '.join(str(exc).split())[:160]}") from None
+    except RecursionError:
+        raise InputError(f"cannot parse {what} {path}: nested too deeply") from None
 
 
 def check_output_path(

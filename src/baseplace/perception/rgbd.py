@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from baseplace.errors import InputError, brief
-from baseplace.guards import check_alloc, check_input_file
+from baseplace.guards import check_alloc, check_input_file, read_document
 
 RGB_FORMATS = (".png", ".jpg", ".jpeg")
 DEPTH_FORMATS = (".png", ".npy")
@@ -36,6 +36,7 @@ JPEG_MAX_RATIO = 2000.0
 MAX_SIDE = 16384
 """Longest image side accepted [px]; camera images are under 8k."""
 MAX_YAML_BYTES = 1 << 20
+"""The largest CameraInfo YAML read [bytes] (ROS writes about 600)."""
 _DECODE_BYTES_PER_PIXEL = 40.0  # what the pipeline holds per pixel: the image, float depth, xyz points
 
 
@@ -269,18 +270,10 @@ def parse_intrinsics(spec: str) -> Intrinsics:
 
 
 def _camera_info(path: Path) -> Intrinsics:
-    import yaml
 
     if not path.is_file():
         raise InputError(f"CameraInfo YAML not found: {brief(str(path), 200)}")
-    if path.stat().st_size > MAX_YAML_BYTES:
-        raise InputError(f"{path}: a CameraInfo YAML of {path.stat().st_size} bytes is over the 1 MB limit")
-    try:
-        doc = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise InputError(f"{path}: cannot parse YAML: {' '.join(str(exc).split())[:160]}") from None
-    except (UnicodeDecodeError, OSError, RecursionError):
-        raise InputError(f"{path}: cannot parse YAML (not UTF-8 text or nested too deeply)") from None
+    doc = read_document(path, "CameraInfo YAML", MAX_YAML_BYTES)
     if not isinstance(doc, dict):
         raise InputError(f"{path}: expected a CameraInfo mapping with camera_matrix (or K / k)")
     matrix: Any = doc.get("camera_matrix")

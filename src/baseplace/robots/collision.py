@@ -86,7 +86,8 @@ def _remove_srdf_pairs(model: pin.Model, geom: pin.GeometryModel, srdf: Path) ->
     Size and nesting are checked before pinocchio's reader, which recurses once per level (a
     700 kB SRDF nested 100,000 deep crashed the process).
     """
-    from baseplace.robots.urdf import check_file_size, check_xml_depth
+    from baseplace.guards import check_file_size
+    from baseplace.robots.urdf import check_xml_depth
 
     check_file_size(srdf, "SRDF", MAX_SRDF_BYTES)
     try:

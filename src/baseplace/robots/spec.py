@@ -30,21 +30,16 @@ import hashlib
 import importlib.metadata
 import math
 import os
-import sys
 from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from baseplace.errors import InputError, brief, unknown
-from baseplace.guards import check_name
+from baseplace.guards import check_name, read_document
 
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
+MAX_ROBOT_FILE_BYTES = 1 << 20
+"""The largest robot file (TOML or YAML) read [bytes]; one with two arms and joint limits is about 2 kB."""
 
 
 APPROACH_AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0),
@@ -339,14 +334,7 @@ def load_spec(name_or_path: str | Path) -> RobotSpec:
         raise unknown("robot", text, [*BUILTIN_ROBOTS, "<path to a .toml/.yaml robot file>"])
     if not path.is_file():
         raise InputError(f"robot file {path} does not exist")
-    try:
-        raw = path.read_text()
-        data = tomllib.loads(raw) if path.suffix.lower() == ".toml" else yaml.safe_load(raw)
-    except (tomllib.TOMLDecodeError, yaml.YAMLError, UnicodeDecodeError) as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise InputError(f"cannot parse robot file {path}: {first}") from None
-    except RecursionError:
-        raise InputError(f"cannot parse robot file {path}: nested too deeply") from None
+    data = read_document(path, "robot file", MAX_ROBOT_FILE_BYTES, "a robot file names its URDF and arms")
     return spec_from_dict(data, path.parent, str(path))
 
 

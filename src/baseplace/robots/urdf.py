@@ -20,6 +20,7 @@ from pathlib import Path
 from xml.etree import ElementTree
 
 from baseplace.errors import InputError, brief
+from baseplace.guards import check_file_size
 from baseplace.robots.spec import BASE_CLEARANCE, RobotSpec, ros_package_roots
 
 PACKAGE = "package://"
@@ -59,20 +60,6 @@ def check_urdf_file(path: Path) -> None:
         InputError: one line with the size and the limit.
     """
     check_file_size(path, "URDF", MAX_URDF_BYTES)
-
-
-def check_file_size(path: Path, what: str, limit: int) -> None:
-    """Refuse a robot file (``what``: "URDF", "SRDF") over ``limit`` bytes before it is read.
-
-    Raises:
-        InputError: one line with the size and the limit, or why the file cannot be read.
-    """
-    try:
-        size = path.stat().st_size
-    except OSError as exc:
-        raise InputError(f"cannot read {what} {path}: {exc.strerror or exc}") from None
-    if size > limit:
-        raise InputError(f"{what} {path} is {size} bytes; the limit is {limit} ({limit >> 20} MB)")
 
 
 def check_xml_depth(root: ElementTree.Element, what: str, usual: int) -> None:

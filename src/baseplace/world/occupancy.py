@@ -32,11 +32,10 @@ from typing import Any
 
 import cv2
 import numpy as np
-import yaml
 from numpy.typing import ArrayLike, NDArray
 
 from baseplace.errors import InputError, brief, unknown
-from baseplace.guards import check_alloc, check_grid_size, check_path_length
+from baseplace.guards import check_alloc, check_grid_size, check_path_length, read_document
 
 MODES = ("trinary", "scale", "raw")
 IMAGE_FORMATS = (".bmp", ".pgm", ".png")
@@ -214,22 +213,7 @@ def _number(doc: dict[str, Any], key: str, where: str) -> float:
 def _read_yaml(path: Path) -> dict[str, Any]:
     if not path.is_file():
         raise InputError(f"occupancy map YAML not found: {path}")
-    size = path.stat().st_size
-    if size > MAX_YAML_BYTES:  # before PyYAML, whose pure-Python parser takes about 1 s a megabyte
-        raise InputError(
-            f"{path}: a map YAML of {size} bytes is over the {MAX_YAML_BYTES >> 10} KiB limit "
-            f"(map_server's holds an image path and six numbers)"
-        )
-    try:
-        doc = yaml.safe_load(path.read_text())
-    except yaml.MarkedYAMLError as e:
-        mark = e.problem_mark or e.context_mark
-        at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        raise InputError(f"{path}: cannot parse YAML{at}: {e.problem or e.context}") from None
-    except (yaml.YAMLError, UnicodeDecodeError, OSError) as e:
-        raise InputError(f"{path}: cannot parse YAML: {' '.join(str(e).split())}") from None
-    except RecursionError:
-        raise InputError(f"{path}: cannot parse YAML: nested too deeply") from None
+    doc = read_document(path, "map YAML", MAX_YAML_BYTES, "map_server's holds an image path and six numbers")
     if not isinstance(doc, dict):
         raise InputError(f"{path}: expected a YAML mapping with keys {', '.join(REQUIRED_KEYS)}[, mode]")
     for key in REQUIRED_KEYS:
