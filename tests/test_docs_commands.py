@@ -37,7 +37,12 @@ PLACEHOLDER = re.compile(
 INPUT_OPTIONS = {"--cloud", "--bag", "--map", "--occupancy", "--targets", "--bases"}
 NEVER_RUN = ("serve",)  # a server: runs until stopped
 SLOW_COMMANDS = ("experiment", "demo", "build-map", "surface-map", "navigate")
-DEFAULT_MAP_COMMANDS = ("place", "explain", "candidates")  # without --map: the default map
+DEFAULT_MAP_COMMANDS = (
+    "place",
+    "explain",
+    "candidates",
+    "reach",
+)  # without --map (or --map default): the default map
 
 
 @dataclass(frozen=True)
@@ -149,7 +154,8 @@ def doc_commands(path: Path) -> list[DocCommand]:
                 elif not Path(resolve(word)).exists():
                     why_not = f"reads {word}, which nothing provides"
             slow = slow or words[1] in SLOW_COMMANDS
-            if words[1] in DEFAULT_MAP_COMMANDS and "--map" not in words:
+            given_map = words[words.index("--map") + 1] if "--map" in words[:-1] else "default"
+            if words[1] in DEFAULT_MAP_COMMANDS and given_map == "default":
                 slow = True  # builds the 2e8-sample default map on a fresh machine
             for output_file in _outputs(words) if not why_not else ():
                 made[output_file] = slow
