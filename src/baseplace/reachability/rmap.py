@@ -553,7 +553,13 @@ def _value_one(T, grid_f, grid_i, pixel_phi, offset, blocks):
             if not math.isfinite(T[a, b]):
                 return -1.0
     out = np.empty(1, dtype=np.float32)
-    _batch_rows(0, 1, T, T.reshape((1, 4, 4)), False, grid_f[:3], grid_f[3], grid_i[:3], grid_i[3],
+    # rows lo:hi and ``invert`` as run-time values, not the constants 0, 1 and False: numba would
+    # compile _batch_rows anew for those literal types (about 20 s of a cold start) instead of
+    # calling the overload the batch lookups compile and cache
+    hi = out.shape[0]
+    lo = hi - 1
+    invert = hi != hi
+    _batch_rows(lo, hi, T, T.reshape((1, 4, 4)), invert, grid_f[:3], grid_f[3], grid_i[:3], grid_i[3],
                 grid_i[4], pixel_phi, offset, blocks, grid_f[4], grid_f[5], grid_f[6], grid_f[7], out)  # fmt: skip
     return out[0]
 

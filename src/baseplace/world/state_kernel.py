@@ -207,7 +207,9 @@ def _uncertified(Q, a, b, n, travel, levers, placements, axes, kinds, joint, loc
     Per state, which of the pairs asked (``ask``, sorted) are left (``out_i``) and, on a line, by
     how much [m] a distance bound certifies each clear of its margin (its gap: ``slack_i``; 0:
     certified otherwise, or not at all). ``i`` numbers the state for the covers' and anchors'
-    caches. The arguments are those of the two, with dummies for the other's.
+    caches. The arguments are those of the two, with dummies for the other's. Both pass the same
+    types, no literal constant among them (numba compiles a callee anew for each literal value: a
+    literal 0 for ``n`` or ``start`` compiled this body twice, about 30 s of a cold start).
     """
     ws = _workspace(a.shape[0], joint.shape[0], sub_joint.shape[0], group_local.shape[0], self_pairs.shape[0],
                     anc_joint.shape[0], parts, scene_reach, halves, self_runs)  # fmt: skip
@@ -456,7 +458,8 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
     then the call goes on from the next): returns its index, or -1 when every state is certified.
     """
     z = np.zeros(Q.shape[1])
-    return _uncertified(Q, z, z, 0, 0.0, np.zeros((joint.shape[0], Q.shape[1])), placements, axes, kinds, joint, local,
+    n = Q.shape[0] - Q.shape[0]  # 0, typed int64 as in _uncertified_line's call (see _uncertified's note)
+    return _uncertified(Q, z, z, n, 0.0, np.zeros((joint.shape[0], Q.shape[1])), placements, axes, kinds, joint, local,
                         radius, sub_start, sub_joint, sub_local, sub_radius, group_local, group_radius, hull_start,
                         hull_planes, vert_start, verts, T, scene_rows, scene_reach, parts, offs, all_points, all_keys,
                         all_starts, all_fields, geo, ints, halves, planes, balls, self_pairs, self_reach, self_runs,
@@ -499,7 +502,7 @@ def _uncertified_line(a, b, n, travel, levers, placements, axes, kinds, joint, l
                         all_starts, all_fields, geo, ints, halves, planes, balls, self_pairs, self_reach, self_runs,
                         run_reach, self_table, tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off, tab_cert, anchor_of,
                         anc_joint, anc_box, anc_lo, anc_h, anc_dims, anc_off, anc_field, anc_reach, anc_group_reach,
-                        slack, queue, pool, ctl, 0, out)  # fmt: skip
+                        slack, queue, pool, ctl, n - n, out)  # fmt: skip
 
 
 @nb.njit(cache=True, inline="always")
