@@ -9,9 +9,7 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -21,7 +19,7 @@ import pytest
 
 from baseplace.errors import InputError
 from baseplace.robots.model import Robot
-from conftest import DATA
+from conftest import DATA, run_cli
 
 QUICK_S = 20.0  # a refusal takes ~2 s; building the default map takes minutes
 
@@ -47,11 +45,13 @@ def scene(tmp_path_factory) -> dict[str, Path]:
 
 
 def cli(scene: dict[str, Path], *args: str) -> subprocess.CompletedProcess[str]:
-    """The command in a fresh process with the empty cache; checks it was quick and built no map."""
+    """The command (in this process) with the empty cache; checks it was quick and built no map.
+
+    Nothing keeps a map in memory between commands (maps are loaded per job), so a command that
+    built or loaded one before refusing leaves it in the cache folder, or takes minutes.
+    """
     t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-m", "baseplace.cli", *args], capture_output=True, text=True,
-                          stdin=subprocess.DEVNULL, timeout=120,
-                          env={**os.environ, "BASEPLACE_CACHE": str(scene["cache"])})  # fmt: skip
+    proc = run_cli(*args, env={"BASEPLACE_CACHE": str(scene["cache"])})
     elapsed = time.perf_counter() - t0
     maps = scene["cache"] / "maps"
     assert not (maps.exists() and any(maps.iterdir())), sorted(maps.iterdir())
