@@ -37,12 +37,8 @@ PLACEHOLDER = re.compile(
 INPUT_OPTIONS = {"--cloud", "--bag", "--map", "--occupancy", "--targets", "--bases"}
 NEVER_RUN = ("serve",)  # a server: runs until stopped
 SLOW_COMMANDS = ("experiment", "demo", "build-map", "surface-map", "navigate")
-DEFAULT_MAP_COMMANDS = (
-    "place",
-    "explain",
-    "candidates",
-    "reach",
-)  # without --map (or --map default): the default map
+# without --map (or with --map default) these read the default map, built on a fresh machine
+DEFAULT_MAP_COMMANDS = ("place", "explain", "candidates", "reach")
 
 
 @dataclass(frozen=True)

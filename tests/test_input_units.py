@@ -47,8 +47,9 @@ def scene(tmp_path_factory) -> dict[str, Path]:
 def cli(scene: dict[str, Path], *args: str) -> subprocess.CompletedProcess[str]:
     """The command (in this process) with the empty cache; checks it was quick and built no map.
 
-    Nothing keeps a map in memory between commands (maps are loaded per job), so a command that
-    built or loaded one before refusing leaves it in the cache folder, or takes minutes.
+    Nothing keeps a map in memory between commands (maps are loaded per job): a command that went
+    for its map before refusing builds the default one into the empty cache (minutes), or fails on
+    the missing map file with another message than the refusal's.
     """
     t0 = time.perf_counter()
     proc = run_cli(*args, env={"BASEPLACE_CACHE": str(scene["cache"])})

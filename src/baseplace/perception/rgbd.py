@@ -270,7 +270,6 @@ def parse_intrinsics(spec: str) -> Intrinsics:
 
 
 def _camera_info(path: Path) -> Intrinsics:
-
     if not path.is_file():
         raise InputError(f"CameraInfo YAML not found: {brief(str(path), 200)}")
     doc = read_document(path, "CameraInfo YAML", MAX_YAML_BYTES)
