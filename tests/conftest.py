@@ -5,6 +5,7 @@ import io
 import os
 import socket
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -73,20 +74,30 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def run_cli(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
-    """The CLI in this process (saves the interpreter's start per call); stdout and stderr captured."""
+def run_cli(
+    *args: str, env: dict[str, str] | None = None, cwd: Path | None = None
+) -> subprocess.CompletedProcess[str]:
+    """``baseplace ARGS`` in this process, as a fresh one would run it (its ``sys.argv``, ``env`` added
+    to the environment, ``cwd`` its working folder); stdout and stderr captured. Saves the interpreter's
+    start and the compiled kernels' loading, 2-4 s a call. Tests of what only a fresh process shows
+    (imports, memory peaks, signals, file-size limits) start one."""
     from baseplace.cli import main
 
     out, err = io.StringIO(), io.StringIO()
-    saved = dict(os.environ)
+    saved_env, saved_argv, saved_cwd = dict(os.environ), sys.argv, os.getcwd()
     os.environ.update(env or {})
+    sys.argv = ["baseplace", *args]
     try:
+        if cwd is not None:
+            os.chdir(cwd)
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
             try:
                 code = main(list(args))
             except SystemExit as exc:  # argparse's errors, --help and --version exit
                 code = exc.code if isinstance(exc.code, int) else 1
     finally:
+        os.chdir(saved_cwd)
+        sys.argv = saved_argv
         os.environ.clear()
-        os.environ.update(saved)
+        os.environ.update(saved_env)
     return subprocess.CompletedProcess(list(args), code, out.getvalue(), err.getvalue())

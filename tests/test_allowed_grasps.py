@@ -11,6 +11,7 @@ from baseplace.robots.fk import forward_kinematics
 from baseplace.sim.scenes import Plane, Scene, SceneObject, SceneSettings
 from baseplace_experiments.allowed_grasps import AllowedGrasps, scene_solids
 from baseplace_experiments.table_grid import RobotShapes
+from conftest import run_cli
 
 FLOOR = Plane(0, "floor", (0.0, 0.0), (6.0, 6.0), 0.0, 0.0, 0.0, 0.0)
 FAR = SceneObject("cylinder", (2.5, 2.5, 0.1), 0.0, (0.06, 0.06, 0.2))  # the "grasped" object, out of the way
@@ -62,11 +63,9 @@ def test_the_clearance_is_kept_from_every_solid(tiago):
 
 def test_a_held_out_v2_run_with_other_counts_or_mixed_seeds_is_refused_before_any_work():
     import subprocess
-    import sys
 
     def run(*args: str) -> subprocess.CompletedProcess[str]:
-        return subprocess.run([sys.executable, "-m", "baseplace.cli", "experiment", "osrm", "--protocol", "2", *args],
-                              capture_output=True, text=True, timeout=60)  # fmt: skip
+        return run_cli("experiment", "osrm", "--protocol", "2", *args)
 
     r = run("--split", "held-out", "--grasps", "5")
     assert r.returncode == 2 and "uses --scenes 7 --grasps 3 --tries 100" in r.stderr

@@ -8,12 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import DATA
+from conftest import DATA, run_cli
 
 
-def run(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "baseplace.cli", *args], capture_output=True, text=True,
-                          cwd=cwd, stdin=subprocess.DEVNULL, timeout=600)  # fmt: skip
+def run(*args: str) -> subprocess.CompletedProcess[str]:
+    return run_cli(*args)
 
 
 def assert_one_line_error(proc: subprocess.CompletedProcess[str], code: int, *fragments: str) -> None:
@@ -342,14 +341,10 @@ def test_place_command(tmp_path):
 @pytest.fixture(scope="module")
 def surface_cli(tmp_path_factory):
     """Runs the CLI with its own cache, so that the small maps of these tests stay out of the user's."""
-    import os
-
     cache = tmp_path_factory.mktemp("surface") / "kernels"
 
     def call(*args: str) -> subprocess.CompletedProcess[str]:
-        return subprocess.run([sys.executable, "-m", "baseplace.cli", *args], capture_output=True, text=True,
-                              stdin=subprocess.DEVNULL, timeout=600,
-                              env={**os.environ, "BASEPLACE_CACHE": str(cache)})  # fmt: skip
+        return run_cli(*args, env={"BASEPLACE_CACHE": str(cache)})
 
     return call
 

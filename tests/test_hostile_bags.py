@@ -25,6 +25,7 @@ from baseplace.io.bag import read_bag
 from baseplace.io.bag_writer import CloudRecord, GridRecord, TfRecord, write_input_bag
 from baseplace.io.messages import POINTCLOUD2, TF_MESSAGE, cloud_msg, header, tf_msg
 from baseplace.world.occupancy import OccupancyGrid
+from conftest import run_cli
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
 T0 = 10**9
@@ -110,9 +111,8 @@ def small_bag(path: Path, fmt: str = "ros1", n: int = 2000) -> Path:
 
 
 def cli(*args: str, cap_mb: int) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "PYTHONPATH": SRC, "BASEPLACE_MAX_MEMORY_MB": str(cap_mb)}
-    return subprocess.run([sys.executable, "-m", "baseplace.cli", *args], capture_output=True, text=True,
-                          stdin=subprocess.DEVNULL, timeout=600, env=env)  # fmt: skip
+    """The CLI's verdict under the cap; its memory is measured by ``probe``, in a fresh process."""
+    return run_cli(*args, env={"BASEPLACE_MAX_MEMORY_MB": str(cap_mb)})
 
 
 # --- clouds and chunks -----------------------------------------------------------------------------

@@ -21,6 +21,8 @@ import h5py
 import numpy as np
 import pytest
 
+from conftest import run_cli
+
 SRC = str(Path(__file__).resolve().parents[1] / "src")
 LIMIT_MB = 200.0
 LIMIT_S = 2.0
@@ -67,8 +69,7 @@ def probe(kind: str, path: Path, **env: str) -> dict[str, object]:
 
 
 def cli(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "baseplace.cli", *args], capture_output=True, text=True,
-                          stdin=subprocess.DEVNULL, timeout=300, env={**os.environ, "PYTHONPATH": SRC})  # fmt: skip
+    return run_cli(*args)  # the memory and time were measured by the probe, in a fresh process
 
 
 def assert_refused(kind: str, path: Path, fragment: str, cli_args: list[str]) -> None:

@@ -20,7 +20,7 @@ from baseplace.io.results import read_result_mcap
 from baseplace.io.tf import TfTree
 from baseplace.terrain.io import load_cloud, load_transform
 from baseplace.world.occupancy import load_occupancy
-from conftest import SHARED
+from conftest import SHARED, run_cli
 
 MUG = SHARED / "pointclouds" / "table_scene_mug_stereo_textured.pcd"
 DEPOT = SHARED / "maps" / "depot.yaml"
@@ -399,7 +399,6 @@ def test_place_with_start_plans_on_the_map_around_the_table(bags, map_file, tmp_
 def test_surface_sample_reads_the_grid_from_the_bag(bags, tmp_path):
     import os
     import subprocess
-    import sys
 
     env = {
         **os.environ,
@@ -407,8 +406,7 @@ def test_surface_sample_reads_the_grid_from_the_bag(bags, tmp_path):
     }  # small maps stay out of the user's cache
 
     def cli(*args: str) -> subprocess.CompletedProcess[str]:
-        return subprocess.run([sys.executable, "-m", "baseplace.cli", *args], capture_output=True, text=True,
-                              stdin=subprocess.DEVNULL, timeout=600, env=env)  # fmt: skip
+        return run_cli(*args, env=env)
 
     smap = tmp_path / "table.smap"
     proc = cli("surface-map", "--robot", "tiago", "--samples", "3e5", "--height", "0.74", "--resolution", "0.1",

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -11,6 +10,7 @@ import pytest
 from baseplace.errors import InputError
 from baseplace_experiments import osrm_experiment, osrm_v2, osrm_v3
 from baseplace_experiments.osrm_experiment import ExperimentSettings, experiment_scene
+from conftest import run_cli
 
 
 def test_the_clean_collision_cloud_is_the_noise_free_sample_and_the_segmentation_stays_the_noisy_clouds():
@@ -54,8 +54,7 @@ def test_protocol_v3_runs_v2_on_the_clean_cloud_with_fresh_held_out_seeds(tiago,
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "baseplace.cli", "experiment", "osrm", "--protocol", "3", *args],
-                          capture_output=True, text=True, timeout=60)  # fmt: skip
+    return run_cli("experiment", "osrm", "--protocol", "3", *args)
 
 
 def test_a_held_out_v3_run_with_other_counts_mixed_seeds_or_a_v1_file_beside_is_refused_before_any_work(

@@ -2,7 +2,6 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +11,7 @@ from baseplace.errors import InputError
 from baseplace.sim.scenes import SceneSettings, generate_scene
 from baseplace_experiments.results import RunClock, SeedSplit, write_results
 from baseplace_experiments.segmentation_eval import noisy_height_map
+from conftest import run_cli
 
 
 def test_results_file_holds_command_commit_seeds_and_time(tmp_path):
@@ -84,9 +84,8 @@ def test_height_map_noise_is_the_seeds_model():
         noisy_height_map(scene, rng, "points")
 
 
-def _cli(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "baseplace.cli", *args], capture_output=True, text=True,
-                          stdin=subprocess.DEVNULL, timeout=300)  # fmt: skip
+def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
+    return run_cli(*args, cwd=cwd)
 
 
 def test_experiment_command_writes_its_results_file(tmp_path):
@@ -115,8 +114,7 @@ def test_experiment_command_writes_its_results_file(tmp_path):
     ],
 )
 def test_experiment_bad_input_is_one_line(args, fragment, tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "baseplace.cli", "experiment", *args], capture_output=True,
-                          text=True, stdin=subprocess.DEVNULL, timeout=300, cwd=tmp_path)  # fmt: skip
+    proc = _cli("experiment", *args, cwd=tmp_path)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and fragment in lines[0], proc.stderr

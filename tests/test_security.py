@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 
 from baseplace.errors import InputError
+from conftest import run_cli
 
 DATA = Path(__file__).parent / "data"
 SRC = str(Path(__file__).resolve().parents[1] / "src")
@@ -28,8 +29,7 @@ def _env(**extra: str) -> dict[str, str]:
 def cli(
     *args: str, env: dict[str, str] | None = None, cwd: Path | None = None
 ) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "baseplace.cli", *args], capture_output=True, text=True,
-                          stdin=subprocess.DEVNULL, timeout=600, env=env or _env(), cwd=cwd)  # fmt: skip
+    return run_cli(*args, env=env, cwd=cwd)
 
 
 def one_line(proc: subprocess.CompletedProcess[str], code: int = 2) -> str:

@@ -30,7 +30,6 @@ import cv2
 import numpy as np
 import shapely
 from numpy.typing import ArrayLike, NDArray
-from scipy.signal import fftconvolve
 
 from baseplace.errors import InputError, brief, unknown
 from baseplace.geometry.poses import FloatArray
@@ -337,6 +336,9 @@ def build_surface_map(
     g0 = g.min(axis=0)
     mask = np.zeros(tuple(g.max(axis=0) - g0 + 1), dtype=np.float32)
     mask[g[:, 0] - g0[0], g[:, 1] - g0[1]] = 1.0
+    # imported here: scipy.signal takes 1 s to import, and loading a surface map needs none of it
+    from scipy.signal import fftconvolve
+
     combined: NDArray[np.float32] | None = None
     for name, rmap in rmaps.items():
         approach = robot.arm(name).approach_axis  # the arm's own, from its robot file
