@@ -25,6 +25,26 @@ DATA = Path(__file__).parent / "data"
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    """With xdist workers: compile the kernels that they all use once, before they start.
+
+    Two processes side by side (tests/precompile.py), in the controller only; the workers load the
+    kernels from numba's cache. A part that fails is reported and left to the tests that use it.
+    """
+    if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
+        return
+    script = Path(__file__).with_name("precompile.py")
+    parts = {
+        part: subprocess.Popen([sys.executable, str(script), *part.split()]) for part in ("motion", "ik maps")
+    }
+    for part, proc in parts.items():
+        if proc.wait() != 0:
+            print(
+                f"tests/precompile.py {part} failed (exit {proc.returncode}); the workers compile it",
+                file=sys.stderr,
+            )
+
+
 @pytest.fixture(scope="session")
 def tiago() -> Robot:
     return Robot("tiago")
