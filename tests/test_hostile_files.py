@@ -69,7 +69,8 @@ def probe(kind: str, path: Path, **env: str) -> dict[str, object]:
 
 
 def cli(*args: str) -> subprocess.CompletedProcess[str]:
-    return run_cli(*args)  # the memory and time were measured by the probe, in a fresh process
+    """The CLI's verdict, in this process; a load's memory is measured by ``probe``, in a fresh one."""
+    return run_cli(*args)
 
 
 def assert_refused(kind: str, path: Path, fragment: str, cli_args: list[str]) -> None:
