@@ -8,11 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import DATA, run_cli
-
-
-def run(*args: str) -> subprocess.CompletedProcess[str]:
-    return run_cli(*args)
+from conftest import DATA
+from conftest import run_cli as run
 
 
 def assert_one_line_error(proc: subprocess.CompletedProcess[str], code: int, *fragments: str) -> None:
@@ -344,7 +341,7 @@ def surface_cli(tmp_path_factory):
     cache = tmp_path_factory.mktemp("surface") / "kernels"
 
     def call(*args: str) -> subprocess.CompletedProcess[str]:
-        return run_cli(*args, env={"BASEPLACE_CACHE": str(cache)})
+        return run(*args, env={"BASEPLACE_CACHE": str(cache)})
 
     return call
 

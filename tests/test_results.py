@@ -84,13 +84,9 @@ def test_height_map_noise_is_the_seeds_model():
         noisy_height_map(scene, rng, "points")
 
 
-def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
-    return run_cli(*args, cwd=cwd)
-
-
 def test_experiment_command_writes_its_results_file(tmp_path):
     path = tmp_path / "seg.json"
-    proc = _cli("experiment", "segmentation", "--scenes", "1", "--noise", "heightmap", "--seed", "5",
+    proc = run_cli("experiment", "segmentation", "--scenes", "1", "--noise", "heightmap", "--seed", "5",
                 "--results", str(path), "--json")  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     stored = json.loads(path.read_text())
@@ -114,7 +110,7 @@ def test_experiment_command_writes_its_results_file(tmp_path):
     ],
 )
 def test_experiment_bad_input_is_one_line(args, fragment, tmp_path):
-    proc = _cli("experiment", *args, cwd=tmp_path)
+    proc = run_cli("experiment", *args, cwd=tmp_path)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and fragment in lines[0], proc.stderr

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from baseplace.errors import InputError
-from conftest import run_cli
+from conftest import run_cli as cli
 
 DATA = Path(__file__).parent / "data"
 SRC = str(Path(__file__).resolve().parents[1] / "src")
@@ -24,12 +24,6 @@ SRC = str(Path(__file__).resolve().parents[1] / "src")
 
 def _env(**extra: str) -> dict[str, str]:
     return {**os.environ, "PYTHONPATH": SRC, **extra}
-
-
-def cli(
-    *args: str, env: dict[str, str] | None = None, cwd: Path | None = None
-) -> subprocess.CompletedProcess[str]:
-    return run_cli(*args, env=env, cwd=cwd)
 
 
 def one_line(proc: subprocess.CompletedProcess[str], code: int = 2) -> str:
