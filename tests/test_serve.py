@@ -466,3 +466,26 @@ def test_the_serve_commands_defaults_are_the_settings_defaults(monkeypatch):
         == 0
     )
     assert served[1] == dataclasses.replace(ServeSettings(), max_inflight_bytes=300 * 2**20, robots=("pr2",))
+
+
+def test_the_services_folder_is_deleted_without_close():
+    """The scenes' folder goes with ``close()``, and also when a state is dropped unclosed (an app
+    never started) or its process exits without closing it."""
+    import gc
+    import subprocess
+
+    state = ServiceState(ServeSettings(warm_up=False, robots=()))
+    folder = state.folder
+    assert folder.is_dir()
+    state.close(wait_s=1.0)
+    assert not folder.exists()
+    state = ServiceState(ServeSettings(warm_up=False, robots=()))
+    folder = state.folder
+    del state
+    gc.collect()
+    assert not folder.exists()
+    code = "from baseplace.serve.state import ServeSettings, ServiceState\n" \
+           "s = ServiceState(ServeSettings(warm_up=False, robots=()))\nprint(s.folder)"  # fmt: skip
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "baseplace-serve-" in proc.stdout and not Path(proc.stdout.strip()).exists()

@@ -18,6 +18,7 @@ import tempfile
 import threading
 import time
 import uuid
+import weakref
 from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -198,6 +199,8 @@ class ServiceState:
         # candidates, navigation and surface maps: one at a time, beside the placements, on robots of their own
         self.commands = FairLane("command", 1, _kernel_threads, n)
         self.folder = Path(tempfile.mkdtemp(prefix="baseplace-serve-"))
+        # deleted by close(), or when the state is collected or the process exits without it
+        self._remove_folder = weakref.finalize(self, shutil.rmtree, str(self.folder), ignore_errors=True)
         self._robots: dict[str, Any] = {}
         self._lane_robots: dict[str, dict[str, Any]] = {}  # lane -> robots of its own thread
         self._maps: dict[tuple[str, str | None], Any] = {}
@@ -408,7 +411,7 @@ class ServiceState:
         for pool in pools:
             for thread in pool.threads:
                 thread.join(max(0.0, end - time.monotonic()))
-        shutil.rmtree(self.folder, ignore_errors=True)
+        self._remove_folder()
 
 
 MAX_FLOOR_POINTS = 4_000_000
