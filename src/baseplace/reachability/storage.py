@@ -13,6 +13,7 @@ import dataclasses
 import json
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import h5py
 import numpy as np
@@ -22,7 +23,9 @@ from baseplace.errors import InputError
 from baseplace.files import atomic_hdf5
 from baseplace.reachability.grid import SE3Grid
 from baseplace.reachability.rmap import MapInfo, ReachabilityMap
-from baseplace.robots.model import Robot
+
+if TYPE_CHECKING:
+    from baseplace.robots.model import Robot
 
 FORMAT = "baseplace-reachability-map"
 FORMAT_VERSION = 2  # 1 kept grid and info in variable-length string attributes
