@@ -374,9 +374,14 @@ class RealServer:
         return time.perf_counter() - t
 
     def stop(self) -> None:
+        """SIGTERM, as an operator stops it (the service then deletes its scenes' files), else SIGKILL."""
         if self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.wait(10)
+            self.proc.terminate()
+            try:
+                self.proc.wait(30)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(10)
 
 
 @pytest.fixture(scope="module")
