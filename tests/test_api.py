@@ -79,3 +79,20 @@ def test_import_baseplace_loads_no_numba_and_no_robot_model():
     code = "import sys, baseplace; baseplace.ReachabilityMap; print('baseplace.reachability' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "True"
+
+
+def test_reading_a_grid_or_a_map_loads_no_collision_model():
+    """``baseplace.world`` is lazy too: the occupancy-grid and map loaders import neither coal nor
+    pinocchio nor the scene model, and a public name of the package still resolves on first use."""
+    import subprocess
+    import sys
+
+    heavy = ("coal", "pinocchio", "baseplace.world.environment", "scipy.spatial")
+    code = (
+        "import sys, baseplace.world.occupancy, baseplace.reachability.storage\n"
+        f"print(sorted(m for m in {heavy!r} if m in sys.modules))\n"
+        "from baseplace.world import GraspedObject, parse_obstacles\n"
+        "print(GraspedObject.__module__, parse_obstacles.__module__)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.split("\n")[:2] == ["[]", "baseplace.world.grasped_object baseplace.world.obstacles"], out
