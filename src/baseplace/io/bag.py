@@ -189,6 +189,41 @@ TF_BATCH = 4096
 """Transforms gathered from /tf messages before they are recorded together (one sort per batch)."""
 
 
+class _TfBatch:
+    """Transforms of /tf (or /tf_static) messages not recorded yet, as plain names and numbers.
+
+    A decoded message's objects are dropped as soon as its numbers are read: held in a batch they
+    would outlive the garbage collector's young generations, and its full collections, which walk
+    every object the process holds, took half of a large recording's tf read.
+    """
+
+    def __init__(self) -> None:
+        self.parents: list[str] = []
+        self.children: list[str] = []
+        self.stamps: list[int] = []
+        self.poses: list[tuple[float, ...]] = []
+
+    def clear(self) -> None:
+        for values in (self.parents, self.children, self.stamps, self.poses):
+            values.clear()
+
+    def extend(self, transforms: Sequence[Any]) -> None:
+        for t in transforms:
+            r, q = t.transform.translation, t.transform.rotation
+            self.parents.append(t.header.frame_id)
+            self.children.append(t.child_frame_id)
+            self.stamps.append(stamp_ns(t.header))
+            self.poses.append((r.x, r.y, r.z, q.x, q.y, q.z, q.w))
+
+    def __len__(self) -> int:
+        return len(self.stamps)
+
+    def record(self, tree: TfTree, static: bool) -> None:
+        """Record the batch in ``tree``, and empty it."""
+        tree.add_many(self.parents, self.children, self.stamps, self.poses or np.zeros((0, 7)), static)
+        self.clear()
+
+
 def _read_tf(reader: Any, path: Path, tolerance_ns: int) -> TfTree:
     tree = TfTree(tolerance_ns)
     conns = [c for c in reader.connections if c.topic in TF_TOPICS]
@@ -197,27 +232,17 @@ def _read_tf(reader: Any, path: Path, tolerance_ns: int) -> TfTree:
             raise InputError(
                 f"bag {path}: topic {c.topic!r} carries unknown message type {c.msgtype}; expected {TF_MESSAGE}"
             )
-    batches: dict[bool, list[Any]] = {False: [], True: []}  # TransformStamped messages of /tf, /tf_static
+    batches = {False: _TfBatch(), True: _TfBatch()}  # the transforms of /tf, /tf_static
     seen = 0  # transforms read, recorded or in a batch
     for conn, raw in _raw_messages(reader, conns, path) if conns else ():
         seen += check_tf_message(raw, reader.is2, seen, MAX_TRANSFORMS, f"bag {path}")
-        batch = batches[conn.topic == "/tf_static"]
-        batch.extend(_decode(reader, conn, raw, path).transforms)
-        if len(batch) >= TF_BATCH:
-            _record(tree, batch, conn.topic == "/tf_static")
+        static = conn.topic == "/tf_static"
+        batches[static].extend(_decode(reader, conn, raw, path).transforms)
+        if len(batches[static]) >= TF_BATCH:
+            batches[static].record(tree, static)
     for static, batch in batches.items():
-        _record(tree, batch, static)
+        batch.record(tree, static)
     return tree
-
-
-def _record(tree: TfTree, transforms: list[Any], static: bool) -> None:
-    """Record a batch of geometry_msgs/TransformStamped in ``tree``, and empty it."""
-    poses = [(t.transform.translation.x, t.transform.translation.y, t.transform.translation.z,
-              t.transform.rotation.x, t.transform.rotation.y, t.transform.rotation.z, t.transform.rotation.w)
-             for t in transforms]  # fmt: skip
-    tree.add_many([t.header.frame_id for t in transforms], [t.child_frame_id for t in transforms],
-                  [stamp_ns(t.header) for t in transforms], poses or np.zeros((0, 7)), static)  # fmt: skip
-    transforms.clear()
 
 
 def read_bag(
