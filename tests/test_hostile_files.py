@@ -21,7 +21,7 @@ import h5py
 import numpy as np
 import pytest
 
-from conftest import run_cli
+from conftest import run_cli as cli  # the CLI's verdict, in this process; a load's memory: probe
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
 LIMIT_MB = 200.0
@@ -66,11 +66,6 @@ def probe(kind: str, path: Path, **env: str) -> dict[str, object]:
                           timeout=300, env={**os.environ, "PYTHONPATH": SRC, **env})  # fmt: skip
     assert proc.returncode == 0, proc.stderr[-3000:]
     return json.loads(proc.stdout.strip().splitlines()[-1])  # type: ignore[no-any-return]
-
-
-def cli(*args: str) -> subprocess.CompletedProcess[str]:
-    """The CLI's verdict, in this process; a load's memory is measured by ``probe``, in a fresh one."""
-    return run_cli(*args)
 
 
 def assert_refused(kind: str, path: Path, fragment: str, cli_args: list[str]) -> None:

@@ -87,7 +87,7 @@ def test_height_map_noise_is_the_seeds_model():
 def test_experiment_command_writes_its_results_file(tmp_path):
     path = tmp_path / "seg.json"
     proc = run_cli("experiment", "segmentation", "--scenes", "1", "--noise", "heightmap", "--seed", "5",
-                "--results", str(path), "--json")  # fmt: skip
+                   "--results", str(path), "--json")  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     stored = json.loads(path.read_text())
     assert stored == json.loads(proc.stdout)  # the file is what the command printed, whole
