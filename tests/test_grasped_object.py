@@ -450,3 +450,23 @@ def test_one_noisy_pair_across_a_gap_does_not_join_two_bottles():
     assert joined[0] >= 1, "single linkage kept them apart in every draw: the test shows nothing"
     assert joined[default] == 0
     assert outside == 0
+
+
+def test_footprint_within_matches_every_distance_by_brute_force():
+    """``footprint_within`` (a search bounded at the radius) against all point-to-point distances.
+
+    A point at exactly the radius from the nearest object point (a distance exact in floating
+    point) is within, as ``footprint_distance(xy) <= radius`` says.
+    """
+    rng = np.random.default_rng(7)
+    obj = GraspedObject.from_points(rng.uniform(-0.05, 0.05, (300, 3)))
+    r = 0.0125
+    xy = rng.uniform(-0.3, 0.3, (5000, 2))
+    brute = np.sqrt(((xy[:, None, :] - obj.points[None, :, :2]) ** 2).sum(axis=2)).min(axis=1)
+    assert np.array_equal(obj.footprint_within(xy, r), brute <= r)
+    pair = GraspedObject.from_points([[0.0, 0.0, 0.0], [1.0, 1.0, 0.2]])
+    assert pair.footprint_within([[0.25, 0.0], [0.25, 1e-6]], 0.25).tolist() == [True, False]
+    assert np.allclose(obj.footprint_distance(xy), brute, rtol=0, atol=1e-12)
+    for shape in (GraspedObject.box([0.1, 0.2, 0.5], [0.06, 0.1, 0.2], 0.4),
+                  GraspedObject.cylinder([0.1, 0.2, 0.5], 0.03, 0.2)):  # fmt: skip
+        assert np.array_equal(shape.footprint_within(xy, r), shape.footprint_distance(xy) <= r)

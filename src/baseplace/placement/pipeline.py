@@ -402,7 +402,7 @@ def clearance_of(
     if noise is None:  # no denoised cells near the object kept it
         p = np.asarray(points, dtype=float).reshape(-1, 3)
         p = p[np.all(np.isfinite(p), axis=1)]
-        noise = surface_noise(p[grasped.footprint_distance(p[:, :2]) <= RADIUS])
+        noise = surface_noise(p[grasped.footprint_within(p[:, :2], RADIUS)])
     derived = derived_clearance(support_plane(groups), noise=noise)
     if given is not None:
         return float(given), "given", derived[0]

@@ -579,8 +579,8 @@ def fine_groups(
     res = object_voxels.resolution
     p = np.asarray(points, dtype=float).reshape(-1, 3)
     p = p[np.all(np.isfinite(p), axis=1)]
-    around = p[grasped.footprint_distance(p[:, :2]) <= radius] if len(p) else p
-    near = {name: grasped.footprint_distance(v.centres[:, :2]) <= radius if len(v) else np.zeros(0, bool)
+    around = p[grasped.footprint_within(p[:, :2], radius)] if len(p) else p
+    near = {name: grasped.footprint_within(v.centres[:, :2], radius) if len(v) else np.zeros(0, bool)
             for name, v in [*groups.items(), (_OBJECT, object_voxels)]}  # fmt: skip
     keys = np.floor(p / res).astype(np.int64)
     owner = np.full(len(p), -1)
@@ -753,7 +753,7 @@ def _object_points(
     z_ok = (p[:, 2] >= low) & (p[:, 2] <= top + above)
     out = np.zeros(len(p), dtype=bool)
     if z_ok.any():
-        out[z_ok] = grasped.footprint_distance(p[z_ok, :2]) <= OBJECT_TOLERANCE
+        out[z_ok] = grasped.footprint_within(p[z_ok, :2], OBJECT_TOLERANCE)
     if grasped.kind == "points":
         mine = np.unique(np.floor(grasped.points / FINE).astype(np.int64), axis=0)
         out |= rows_in(np.floor(p / FINE).astype(np.int64), mine)
