@@ -262,6 +262,10 @@ def test_segment_bad_arguments(tmp_path):
         run("scene", "generate", "--size-class", "huge", "--out", str(tmp_path / "s.ply")), 2
     )
     assert_one_line_error(run("segment", str(tmp_path / "missing.pcd")), 2, "does not exist")
+    # no cloud: the message names segment's own argument; --cloud is not taken for --cloud-topic
+    assert_one_line_error(run("segment"), 2, "baseplace segment CLOUD", "--bag")
+    assert_one_line_error(run("segment", "--cloud", str(cloud)), 2, "unrecognized arguments: --cloud")
+    assert_one_line_error(run("segment", str(cloud), "--resol", "0.05"), 2, "unrecognized arguments: --resol")
 
 
 def test_place_command(tmp_path):
@@ -487,7 +491,10 @@ def test_candidates_bad_input(tiago_map_file, tmp_path):
                               *common), 2, "origin")  # fmt: skip
 
 
-def test_build_map_with_a_local_cluster_and_a_bad_scheduler(tmp_path):
+def test_build_map_with_a_local_cluster_and_a_bad_scheduler(tmp_path, monkeypatch):
+    import functools
+
+    from baseplace.reachability import distributed
     from baseplace.reachability.storage import load_map
 
     args = ("build-map", "--robot", str(DATA / "planar3.toml"), "--samples", "3e6", "--seed", "5")
@@ -497,8 +504,10 @@ def test_build_map_with_a_local_cluster_and_a_bad_scheduler(tmp_path):
     one, two = load_map(tmp_path / "one.rmap"), load_map(tmp_path / "two.rmap")
     np.testing.assert_array_equal(one.cells, two.cells)
     np.testing.assert_array_equal(one.counts, two.counts)
+    # dask retries a refused connection until the timeout: 1 s here instead of the CLI's 10 s
+    monkeypatch.setattr(distributed, "connect", functools.partial(distributed.connect, timeout_s=1.0))
     proc = run(*args, "--out", str(tmp_path / "x.rmap"), "--scheduler", "tcp://127.0.0.1:9")
-    assert_one_line_error(proc, 2, "cannot connect to dask scheduler", "127.0.0.1:9")
+    assert_one_line_error(proc, 2, "cannot connect to dask scheduler", "127.0.0.1:9", "within 1 s")
     assert not (tmp_path / "x.rmap").exists() and not (tmp_path / "x.rmap.partial").exists()
 
 

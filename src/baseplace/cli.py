@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any, NoReturn
 
 from baseplace import __version__
 from baseplace.argtypes import count, finite_float, in_radians, nonneg_int
-from baseplace.errors import BaseplaceError, brief
+from baseplace.errors import BaseplaceError, InputError, brief
 from baseplace.jobs.inputs import DEFAULT_MAP_SAMPLES, Progress, motion_and_robustness
 from baseplace.robots.defaults import DEFAULT_ROBOT
 
@@ -72,6 +72,11 @@ class _Parser(argparse.ArgumentParser):
 
     json_argv: list[str] | None = None  # set by main when the command line asks for --json
     json_kind: str | None = None  # the command's kind; None for an unknown command
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        # no abbreviated options: `segment --cloud F` was taken for --cloud-topic F
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> NoReturn:
         text = f"{message} (see '{self.prog} --help')"
@@ -126,6 +131,13 @@ def _cloud(args: argparse.Namespace) -> Any:
                        args.world_frame, getattr(args, "bag_clouds", "last"))  # fmt: skip
     return CloudInput(paths, transforms if paths else [], bag=bag, fuse=getattr(args, "fuse", False),
                       fuse_miss=getattr(args, "fuse_miss", 0.35), fused_out=getattr(args, "fused_out", None))  # fmt: skip
+
+
+def _segment(args: argparse.Namespace, progress: Progress) -> Any:
+    # the jobs' message names --cloud, which segment takes as CLOUD
+    if args.cloud is None and args.bag is None:
+        raise InputError("give a cloud file (baseplace segment CLOUD) or --bag FILE --cloud-topic TOPIC")
+    return navigate.segment_job(navigate.SegmentJob(_cloud(args), args.algorithm, args.resolution, args.out))
 
 
 def _build_map(args: argparse.Namespace, progress: Progress) -> Any:
@@ -240,7 +252,7 @@ JOBS: dict[str, Callable[[argparse.Namespace, Progress], Any]] = {
         a.map, a.n, a.occupancy, _cloud(a).bag if a.map_topic else None, a.candidates, not a.no_discount, a.robot,
         a.seed)),
     "occupancy": lambda a, _: world.occupancy_job(a.map),
-    "segment": lambda a, _: navigate.segment_job(navigate.SegmentJob(_cloud(a), a.algorithm, a.resolution, a.out)),
+    "segment": _segment,
     "generate": lambda a, _: world.scene_job(world.SceneJob(
         a.out, a.truth, a.size_class, a.planes, a.sigma, a.extent, not a.no_box, a.seed)),
     "demo": _demo,
