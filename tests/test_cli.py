@@ -265,7 +265,10 @@ def test_segment_bad_arguments(tmp_path):
     # no cloud: the message names segment's own argument; --cloud is not taken for --cloud-topic
     assert_one_line_error(run("segment"), 2, "baseplace segment CLOUD", "--bag")
     assert_one_line_error(run("segment", "--cloud", str(cloud)), 2, "unrecognized arguments: --cloud")
-    assert_one_line_error(run("segment", str(cloud), "--resol", "0.05"), 2, "unrecognized arguments: --resol")
+    assert_one_line_error(run("segment", str(cloud), "--resol", "0.05"), 2, "unrecognized arguments: --resol",
+                          "see 'baseplace segment --help'")  # fmt: skip
+    assert_one_line_error(run("scene", "generate", "--out", str(tmp_path / "s.ply"), "--bogus"), 2,
+                          "unrecognized arguments: --bogus", "see 'baseplace scene generate --help'")  # fmt: skip
 
 
 def test_place_command(tmp_path):

@@ -78,6 +78,23 @@ class _Parser(argparse.ArgumentParser):
         kwargs.setdefault("allow_abbrev", False)
         super().__init__(*args, **kwargs)
 
+    def parse_command_line(self, args: Sequence[str]) -> argparse.Namespace:
+        """``parse_args``, but an unrecognised argument is reported by the (sub)command that was given it."""
+        ns, extras = self.parse_known_args(args)
+        if extras:
+            self._chosen(ns).error(f"unrecognized arguments: {' '.join(extras)}")
+        return ns
+
+    def _chosen(self, ns: argparse.Namespace) -> _Parser:
+        """The innermost command's parser that ``ns`` went through."""
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                name = getattr(ns, action.dest, None)
+                chosen = action.choices.get(name) if isinstance(name, str) else None
+                if isinstance(chosen, _Parser):
+                    return chosen._chosen(ns)
+        return self
+
     def error(self, message: str) -> NoReturn:
         text = f"{message} (see '{self.prog} --help')"
         if _Parser.json_argv is not None:
@@ -311,7 +328,7 @@ def _add_degrees_argument(p: argparse.ArgumentParser) -> None:
                         "an object's yaw) are in degrees; without it radians, and values beyond 2 pi are refused")  # fmt: skip
 
 
-def build_parser(chosen: str | None = None) -> argparse.ArgumentParser:
+def build_parser(chosen: str | None = None) -> _Parser:
     """The argument parser of the ``baseplace`` command.
 
     With ``chosen`` (the command a command line names) the modules that register other commands
@@ -722,7 +739,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     words = [a for a in argv if not a.startswith("-")]
     _Parser.json_argv = argv if "--json" in argv else None
     _Parser.json_kind = KINDS.get(words[0]) if words else None
-    args = build_parser(words[0] if words else None).parse_args(argv)
+    args = build_parser(words[0] if words else None).parse_command_line(argv)
     from baseplace.jobs.report import NoResultError, Report
     from baseplace.status import ProgressBars, elapsed_status
 
