@@ -6,6 +6,7 @@ import os
 import socket
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -25,24 +26,35 @@ DATA = Path(__file__).parent / "data"
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 
 
+PRECOMPILE_TIMEOUT_S = 600
+"""The precompile step's limit [s]: about 75 s on this project's 2-core machine with an empty cache."""
+
+
 def pytest_configure(config: pytest.Config) -> None:
     """With xdist workers: compile the kernels that they all use once, before they start.
 
     Two processes side by side (tests/precompile.py), in the controller only; the workers load the
-    kernels from numba's cache. A part that fails is reported and left to the tests that use it.
+    kernels from numba's cache. A part that fails, or runs past :data:`PRECOMPILE_TIMEOUT_S`, is
+    reported and left to the tests that use it. Nothing is compiled when only collecting.
     """
     if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
+        return
+    if config.option.collectonly:
         return
     script = Path(__file__).with_name("precompile.py")
     parts = {
         part: subprocess.Popen([sys.executable, str(script), *part.split()]) for part in ("motion", "ik maps")
     }
+    deadline = time.monotonic() + PRECOMPILE_TIMEOUT_S
     for part, proc in parts.items():
-        if proc.wait() != 0:
-            print(
-                f"tests/precompile.py {part} failed (exit {proc.returncode}); the workers compile it",
-                file=sys.stderr,
-            )
+        try:
+            why = f"exit {proc.wait(timeout=max(deadline - time.monotonic(), 0.0))}"
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+            why = f"still running after {PRECOMPILE_TIMEOUT_S} s, killed"
+        if proc.returncode != 0:
+            print(f"tests/precompile.py {part} failed ({why}); the workers compile it", file=sys.stderr)
 
 
 @pytest.fixture(scope="session")
