@@ -460,13 +460,14 @@ def test_footprint_within_matches_every_distance_by_brute_force():
     """
     rng = np.random.default_rng(7)
     obj = GraspedObject.from_points(rng.uniform(-0.05, 0.05, (300, 3)))
-    r = 0.0125
     xy = rng.uniform(-0.3, 0.3, (5000, 2))
     brute = np.sqrt(((xy[:, None, :] - obj.points[None, :, :2]) ** 2).sum(axis=2)).min(axis=1)
-    assert np.array_equal(obj.footprint_within(xy, r), brute <= r)
-    pair = GraspedObject.from_points([[0.0, 0.0, 0.0], [1.0, 1.0, 0.2]])
-    assert pair.footprint_within([[0.25, 0.0], [0.25, 1e-6]], 0.25).tolist() == [True, False]
+    for r in (0.0125, 0.05, 0.3):
+        assert np.array_equal(obj.footprint_within(xy, r), brute <= r)
+    # the middle point: not one of the extremes that footprint_within tries before its tree
+    three = GraspedObject.from_points([[-1.0, -1.0, 0.0], [0.0, 0.0, 0.0], [1.0, 1.0, 0.2]])
+    assert three.footprint_within([[0.25, 0.0], [0.25, 1e-6]], 0.25).tolist() == [True, False]
     assert np.allclose(obj.footprint_distance(xy), brute, rtol=0, atol=1e-12)
     for shape in (GraspedObject.box([0.1, 0.2, 0.5], [0.06, 0.1, 0.2], 0.4),
                   GraspedObject.cylinder([0.1, 0.2, 0.5], 0.03, 0.2)):  # fmt: skip
-        assert np.array_equal(shape.footprint_within(xy, r), shape.footprint_distance(xy) <= r)
+        assert np.array_equal(shape.footprint_within(xy, 0.0125), shape.footprint_distance(xy) <= 0.0125)
