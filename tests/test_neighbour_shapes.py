@@ -15,8 +15,10 @@ import coal
 import numpy as np
 import pytest
 
-from baseplace.world.neighbour_shapes import FittedShape, fit_neighbours
+import baseplace.world.neighbour_shapes as neighbour_shapes
+from baseplace.world.neighbour_shapes import FittedShape, clusters, clusters_by_pairs, fit_neighbours
 from baseplace.world.sensor_resolution import derived_clearance, group_parts
+from conftest import SHARED
 from test_clearance_bound import PROBE, _parts, _touches
 from test_clearance_from_true_surface import BOTTLE, SIGMA, TOP, noisy_scene
 
@@ -227,3 +229,41 @@ def test_a_small_proud_feature_is_within_u_of_the_fitted_solid_or_rejected():
                     f"seed {seed}: the true surface {outside * 1e3:.1f} mm outside the fit, u {shape.error * 1e3:.1f} mm"
                 )
     assert not beyond, "; ".join(beyond)
+
+
+MUG = SHARED / "pointclouds" / "table_scene_mug_stereo_textured.pcd"
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_cluster_kernel_numbers_the_components_as_every_pair_does(seed, monkeypatch):
+    """The compiled cell kernel against every pair within the link (a KD-tree and a sparse graph).
+
+    Clouds of sparse blobs, dense patches and scattered points, where clusters touch and do not;
+    and points exactly one link apart along a line (distances exact in floating point): joined.
+    """
+    monkeypatch.setattr(neighbour_shapes, "KERNEL_FROM", 0)
+    rng = np.random.default_rng(seed)
+    parts = [rng.normal(rng.uniform(-0.3, 0.3, 3), rng.uniform(0.005, 0.05), (rng.integers(1, 800), 3))
+             for _ in range(12)]  # fmt: skip
+    p = np.concatenate([*parts, rng.uniform(-0.4, 0.4, (300, 3))])[
+        rng.permutation(sum(map(len, parts)) + 300)
+    ]
+    for link in (0.005, 0.02, 0.06):
+        assert np.array_equal(clusters(p, link), clusters_by_pairs(p, link))
+    line = np.c_[np.arange(10) * 2.0**-6, np.zeros((10, 2))]
+    line[5:] += [2.0**-6 * 1e-6, 0, 0]  # one gap a hair over the link: two components
+    assert clusters(line, 2.0**-6).tolist() == clusters_by_pairs(line, 2.0**-6).tolist() == [0] * 5 + [1] * 5
+
+
+@pytest.mark.skipif(not MUG.exists(), reason="needs the shared PCL data")
+def test_the_cluster_kernel_on_the_pcl_mug_cloud():
+    """Around the PCL mug (about 1 000 pairs per point within 2 cm) the kernel's components are every pair's."""
+    from baseplace.terrain.io import load_cloud, load_transform
+
+    p = load_cloud(MUG).points
+    p = p[np.all(np.isfinite(p), axis=1)]
+    T = load_transform("0.0162 -0.8378 -0.5458")  # z up (test_grasped_object's MUG_UP)
+    p = p @ T[:3, :3].T + T[:3, 3]
+    near = p[np.linalg.norm(p - [0.06, 0.605, -0.47], axis=1) < 0.08]  # the mug and the table around it
+    assert len(near) >= neighbour_shapes.KERNEL_FROM
+    assert np.array_equal(clusters(near), clusters_by_pairs(near))

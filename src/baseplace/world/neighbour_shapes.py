@@ -30,6 +30,7 @@ cluster stays as it was.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -61,13 +62,117 @@ def plane_frame(slab: SupportSlab) -> tuple[FloatArray, FloatArray]:
 
 
 def clusters(points: ArrayLike, link: float = LINK) -> NDArray[np.int64]:
-    """(N,) the connected component of each point (N, 3) [m], points closer than ``link`` joined."""
+    """(N,) the connected component of each point (N, 3) [m], points at most ``link`` apart joined.
+
+    Components are numbered in the order of their first point. Clouds of :data:`KERNEL_FROM`
+    points or more go through a compiled kernel (:func:`_cell_components`); smaller ones through
+    every pair within ``link`` (:func:`clusters_by_pairs`, the kernel's test oracle). A dense stereo
+    cloud holds about a thousand pairs per point within 2 cm: 8.7 million pairs, 1.8 s, for
+    the 16 586 points around the PCL mug.
+    """
+    p = np.ascontiguousarray(np.asarray(points, dtype=float).reshape(-1, 3))
+    if len(p) < KERNEL_FROM:
+        return clusters_by_pairs(p, link)
+    h = link / math.sqrt(3.0) * (1.0 - 1e-9)  # two points in one cell of edge h are closer than link
+    cells = np.floor(p / h).astype(np.int64)
+    cells -= cells.min(axis=0) - 2  # two empty cells of margin on every side
+    dims = cells.max(axis=0) + 3
+    keys = (cells[:, 0] * dims[1] + cells[:, 1]) * dims[2] + cells[:, 2]
+    order = np.argsort(keys, kind="stable")
+    root = _components_kernel()(p, link * link, cells, dims, keys[order], order)
+    return np.unique(root, return_inverse=True)[1].astype(np.int64)  # roots are each component's first point
+
+
+def clusters_by_pairs(points: ArrayLike, link: float = LINK) -> NDArray[np.int64]:
+    """:func:`clusters` from every pair of points within ``link`` (a KD-tree) and a sparse graph."""
     p = np.asarray(points, dtype=float).reshape(-1, 3)
     if len(p) == 0:
         return np.zeros(0, dtype=np.int64)
     pairs = cKDTree(p).query_pairs(link, output_type="ndarray")
     graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(p), len(p)))
     return np.asarray(connected_components(graph, directed=False)[1], dtype=np.int64)
+
+
+KERNEL_FROM = 10_000
+"""Clouds of at least this many points are split into clusters by the compiled kernel."""
+
+_compiled: list[Any] = []
+
+
+def _components_kernel() -> Any:
+    """The compiled :func:`_cell_components` (numba imported on first use, cached on disk)."""
+    if not _compiled:
+        import numba as nb
+
+        _compiled.append(nb.njit(cache=True)(_cell_components))
+    return _compiled[0]
+
+
+def _cell_components(p, link2, cells, dims, sorted_keys, order):  # pragma: no cover - compiled
+    """Each point's component root (N,), the component's lowest point index: union-find over cells.
+
+    The points of one cell (edge under link / sqrt 3) are joined without a test; two cells up to
+    two apart along each axis are joined when their roots differ and some pair of their points
+    lies within the link (squared: ``link2``), tested pair by pair until one does. Roots are
+    found with path halving; a union hangs the higher root under the lower.
+    """
+    n = len(p)
+    parent = np.arange(n)
+    starts = np.empty(n + 1, dtype=np.int64)  # runs of one key in sorted_keys
+    m = 0
+    for k in range(n):
+        if k == 0 or sorted_keys[k] != sorted_keys[k - 1]:
+            starts[m] = k
+            m += 1
+    starts[m] = n
+    for c in range(m):  # one cell: one component, under its lowest point
+        low = order[starts[c]]
+        for k in range(starts[c], starts[c + 1]):
+            low = min(low, order[k])
+        for k in range(starts[c], starts[c + 1]):
+            parent[order[k]] = low
+    for c in range(m):
+        i0, c0, c1 = order[starts[c]], starts[c], starts[c + 1]
+        for dx in range(-2, 3):
+            for dy in range(-2, 3):
+                for dz in range(-2, 3):
+                    key = ((cells[i0, 0] + dx) * dims[1] + cells[i0, 1] + dy) * dims[2] + cells[i0, 2] + dz
+                    if key <= sorted_keys[c0]:
+                        continue  # each pair of cells once
+                    b0 = np.searchsorted(sorted_keys, key)
+                    if b0 == n or sorted_keys[b0] != key:
+                        continue
+                    ra, rb = i0, order[b0]
+                    while parent[ra] != ra:
+                        parent[ra] = parent[parent[ra]]
+                        ra = parent[ra]
+                    while parent[rb] != rb:
+                        parent[rb] = parent[parent[rb]]
+                        rb = parent[rb]
+                    if ra == rb:
+                        continue
+                    b1 = b0
+                    while b1 < n and sorted_keys[b1] == key:
+                        b1 += 1
+                    joined = False
+                    for u in range(c0, c1):
+                        i = order[u]
+                        for v in range(b0, b1):
+                            j = order[v]
+                            d0, d1, d2 = p[j, 0] - p[i, 0], p[j, 1] - p[i, 1], p[j, 2] - p[i, 2]
+                            if d0 * d0 + d1 * d1 + d2 * d2 <= link2:
+                                joined = True
+                                break
+                        if joined:
+                            break
+                    if joined:
+                        parent[max(ra, rb)] = min(ra, rb)
+    for i in range(n):  # every point to its root
+        r = i
+        while parent[r] != r:
+            r = parent[r]
+        parent[i] = r
+    return parent
 
 
 def fit_neighbours(
