@@ -303,9 +303,10 @@ def sample_spacing(points: ArrayLike, at: ArrayLike) -> FloatArray:
     if len(p) <= k or len(q) == 0:
         return np.zeros(len(q))
     tree = cKDTree(p)
-    own = tree.query(p, k=k + 1)[0][:, -1] * math.sqrt(math.pi / k)
     votes = tree.query(q, k=min(len(p), SMOOTH_VOTES))[1]
-    return np.median(own[votes], axis=1)
+    voters, at_voter = np.unique(votes, return_inverse=True)  # only these points' own spacing is read
+    own = tree.query(p[voters], k=k + 1)[0][:, -1] * math.sqrt(math.pi / k)
+    return np.median(own[at_voter.reshape(votes.shape)], axis=1)
 
 
 def max_shift(noise_margin: float) -> float:
