@@ -84,6 +84,10 @@ def main() -> None:
     result: dict[str, Any] = {"command": "baseplace " + " ".join([*ARGS[:2], MUG.name, *ARGS[3:], *extra]),
                               "repeats": args.repeats, "medians": {n: medians(r) for n, r in rows.items()}}  # fmt: skip
     if args.baseline:
+        head = subprocess.run(
+            ["git", "-C", args.baseline, "rev-parse", "HEAD"], capture_output=True, text=True
+        )
+        result["baseline_commit"] = head.stdout.strip() or None  # None: not a git checkout
         a, b = result["medians"]["this"], result["medians"]["baseline"]
         result["this_over_baseline"] = {k: round(a[k] / b[k], 3) for k in a if b[k]}
         result["same_placements"] = all(
