@@ -1,4 +1,4 @@
-"""Public names imported on first use (PEP 562), so that importing a package costs none of them."""
+"""Imported on first use: a package's public names (PEP 562), a numba kernel; importing costs none of them."""
 
 from __future__ import annotations
 
@@ -23,3 +23,18 @@ def lazy_getattr(package: str, names: Mapping[str, str], namespace: dict[str, An
         return value
 
     return __getattr__
+
+
+def lazy_njit(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """``fn`` compiled by numba (``cache=True``) at its first call; numba is imported then, not before."""
+    compiled: list[Callable[..., Any]] = []
+
+    def call(*args: Any) -> Any:
+        if not compiled:
+            import numba as nb
+
+            compiled.append(nb.njit(cache=True)(fn))
+        return compiled[0](*args)
+
+    call.__doc__ = fn.__doc__
+    return call

@@ -30,7 +30,6 @@ cluster stays as it was.
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -39,10 +38,12 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from baseplace.geometry.poses import FloatArray
+from baseplace.lazy import lazy_njit
 from baseplace.world.fit_acceptance import POINT_SIGMAS, accepted
 from baseplace.world.fitted_shape import FittedShape, noise_sigma
 from baseplace.world.primitive_fits import fit_cluster
 from baseplace.world.support_plane import SupportSlab
+from baseplace.world.thinning import sorted_cells
 
 __all__ = ["LINK", "MIN_POINTS", "FittedShape", "clusters", "fit_neighbours", "plane_frame"]
 
@@ -74,12 +75,7 @@ def clusters(points: ArrayLike, link: float = LINK) -> NDArray[np.int64]:
     if len(p) < KERNEL_FROM:
         return clusters_by_pairs(p, link)
     h = link / math.sqrt(3.0) * (1.0 - 1e-9)  # two points in one cell of edge h are closer than link
-    cells = np.floor(p / h).astype(np.int64)
-    cells -= cells.min(axis=0) - 2  # two empty cells of margin on every side
-    dims = cells.max(axis=0) + 3
-    keys = (cells[:, 0] * dims[1] + cells[:, 1]) * dims[2] + cells[:, 2]
-    order = np.argsort(keys, kind="stable")
-    root = _components_kernel()(p, link * link, cells, dims, keys[order], order)
+    root = _cell_components(p, link * link, *sorted_cells(p, h, 2))
     return np.unique(root, return_inverse=True)[1].astype(np.int64)  # roots are each component's first point
 
 
@@ -96,18 +92,8 @@ def clusters_by_pairs(points: ArrayLike, link: float = LINK) -> NDArray[np.int64
 KERNEL_FROM = 10_000
 """Clouds of at least this many points are split into clusters by the compiled kernel."""
 
-_compiled: list[Any] = []
 
-
-def _components_kernel() -> Any:
-    """The compiled :func:`_cell_components` (numba imported on first use, cached on disk)."""
-    if not _compiled:
-        import numba as nb
-
-        _compiled.append(nb.njit(cache=True)(_cell_components))
-    return _compiled[0]
-
-
+@lazy_njit
 def _cell_components(p, link2, cells, dims, sorted_keys, order):  # pragma: no cover - compiled
     """Each point's component root (N,), the component's lowest point index: union-find over cells.
 

@@ -10,12 +10,11 @@ process); both give the same result.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 from numpy.typing import NDArray
 
 from baseplace.geometry.poses import FloatArray
+from baseplace.lazy import lazy_njit
 
 KERNEL_FROM = 20_000
 """Clouds with at least this many points are thinned by the numba kernel."""
@@ -54,26 +53,27 @@ def _owners_tree(p: FloatArray, spacing: float) -> NDArray[np.int64]:
 
 def _owners_kernel(p: FloatArray, spacing: float) -> NDArray[np.int64]:
     """As :func:`_owners_tree`, in the numba kernel: candidates from cells of edge ``spacing``."""
-    cells = np.floor(p / spacing).astype(np.int64)
-    cells -= cells.min(axis=0) - 1  # one empty cell of margin on every side
-    dims = cells.max(axis=0) + 2
+    return np.asarray(_thin(p, spacing * spacing, *sorted_cells(p, spacing, 1)))
+
+
+def sorted_cells(
+    p: FloatArray, edge: float, margin: int
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64], NDArray[np.intp]]:
+    """The cells of edge ``edge`` [m] holding the points (N, 3), for a kernel's neighbour search.
+
+    Returns each point's cell (N, 3), counted from ``margin`` empty cells below the lowest; the
+    grid's size (3,), ``margin`` empty cells above the highest included; the points' cell keys
+    (row-major in that grid) sorted; and the order (N,) that sorts them (stable).
+    """
+    cells = np.floor(p / edge).astype(np.int64)
+    cells -= cells.min(axis=0) - margin
+    dims = cells.max(axis=0) + margin + 1
     keys = (cells[:, 0] * dims[1] + cells[:, 1]) * dims[2] + cells[:, 2]
     order = np.argsort(keys, kind="stable")
-    return np.asarray(_kernel()(p, spacing * spacing, cells, dims, keys[order], order))
+    return cells, dims, keys[order], order
 
 
-_compiled: list[object] = []
-
-
-def _kernel() -> Any:
-    """The compiled kernel (numba imported on first use, cached on disk)."""
-    if not _compiled:
-        import numba as nb
-
-        _compiled.append(nb.njit(cache=True)(_thin))
-    return _compiled[0]
-
-
+@lazy_njit
 def _thin(p, spacing2, cells, dims, sorted_keys, order):  # pragma: no cover - compiled
     n = len(p)
     owner = np.full(n, -1, dtype=np.int64)
