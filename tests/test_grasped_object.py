@@ -471,3 +471,24 @@ def test_footprint_within_matches_every_distance_by_brute_force():
     for shape in (GraspedObject.box([0.1, 0.2, 0.5], [0.06, 0.1, 0.2], 0.4),
                   GraspedObject.cylinder([0.1, 0.2, 0.5], 0.03, 0.2)):  # fmt: skip
         assert np.array_equal(shape.footprint_within(xy, 0.0125), shape.footprint_distance(xy) <= 0.0125)
+
+
+def test_shared_links_keep_the_pairs_with_enough_common_neighbours():
+    """``_shared_links`` against the rule read from each pair's neighbour sets (Python sets)."""
+    from scipy.spatial import cKDTree
+
+    from baseplace.world.grasped_object import _shared_links
+
+    rng = np.random.default_rng(5)
+    p = np.r_[rng.uniform(0, 0.1, (300, 3)), rng.uniform(0.2, 0.21, (4, 3))]  # a blob and a few stragglers
+    pairs = cKDTree(p).query_pairs(0.02, output_type="ndarray")
+    neighbours: list[set[int]] = [set() for _ in range(len(p))]
+    for i, j in pairs.tolist():
+        neighbours[i].add(j)
+        neighbours[j].add(i)
+    for shared in (0, 2, 5):
+        kept = _shared_links(pairs, len(p), shared).tocoo()
+        want = {(i, j) for i, j in pairs.tolist()
+                if len(neighbours[i] & neighbours[j]) >= min(shared, min(len(neighbours[i]), len(neighbours[j])) - 2)}  # fmt: skip
+        assert set(zip(kept.row.tolist(), kept.col.tolist(), strict=True)) == want
+        assert 0 < len(want) < len(pairs) or shared == 0

@@ -438,7 +438,8 @@ def _shared_links(pairs: NDArray[np.int64], n: int, shared: int) -> Any:
     rows, cols = np.r_[pairs[:, 0], pairs[:, 1]], np.r_[pairs[:, 1], pairs[:, 0]]
     A = coo_matrix((ones, (rows, cols)), shape=(n, n)).tocsr()
     degree = np.diff(A.indptr)
-    common = np.asarray((A[pairs[:, 0]].multiply(A[pairs[:, 1]])).sum(axis=1)).ravel()
+    # (A A)_ij counts the common neighbours of i and j; read at the pairs only (A's pattern)
+    common = np.asarray((A @ A).multiply(A).tocsr()[pairs[:, 0], pairs[:, 1]]).ravel()
     fewer = np.minimum(degree[pairs[:, 0]], degree[pairs[:, 1]])  # each counts the other too
     kept = pairs[common >= np.minimum(shared, fewer - 2)]
     return coo_matrix((np.ones(len(kept), dtype=np.int8), (kept[:, 0], kept[:, 1])), shape=(n, n)).tocsr()
