@@ -162,11 +162,11 @@ def segment_job(job: SegmentJob) -> SegmentReport:
     if job.algorithm not in ("robust", "baseline"):
         raise InputError(f"unknown algorithm {job.algorithm!r}; valid: baseline, robust")
     png = out_path(job.png, "--out", PLOT_SUFFIXES)  # outputs first: before the imports and any work
+    t0 = time.perf_counter()
+    cloud = world_cloud(job.cloud)  # a bad cloud is refused before the segmentation is imported
+    t_load = time.perf_counter()
     from baseplace.terrain.pipeline import terrain_from_points, terrain_json
 
-    t0 = time.perf_counter()
-    cloud = world_cloud(job.cloud)
-    t_load = time.perf_counter()
     if job.cache is not None and job.algorithm == "robust":
         terrain = job.cache.terrain(job.resolution)
     else:
