@@ -18,6 +18,7 @@ import pytest
 import baseplace.world.neighbour_shapes as neighbour_shapes
 from baseplace.world.neighbour_shapes import FittedShape, clusters, clusters_by_pairs, fit_neighbours
 from baseplace.world.sensor_resolution import derived_clearance, group_parts
+from baseplace.world.thinning import sorted_cells
 from conftest import SHARED
 from test_clearance_bound import PROBE, _parts, _touches
 from test_clearance_from_true_surface import BOTTLE, SIGMA, TOP, noisy_scene
@@ -250,6 +251,10 @@ def test_the_cluster_kernel_numbers_the_components_as_every_pair_does(seed, monk
     ]
     for link in (0.005, 0.02, 0.06):
         assert np.array_equal(clusters(p, link), clusters_by_pairs(p, link))
+    # kilometres apart: more cells than their keys hold, so every pair decides
+    far = np.r_[p, p + np.array([5e6, 0.0, 0.0]), p + np.array([0.0, 0.0, -5e6])]
+    assert sorted_cells(far, 0.02 / np.sqrt(3.0), 2) is None
+    assert np.array_equal(clusters(far, 0.02), clusters_by_pairs(far, 0.02))
     line = np.c_[np.arange(10) * 2.0**-6, np.zeros((10, 2))]
     line[5:] += [2.0**-6 * 1e-6, 0, 0]  # one gap a hair over the link: two components
     assert clusters(line, 2.0**-6).tolist() == clusters_by_pairs(line, 2.0**-6).tolist() == [0] * 5 + [1] * 5

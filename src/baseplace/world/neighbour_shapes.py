@@ -75,7 +75,10 @@ def clusters(points: ArrayLike, link: float = LINK) -> NDArray[np.int64]:
     if len(p) < KERNEL_FROM:
         return clusters_by_pairs(p, link)
     h = link / math.sqrt(3.0) * (1.0 - 1e-9)  # two points in one cell of edge h are closer than link
-    root = _cell_components(p, link * link, *sorted_cells(p, h, 2))
+    cells = sorted_cells(p, h, 2)
+    if cells is None:  # too wide for its cells' keys
+        return clusters_by_pairs(p, link)
+    root = _cell_components(p, link * link, *cells)
     return np.unique(root, return_inverse=True)[1].astype(np.int64)  # roots are each component's first point
 
 

@@ -53,18 +53,26 @@ def _owners_tree(p: FloatArray, spacing: float) -> NDArray[np.int64]:
 
 def _owners_kernel(p: FloatArray, spacing: float) -> NDArray[np.int64]:
     """As :func:`_owners_tree`, in the numba kernel: candidates from cells of edge ``spacing``."""
-    return np.asarray(_thin(p, spacing * spacing, *sorted_cells(p, spacing, 1)))
+    cells = sorted_cells(p, spacing, 1)
+    if cells is None:  # too wide for its cells' keys
+        return _owners_tree(p, spacing)
+    return np.asarray(_thin(p, spacing * spacing, *cells))
 
 
 def sorted_cells(
     p: FloatArray, edge: float, margin: int
-) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64], NDArray[np.intp]]:
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64], NDArray[np.intp]] | None:
     """The cells of edge ``edge`` [m] holding the points (N, 3), for a kernel's neighbour search.
 
     Returns each point's cell (N, 3), counted from ``margin`` empty cells below the lowest; the
     grid's size (3,), ``margin`` empty cells above the highest included; the points' cell keys
-    (row-major in that grid) sorted; and the order (N,) that sorts them (stable).
+    (row-major in that grid) sorted; and the order (N,) that sorts them (stable). None when the
+    grid holds 2**62 cells or more: its keys would overflow (points kilometres apart at
+    centimetre cells), and the caller takes another way.
     """
+    lo, hi = np.floor(p.min(axis=0) / edge), np.floor(p.max(axis=0) / edge)
+    if float(np.prod(hi - lo + 2 * margin + 1)) >= 2.0**62:
+        return None
     cells = np.floor(p / edge).astype(np.int64)
     cells -= cells.min(axis=0) - margin
     dims = cells.max(axis=0) + margin + 1
