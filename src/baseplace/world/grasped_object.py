@@ -126,7 +126,8 @@ class GraspedObject:
         near = np.flatnonzero(np.all((p >= lo) & (p <= hi), axis=1))
         out = np.zeros(len(p), dtype=bool)
         for c in obj[[*obj.argmin(axis=0), *obj.argmax(axis=0)]]:
-            out[near] |= np.hypot(p[near, 0] - c[0], p[near, 1] - c[1]) <= radius
+            d = p[near] - c
+            out[near] |= np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]) <= radius  # as the tree computes it
         near = near[~out[near]]
         # the search's bound is strict: one step above radius, then the same comparison as above
         dist, _ = self._footprint_tree.query(p[near], distance_upper_bound=math.nextafter(radius, math.inf))
