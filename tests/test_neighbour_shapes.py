@@ -251,6 +251,8 @@ def test_the_cluster_kernel_numbers_the_components_as_every_pair_does(seed, monk
     ]
     for link in (0.005, 0.02, 0.06):
         assert np.array_equal(clusters(p, link), clusters_by_pairs(p, link))
+    utm = p + np.array([5e5, 4e6, 100.0])  # map coordinates: the cells' rounding is larger there
+    assert np.array_equal(clusters(utm, 0.02), clusters_by_pairs(utm, 0.02))
     # kilometres apart: more cells than their keys hold, so every pair decides
     far = np.r_[p, p + np.array([5e6, 0.0, 0.0]), p + np.array([0.0, 0.0, -5e6])]
     assert sorted_cells(far, 0.02 / np.sqrt(3.0), 2) is None

@@ -74,7 +74,9 @@ def clusters(points: ArrayLike, link: float = LINK) -> NDArray[np.int64]:
     p = np.ascontiguousarray(np.asarray(points, dtype=float).reshape(-1, 3))
     if len(p) < KERNEL_FROM:
         return clusters_by_pairs(p, link)
-    h = link / math.sqrt(3.0) * (1.0 - 1e-9)  # two points in one cell of edge h are closer than link
+    # two points in one cell of edge h are closer than link, by 20 nm at 2 cm: more than the cells'
+    # rounding (p / h in doubles) moves a point at UTM-sized coordinates (1e-10 m at 1e6 m)
+    h = link / math.sqrt(3.0) * (1.0 - 1e-6)
     cells = sorted_cells(p, h, 2)
     if cells is None:  # too wide for its cells' keys
         return clusters_by_pairs(p, link)
