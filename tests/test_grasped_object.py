@@ -473,6 +473,19 @@ def test_footprint_within_matches_every_distance_by_brute_force():
         assert np.array_equal(shape.footprint_within(xy, 0.0125), shape.footprint_distance(xy) <= 0.0125)
 
 
+def test_the_objects_arrays_are_its_own_read_only_copies():
+    """The footprint tree is kept once built: a change to the caller's array must not reach the object."""
+    given = np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.05]])
+    obj = GraspedObject("points", np.array([0.05, 0.0, 0.025]), np.array([0.1, 0.0, 0.05]), points=given)
+    assert obj.footprint_within([[0.2, 0.0]], 0.1).tolist() == [True]  # builds the tree
+    given[1] = [5.0, 5.0, 0.0]
+    assert obj.points[1].tolist() == [0.1, 0.0, 0.05]
+    assert obj.footprint_within([[0.2, 0.0]], 0.1).tolist() == [True]
+    for array in (obj.points, obj.center, obj.size, GraspedObject.box([0, 0, 0.5], [0.1, 0.1, 0.2]).center):
+        with pytest.raises(ValueError, match="read-only"):
+            array[0] = 1.0
+
+
 def test_shared_links_keep_the_pairs_with_enough_common_neighbours():
     """``_shared_links`` against the rule read from each pair's neighbour sets (Python sets)."""
     from scipy.spatial import cKDTree

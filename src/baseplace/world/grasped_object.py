@@ -59,6 +59,14 @@ class GraspedObject:
     points: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
     source: str = "given"
 
+    def __post_init__(self) -> None:
+        # the object's own read-only copies: the footprint tree, built from the points on first use
+        # and kept, cannot go stale by a change to an array the caller still holds
+        for name in ("center", "size", "points"):
+            value = np.array(getattr(self, name), dtype=float)
+            value.flags.writeable = False
+            object.__setattr__(self, name, value)
+
     @classmethod
     def box(cls, center: ArrayLike, size: ArrayLike, yaw: float = 0.0) -> GraspedObject:
         """A box of edge lengths ``size`` (3,) [m] centred at ``center`` (3,), turned by ``yaw`` [rad]."""
