@@ -260,6 +260,9 @@ def test_the_cluster_kernel_numbers_the_components_as_every_pair_does(seed, monk
     line = np.c_[np.arange(10) * 2.0**-6, np.zeros((10, 2))]
     line[5:] += [2.0**-6 * 1e-6, 0, 0]  # one gap a hair over the link: two components
     assert clusters(line, 2.0**-6).tolist() == clusters_by_pairs(line, 2.0**-6).tolist() == [0] * 5 + [1] * 5
+    empty = np.zeros((0, 3))  # no points, no grid: the pairs' way, with nothing to join
+    assert sorted_cells(empty, 0.01, 1) is None
+    assert clusters(empty, 0.02).tolist() == clusters_by_pairs(empty, 0.02).tolist() == []
 
 
 @pytest.mark.skipif(not MUG.exists(), reason="needs the shared PCL data")

@@ -68,8 +68,10 @@ def sorted_cells(
     grid's size (3,), ``margin`` empty cells above the highest included; the points' cell keys
     (row-major in that grid) sorted; and the order (N,) that sorts them (stable). None when the
     grid holds 2**62 cells or more: its keys would overflow (points kilometres apart at
-    centimetre cells), and the caller takes another way.
+    centimetre cells), and the caller takes another way; None for no points too (no grid).
     """
+    if len(p) == 0:
+        return None
     lo, hi = np.floor(p.min(axis=0) / edge), np.floor(p.max(axis=0) / edge)
     if float(np.prod(hi - lo + 2 * margin + 1)) >= 2.0**62:
         return None
