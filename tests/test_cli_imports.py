@@ -67,6 +67,7 @@ def test_a_mistyped_argument_is_refused_before_the_pipelines_imports(tmp_path):
         ("place", "--cloud", str(cloud), "--target", target, "--out", str(tmp_path / "p.txt")),
         ("place", "--cloud", str(cloud), "--target", target, "--start", "1 2"),
         ("candidates", "--object", "1 2", "--occupancy", str(tmp_path / "none.yaml")),
+        ("candidates", "--object", "1 2 0.8", "--cloud", str(cloud)),  # no occupancy grid
         (
             "candidates",
             "--object",
@@ -87,3 +88,15 @@ def test_serve_help_still_registers_the_service():
     out = subprocess.run([sys.executable, "-m", "baseplace.cli", "serve", "--help"], capture_output=True,
                          text=True, timeout=120)  # fmt: skip
     assert out.returncode == 0 and "usage: baseplace serve" in out.stdout and "--max-scenes" in out.stdout
+
+
+def test_candidates_without_a_grid_name_what_to_give():
+    """Candidates stand on an occupancy grid: asked for without one, the error says which options give it."""
+    from conftest import run_cli
+
+    for argv in (("--object", "1 2 0.8"), ("--object", "1 2 0.8", "--bag", "run.bag")):
+        proc = run_cli("candidates", *argv)
+        assert proc.returncode == 2, proc.stderr
+        assert proc.stderr == "error: give --occupancy MAP.yaml or --bag FILE --map-topic TOPIC\n", (
+            proc.stderr
+        )

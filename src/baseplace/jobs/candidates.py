@@ -38,6 +38,10 @@ if TYPE_CHECKING:
     from baseplace.world.occupancy import OccupancyGrid
 
 
+NO_GRID = "give --occupancy MAP.yaml or --bag FILE --map-topic TOPIC"
+"""The error for candidates asked without an occupancy grid (seed 004's candidates stand on one)."""
+
+
 @dataclass
 class CandidatesJob:
     """The inputs of :func:`candidates_job`.
@@ -100,8 +104,9 @@ class CandidatesJob:
         """The inputs that need no library beyond numpy, checked before any work; parsed.
 
         The method, the outputs (PNG, MCAP, the fused cloud's), the object's position, the robot's
-        pose, the object shape's yaw and, last, the cloud files' names. Front ends call it before they build
-        the settings, whose imports take seconds, so that a mistyped argument is refused at once.
+        pose, the object shape's yaw, that a grid is given (:data:`NO_GRID`) and, last, the cloud
+        files' names. Front ends call it before they build the settings, whose imports take
+        seconds, so that a mistyped argument is refused at once.
 
         Returns:
             The PNG and MCAP paths (None: not asked), the object "x y z" (3,) and the robot pose
@@ -115,6 +120,8 @@ class CandidatesJob:
         p_o = inputs.parse_xyz(self.object, "--object")
         robot_pose = None if self.robot_pose is None else inputs.base_xyyaw(self.robot_pose, "--robot-pose")
         inputs.check_object_yaw(self.object_shape, "--object-shape")
+        if self.occupancy is None and (self.cloud.bag is None or self.cloud.bag.map_topic is None):
+            raise InputError(NO_GRID)
         self.cloud.check_paths()  # the files last: a mistyped option is named first
         return png, mcap, p_o, robot_pose
 
@@ -169,7 +176,7 @@ def candidates_job(job: CandidatesJob, progress: inputs.Progress | None = None) 
     check_clear_of(obstacles, p_o, ["--object"])
     grid = inputs.occupancy_grid(job.occupancy, job.cloud.bag, job.cloud)
     if grid is None:
-        raise InputError("give --occupancy MAP.yaml or --bag FILE --map-topic TOPIC")
+        raise InputError(NO_GRID)
     robot = inputs.load_robot(job.robot)
     # before the map: an object no base on the grid brings within reach, a robot off the grid
     arm_name = job.arm
