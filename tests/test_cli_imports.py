@@ -55,7 +55,7 @@ HEAVY = {"baseplace.placement.pipeline", "baseplace.world.environment", "numba",
 
 
 def test_a_mistyped_argument_is_refused_before_the_pipelines_imports(tmp_path):
-    """``PlaceJob.check_inputs`` and ``CandidatesJob.check_inputs`` run before the settings' imports."""
+    """``place``, ``candidates``, ``navigate`` and ``explain`` check their inputs before the settings' imports."""
     cloud = tmp_path / "scene.ply"
     cloud.write_bytes(b"not read")
     target = "1 0.5 0.75 0 1.5708 0"
@@ -68,6 +68,12 @@ def test_a_mistyped_argument_is_refused_before_the_pipelines_imports(tmp_path):
         ("place", "--cloud", str(cloud), "--target", target, "--start", "1 2"),
         ("candidates", "--object", "1 2", "--occupancy", str(tmp_path / "none.yaml")),
         ("candidates", "--object", "1 2 0.8", "--cloud", str(cloud)),  # no occupancy grid
+        ("navigate", "--start", "0 0 0", "--goal", "1 0 0"),  # no cloud
+        ("navigate", "--cloud", str(tmp_path / "none.ply"), "--start", "0 0 0", "--goal", "1 0 0"),
+        ("navigate", "--cloud", str(cloud), "--start", "0 0", "--goal", "1 0 0"),
+        ("explain", "--cloud", str(cloud), "--target", target),  # no base pose
+        ("explain", "--base", "0 0 0", "--target", target, "--floor", "0"),  # a floor without a cloud
+        ("explain", "--cloud", str(tmp_path / "none.ply"), "--base", "0 0 0", "--target", target),
         (
             "candidates",
             "--object",

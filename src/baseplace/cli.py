@@ -200,27 +200,15 @@ def _place(a: argparse.Namespace, progress: Progress) -> Any:
 
 
 def _explain(a: argparse.Namespace, progress: Progress) -> Any:
+    job = explain.ExplainJob(a.base, a.target, a.map, a.robot, a.arm, _cloud(a), a.object, a.floor, None, a.seed,
+                             a.grasp_point, obstacles=a.obstacle or [])  # fmt: skip
+    job.check_inputs()  # before the settings' imports (seconds)
     from dataclasses import replace
 
     from baseplace.placement.pipeline import PlaceSettings
 
     settings = PlaceSettings(resolution=a.resolution, clearance=a.clearance, stand_on=a.stand_on)
-    if a.no_motion_check:
-        settings = replace(settings, motion=None)
-    job = explain.ExplainJob(
-        a.base,
-        a.target,
-        a.map,
-        a.robot,
-        a.arm,
-        _cloud(a),
-        a.object,
-        a.floor,
-        settings,
-        a.seed,
-        a.grasp_point,
-        obstacles=a.obstacle or [],
-    )
+    job.settings = settings if not a.no_motion_check else replace(settings, motion=None)
     return explain.explain_job(job, progress)
 
 

@@ -81,6 +81,38 @@ class ExplainJob:
     cache: SceneCache | None = field(default=None, repr=False, compare=False)
     obstacles: Sequence[str] = ()
 
+    def check_inputs(self) -> tuple[tuple[float, float, float], np.ndarray, str]:
+        """The inputs that need no library beyond numpy, checked before any work; parsed.
+
+        The base pose, the target (or grasp point), a floor without a cloud and, last, the cloud
+        files' names. Front ends call it before they build the settings, whose imports take
+        seconds, so that a mistyped argument is refused at once.
+
+        Returns:
+            The base "x y yaw", the target pose (4, 4) as given (the TCP's, or the grasp point's)
+            and the option it was given with.
+        """
+        if self.base is None:
+            raise InputError('give the base pose --base "x y yaw" [m, rad]')
+        if self.target is not None and self.grasp_point is not None:
+            raise InputError(
+                "give --target (the TCP pose) or --grasp-point (the point between the fingertips), not both"
+            )
+        given: str | Sequence[float]
+        if self.target is not None:
+            given, option = self.target, "--target"
+        elif self.grasp_point is not None:
+            given, option = self.grasp_point, "--grasp-point"
+        else:
+            raise InputError('give the target --target "x y z roll pitch yaw" [m, rad] (the TCP pose) '
+                             "or --grasp-point (the point between the fingertips)")  # fmt: skip
+        x, y, yaw = base_xyyaw(self.base, "--base")
+        T_target = _target(given, option)
+        if self.floor is not None and not self.cloud.given:
+            raise InputError("--floor adds a floor under a cloud: give --cloud too")
+        self.cloud.check_paths()
+        return (x, y, yaw), T_target, option
+
     def echo(self) -> dict[str, Any]:
         """The inputs as given."""
         return {
@@ -147,22 +179,7 @@ def explain_job(job: ExplainJob, progress: Progress | None = None) -> ExplainRep
     from baseplace.world.obstacles import check_clear_of, parse_obstacles
 
     t0 = time.perf_counter()
-    if job.base is None:
-        raise InputError('give the base pose --base "x y yaw" [m, rad]')
-    if job.target is not None and job.grasp_point is not None:
-        raise InputError(
-            "give --target (the TCP pose) or --grasp-point (the point between the fingertips), not both"
-        )
-    given: str | Sequence[float]
-    if job.target is not None:
-        given, option = job.target, "--target"
-    elif job.grasp_point is not None:
-        given, option = job.grasp_point, "--grasp-point"
-    else:
-        raise InputError('give the target --target "x y z roll pitch yaw" [m, rad] (the TCP pose) '
-                         "or --grasp-point (the point between the fingertips)")  # fmt: skip
-    x, y, yaw = base_xyyaw(job.base, "--base")
-    T_target = _target(given, option)
+    (x, y, yaw), T_target, option = job.check_inputs()
     grasped = parse_grasped_object(job.object)
     obstacles = parse_obstacles(job.obstacles)
     settings = job.settings or PlaceSettings()
@@ -174,8 +191,6 @@ def explain_job(job: ExplainJob, progress: Progress | None = None) -> ExplainRep
     if job.cloud.given:
         points = world_cloud(job.cloud).points
         points = points if job.floor is None else with_floor(points, job.floor)
-    elif job.floor is not None:
-        raise InputError("--floor adds a floor under a cloud: give --cloud too")
     t_load = time.perf_counter()
     chosen = resolve_map(robot, job.map, job.arm, progress)
     rmap = chosen.rmap

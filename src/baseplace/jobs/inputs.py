@@ -85,6 +85,10 @@ def out_path(path: str | Path | None, what: str, suffixes: Sequence[str] | None)
 
 
 PLOT_SUFFIXES = (".png", ".pdf", ".svg")
+NO_CLOUD = "give --cloud FILE or --bag FILE --cloud-topic TOPIC"
+"""The error for a job that needs a cloud and was given none."""
+NO_BAG_TOPIC = "with --bag, give the cloud topic: --cloud-topic /camera/points"
+"""The error for a recording given without the topic of its clouds."""
 DEFAULT_MAP_SAMPLES = DEFAULT_SAMPLES
 """``BuildSettings().samples``, from the settings' module: ``--help`` and the jobs' inputs import no numba."""
 
@@ -149,6 +153,13 @@ class CloudInput:
             return self.bag.path
         return " ".join(self.paths) if self.paths else "points"
 
+    def check_given(self) -> None:
+        """A cloud is given: files, points, or a recording with its cloud topic (nothing is read)."""
+        if self.bag is not None and not self.bag.cloud_topics:
+            raise InputError(NO_BAG_TOPIC)
+        if not self.given:
+            raise InputError(NO_CLOUD)
+
     def check_paths(self) -> None:
         """Each cloud file has a suffix a reader knows and exists (nothing is read)."""
         from baseplace.guards import check_input_file
@@ -197,7 +208,7 @@ def world_cloud(cloud: CloudInput) -> Cloud:
         return Cloud(np.asarray(cloud.points, dtype=float), source="points")
     if cloud.bag is not None:
         if not cloud.bag.cloud_topics:
-            raise InputError("with --bag, give the cloud topic: --cloud-topic /camera/points")
+            raise InputError(NO_BAG_TOPIC)
         scene = read_bag_input(cloud.bag, cloud)
         source = f"{cloud.bag.path} {' '.join(cloud.bag.cloud_topics)}"
         if cloud.fuse:
@@ -205,7 +216,7 @@ def world_cloud(cloud: CloudInput) -> Cloud:
             return _fused(posed, cloud.fuse_miss, fused_out, source)
         return Cloud(scene.world_points(), source=source)
     if not cloud.paths:
-        raise InputError("give --cloud FILE or --bag FILE --cloud-topic TOPIC")
+        raise InputError(NO_CLOUD)
     paths, transforms = list(cloud.paths), list(cloud.transforms)
     if len(transforms) not in (0, len(paths)) and transforms != [None]:
         raise InputError(

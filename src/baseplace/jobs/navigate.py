@@ -85,12 +85,14 @@ def navigate_job(job: NavigateJob) -> NavigateReport:
         raise InputError(f"unknown planner {job.planner!r}; valid: regions, rrt")
     png = out_path(job.png, "--out", PLOT_SUFFIXES)  # outputs first: before the imports and any work
     mcap = out_path(job.mcap, "--mcap", (".mcap",))
+    start, goal = base_xyyaw(job.start, "--start"), base_xyyaw(job.goal, "--goal")
+    job.cloud.check_given()
+    job.cloud.check_paths()
     from baseplace.navigation.navmap import navigation_map
     from baseplace.navigation.planners import plan_path
     from baseplace.terrain.pipeline import terrain_from_points
 
     t0 = time.perf_counter()
-    start, goal = base_xyyaw(job.start, "--start"), base_xyyaw(job.goal, "--goal")
     robot = load_robot(job.robot)
     cloud = world_cloud(job.cloud)
     # poses off the scene: refused before the segmentation (a scene's cache found its bounds on upload)
