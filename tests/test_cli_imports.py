@@ -55,7 +55,7 @@ HEAVY = {"baseplace.placement.pipeline", "baseplace.world.environment", "numba",
 
 
 def test_a_mistyped_argument_is_refused_before_the_pipelines_imports(tmp_path):
-    """``place``, ``candidates``, ``navigate`` and ``explain`` check their inputs before the settings' imports."""
+    """``place``, ``candidates``, ``navigate``, ``explain`` and ``surface-map`` check their inputs before the settings' imports."""
     cloud = tmp_path / "scene.ply"
     cloud.write_bytes(b"not read")
     target = "1 0.5 0.75 0 1.5708 0"
@@ -74,6 +74,15 @@ def test_a_mistyped_argument_is_refused_before_the_pipelines_imports(tmp_path):
         ("explain", "--cloud", str(cloud), "--target", target),  # no base pose
         ("explain", "--base", "0 0 0", "--target", target, "--floor", "0"),  # a floor without a cloud
         ("explain", "--cloud", str(tmp_path / "none.ply"), "--base", "0 0 0", "--target", target),
+        (
+            "surface-map",
+            "--polygon",
+            "0,0;1,0",
+            "--height",
+            "0.7",
+            "--out",
+            str(tmp_path / "s.smap"),
+        ),  # 2 vertices
         (
             "candidates",
             "--object",

@@ -98,14 +98,16 @@ def surface_map_job(job: SurfaceMapJob, progress: Progress | None = None) -> Sur
     """
     out = out_path(job.out, "--out", SURFACE_SUFFIXES)  # outputs first: before the imports and any work
     png = out_path(job.png, "--png", PLOT_SUFFIXES)
-    from baseplace.placement.surface_map import build_surface_map, check_surface_grid, parse_polygon
+    from baseplace.terrain.polygons import parse_polygon
+
+    polygon = parse_polygon(job.polygon)  # before the maps' imports (a second)
+    from baseplace.placement.surface_map import build_surface_map, check_surface_grid
     from baseplace.placement.surface_storage import save_surface_map
     from baseplace.reachability.build import BuildSettings
     from baseplace.reachability.cache import resolve_map
 
     t0 = time.perf_counter()
     assert out is not None
-    polygon = parse_polygon(job.polygon)
     check_surface_grid(polygon, job.resolution, job.orientations)  # the polygon's box alone, before the maps
     robot = load_robot(job.robot)
     arms, combine = surface_arms(robot, job.arms)

@@ -31,13 +31,15 @@ import numpy as np
 import shapely
 from numpy.typing import ArrayLike, NDArray
 
-from baseplace.errors import InputError, brief, unknown
+from baseplace.errors import InputError, unknown
 from baseplace.geometry.poses import FloatArray
 from baseplace.guards import check_alloc, check_grid_size
 from baseplace.placement.osrm import footprint_kernel
 from baseplace.reachability.rmap import ReachabilityMap
 from baseplace.robots.model import Robot
+from baseplace.terrain.polygons import MAX_COORDINATE as MAX_COORDINATE
 from baseplace.terrain.polygons import footprint_outline
+from baseplace.terrain.polygons import parse_polygon as parse_polygon
 
 COMBINE = {"any": np.maximum, "both": np.minimum}
 """How per-arm surface maps combine: "any" arm reaches (max) or "both" arms reach (min)."""
@@ -47,41 +49,6 @@ FACE_NUDGE = 1e-6
 whatever the round-off of the rotation."""
 TCP_HEIGHT = 0.05
 """Height [m] of the TCP above the surface where it works: grasping a small object standing there."""
-
-
-MAX_COORDINATE = 1e6  # m: beyond any workspace; keeps areas and grid sizes finite
-
-
-def parse_polygon(text: str | ArrayLike) -> FloatArray:
-    """A simple polygon from ``"x1,y1;x2,y2;..."`` or an (N, 2) array; (N, 2) vertices [m].
-
-    Raises:
-        InputError: unparsable text, fewer than 3 vertices, a vertex beyond
-            :data:`MAX_COORDINATE`, zero area or a self-intersection.
-    """
-    if isinstance(text, str):
-        try:
-            pts = np.array([[float(v) for v in p.split(",")] for p in text.strip().strip(";").split(";")])
-        except ValueError:
-            raise InputError(f'polygon must be "x1,y1;x2,y2;x3,y3;..." in metres, got {text!r}') from None
-    else:
-        try:
-            pts = np.asarray(text, dtype=float)
-        except (TypeError, ValueError):
-            raise InputError("polygon must be an (N, 2) array of numbers in metres") from None
-    if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 3 or not np.all(np.isfinite(pts)):
-        raise InputError(f"polygon needs at least 3 finite (x, y) vertices, got {brief(pts.tolist())}")
-    if np.abs(pts).max() > MAX_COORDINATE:
-        raise InputError(f"polygon vertices must lie within {MAX_COORDINATE:g} m of the origin")
-    centred = pts - pts.mean(axis=0)
-    if np.linalg.matrix_rank(centred, tol=1e-6) < 2:
-        raise InputError(f"polygon is degenerate: its vertices {pts.tolist()} are collinear")
-    if not shapely.LinearRing(pts).is_simple:
-        raise InputError("polygon is not simple: its edges cross; list its vertices in order around it")
-    area = shapely.Polygon(pts).area
-    if area < 1e-6:
-        raise InputError(f"polygon is degenerate: its area is {area:.2g} m^2")
-    return pts
 
 
 def allowed_bins(
