@@ -23,6 +23,7 @@ import numpy as np
 from baseplace.errors import InputError
 from baseplace.geometry.poses import BasePose, pose_json
 from baseplace.jobs.inputs import (
+    TARGET_AND_GRASP_POINT,
     CloudInput,
     Progress,
     base_xyyaw,
@@ -95,9 +96,7 @@ class ExplainJob:
         if self.base is None:
             raise InputError('give the base pose --base "x y yaw" [m, rad]')
         if self.target is not None and self.grasp_point is not None:
-            raise InputError(
-                "give --target (the TCP pose) or --grasp-point (the point between the fingertips), not both"
-            )
+            raise InputError(TARGET_AND_GRASP_POINT)
         given: str | Sequence[float]
         if self.target is not None:
             given, option = self.target, "--target"

@@ -89,6 +89,10 @@ NO_CLOUD = "give --cloud FILE or --bag FILE --cloud-topic TOPIC"
 """The error for a job that needs a cloud and was given none."""
 NO_BAG_TOPIC = "with --bag, give the cloud topic: --cloud-topic /camera/points"
 """The error for a recording given without the topic of its clouds."""
+TARGET_AND_GRASP_POINT = (
+    "give --target (the TCP pose) or --grasp-point (the point between the fingertips), not both"
+)
+"""The error for a job given both a TCP target and a grasp point."""
 DEFAULT_MAP_SAMPLES = DEFAULT_SAMPLES
 """``BuildSettings().samples``, from the settings' module: ``--help`` and the jobs' inputs import no numba."""
 

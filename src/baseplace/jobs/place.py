@@ -112,9 +112,7 @@ class PlaceJob:
         png = inputs.out_path(self.png, "--out", inputs.PLOT_SUFFIXES)
         mcap = inputs.out_path(self.mcap, "--mcap", (".mcap",))
         if self.targets and self.grasp_points:
-            raise InputError(
-                "give --target (the TCP pose) or --grasp-point (the point between the fingertips), not both"
-            )
+            raise InputError(inputs.TARGET_AND_GRASP_POINT)
         if not self.targets and not self.grasp_points:
             raise InputError('give at least one --target "x y z roll pitch yaw" (the TCP pose) '
                              'or --grasp-point "x y z roll pitch yaw" (the point between the fingertips)')  # fmt: skip
