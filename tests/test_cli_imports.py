@@ -99,6 +99,18 @@ def test_a_mistyped_argument_is_refused_before_the_pipelines_imports(tmp_path):
         assert not modules & HEAVY, (argv, sorted(modules & HEAVY))
 
 
+def test_reach_and_view_refuse_a_missing_input_before_their_imports(tmp_path):
+    """``reach`` without targets or bases is refused before the map's imports (numba), ``view`` of a
+    missing result before the viewer's (viser, the robot's meshes): a third of a second, not one."""
+    for argv in (("reach",), ("reach", "--target", "1 0.5 0.75 0 1.5708 0")):
+        code, modules = _modules(*argv)
+        assert code == 2, argv
+        assert not modules & {"numba", "pinocchio", "baseplace.reachability.cache"}, (argv, sorted(modules))
+    code, modules = _modules("view", str(tmp_path / "none.json"))
+    assert code == 2
+    assert "baseplace.jobs.view" in modules and "baseplace.viz.viewer" not in modules, sorted(modules)
+
+
 def test_serve_help_still_registers_the_service():
     out = subprocess.run([sys.executable, "-m", "baseplace.cli", "serve", "--help"], capture_output=True,
                          text=True, timeout=120)  # fmt: skip

@@ -188,15 +188,13 @@ def reach_job(job: ReachJob, progress: Progress | None = None) -> ReachReport:
     Raises:
         InputError: not exactly one of each pair, malformed poses, a map of another robot.
     """
-    from baseplace.geometry.poses import RPY_LIMITS, YAW_LIMIT, BasePose, invert_transforms, pose_from_xyz_rpy
-    from baseplace.reachability.cache import resolve_map
-    from baseplace.reachability.storage import check_map_matches, load_map
-
     t0 = time.perf_counter()
-    if (job.target is None) == (job.targets is None):
+    if (job.target is None) == (job.targets is None):  # before the map's imports (numba)
         raise InputError("give exactly one of --target or --targets FILE")
     if (job.base is None) == (job.bases is None):
         raise InputError("give exactly one of --base or --bases FILE")
+    from baseplace.geometry.poses import RPY_LIMITS, YAW_LIMIT, BasePose, invert_transforms, pose_from_xyz_rpy
+
     default = job.map is None or job.map == DEFAULT_MAP
     robot = (
         load_robot(job.robot or DEFAULT_ROBOT)
@@ -224,6 +222,9 @@ def reach_job(job: ReachJob, progress: Progress | None = None) -> ReachReport:
             f"--targets has {len(targets)} poses but --bases has {len(bases)}; they pair row by row"
         )
     _check_in_reach(job, robot, invert_transforms(bases) @ targets, len(targets))  # before the map is read
+    from baseplace.reachability.cache import resolve_map
+    from baseplace.reachability.storage import check_map_matches, load_map
+
     chosen = None
     if default:
         assert robot is not None

@@ -54,9 +54,12 @@ def view_job(job: ViewJob, announce: Callable[[str], None] = lambda line: None) 
         return _view_map(job, announce)
     if job.out is not None:
         raise InputError("--out draws a reachability map: give the map (view MAP.rmap --out map.png)")
+    from baseplace.viz.result_view import result_file
+
+    path = result_file(job.result)  # before the viewer's imports
     from baseplace.viz.viewer import serve
 
-    serve(Path(job.result) if job.result else None, host=job.host, port=job.port, block=True, given=job.given)
+    serve(path, host=job.host, port=job.port, block=True, given=job.given)
     return 0
 
 

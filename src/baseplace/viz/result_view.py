@@ -485,6 +485,31 @@ def _robot_pose(p: dict[str, Any], r: _Reader, what: str, arm_joints: tuple[str,
     return RobotPose(T, joints, motion, what)
 
 
+DEFAULT_RESULT = Path("out") / "demo.json"
+"""The result the viewer shows when given none: the demo's."""
+
+
+def result_file(path: str | Path | None) -> Path:
+    """The result file to view (:data:`DEFAULT_RESULT` for None), which must exist.
+
+    Checked before the viewer's libraries are imported, so that a mistyped name is refused at once.
+
+    Raises:
+        InputError: the file does not exist, with how to write one.
+    """
+    if path is None:
+        if not DEFAULT_RESULT.is_file():
+            raise InputError(
+                f"result {DEFAULT_RESULT} does not exist; run `baseplace demo` first, or give a result JSON"
+            )
+        return DEFAULT_RESULT
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"result {path} does not exist; write one with a command's --json (e.g. `baseplace "
+                         f"place ... --json > {path.name}`) or run `baseplace demo`")  # fmt: skip
+    return path
+
+
 def read_result(
     path: str | Path, arm_joints: tuple[str, ...] = (), given: dict[str, Any] | None = None
 ) -> ResultView:
@@ -501,10 +526,7 @@ def read_result(
         InputError: the file is missing, not a result, of a kind with nothing to draw, malformed,
             or names an input file that does not exist.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"result {path} does not exist; write one with a command's --json (e.g. `baseplace "
-                         f"place ... --json > {path.name}`) or run `baseplace demo`")  # fmt: skip
+    path = result_file(path)
     try:
         obj = json.loads(path.read_text())
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:

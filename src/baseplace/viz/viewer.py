@@ -50,13 +50,12 @@ import numpy as np
 
 from baseplace.errors import InputError
 from baseplace.geometry.poses import yaw_of
-from baseplace.viz.result_view import ResultView, read_result
+from baseplace.viz.result_view import ResultView, read_result, result_file
 from baseplace.viz.view_scene import SceneInputs, build_scene, ground, load_inputs
 
 if TYPE_CHECKING:
     import viser
 
-DEFAULT_RESULT = Path("out") / "demo.json"
 """What ``baseplace view`` shows without an argument: the demo's result."""
 
 
@@ -252,9 +251,7 @@ def serve(
     """
     import viser
 
-    path = DEFAULT_RESULT if result_json is None else Path(result_json)
-    if result_json is None and not path.is_file():
-        raise InputError(f"result {path} does not exist; run `baseplace demo` first, or give a result JSON")
+    path = result_file(result_json)
     view, inputs, robot = open_view(path, given)
     _check_port(host, port)
     with contextlib.redirect_stdout(io.StringIO()):  # viser's banner; serve prints its own line
