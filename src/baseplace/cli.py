@@ -158,10 +158,11 @@ def _segment(args: argparse.Namespace, progress: Progress) -> Any:
 
 
 def _build_map(args: argparse.Namespace, progress: Progress) -> Any:
-    from baseplace.jobs.inputs import out_path
+    from baseplace.jobs.inputs import check_robot_name, out_path
     from baseplace.jobs.reach import MAP_SUFFIXES
 
     out_path(args.out, "--out", MAP_SUFFIXES)  # before the settings' imports and the checkpoint's name
+    check_robot_name(args.robot)
     from baseplace.reachability.build import BuildSettings
     from baseplace.reachability.checkpoint import default_checkpoint_path
 

@@ -122,6 +122,7 @@ class CandidatesJob:
         inputs.check_object_yaw(self.object_shape, "--object-shape")
         if self.occupancy is None and (self.cloud.bag is None or self.cloud.bag.map_topic is None):
             raise InputError(NO_GRID)
+        inputs.check_robot_name(self.robot)
         self.cloud.check_paths()  # the files last: a mistyped option is named first
         return png, mcap, p_o, robot_pose
 

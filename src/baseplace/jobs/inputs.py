@@ -42,6 +42,17 @@ def map_output(chosen: MapChoice) -> dict[str, str]:
     return {"map": str(path)} if chosen.built and path is not None and path.is_file() else {}
 
 
+def check_robot_name(robot: object) -> None:
+    """A robot given by name or file is refused at once when it names none (:func:`~baseplace.robots.spec.robot_file`).
+
+    A loaded robot passes; checked before the model's imports (pinocchio, coal).
+    """
+    if isinstance(robot, str):
+        from baseplace.robots.spec import robot_file
+
+        robot_file(robot)
+
+
 def load_robot(robot: Robot | str) -> Robot:
     """A loaded robot, or a built-in name / robot file loaded now."""
     from baseplace.robots.model import Robot

@@ -20,6 +20,7 @@ from baseplace.jobs.inputs import (
     bag_stamp,
     base_xyyaw,
     check_on_scene,
+    check_robot_name,
     load_robot,
     out_path,
     points_bounds,
@@ -87,6 +88,7 @@ def navigate_job(job: NavigateJob) -> NavigateReport:
     mcap = out_path(job.mcap, "--mcap", (".mcap",))
     start, goal = base_xyyaw(job.start, "--start"), base_xyyaw(job.goal, "--goal")
     job.cloud.check_given()
+    check_robot_name(job.robot)
     job.cloud.check_paths()
     from baseplace.navigation.navmap import navigation_map
     from baseplace.navigation.planners import plan_path

@@ -127,6 +127,7 @@ class PlaceJob:
         )
         inputs.check_object_yaw(self.object, "--object")
         start = None if self.start is None else inputs.base_xyyaw(self.start, "--start")
+        inputs.check_robot_name(self.robot)
         self.cloud.check_paths()  # the files last: a mistyped option is named first
         return png, mcap, targets, start
 

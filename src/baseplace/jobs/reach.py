@@ -17,6 +17,7 @@ from baseplace.jobs.inputs import (
     CHECK_MARGIN,
     Progress,
     base_xyyaw,
+    check_robot_name,
     load_robot,
     map_output,
     map_step,
@@ -193,6 +194,7 @@ def reach_job(job: ReachJob, progress: Progress | None = None) -> ReachReport:
         raise InputError("give exactly one of --target or --targets FILE")
     if (job.base is None) == (job.bases is None):
         raise InputError("give exactly one of --base or --bases FILE")
+    check_robot_name(job.robot)
     from baseplace.geometry.poses import RPY_LIMITS, YAW_LIMIT, BasePose, invert_transforms, pose_from_xyz_rpy
 
     default = job.map is None or job.map == DEFAULT_MAP
@@ -316,6 +318,7 @@ def build_map_job(job: BuildMapJob, progress: Progress | None = None) -> BuildMa
         InputError: bad input (an unknown arm, bad settings, an unwritable output, bad workers).
     """
     out = out_path(job.out, "--out", MAP_SUFFIXES)  # outputs first: before the imports and any work
+    check_robot_name(job.robot)
     from baseplace.reachability.build import BuildSettings, build_map
     from baseplace.reachability.cache import cached_map_path
     from baseplace.reachability.storage import load_map, save_map

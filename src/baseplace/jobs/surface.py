@@ -19,6 +19,7 @@ from baseplace.jobs.inputs import (
     DEFAULT_MAP_SAMPLES,
     PLOT_SUFFIXES,
     Progress,
+    check_robot_name,
     load_robot,
     occupancy_grid,
     out_path,
@@ -101,6 +102,7 @@ def surface_map_job(job: SurfaceMapJob, progress: Progress | None = None) -> Sur
     from baseplace.terrain.polygons import parse_polygon
 
     polygon = parse_polygon(job.polygon)  # before the maps' imports (a second)
+    check_robot_name(job.robot)
     from baseplace.placement.surface_map import build_surface_map, check_surface_grid
     from baseplace.placement.surface_storage import save_surface_map
     from baseplace.reachability.build import BuildSettings

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from baseplace.jobs.inputs import PLOT_SUFFIXES, out_path
+from baseplace.jobs.inputs import PLOT_SUFFIXES, check_robot_name, out_path
 from baseplace.jobs.report import OccupancyReport, RobotCheckReport, RobotRef, RobotsReport, SceneReport
 
 
@@ -49,6 +49,7 @@ class RobotCheckJob:
 def robot_check_job(job: RobotCheckJob) -> RobotCheckReport:
     """Load a robot file, describe it, render its collision geometry and warn where it looks wrong."""
     png = out_path(job.png, "--png", PLOT_SUFFIXES)  # checked before the robot loads
+    check_robot_name(job.robot)
     from baseplace.robots.check import check_robot, collision_meshes
     from baseplace.robots.collision import load_collision_model
     from baseplace.robots.model import Robot

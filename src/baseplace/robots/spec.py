@@ -324,16 +324,31 @@ def builtin_spec(name: str) -> RobotSpec:
     return specs[name]
 
 
-def load_spec(name_or_path: str | Path) -> RobotSpec:
-    """A built-in robot by name, or a custom robot from a TOML or YAML file."""
+def robot_file(name_or_path: str | Path) -> Path | None:
+    """The robot file a robot argument names, None for a built-in robot; nothing is read.
+
+    Front ends call it before the robot model's imports (pinocchio, coal: seconds), so that a
+    mistyped robot is refused at once.
+
+    Raises:
+        InputError: neither a built-in name nor a .toml/.yaml file that exists.
+    """
     text = str(name_or_path)
     if text in BUILTIN_ROBOTS:
-        return builtin_spec(text)
+        return None
     path = Path(text)
     if path.suffix.lower() not in (".toml", ".yaml", ".yml"):
         raise unknown("robot", text, [*BUILTIN_ROBOTS, "<path to a .toml/.yaml robot file>"])
     if not path.is_file():
         raise InputError(f"robot file {path} does not exist")
+    return path
+
+
+def load_spec(name_or_path: str | Path) -> RobotSpec:
+    """A built-in robot by name, or a custom robot from a TOML or YAML file."""
+    path = robot_file(name_or_path)
+    if path is None:
+        return builtin_spec(str(name_or_path))
     data = read_document(path, "robot file", MAX_ROBOT_FILE_BYTES, "a robot file names its URDF and arms")
     return spec_from_dict(data, path.parent, str(path))
 
