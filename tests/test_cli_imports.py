@@ -44,7 +44,7 @@ def _run(*argv: str) -> tuple[int, set[str], str]:
                          timeout=120)  # fmt: skip
     *before, last_line = out.stderr.strip().splitlines()
     last = json.loads(last_line)
-    return last["code"], set(last["modules"]), "\n".join(before)
+    return last["code"], set(last["modules"]), "\n".join(before).strip()
 
 
 def test_place_imports_neither_the_service_nor_the_plugins_nor_other_jobs(tmp_path):
@@ -144,6 +144,36 @@ def test_an_unknown_robot_is_refused_before_the_models_imports(tmp_path):
             code, modules, stderr = _run(*argv)
             assert code == 2 and stderr.startswith(said), (argv, stderr)
             assert not modules & heavy, (argv, sorted(modules & heavy))
+
+
+def test_a_mistyped_arm_or_a_missing_map_file_is_refused_before_the_imports(tmp_path):
+    """``--arm`` is checked against the robot's spec, and ``--map`` (a reachability or surface map) for
+    being there, before numba, coal or pinocchio are imported; the messages are the loaders'."""
+    cloud = tmp_path / "scene.ply"
+    cloud.write_bytes(b"not read")
+    grid = tmp_path / "map.yaml"
+    grid.write_text("not read")
+    target = "1 0.5 0.75 0 1.5708 0"
+    missing = tmp_path / "none.rmap"
+    jobs = [
+        ("place", "--cloud", str(cloud), "--target", target),
+        ("candidates", "--object", "1 2 0.8", "--occupancy", str(grid)),
+        ("explain", "--cloud", str(cloud), "--base", "0 0 0", "--target", target),
+    ]
+    cases = [(*argv, "--arm", "left") for argv in jobs] + [
+        ("build-map", "--out", str(tmp_path / "m.rmap"), "--arm", "left")
+    ]
+    said = ["error: unknown arm 'left' of robot 'tiago'; valid: arm"] * len(cases)
+    cases += [(*argv, "--map", str(missing)) for argv in jobs] + [
+        ("reach", "--target", target, "--base", "0 0 0", "--map", str(missing))
+    ]
+    said += [f"error: map file {missing} does not exist"] * (len(jobs) + 1)
+    cases.append(("surface-sample", "--map", str(tmp_path / "none.smap")))
+    said.append(f"error: surface map {tmp_path / 'none.smap'} does not exist")
+    for argv, message in zip(cases, said, strict=True):
+        code, modules, stderr = _run(*argv)
+        assert code == 2 and stderr == message, (argv, stderr)
+        assert not modules & {"numba", "coal", "pinocchio"}, (argv, sorted(modules))
 
 
 def test_serve_help_still_registers_the_service():

@@ -162,7 +162,7 @@ def _build_map(args: argparse.Namespace, progress: Progress) -> Any:
     from baseplace.jobs.reach import MAP_SUFFIXES
 
     out_path(args.out, "--out", MAP_SUFFIXES)  # before the settings' imports and the checkpoint's name
-    check_robot_name(args.robot)
+    check_robot_name(args.robot, args.arm)
     from baseplace.reachability.build import BuildSettings
     from baseplace.reachability.checkpoint import default_checkpoint_path
 

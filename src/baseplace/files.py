@@ -49,6 +49,26 @@ class CacheSkipped(UserWarning):
     """A cache entry was not stored (its disk is full); the result it would have cached is unaffected."""
 
 
+MAP_FILE = "map file"
+"""What :func:`existing_file` calls a reachability map (``reachability.storage.load_map``)."""
+SURFACE_MAP_FILE = "surface map"
+"""... and a surface map (``placement.surface_storage.load_surface_map``)."""
+
+
+def existing_file(path: str | Path, what: str) -> Path:
+    """``path``, checked to be a file before ``what`` (e.g. "map file") is read from it.
+
+    Front ends call it before the reader's imports, so that a mistyped name is refused at once.
+
+    Raises:
+        InputError: ``{what} {path} does not exist``.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{what} {path} does not exist")
+    return path
+
+
 def is_disk_full(exc: BaseException) -> bool:
     """Whether ``exc`` is a write that ran out of space, quota or file size (:data:`DISK_FULL`)."""
     return isinstance(exc, OSError) and exc.errno in DISK_FULL

@@ -122,7 +122,8 @@ class CandidatesJob:
         inputs.check_object_yaw(self.object_shape, "--object-shape")
         if self.occupancy is None and (self.cloud.bag is None or self.cloud.bag.map_topic is None):
             raise InputError(NO_GRID)
-        inputs.check_robot_name(self.robot)
+        inputs.check_robot_name(self.robot, self.arm)
+        inputs.check_map_file(self.map)
         self.cloud.check_paths()  # the files last: a mistyped option is named first
         return png, mcap, p_o, robot_pose
 

@@ -27,6 +27,7 @@ from baseplace.jobs.inputs import (
     CloudInput,
     Progress,
     base_xyyaw,
+    check_map_file,
     check_robot_name,
     load_robot,
     map_output,
@@ -110,7 +111,8 @@ class ExplainJob:
         T_target = _target(given, option)
         if self.floor is not None and not self.cloud.given:
             raise InputError("--floor adds a floor under a cloud: give --cloud too")
-        check_robot_name(self.robot)
+        check_robot_name(self.robot, self.arm)
+        check_map_file(self.map)
         self.cloud.check_paths()
         return (x, y, yaw), T_target, option
 

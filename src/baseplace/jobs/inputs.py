@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from baseplace.errors import InputError
+from baseplace.files import MAP_FILE, existing_file
 from baseplace.reachability.settings import DEFAULT_SAMPLES
 from baseplace.status import Progress as Progress  # re-exported: jobs and the CLI take them from here
 from baseplace.status import map_step as map_step
@@ -42,15 +43,26 @@ def map_output(chosen: MapChoice) -> dict[str, str]:
     return {"map": str(path)} if chosen.built and path is not None and path.is_file() else {}
 
 
-def check_robot_name(robot: object) -> None:
-    """A robot given by name or file is refused at once when it names none (:func:`~baseplace.robots.spec.robot_file`).
+def check_robot_name(robot: object, arm: str | None = None) -> None:
+    """A robot given by name or file, and its arm, refused at once when they name none.
 
-    A loaded robot passes; checked before the model's imports (pinocchio, coal).
+    The robot's spec alone is read (:func:`~baseplace.robots.spec.load_spec`: a built-in's, or
+    the robot file's text), not its model: checked before the model's imports (pinocchio, coal),
+    so that a mistyped ``--robot`` or ``--arm`` costs no seconds. A loaded robot passes, and its
+    arm is checked where it is used.
     """
     if isinstance(robot, str):
-        from baseplace.robots.spec import robot_file
+        from baseplace.robots.spec import load_spec
 
-        robot_file(robot)
+        spec = load_spec(robot)
+        if arm is not None:
+            spec.arm(arm)
+
+
+def check_map_file(rmap: object) -> None:
+    """A reachability map given as a file must exist (the default map, or a loaded one, passes)."""
+    if isinstance(rmap, str) and rmap != "default":
+        existing_file(rmap, MAP_FILE)
 
 
 def load_robot(robot: Robot | str) -> Robot:

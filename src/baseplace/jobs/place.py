@@ -127,7 +127,8 @@ class PlaceJob:
         )
         inputs.check_object_yaw(self.object, "--object")
         start = None if self.start is None else inputs.base_xyyaw(self.start, "--start")
-        inputs.check_robot_name(self.robot)
+        inputs.check_robot_name(self.robot, self.arm)
+        inputs.check_map_file(self.map)
         self.cloud.check_paths()  # the files last: a mistyped option is named first
         return png, mcap, targets, start
 

@@ -17,6 +17,7 @@ from baseplace.jobs.inputs import (
     CHECK_MARGIN,
     Progress,
     base_xyyaw,
+    check_map_file,
     check_robot_name,
     load_robot,
     map_output,
@@ -195,6 +196,7 @@ def reach_job(job: ReachJob, progress: Progress | None = None) -> ReachReport:
     if (job.base is None) == (job.bases is None):
         raise InputError("give exactly one of --base or --bases FILE")
     check_robot_name(job.robot)
+    check_map_file(job.map)
     from baseplace.geometry.poses import RPY_LIMITS, YAW_LIMIT, BasePose, invert_transforms, pose_from_xyz_rpy
 
     default = job.map is None or job.map == DEFAULT_MAP
@@ -318,7 +320,7 @@ def build_map_job(job: BuildMapJob, progress: Progress | None = None) -> BuildMa
         InputError: bad input (an unknown arm, bad settings, an unwritable output, bad workers).
     """
     out = out_path(job.out, "--out", MAP_SUFFIXES)  # outputs first: before the imports and any work
-    check_robot_name(job.robot)
+    check_robot_name(job.robot, job.arm)
     from baseplace.reachability.build import BuildSettings, build_map
     from baseplace.reachability.cache import cached_map_path
     from baseplace.reachability.storage import load_map, save_map

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from baseplace.errors import InputError
+from baseplace.files import SURFACE_MAP_FILE, existing_file
 from baseplace.jobs.inputs import (
     DEFAULT_MAP_SAMPLES,
     PLOT_SUFFIXES,
@@ -179,12 +180,14 @@ def surface_samples_job(job: SurfaceSamplesJob) -> SurfaceSamplesReport:
     Raises:
         InputError: bad input (n or candidates < 1, an unreadable map, a robot that does not match).
     """
+    if job.n < 1 or job.candidates < 1:
+        raise InputError(f"--n and --candidates must be >= 1, got {job.n} and {job.candidates}")
+    existing_file(job.map, SURFACE_MAP_FILE)  # before the sampler's imports
+    check_robot_name(job.robot)
     from baseplace.placement.surface_sampling import SurfaceSampler
     from baseplace.placement.surface_storage import load_surface_map
 
     t0 = time.perf_counter()
-    if job.n < 1 or job.candidates < 1:
-        raise InputError(f"--n and --candidates must be >= 1, got {job.n} and {job.candidates}")
     smap = load_surface_map(job.map)
     robot = load_robot(job.robot or smap.robot)
     grid = occupancy_grid(job.occupancy, job.bag)

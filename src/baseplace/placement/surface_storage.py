@@ -18,7 +18,7 @@ import numpy as np
 
 from baseplace import h5files
 from baseplace.errors import InputError
-from baseplace.files import atomic_hdf5
+from baseplace.files import SURFACE_MAP_FILE, atomic_hdf5, existing_file
 from baseplace.guards import check_alloc
 from baseplace.placement.surface_map import SurfaceMap, parse_polygon
 
@@ -55,9 +55,7 @@ def load_surface_map(path: str | Path) -> SurfaceMap:
     Raises:
         InputError: missing, truncated or corrupt file, another kind of file, or a newer format.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"surface map {path} does not exist")
+    path = existing_file(path, SURFACE_MAP_FILE)
     try:
         with h5py.File(path, "r") as f:
             h5files.read_header(f, path, FORMAT, FORMAT_VERSION, "surface map", "rebuild it with surface-map")

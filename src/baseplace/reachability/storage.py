@@ -20,7 +20,7 @@ import numpy as np
 
 from baseplace import h5files
 from baseplace.errors import InputError
-from baseplace.files import atomic_hdf5
+from baseplace.files import MAP_FILE, atomic_hdf5, existing_file
 from baseplace.reachability.grid import SE3Grid
 from baseplace.reachability.rmap import MapInfo, ReachabilityMap
 
@@ -89,9 +89,7 @@ def load_map(path: str | Path, robot: Robot | None = None, arm: str | None = Non
         InputError: missing, truncated or corrupt file, a newer format version, or a map of
             another robot, URDF or arm.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"map file {path} does not exist")
+    path = existing_file(path, MAP_FILE)
     try:
         with h5py.File(path, "r") as f:
             h5files.read_header(
