@@ -147,8 +147,9 @@ def test_an_unknown_robot_is_refused_before_the_models_imports(tmp_path):
 
 
 def test_a_mistyped_arm_or_a_missing_map_file_is_refused_before_the_imports(tmp_path):
-    """``--arm`` is checked against the robot's spec, and ``--map`` (a reachability or surface map) for
-    being there, before numba, coal or pinocchio are imported; the messages are the loaders'."""
+    """``--arm`` is checked against the robot's spec, ``--map`` (a reachability or surface map) for
+    being there and ``--clearance`` for its range, before numba, coal or pinocchio are imported;
+    the messages are the loaders' and the settings'."""
     cloud = tmp_path / "scene.ply"
     cloud.write_bytes(b"not read")
     grid = tmp_path / "map.yaml"
@@ -170,6 +171,8 @@ def test_a_mistyped_arm_or_a_missing_map_file_is_refused_before_the_imports(tmp_
     said += [f"error: map file {missing} does not exist"] * (len(jobs) + 1)
     cases.append(("surface-sample", "--map", str(tmp_path / "none.smap")))
     said.append(f"error: surface map {tmp_path / 'none.smap'} does not exist")
+    cases += [(*argv, "--clearance", "0.2") for argv in jobs]
+    said += ["error: clearance must be a finite distance in [0, 0.1] m, got 0.2"] * len(jobs)
     for argv, message in zip(cases, said, strict=True):
         code, modules, stderr = _run(*argv)
         assert code == 2 and stderr == message, (argv, stderr)

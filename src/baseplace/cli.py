@@ -27,6 +27,7 @@ from baseplace.argtypes import count, finite_float, in_radians, nonneg_int
 from baseplace.errors import BaseplaceError, InputError, brief
 from baseplace.jobs.inputs import DEFAULT_MAP_SAMPLES, Progress, motion_and_robustness
 from baseplace.robots.defaults import DEFAULT_ROBOT
+from baseplace.world.clearance import check_clearance
 
 
 def _lazy_module(name: str) -> ModuleType:
@@ -190,7 +191,8 @@ def _place(a: argparse.Namespace, progress: Progress) -> Any:
     job = place.PlaceJob(a.target or [], a.robot, a.arm, _cloud(a), a.occupancy, a.map, None, a.seed, a.start,
                          a.planner, a.object, a.floor, a.out, a.mcap, grasp_points=a.grasp_point or [],
                          obstacles=a.obstacle or [])  # fmt: skip
-    job.check_inputs()  # before the settings' imports (seconds)
+    check_clearance(a.clearance)  # before the settings' imports (seconds), with the job's inputs
+    job.check_inputs()
     from baseplace.placement.pipeline import PlaceSettings
 
     motion, robustness = motion_and_robustness(vars(a))
@@ -203,7 +205,8 @@ def _place(a: argparse.Namespace, progress: Progress) -> Any:
 def _explain(a: argparse.Namespace, progress: Progress) -> Any:
     job = explain.ExplainJob(a.base, a.target, a.map, a.robot, a.arm, _cloud(a), a.object, a.floor, None, a.seed,
                              a.grasp_point, obstacles=a.obstacle or [])  # fmt: skip
-    job.check_inputs()  # before the settings' imports (seconds)
+    check_clearance(a.clearance)  # before the settings' imports (seconds), with the job's inputs
+    job.check_inputs()
     from dataclasses import replace
 
     from baseplace.placement.pipeline import PlaceSettings

@@ -26,6 +26,7 @@ from baseplace.jobs.report import (
     placement_row,
 )
 from baseplace.robots.defaults import DEFAULT_ROBOT
+from baseplace.world.clearance import check_clearance
 
 if TYPE_CHECKING:
     from pathlib import Path
@@ -120,6 +121,7 @@ class CandidatesJob:
         p_o = inputs.parse_xyz(self.object, "--object")
         robot_pose = None if self.robot_pose is None else inputs.base_xyyaw(self.robot_pose, "--robot-pose")
         inputs.check_object_yaw(self.object_shape, "--object-shape")
+        check_clearance(self.clearance)
         if self.occupancy is None and (self.cloud.bag is None or self.cloud.bag.map_topic is None):
             raise InputError(NO_GRID)
         inputs.check_robot_name(self.robot, self.arm)

@@ -39,6 +39,7 @@ from baseplace.terrain.pipeline import Terrain, terrain_from_points
 from baseplace.terrain.polygons import footprint_outline
 from baseplace.terrain.segmentation import Segmentation
 from baseplace.terrain.voxels import VoxelMap
+from baseplace.world.clearance import check_clearance
 from baseplace.world.environment import (
     SUPPORT_DIST,
     Environment,
@@ -51,7 +52,6 @@ from baseplace.world.neighbour_shapes import FittedShape
 from baseplace.world.obstacles import Obstacle, obstacles_key
 from baseplace.world.sensor_resolution import (
     Group,
-    check_clearance,
     derived_clearance,
     derived_plane_clearance,
     group_parts,

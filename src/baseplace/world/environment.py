@@ -32,6 +32,7 @@ from baseplace.robots.collision import SelfCollision, load_collision_model
 from baseplace.robots.model import REVOLUTE, Arm, Robot
 from baseplace.terrain.segmentation import Segmentation
 from baseplace.terrain.voxels import VoxelMap
+from baseplace.world.clearance import check_clearance
 from baseplace.world.grasped_object import GraspedObject, rows_in
 from baseplace.world.obstacles import Obstacle
 from baseplace.world.sensor_resolution import (
@@ -39,7 +40,6 @@ from baseplace.world.sensor_resolution import (
     Group,
     Part,
     SupportPlane,
-    check_clearance,
     fine_groups,
     group_parts,
     group_size,

@@ -71,7 +71,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import ConvexHull, QhullError
 
-from baseplace.errors import InputError
 from baseplace.geometry.poses import FloatArray
 from baseplace.terrain.voxels import VoxelMap
 from baseplace.world.grasped_object import GraspedObject, rows_in
@@ -141,8 +140,6 @@ NOISE_SAMPLES = 4000
 """At most this many points (every n-th) have their local plane fitted."""
 NOISE_MIN_FITS = 30
 """A direction of :func:`surface_noise` is measured on at least this many local fits, else not at all."""
-MAX_CLEARANCE = 0.1
-"""The largest clearance [m] accepted: more would forbid most grasps outright."""
 PLANAR_FACTOR = 1.2
 """A point is on a smooth surface (:func:`denoised`) when a quadric through its neighbours leaves
 residuals of at most this many times the surfaces' noise (7 % of a flat surface's points fail it)."""
@@ -535,16 +532,6 @@ def derived_plane_clearance(plane: SupportPlane, noise: SurfaceNoise | None = No
         f"the support plane: 3 standard errors of its fit (sigma {sigma * 1e3:.1f} mm / sqrt({n}) = "
         f"{error * 1e3:.3f} mm{floor})"
     )
-
-
-def check_clearance(clearance: float | None) -> None:
-    """Raise InputError unless ``clearance`` is None or a finite distance in [0, :data:`MAX_CLEARANCE`] [m]."""
-    if clearance is None:
-        return
-    if not (
-        isinstance(clearance, int | float) and math.isfinite(clearance) and 0 <= clearance <= MAX_CLEARANCE
-    ):
-        raise InputError(f"clearance must be a finite distance in [0, {MAX_CLEARANCE}] m, got {clearance}")
 
 
 def fine_groups(
