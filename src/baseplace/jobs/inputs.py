@@ -59,9 +59,13 @@ def check_robot_name(robot: object, arm: str | None = None) -> None:
             spec.arm(arm)
 
 
+DEFAULT_MAP = "default"
+"""``--map default``: the robot's cached default map (as ``reachability.cache.DEFAULT_MAP``, without numba)."""
+
+
 def check_map_file(rmap: object) -> None:
-    """A reachability map given as a file must exist (the default map, or a loaded one, passes)."""
-    if isinstance(rmap, str) and rmap != "default":
+    """A reachability map given as a file must exist (:data:`DEFAULT_MAP`, or a loaded map, passes)."""
+    if isinstance(rmap, str) and rmap != DEFAULT_MAP:
         existing_file(rmap, MAP_FILE)
 
 

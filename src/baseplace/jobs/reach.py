@@ -15,6 +15,7 @@ import numpy as np
 from baseplace.errors import InputError
 from baseplace.jobs.inputs import (
     CHECK_MARGIN,
+    DEFAULT_MAP,
     Progress,
     base_xyyaw,
     check_map_file,
@@ -37,8 +38,6 @@ if TYPE_CHECKING:
     from baseplace.robots.model import Robot
 
 MAP_SUFFIXES = (".rmap", ".h5", ".hdf5")
-DEFAULT_MAP = "default"
-"""``--map default``: the robot's cached default map (as ``reachability.cache.DEFAULT_MAP``, without numba)."""
 
 
 def read_pose_file(

@@ -327,8 +327,9 @@ def builtin_spec(name: str) -> RobotSpec:
 def robot_file(name_or_path: str | Path) -> Path | None:
     """The robot file a robot argument names, None for a built-in robot; nothing is read.
 
-    Front ends call it before the robot model's imports (pinocchio, coal: seconds), so that a
-    mistyped robot is refused at once.
+    :func:`load_spec`'s first step, which front ends reach before the robot model's imports
+    (pinocchio, coal: seconds; ``jobs.inputs.check_robot_name``), so that a mistyped robot is
+    refused at once.
 
     Raises:
         InputError: neither a built-in name nor a .toml/.yaml file that exists.
