@@ -137,13 +137,15 @@ def test_an_unknown_robot_is_refused_before_the_models_imports(tmp_path):
     ]
     heavy = {"numba", "coal", "pinocchio"}
     missing = tmp_path / "none.toml"
-    for robot, said in (("tiagoo", "error: unknown robot 'tiagoo'; valid: "),
-                        (str(missing), f"error: robot file {missing} does not exist")):  # fmt: skip
-        for argv in [*commands, ("robot", "check")]:
-            argv = (*argv, robot) if argv[0] == "robot" else (*argv, "--robot", robot)
-            code, modules, stderr = _run(*argv)
-            assert code == 2 and stderr.startswith(said), (argv, stderr)
-            assert not modules & heavy, (argv, sorted(modules & heavy))
+    cases = [(*argv, "--robot", "tiagoo") for argv in commands] + [("robot", "check", "tiagoo")]
+    said = ["error: unknown robot 'tiagoo'; valid: "] * len(cases)
+    # a missing robot file takes the same check (robots.spec.robot_file) in every command: two of them
+    cases += [(*commands[0], "--robot", str(missing)), ("robot", "check", str(missing))]
+    said += [f"error: robot file {missing} does not exist"] * 2
+    for argv, message in zip(cases, said, strict=True):
+        code, modules, stderr = _run(*argv)
+        assert code == 2 and stderr.startswith(message), (argv, stderr)
+        assert not modules & heavy, (argv, sorted(modules & heavy))
 
 
 def test_a_mistyped_arm_or_a_missing_map_file_is_refused_before_the_imports(tmp_path):
