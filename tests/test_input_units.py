@@ -40,8 +40,9 @@ def scene(tmp_path_factory) -> dict[str, Path]:
     save_map(
         build_map(Robot(DATA / "planar3.toml"), None, BuildSettings(samples=200_000, seed=1)), d / "p3.rmap"
     )
-    return {"cloud": d / "floor.npy", "map": d / "p3.rmap", "cache": d / "cache", "missing": d / "no.rmap",
-            "grid": d / "free.yaml"}  # fmt: skip
+    (d / "unreadable.rmap").write_bytes(b"not a map")  # there, so refused only when read
+    return {"cloud": d / "floor.npy", "map": d / "p3.rmap", "cache": d / "cache",
+            "unreadable": d / "unreadable.rmap", "grid": d / "free.yaml"}  # fmt: skip
 
 
 def cli(scene: dict[str, Path], *args: str) -> subprocess.CompletedProcess[str]:
@@ -49,7 +50,8 @@ def cli(scene: dict[str, Path], *args: str) -> subprocess.CompletedProcess[str]:
 
     Nothing keeps a map in memory between commands (maps are loaded per job): a command that went
     for its map before refusing builds the default one into the empty cache (minutes), or fails on
-    the missing map file with another message than the refusal's.
+    the unreadable map file with another message than the refusal's (a missing one is refused
+    before anything else: tests/test_cli_imports.py).
     """
     t0 = time.perf_counter()
     proc = run_cli(*args, env={"BASEPLACE_CACHE": str(scene["cache"])})
@@ -88,9 +90,9 @@ PLACE = [
 
 
 @pytest.mark.parametrize(("args", "fragments"), PLACE)
-@pytest.mark.parametrize("map_arg", ["default", "missing"])
+@pytest.mark.parametrize("map_arg", ["default", "unreadable"])
 def test_place_refuses_before_the_map(scene, args, fragments, map_arg):
-    maps = [] if map_arg == "default" else ["--map", str(scene["missing"])]  # neither built nor loaded
+    maps = [] if map_arg == "default" else ["--map", str(scene["unreadable"])]  # neither built nor loaded
     one_line(cli(scene, "place", "--cloud", str(scene["cloud"]), *maps, *args), *fragments)
 
 
@@ -113,9 +115,9 @@ CANDIDATES = [
 
 
 @pytest.mark.parametrize(("args", "fragments"), CANDIDATES)
-@pytest.mark.parametrize("map_arg", ["default", "missing"])
+@pytest.mark.parametrize("map_arg", ["default", "unreadable"])
 def test_candidates_refuses_before_the_map(scene, args, fragments, map_arg):
-    maps = [] if map_arg == "default" else ["--map", str(scene["missing"])]
+    maps = [] if map_arg == "default" else ["--map", str(scene["unreadable"])]
     one_line(cli(scene, "candidates", "--occupancy", str(scene["grid"]), *maps, *args), *fragments)
 
 
@@ -225,12 +227,18 @@ def test_jobs_refuse_degrees_without_the_cli(scene):
         InputError, match=r"^--target: pitch 90 is outside \[-pi, pi\] rad; angles are in radians"
     ):
         place_job(
-            PlaceJob([[1.0, 0.5, 0.75, 0.0, 90.0, 0.0]], cloud=CloudInput(points=floor), map="unused.rmap")
+            PlaceJob(
+                [[1.0, 0.5, 0.75, 0.0, 90.0, 0.0]],
+                cloud=CloudInput(points=floor),
+                map=str(scene["unreadable"]),
+            )
         )
     with pytest.raises(
         InputError, match=r"^target 0 at \(1000, 500, 750\) m is .* outside the cloud's bounds"
     ):
-        place_job(PlaceJob(["1000 500 750 0 0 0"], cloud=CloudInput(points=floor), map="unused.rmap"))
+        place_job(
+            PlaceJob(["1000 500 750 0 0 0"], cloud=CloudInput(points=floor), map=str(scene["unreadable"]))
+        )
     with pytest.raises(InputError, match=r"^--start: yaw 90 is outside"):
         navigate_job(NavigateJob([0.0, 0.0, 90.0], "1 1 0", CloudInput(points=floor)))
     with pytest.raises(InputError, match=r"^--base: yaw 60 is outside"):
