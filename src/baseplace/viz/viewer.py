@@ -56,8 +56,6 @@ from baseplace.viz.view_scene import SceneInputs, build_scene, ground, load_inpu
 if TYPE_CHECKING:
     import viser
 
-"""What ``baseplace view`` shows without an argument: the demo's result."""
-
 
 def _check_port(host: str, port: int) -> None:
     """Raise a one-line InputError if ``host:port`` cannot be bound (in use, bad host)."""
