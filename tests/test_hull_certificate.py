@@ -16,9 +16,10 @@ import pinocchio as pin
 import pytest
 
 from baseplace.placement.motion import stowed_configuration
+from baseplace.robots.spheres import _joint_frames, _place
 from baseplace.world.environment import Environment
 from baseplace.world.state_filter import _no_anchors
-from baseplace.world.state_kernel import _uncertified_states
+from baseplace.world.state_kernel import _hull_points_clear, _uncertified_states
 from test_state_filter import table_scene_states
 
 
@@ -97,3 +98,49 @@ def test_hulls_clear_only_scene_pairs_coal_finds_free(tiago, scene_states):
             P_kinds["points"] += int((kind[rows] == 0).sum())
             P_kinds["plane"] += int((kind[rows] == 1).sum())
     assert P_kinds["points"] > 100 and P_kinds["plane"] > 10, P_kinds  # both certificates at work
+
+
+def test_hull_points_margin_is_below_coals_distance(tiago):
+    """The margin by which one geometry's hull points clear a face plane of the other's hull is a lower bound of coal's distance.
+
+    Every self pair, both ways, at states around the stowed configuration (the arm beside the
+    torso) and random ones: wherever the test names a plane, coal's distance between the two
+    geometries is at least the pair's reach plus the margin. It must also do its work: the
+    torso's column and the upper arm (about 2 cm apart when the arm is tucked, where every sphere
+    of the arm's cover reaches past the gap) are cleared in most states near the stowed one.
+    """
+    arm = tiago.arm()
+    filt = Environment(tiago, {}).state_filter(arm)
+    rng = np.random.default_rng(5)
+    q0 = stowed_configuration(tiago, arm)
+    near = np.clip(q0 + rng.normal(0.0, 0.1, (40, arm.n_joints)), arm.lower, arm.upper)
+    states = np.vstack([near, arm.sample(rng, 20)])
+    model, data, geom, gdata = filt.self_check
+    names = [geom.geometryObjects[int(geom.collisionPairs[int(i)].first)].name + " | "
+             + geom.geometryObjects[int(geom.collisionPairs[int(i)].second)].name for i in filt._self_index]  # fmt: skip
+    column = names.index("torso_fixed_column_link_0 | arm_2_link_0")
+    F, R, t = np.empty((arm.n_joints, 3, 4)), np.empty((3, 3)), np.empty(3)
+    Cg = np.empty((len(filt.joint), 3))
+    certified, column_cleared = 0, 0
+    for s, q in enumerate(states):
+        _joint_frames(q, arm.placements, arm.axes, arm.kinds, F, R, t)
+        _place(filt.joint, filt.local, F, Cg)
+        pin.forwardKinematics(model, data, filt._full(q))
+        pin.updateGeometryPlacements(model, data, geom, gdata)
+        for p, (g, h) in enumerate(filt._self_pairs):
+            reach = float(filt._self_reach[p])
+            found = [
+                _hull_points_clear(a, b, reach, filt.joint, Cg, F, *filt._hulls, -1)
+                for a, b in ((g, h), (h, g))
+            ]
+            margin = max(gap for k, gap in found)
+            if margin <= 0.0:
+                continue
+            distance = pin.computeDistance(geom, gdata, int(filt._self_index[p])).min_distance
+            assert distance >= reach + margin - 1e-9, (
+                f"{names[p]} at state {s}: {distance} < {reach} + {margin}"
+            )
+            certified += 1
+            column_cleared += p == column and s < len(near)
+    assert certified > 1000
+    assert column_cleared >= 0.9 * len(near), column_cleared

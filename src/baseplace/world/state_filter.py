@@ -14,9 +14,13 @@ one sphere that truly contains it (:func:`bounding_sphere`), placed by the arm's
 * any other part (an obstacle given by hand) and another robot geometry: sphere against sphere;
 * failing those, by the robot geometry's convex hull (:func:`convex_hull`, placed with its joint):
   every box centre near it, or every sphere of the other geometry's cover, farther than the reach
-  outside one of its face planes; against the convex part, all its hull's points outside one of
-  the part's planes. On the 72 table-grid dev motion checks about 10 k states went to coal
-  where the spheres alone sent 60 k (their times: bench/results/motion_verdicts_speed_dev.json).
+  outside one of its face planes, or else every point of the other's hull
+  (:func:`~baseplace.world.state_kernel._hull_points_clear`); against the convex part, all its
+  hull's points outside one of the part's planes. On the 72 table-grid dev motion checks about
+  10 k states went to coal where the spheres alone sent 60 k (their times:
+  bench/results/motion_verdicts_speed_dev.json); the hull points against the other's face
+  planes took the self pairs' share of the states left to coal from 71 to 21 per check (the
+  arm tucked beside the torso's column: ``bench/profile_motion_stages.py``, session 33).
 
 Only the pairs not certified go to coal (``pinocchio.computeCollision``, the same call, request
 and margin as the full check), so the verdict is coal's. Geometries no arm joint moves are

@@ -403,6 +403,16 @@ def _uncertified(Q, a, b, n, travel, levers, placements, axes, kinds, joint, loc
                                              sub_local, sub_radius, F, T, Cs, Ws, hull_start, hull_planes, hull_hint[p, 1])  # fmt: skip
                         if kh >= 0:
                             hull_hint[p, 1], touch = kh, False
+                if touch:  # every hull point of h outside a face plane of g's hull, else the other way
+                    kh, gap = _hull_points_clear(g, h, self_reach[p], joint, Cg, F, hull_start, hull_planes, vert_start,
+                                                 verts, hull_hint[p, 0])  # fmt: skip
+                    if kh >= 0:
+                        hull_hint[p, 0], touch = kh, False
+                    else:
+                        kh, gap = _hull_points_clear(h, g, self_reach[p], joint, Cg, F, hull_start, hull_planes,
+                                                     vert_start, verts, hull_hint[p, 1])  # fmt: skip
+                        if kh >= 0:
+                            hull_hint[p, 1], touch = kh, False
                 out_i[ask[v]], slack_i[ask[v]] = touch, max(gap, 0.0)
                 any_pair |= touch
         if not line:
@@ -705,6 +715,89 @@ def _hull_clear(g, h, i, reach, joint, Cg, radius, stamp, sub_start, sub_joint, 
             return -1, -1.0
         gap = min(gap, sub_gap)
     return k, gap
+
+
+@nb.njit(cache=True)
+def _hull_points_clear(g, h, reach, joint, Cg, F, hull_start, hull_planes, vert_start, verts, hint):
+    """A face plane of geometry g's convex hull with every point h's hull is made of more than ``reach`` outside it, and the least margin [m]; or (-1, -1).
+
+    The exact form of :func:`_hull_clear`'s test: h's hull points (``verts[vert_start[h]:vert_start[h + 1]]``,
+    in the frame of the arm joint that moves h) instead of the spheres around them, so a pair a
+    few millimetres apart is certified where every sphere of h's cover reaches past the gap
+    (TIAGo's arm tucked beside the torso's column, about 2 cm away: the column's face planes
+    separate it). The plane holds g on its inner side and h's hull beyond ``reach`` on the
+    other, so the margin is a lower bound of the hulls' distance less ``reach``. Two planes are
+    tried: ``hint`` (the one that served this pair last, or -1), then the one that h's bounding
+    sphere's centre (``Cg[h]``, the arm's base frame) lies farthest outside; each is moved into
+    h's joint frame (``F``: the arm joints' frames in the arm's base) and h's points are tested
+    against it, stopping at the first within ``reach``.
+    """
+    a, b = hull_start[g], hull_start[g + 1]
+    u0, u1 = vert_start[h], vert_start[h + 1]
+    if a == b or u0 == u1:
+        return -1, -1.0
+    jg, jh = joint[g], joint[h]
+    if a <= hint < b:
+        gap = _points_beyond(hint, jg, jh, F, hull_planes, verts, u0, u1, reach)
+        if gap > 0.0:
+            return hint, gap
+    x, y, z = _in_joint_frame(Cg[h], jg, F)
+    k, best = a, -np.inf
+    for m in range(a, b):
+        v = hull_planes[m, 0] * x + hull_planes[m, 1] * y + hull_planes[m, 2] * z + hull_planes[m, 3]
+        if v > best:
+            k, best = m, v
+    if k == hint:
+        return -1, -1.0
+    gap = _points_beyond(k, jg, jh, F, hull_planes, verts, u0, u1, reach)
+    return (k, gap) if gap > 0.0 else (-1, -1.0)
+
+
+@nb.njit(cache=True, inline="always")
+def _points_beyond(k, jg, jh, F, hull_planes, verts, u0, u1, reach):
+    """The least margin [m] by which the points ``verts[u0:u1]`` (arm joint jh's frame) lie more than ``reach`` outside plane k (joint jg's frame); -1 when one does not."""
+    R = np.empty((3, 4))  # jh's frame in jg's: R[:, :3] x + R[:, 3]
+    for r in range(3):
+        for c in range(4):
+            R[r, c] = _frame_entry(jg, jh, F, r, c)
+    nx = hull_planes[k, 0] * R[0, 0] + hull_planes[k, 1] * R[1, 0] + hull_planes[k, 2] * R[2, 0]
+    ny = hull_planes[k, 0] * R[0, 1] + hull_planes[k, 1] * R[1, 1] + hull_planes[k, 2] * R[2, 1]
+    nz = hull_planes[k, 0] * R[0, 2] + hull_planes[k, 1] * R[1, 2] + hull_planes[k, 2] * R[2, 2]
+    d = (
+        hull_planes[k, 0] * R[0, 3]
+        + hull_planes[k, 1] * R[1, 3]
+        + hull_planes[k, 2] * R[2, 3]
+        + hull_planes[k, 3]
+        - reach
+    )
+    gap = np.inf
+    for u in range(u0, u1):
+        v = nx * verts[u, 0] + ny * verts[u, 1] + nz * verts[u, 2] + d
+        if not v > 0.0:
+            return -1.0
+        gap = min(gap, v)
+    return gap
+
+
+@nb.njit(cache=True, inline="always")
+def _frame_entry(jg, jh, F, r, c):
+    """Entry (r, c) of the 3 x 4 transform from arm joint jh's frame into jg's (``F``; -1: the arm's base)."""
+    if jg < 0:
+        if jh < 0:
+            return 1.0 if r == c else 0.0
+        return F[jh, r, c]
+    if jh < 0:  # F[jg]^-1: R^T, -R^T t
+        if c < 3:
+            return F[jg, c, r]
+        return -(F[jg, 0, r] * F[jg, 0, 3] + F[jg, 1, r] * F[jg, 1, 3] + F[jg, 2, r] * F[jg, 2, 3])
+    v = 0.0  # R_g^T (R_h x + t_h - t_g)
+    if c < 3:
+        for e in range(3):
+            v += F[jg, e, r] * F[jh, e, c]
+        return v
+    for e in range(3):
+        v += F[jg, e, r] * (F[jh, e, 3] - F[jg, e, 3])
+    return v
 
 
 @nb.njit(cache=True)
