@@ -605,13 +605,13 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
-def library_commit() -> dict[str, Any]:
-    """The commit of the ``baseplace`` package that runs (it may be another checkout than this script's)."""
+def library_commit(where: Path | None = None) -> dict[str, Any]:
+    """The commit of the ``baseplace`` package that runs (it may be another checkout than this script's), or of the package at ``where``."""
     import subprocess
 
     import baseplace
 
-    where = Path(baseplace.__file__).resolve().parent
+    where = Path(baseplace.__file__).resolve().parent if where is None else where.resolve()
     try:
         head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=where, capture_output=True, text=True,
                               check=True, timeout=10).stdout.strip()  # fmt: skip

@@ -172,6 +172,11 @@ def print_kernel_split(batches: list[tuple[Any, FloatArray, FloatArray]], checks
         print(f"  {name:12s} us/state {min(ts):6.2f} (runs {', '.join(f'{x:.2f}' for x in ts)})")
 
 
+def held_out_seeds() -> set[int]:
+    """The table-grid seeds no development bench may replay: the execution protocol's and every motion protocol's."""
+    return {*range(3, 38), *(seed for _, seeds in PROTOCOLS.values() for seed in seeds)}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--results", default="motion_verdicts_s12_final_a", help="bench/results/NAME.json")
@@ -183,7 +188,7 @@ def main() -> None:
     )
     args = parser.parse_args()
     rows = json.loads((RESULTS / f"{args.results}.json").read_text())["checks"]
-    held_out = {*range(3, 38), *(seed for _, seeds in PROTOCOLS.values() for seed in seeds)}
+    held_out = held_out_seeds()
     if held_out & {row["seed"] for row in rows}:
         parser.error(
             f"{args.results} holds held-out seeds {sorted(held_out & {row['seed'] for row in rows})}"
