@@ -737,8 +737,12 @@ def _hull_points_clear(g, h, reach, joint, Cg, F, hull_start, hull_planes, vert_
     if a == b or u0 == u1:
         return -1, -1.0
     jg, jh = joint[g], joint[h]
+    R = np.empty((3, 4))  # h's joint frame in g's: R[:, :3] x + R[:, 3], once for both planes
+    for r in range(3):
+        for c in range(4):
+            R[r, c] = _frame_entry(jg, jh, F, r, c)
     if a <= hint < b:
-        gap = _points_beyond(hint, jg, jh, F, hull_planes, verts, u0, u1, reach)
+        gap = _points_beyond(hint, R, hull_planes, verts, u0, u1, reach)
         if gap > 0.0:
             return hint, gap
     x, y, z = _in_joint_frame(Cg[h], jg, F)
@@ -749,17 +753,13 @@ def _hull_points_clear(g, h, reach, joint, Cg, F, hull_start, hull_planes, vert_
             k, best = m, v
     if k == hint:
         return -1, -1.0
-    gap = _points_beyond(k, jg, jh, F, hull_planes, verts, u0, u1, reach)
+    gap = _points_beyond(k, R, hull_planes, verts, u0, u1, reach)
     return (k, gap) if gap > 0.0 else (-1, -1.0)
 
 
 @nb.njit(cache=True, inline="always")
-def _points_beyond(k, jg, jh, F, hull_planes, verts, u0, u1, reach):
-    """The least margin [m] by which the points ``verts[u0:u1]`` (arm joint jh's frame) lie more than ``reach`` outside plane k (joint jg's frame); -1 when one does not."""
-    R = np.empty((3, 4))  # jh's frame in jg's: R[:, :3] x + R[:, 3]
-    for r in range(3):
-        for c in range(4):
-            R[r, c] = _frame_entry(jg, jh, F, r, c)
+def _points_beyond(k, R, hull_planes, verts, u0, u1, reach):
+    """The least margin [m] by which the points ``verts[u0:u1]`` lie more than ``reach`` outside plane k, moved by ``R`` (3, 4) into the plane's frame; -1 when one does not."""
     nx = hull_planes[k, 0] * R[0, 0] + hull_planes[k, 1] * R[1, 0] + hull_planes[k, 2] * R[2, 0]
     ny = hull_planes[k, 0] * R[0, 1] + hull_planes[k, 1] * R[1, 1] + hull_planes[k, 2] * R[2, 1]
     nz = hull_planes[k, 0] * R[0, 2] + hull_planes[k, 1] * R[1, 2] + hull_planes[k, 2] * R[2, 2]
