@@ -1,8 +1,8 @@
 """The clearance a placement keeps from the scene: its accepted range, checked without the collision model.
 
-:mod:`baseplace.world.sensor_resolution` derives the default clearance from the cloud's noise and
-re-exports these; front ends check a given ``--clearance`` here before the collision model's
-imports (coal, numba), so that a wrong value is refused at once.
+:mod:`baseplace.world.sensor_resolution` derives the default clearance from the cloud's noise;
+the range is checked here, math only, so that front ends refuse a wrong ``--clearance`` before the
+collision model's imports (coal, numba), and the settings and the environment check it again.
 """
 
 from __future__ import annotations
