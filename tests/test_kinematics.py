@@ -78,6 +78,28 @@ def test_ik_reaches_fk_targets(robot_name, arm_name):
     assert np.all(arm.within_limits(q[ok]))
 
 
+def test_the_damped_step_is_lapacks_solution():
+    """The IK's damped least-squares step, solved by its own 6 x 6 Cholesky factorisation, against
+    numpy's (LAPACK's) solve of the same system: Jacobians of 6-8 columns, full rank, with a zeroed
+    column (a joint held at its limit) and of rank 3, damping from 1e-4 (the solver's) to 1."""
+    from baseplace.robots.ik import _damped_solve
+
+    rng = np.random.default_rng(4)
+    A, y = np.empty((6, 6)), np.empty(6)
+    for case in range(60):
+        n = 6 + case % 3
+        J = rng.normal(size=(6, n))
+        if case % 4 == 1:
+            J[:, rng.integers(n)] = 0.0
+        elif case % 4 == 2:
+            J = rng.normal(size=(6, 3)) @ rng.normal(size=(3, n))
+        e, lam = rng.normal(size=6), float(10.0 ** rng.uniform(-4, 0))
+        dq = np.empty(n)
+        _damped_solve(J, e, lam, A, y, dq)
+        expected = J.T @ np.linalg.solve(J @ J.T + lam * np.eye(6), e)
+        np.testing.assert_allclose(dq, expected, rtol=1e-7, atol=1e-9 * np.abs(expected).max())
+
+
 def test_ik_from_another_start_and_world_frame(tiago, rng):
     arm = tiago.arm()
     q_true = arm.sample(rng, 1)[0]
