@@ -316,3 +316,48 @@ def test_a_check_budget_stops_planning_before_the_time_limit(tiago, wall_scene):
     assert 200 <= counted[0] <= 200 + line + 2 + 100  # the straight line, the ends, one extension
     with pytest.raises(Exception, match="max_checks"):
         MotionSettings(max_checks=0)
+
+
+def test_the_edge_validator_checks_the_new_end_of_an_edge_from_either_side(tiago, table_goal):
+    """RRTConnect's goal tree asks for edges from a new state to the tree, and the planner's state
+    validity checker no longer checks that state: the edge validator must. A free state and a
+    colliding one a hair apart on the line from stowed into the table (by bisection: one checked
+    state between them) are joined by an edge that is refused whichever end is the tree's, and the
+    free state's edge back to stowed is accepted."""
+    from ompl import base as ob
+
+    from baseplace.placement.motion import _edge_validator
+
+    env = table_goal[0]
+    arm = tiago.arm()
+    motion = MotionChecker(tiago, arm, env)
+    T = np.eye(4)
+    free, hit = (
+        motion.q_start,
+        next(q for q in arm.sample(np.random.default_rng(1), 500) if not motion._free(q, T)),
+    )
+    while np.max(np.abs(hit - free)) > 1e-4:  # the last free state before the first colliding one
+        mid = 0.5 * (free + hit)
+        free, hit = (mid, hit) if motion._free(mid, T) else (free, mid)
+    assert motion.edge_states(free, hit) == 1 and motion._line_free(motion.q_start, free, T)
+    space = ob.RealVectorStateSpace(arm.n_joints)
+    bounds = ob.RealVectorBounds(arm.n_joints)
+    for i in range(arm.n_joints):
+        bounds.setLow(i, float(arm.lower[i]))
+        bounds.setHigh(i, float(arm.upper[i]))
+    space.setBounds(bounds)
+    info = ob.SpaceInformation(space)
+
+    def state(q):  # type: ignore[no-untyped-def]
+        s = space.allocState()
+        for i in range(arm.n_joints):
+            s[i] = float(q[i])
+        return s
+
+    validator = _edge_validator(info, motion, T, (motion.q_start,))
+    assert validator.checkMotion(state(motion.q_start), state(free))  # the start tree grows to `free`
+    assert not validator.checkMotion(state(hit), state(free))  # a goal-tree edge from the new `hit`
+    assert not validator.checkMotion(state(free), state(hit))
+    fresh = _edge_validator(info, motion, T, (free,))
+    assert not fresh.checkMotion(state(hit), state(free))
+    assert not fresh.checkMotion(state(hit), state(hit + 1e-5))  # neither end known: both checked

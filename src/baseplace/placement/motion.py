@@ -634,7 +634,12 @@ class MotionChecker:
         t_end: float,
         stop_at: int | None,
     ) -> FloatArray | None:
-        """One RRTConnect search until the clock reads ``t_end`` or ``stop_at`` transit checks (None: no budget)."""
+        """One RRTConnect search until the clock reads ``t_end`` or ``stop_at`` transit checks (None: no budget).
+
+        ``q0`` and ``q_goal`` must be free (:meth:`joint_path` checks them): with the checker's own
+        edge states the edge validator checks every other state, and the planner's state validity
+        checker nothing.
+        """
         from ompl import base as ob
         from ompl import geometric as og
         from ompl import util as ou
@@ -654,15 +659,19 @@ class MotionChecker:
             def valid(state: object) -> bool:
                 return self._free(np.array([state[i] for i in range(n)]), T_world_base)  # type: ignore[index]
 
-            setup.setStateValidityChecker(valid)
+            def known(state: object) -> bool:  # q0 and q_goal, and what the edge validator checks
+                return True
+
+            own_edges = self.settings.point_step is not None
+            setup.setStateValidityChecker(known if own_edges else valid)
             info = setup.getSpaceInformation()
             validator = None  # referenced here while OMPL calls it
-            if self.settings.point_step is None:  # OMPL's own edge checks, at the joint resolution
+            if not own_edges:  # OMPL's own edge checks, at the joint resolution
                 info.setStateValidityCheckingResolution(
                     self.settings.joint_resolution / space.getMaximumExtent()
                 )
             else:  # our edge states (:meth:`edge_states`), not OMPL's resolution
-                validator = _edge_validator(info, self, T_world_base)
+                validator = _edge_validator(info, self, T_world_base, (q0, q_goal))
                 info.setMotionValidator(validator)
             a, b = space.allocState(), space.allocState()
             for i in range(n):
@@ -738,25 +747,47 @@ def _edge_validator_class() -> type:
     from ompl import base as ob
 
     class EdgeValidator(ob.MotionValidator):
-        """OMPL's edges checked at the checker's edge states (:meth:`MotionChecker.edge_states`)."""
+        """OMPL's edges checked at the checker's edge states (:meth:`MotionChecker.edge_states`), their ends included.
 
-        def __init__(self, info: object, checker: MotionChecker, T_world_base: FloatArray) -> None:
+        OMPL's motion validators may take an edge's first state as valid; RRTConnect asks the state
+        validity checker for it first where it is new (an edge of the goal tree runs from the new
+        state to the tree). Here every state an edge validated is remembered (bytes of its joint
+        values; the start and goal given), and an edge whose first state is new is checked from its
+        other end: the same states (a line's states are those of its reverse), the new one among them,
+        in one compiled call, and the tree's end, already free, not again. So the planner's state
+        validity checker need not check anything (:meth:`MotionChecker._rrt`).
+        """
+
+        def __init__(self, info: object, checker: MotionChecker, T_world_base: FloatArray,
+                     free: tuple[FloatArray, ...]) -> None:  # fmt: skip
             super().__init__(info)
             self.checker, self.T_world_base = checker, T_world_base
             self.n = checker.arm.n_joints
+            self.free = {np.asarray(q, dtype=float).tobytes() for q in free}
 
         def checkMotion(self, s1: object, s2: object, *last_valid: object) -> bool:
             if last_valid:
                 raise NotImplementedError("RRTConnect asks only whether a motion is valid")
             a = np.array([s1[i] for i in range(self.n)])  # type: ignore[index]
             b = np.array([s2[i] for i in range(self.n)])  # type: ignore[index]
-            return self.checker._line_free(a, b, self.T_world_base)
+            key_a, key_b = a.tobytes(), b.tobytes()
+            checker, T = self.checker, self.T_world_base
+            if key_a in self.free:
+                ok = checker._line_free(a, b, T)
+            elif key_b in self.free:
+                ok = checker._line_free(b, a, T)
+            else:
+                ok = checker._free(a, T) and checker._line_free(a, b, T)
+            if ok:
+                self.free.update((key_a, key_b))
+            return ok
 
     return EdgeValidator
 
 
-def _edge_validator(info: object, checker: MotionChecker, T_world_base: FloatArray) -> object:
-    return _edge_validator_class()(info, checker, T_world_base)
+def _edge_validator(info: object, checker: MotionChecker, T_world_base: FloatArray,
+                    free: tuple[FloatArray, ...]) -> object:  # fmt: skip
+    return _edge_validator_class()(info, checker, T_world_base, free)
 
 
 def _contacts_of(environment: Environment, arm: Arm, q: FloatArray, T_world_base: FloatArray, stage: str
