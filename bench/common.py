@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import importlib.util
 import json
+import shutil
 import sys
+import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -28,6 +32,26 @@ def _one_line_input_errors(kind: type[BaseException], error: BaseException, tb: 
 sys.excepthook = _one_line_input_errors
 STARTED = RunClock()
 """Started when a benchmark imports this module, before its work: the run's wall time."""
+
+
+def other_module(root: Path, relative: str, name: str) -> ModuleType:
+    """The module ``baseplace/<relative>`` of the checkout at ``root``, loaded under ``name`` for a paired bench.
+
+    Loaded from a copy in a temporary folder: numba keeps its compiled functions beside the source
+    file, under the name they were loaded with, so a module loaded from the checkout itself under
+    another name would leave that checkout's cache unloadable by its own package.
+    """
+    path = root / "src" / "baseplace" / relative
+    if not path.is_file():
+        raise SystemExit(f"error: no {relative} at {path}: --other must be a checkout's root")
+    copy = Path(tempfile.mkdtemp(prefix="paired_")) / path.name
+    shutil.copyfile(path, copy)
+    spec = importlib.util.spec_from_file_location(name, copy)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module  # dataclasses look their module up by name
+    spec.loader.exec_module(module)
+    return module
 
 
 def median_time(fn: Callable[[], Any], repeats: int = 5) -> float:

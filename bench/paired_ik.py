@@ -28,8 +28,6 @@ Usage: python bench/paired_ik.py --other ../base [--turns 4] [--name paired_ik]
 from __future__ import annotations
 
 import argparse
-import importlib.util
-import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -43,21 +41,8 @@ from baseplace.geometry.poses import FloatArray
 from baseplace.placement.motion import WALK_LIMIT_GAIN
 from baseplace.robots.fk import forward_kinematics
 from baseplace.robots.model import Arm, Robot
-from common import report
+from common import other_module, report
 from find_rate import library_commit
-
-
-def other_ik(root: Path) -> ModuleType:
-    """The IK module of the checkout at ``root``, loaded under a name of its own."""
-    path = root / "src" / "baseplace" / "robots" / "ik.py"
-    if not path.is_file():
-        raise SystemExit(f"error: no IK module at {path}: --other must be a checkout's root")
-    spec = importlib.util.spec_from_file_location("other_ik", path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["other_ik"] = module  # dataclasses look their module up by name
-    spec.loader.exec_module(module)
-    return module
 
 
 def planar_offsets(rng: np.random.Generator, count: int) -> FloatArray:
@@ -135,7 +120,7 @@ def main() -> None:
     args = parser.parse_args()
     if args.turns < 2:
         parser.error("--turns must be >= 2 (the first turn is not counted)")
-    modules = {"this": this_ik, "other": other_ik(args.other)}
+    modules = {"this": this_ik, "other": other_module(args.other, "robots/ik.py", "other_ik")}
     robot = Robot("tiago")
     arm = robot.arm()
     sets = problems(arm)

@@ -21,11 +21,9 @@ Usage: python bench/paired_kernel.py --other ../base [--results motion_verdicts_
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import time
 from pathlib import Path
-from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -36,24 +34,12 @@ from baseplace.placement.motion import MotionChecker, MotionSettings
 from baseplace.reachability.cache import resolve_map
 from baseplace.robots.model import Robot
 from bench_motion_verdicts import check_seed, row_models
-from common import RESULTS, report
+from common import RESULTS, other_module, report
 from find_rate import library_commit
 from profile_motion_stages import held_out_seeds
 
 SWAPPED = ("_uncertified_line", "_uncertified_states")
 """The kernel entry points the state filter calls."""
-
-
-def other_kernel(root: Path) -> ModuleType:
-    """The state kernel module of the checkout at ``root``, loaded under a name of its own."""
-    path = root / "src" / "baseplace" / "world" / "state_kernel.py"
-    if not path.is_file():
-        raise SystemExit(f"error: no state kernel at {path}: --other must be a checkout's root")
-    spec = importlib.util.spec_from_file_location("other_state_kernel", path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def main() -> None:
@@ -68,7 +54,10 @@ def main() -> None:
     rows = json.loads((RESULTS / f"{args.results}.json").read_text())["checks"]
     if held_out_seeds() & {row["seed"] for row in rows}:
         parser.error(f"{args.results} holds held-out seeds")
-    kernels = {"this": this_kernel, "other": other_kernel(args.other)}
+    kernels = {
+        "this": this_kernel,
+        "other": other_module(args.other, "world/state_kernel.py", "other_state_kernel"),
+    }
     robot = Robot("tiago")
     arm = robot.arm(resolve_map(robot, None).rmap.info.arm)
     models: dict[tuple[Any, ...], Any] = {}

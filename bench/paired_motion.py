@@ -21,12 +21,9 @@ Usage: python bench/paired_motion.py --other ../base [--results motion_verdicts_
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
-import sys
 import time
 from pathlib import Path
-from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -35,22 +32,9 @@ from baseplace.placement.motion import MotionChecker, MotionSettings
 from baseplace.reachability.cache import resolve_map
 from baseplace.robots.model import Robot
 from bench_motion_verdicts import check_seed, row_models
-from common import RESULTS, report
+from common import RESULTS, other_module, report
 from find_rate import library_commit
 from profile_motion_stages import held_out_seeds
-
-
-def load(root: Path, relative: str, name: str) -> ModuleType:
-    """The module at ``root/src/baseplace/<relative>``, loaded as ``name``."""
-    path = root / "src" / "baseplace" / relative
-    if not path.is_file():
-        raise SystemExit(f"error: no {relative} at {path}: --other must be a checkout's root")
-    spec = importlib.util.spec_from_file_location(name, path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module  # dataclasses look their module up by name
-    spec.loader.exec_module(module)
-    return module
 
 
 def same(a: Any, b: Any) -> bool:
@@ -77,8 +61,8 @@ def main() -> None:
     rows = json.loads((RESULTS / f"{args.results}.json").read_text())["checks"]
     if held_out_seeds() & {row["seed"] for row in rows}:
         parser.error(f"{args.results} holds held-out seeds")
-    other_ik = load(args.other, "robots/ik.py", "other_ik")
-    other_motion = load(args.other, "placement/motion.py", "other_motion")
+    other_ik = other_module(args.other, "robots/ik.py", "other_ik")
+    other_motion = other_module(args.other, "placement/motion.py", "other_motion")
     other_motion.DampedLeastSquaresIK = other_ik.DampedLeastSquaresIK  # type: ignore[attr-defined]
     checkers = {
         "this": (MotionChecker, MotionSettings),
