@@ -302,7 +302,7 @@ def _add_motion_and_robustness_arguments(p: argparse.ArgumentParser) -> None:
                    help="return the most robust placements first (default: the method's order)")  # fmt: skip
     p.add_argument("--robustness-motion", action="store_true",
                    help="a base-error draw counts only if the reaching motion from it exists too "
-                        "(one motion check per draw: about a second per draw)")  # fmt: skip
+                        "(one motion check per draw: about 40 ms each on PCL's mug, 2.6 s for 64 draws)")  # fmt: skip
     p.add_argument("--min-robustness", type=float, default=0.0,
                    help="reject placements whose robustness is below this fraction (default 0)")  # fmt: skip
     p.add_argument("--error-model", default="gaussian", choices=["gaussian", "box"],
