@@ -10,12 +10,11 @@ import argparse
 import time
 
 import numpy as np
-import pinocchio as pin
 
 from baseplace.robots.fk import forward_kinematics
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Robot
-from common import report
+from common import reaches, report
 
 
 def main() -> None:
@@ -30,19 +29,13 @@ def main() -> None:
     targets = forward_kinematics(arm, arm.sample(rng, args.n))
     ik = DampedLeastSquaresIK(arm)
     ik.solve(targets[0], rng)  # compile
-    model, data = robot.model, robot.model.createData()
-    base, tcp = model.getFrameId(arm.base_frame), model.getFrameId(arm.tcp_frame)
+    data = robot.model.createData()
     times, ok = [], 0
     for T in targets:
         start = time.perf_counter()
         q = ik.solve(T, rng)
         times.append(time.perf_counter() - start)
-        if q is None:
-            continue
-        pin.framesForwardKinematics(model, data, arm.to_pinocchio(q, robot.q_reference))
-        reached = (data.oMf[base].inverse() * data.oMf[tcp]).homogeneous
-        rot = np.arccos(np.clip((np.trace(reached[:3, :3].T @ T[:3, :3]) - 1) / 2, -1, 1))
-        ok += bool(np.linalg.norm(reached[:3, 3] - T[:3, 3]) < 1e-4 + 1e-9 and rot < 1e-3 + 1e-9)
+        ok += q is not None and reaches(robot, arm, q, T, data)
     ms = np.array(times) * 1e3
     report(
         f"ik_{args.robot}_{arm.name}",

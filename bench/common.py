@@ -54,6 +54,23 @@ def other_module(root: Path, relative: str, name: str) -> ModuleType:
     return module
 
 
+def reaches(robot: Any, arm: Any, q: Any, T: Any, data: Any = None) -> bool:
+    """Whether pinocchio's FK puts the TCP of arm joint values ``q`` (n,) within the IK's tolerances
+    (1e-4 m, 1e-3 rad) of ``T`` (4, 4), both in the arm's base frame: the oracle of the IK benches.
+
+    ``data``: a ``robot.model.createData()`` to reuse (a new one if None).
+    """
+    import pinocchio as pin
+
+    model = robot.model
+    data = model.createData() if data is None else data
+    pin.framesForwardKinematics(model, data, arm.to_pinocchio(q, robot.q_reference))
+    base, tcp = model.getFrameId(arm.base_frame), model.getFrameId(arm.tcp_frame)
+    reached = (data.oMf[base].inverse() * data.oMf[tcp]).homogeneous
+    rot = np.arccos(np.clip((np.trace(reached[:3, :3].T @ T[:3, :3]) - 1) / 2, -1, 1))
+    return bool(np.linalg.norm(reached[:3, 3] - T[:3, 3]) < 1e-4 + 1e-9 and rot < 1e-3 + 1e-9)
+
+
 def median_time(fn: Callable[[], Any], repeats: int = 5) -> float:
     """Median wall time [s] of ``repeats`` calls (the machine is shared and noisy)."""
     times = []

@@ -41,7 +41,7 @@ from baseplace.geometry.poses import FloatArray
 from baseplace.placement.motion import WALK_LIMIT_GAIN
 from baseplace.robots.fk import forward_kinematics
 from baseplace.robots.model import Arm, Robot
-from common import other_module, report
+from common import other_module, reaches, report
 from find_rate import library_commit
 
 
@@ -151,20 +151,9 @@ def main() -> None:
 
 
 def fk_checked(robot: Robot, arm: Arm, answers: list[Answer]) -> int:
-    """How many solutions pinocchio's FK puts within the solver's tolerances (1e-4 m, 1e-3 rad) of their targets."""
-    import pinocchio as pin
-
-    model, data = robot.model, robot.model.createData()
-    base, tcp = model.getFrameId(arm.base_frame), model.getFrameId(arm.tcp_frame)
-    good = 0
-    for T, q in answers:
-        if q is None:
-            continue
-        pin.framesForwardKinematics(model, data, arm.to_pinocchio(q, robot.q_reference))
-        reached = (data.oMf[base].inverse() * data.oMf[tcp]).homogeneous
-        rot = np.arccos(np.clip((np.trace(reached[:3, :3].T @ T[:3, :3]) - 1) / 2, -1, 1))
-        good += bool(np.linalg.norm(reached[:3, 3] - T[:3, 3]) < 1e-4 + 1e-9 and rot < 1e-3 + 1e-9)
-    return good
+    """How many solutions pinocchio's FK puts within the solver's tolerances of their targets."""
+    data = robot.model.createData()
+    return sum(reaches(robot, arm, q, T, data) for T, q in answers if q is not None)
 
 
 if __name__ == "__main__":

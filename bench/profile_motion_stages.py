@@ -53,6 +53,7 @@ from baseplace.reachability.cache import resolve_map
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Robot
 from bench_motion_verdicts import PROTOCOLS, check_seed, row_models
+from find_rate import library_commit
 
 RESULTS = Path(__file__).parent / "results"
 
@@ -175,6 +176,93 @@ def print_kernel_split(batches: list[tuple[Any, FloatArray, FloatArray]], checks
 def held_out_seeds() -> set[int]:
     """The table-grid seeds no development bench may replay: the execution protocol's and every motion protocol's."""
     return {*range(3, 38), *(seed for _, seeds in PROTOCOLS.values() for seed in seeds)}
+
+
+def paired_arguments(doc: str, turns: int, name: str) -> tuple[argparse.Namespace, list[dict[str, Any]]]:
+    """The paired benches' arguments (``--other``, ``--results``, ``--turns``, ``--name``) and the checks of ``--results``.
+
+    Refused (exit 2) with fewer than 2 turns or a results file that holds held-out seeds.
+    """
+    parser = argparse.ArgumentParser(description=doc.split("\n\n")[0])
+    parser.add_argument("--other", type=Path, required=True, help="the other checkout's root")
+    parser.add_argument("--results", default="motion_verdicts_s17_final_a", help="bench/results/NAME.json")
+    parser.add_argument("--turns", type=int, default=turns, help="turns per checkout and check (>= 2)")
+    parser.add_argument("--name", default=name, help="results file bench/results/NAME.json")
+    args = parser.parse_args()
+    if args.turns < 2:
+        parser.error("--turns must be >= 2 (the first turn is not counted)")
+    rows = json.loads((RESULTS / f"{args.results}.json").read_text())["checks"]
+    if held_out_seeds() & {row["seed"] for row in rows}:
+        parser.error(f"{args.results} holds held-out seeds")
+    return args, rows
+
+
+def paired_checks(args: argparse.Namespace, rows: list[dict[str, Any]], side: Callable[[str], tuple[Any, Any]]
+                  ) -> dict[str, Any]:  # fmt: skip
+    """The paired benches' run: per check of ``rows``, the two sides take ``args.turns`` turns each.
+
+    ``side(name)`` readies side ``name`` ("this" or "other") for a turn and returns its motion
+    checker and settings classes; the first turn of each side is not counted (caches), the
+    fastest of the others is kept. Returns what the bench reports: the summary (medians, means,
+    the per-check ratio's median and quartiles, motions found in the last turn, checks with the
+    same answer: no motion in both, or the same path and approach to 1e-9 rad), the times and
+    both checkouts' commits.
+    """
+    robot = Robot("tiago")
+    arm = robot.arm(resolve_map(robot, None).rmap.info.arm)
+    models: dict[tuple[Any, ...], Any] = {}
+    best: dict[str, list[float]] = {"this": [], "other": []}
+    found = {"this": 0, "other": 0}
+    agree = 0
+    for row in rows:
+        key = (row["seed"], tuple(row["cell"]), row["grasp"])
+        if key not in models:
+            models[key] = row_models(robot, arm.name, row)[:2]
+        seed = check_seed(row["seed"], tuple(row["cell"]), row["grasp"], row["placement"])
+        q, T_base, target = (np.array(row[k]) for k in ("q_grasp", "T_world_base", "target"))
+        fastest = {"this": np.inf, "other": np.inf}
+        answer: dict[str, Any] = {}
+        for turn in range(2 * args.turns):
+            name = ("this", "other")[turn % 2]
+            checker_class, settings_class = side(name)
+            checker = checker_class(robot, arm, *models[key], settings_class())
+            t = time.perf_counter()
+            answer[name] = checker.check(q, T_base, target, seed=seed)
+            wall = time.perf_counter() - t
+            if turn >= 2:
+                fastest[name] = min(fastest[name], wall * 1e3)
+        for name in best:
+            best[name].append(fastest[name])
+            found[name] += answer[name] is not None
+        agree += _same_answer(answer["this"], answer["other"])
+    side("this")
+    a, b = np.array(best["this"]), np.array(best["other"])
+    ratio = a / b
+    summary = {
+        "checks": len(a),
+        "found": found,
+        "same_answer": agree,
+        "median_ms": {"this": float(np.median(a)), "other": float(np.median(b))},
+        "mean_ms": {"this": float(a.mean()), "other": float(b.mean())},
+        "ratio_median": float(np.median(ratio)),
+        "ratio_quartiles": [float(x) for x in np.quantile(ratio, [0.25, 0.75])],
+    }
+    print(summary)
+    other = library_commit(args.other / "src" / "baseplace")
+    return {"inputs": args.results, "turns": args.turns, "other": other, "library": library_commit(),
+            "summary": summary, "ms": best}  # fmt: skip
+
+
+def _same_answer(a: Any, b: Any) -> bool:
+    """Whether two motion checks' answers agree: both none, or the same path and approach."""
+    if a is None or b is None:
+        return a is None and b is None
+    return bool(
+        a.path.shape == b.path.shape
+        and a.approach.shape == b.approach.shape
+        and np.allclose(a.path, b.path, rtol=0.0, atol=1e-9)
+        and np.allclose(a.approach, b.approach, rtol=0.0, atol=1e-9)
+    )
 
 
 def main() -> None:
