@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import atexit
 import importlib.util
 import json
 import shutil
@@ -44,7 +45,9 @@ def other_module(root: Path, relative: str, name: str) -> ModuleType:
     path = root / "src" / "baseplace" / relative
     if not path.is_file():
         raise SystemExit(f"error: no {relative} at {path}: --other must be a checkout's root")
-    copy = Path(tempfile.mkdtemp(prefix="paired_")) / path.name
+    folder = tempfile.mkdtemp(prefix="paired_")
+    atexit.register(shutil.rmtree, folder, ignore_errors=True)
+    copy = Path(folder) / path.name
     shutil.copyfile(path, copy)
     spec = importlib.util.spec_from_file_location(name, copy)
     assert spec is not None and spec.loader is not None
