@@ -44,7 +44,8 @@ def other_module(root: Path, relative: str, name: str) -> ModuleType:
     """
     path = root / "src" / "baseplace" / relative
     if not path.is_file():
-        raise SystemExit(f"error: no {relative} at {path}: --other must be a checkout's root")
+        sys.stderr.write(f"error: no {relative} at {path}: --other must be a checkout's root\n")
+        raise SystemExit(2)
     folder = tempfile.mkdtemp(prefix="paired_")
     atexit.register(shutil.rmtree, folder, ignore_errors=True)
     copy = Path(folder) / path.name
