@@ -178,6 +178,15 @@ def held_out_seeds() -> set[int]:
     return {*range(3, 38), *(seed for _, seeds in PROTOCOLS.values() for seed in seeds)}
 
 
+def development_checks(parser: argparse.ArgumentParser, results: str) -> list[dict[str, Any]]:
+    """The checks of results file ``results`` (``bench_motion_verdicts.py``'s); refused (exit 2) if it holds held-out seeds."""
+    rows: list[dict[str, Any]] = json.loads((RESULTS / f"{results}.json").read_text())["checks"]
+    held = held_out_seeds() & {row["seed"] for row in rows}
+    if held:
+        parser.error(f"{results} holds held-out seeds {sorted(held)}")
+    return rows
+
+
 def paired_arguments(doc: str, turns: int, name: str) -> tuple[argparse.Namespace, list[dict[str, Any]]]:
     """The paired benches' arguments (``--other``, ``--results``, ``--turns``, ``--name``) and the checks of ``--results``.
 
@@ -191,10 +200,7 @@ def paired_arguments(doc: str, turns: int, name: str) -> tuple[argparse.Namespac
     args = parser.parse_args()
     if args.turns < 2:
         parser.error("--turns must be >= 2 (the first turn is not counted)")
-    rows = json.loads((RESULTS / f"{args.results}.json").read_text())["checks"]
-    if held_out_seeds() & {row["seed"] for row in rows}:
-        parser.error(f"{args.results} holds held-out seeds")
-    return args, rows
+    return args, development_checks(parser, args.results)
 
 
 def paired_checks(args: argparse.Namespace, rows: list[dict[str, Any]], side: Callable[[str], tuple[Any, Any]]
@@ -275,12 +281,7 @@ def main() -> None:
         "--kernel-split", action="store_true", help="time the pre-filter per state, split (docstring)"
     )
     args = parser.parse_args()
-    rows = json.loads((RESULTS / f"{args.results}.json").read_text())["checks"]
-    held_out = held_out_seeds()
-    if held_out & {row["seed"] for row in rows}:
-        parser.error(
-            f"{args.results} holds held-out seeds {sorted(held_out & {row['seed'] for row in rows})}"
-        )
+    rows = development_checks(parser, args.results)
     robot = Robot("tiago")
     rmap = resolve_map(robot, None).rmap
     arm = robot.arm(rmap.info.arm)
