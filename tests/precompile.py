@@ -53,7 +53,7 @@ def maps(robot: Robot) -> None:
 
 
 def motion(robot: Robot) -> None:
-    """The state kernel: states and lines against a table scene, in both collision models."""
+    """The state kernel: states, lines and contact proofs against a table scene, in both collision models."""
     from test_state_filter import _environments
 
     arm = robot.arm()
@@ -64,7 +64,9 @@ def motion(robot: Robot) -> None:
     Q = arm.sample(rng, 2)
     for env in (transit, approach):
         env.colliding_arm(arm, Q[0], T_base)
-        env.state_filter(arm).first_colliding_line(Q[0], Q[1], 8, 0.5, T_base)
+        flt = env.state_filter(arm)
+        flt.first_colliding_line(Q[0], Q[1], 8, 0.5, T_base)
+        flt._touch_proven(Q[0], np.ones(len(flt._scene_rows), dtype=np.bool_), T_base @ flt._T_base_armbase)
 
 
 if __name__ == "__main__":

@@ -22,6 +22,7 @@ from baseplace.placement.scene_cache import SceneCache
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.world.environment import Environment
 from baseplace.world.state_filter import StateFilter
+from baseplace.world.state_kernel import _arm_centres
 from baseplace_experiments.execution_experiment import trial_scene
 from baseplace_experiments.table_grid import TableGridSettings
 
@@ -124,7 +125,7 @@ def table_states(tiago):
 
 def test_verdicts_are_coals_on_table_scenes(tiago, table_states):
     arm = tiago.arm()
-    total, colliding, coal_pairs = 0, 0, 0
+    total, colliding, coal_pairs, proven = 0, 0, 0, 0
     for env, T_base, states in table_states:
         fast = np.array([env.colliding_arm(arm, q, T_base) for q in states])
         exact = np.array([env.colliding_arm_exact(arm, q, T_base) for q in states])
@@ -135,9 +136,12 @@ def test_verdicts_are_coals_on_table_scenes(tiago, table_states):
         total += len(states)
         colliding += int(exact.sum())
         coal_pairs += env.state_filter(arm).coal_pairs
+        proven += env.state_filter(arm).proven_states
     assert total >= 2000
     assert 0.2 * total < colliding < 0.8 * total  # both verdicts, many states at contact
     assert coal_pairs > 0  # the near states reach coal
+    assert proven > 0.1 * colliding  # and witness balls decide many contacts without it
+    print(f"{total} states, {colliding} touching, {proven} proven by witness balls")
 
 
 def test_contacts_unchanged(tiago, table_states):
@@ -185,8 +189,12 @@ def _surface_points(geometry):
     return np.asarray(geometry.vertices(), dtype=float).reshape(-1, 3)
 
 
-def test_bounding_spheres_hold_their_geometry(tiago):
-    """Every TIAGo collision geometry, placed by pinocchio FK, lies in the sphere the filter places."""
+def _placed_states(tiago, seed, n):
+    """TIAGo's filter (no scene) and n random arm states, each with the geometries placed by pinocchio FK.
+
+    Yields (filter, geometry model, arm state, the arm's base in the world (4, 4), per geometry
+    its world pose (pin.SE3)) at one base pose.
+    """
     arm = tiago.arm()
     env = Environment(tiago, {}, self_collision=False)
     filt = env.state_filter(arm)
@@ -194,20 +202,55 @@ def test_bounding_spheres_hold_their_geometry(tiago):
     data, gdata = model.createData(), pin.GeometryData(geom)
     T_base = pose_from_xyz_rpy([0.4, -0.3, 0.0, 0.0, 0.0, 0.7])
     T_world_root = pin.SE3(T_base) * env._T_root_base.inverse()
-    points = [_surface_points(obj.geometry) for obj in geom.geometryObjects]
-    worst = -np.inf
-    for q in arm.sample(np.random.default_rng(3), 50):
+    for q in arm.sample(np.random.default_rng(seed), n):
         pin.updateGeometryPlacements(model, data, geom, gdata, arm.to_pinocchio(q, tiago.q_reference))
+        placed = [T_world_root * gdata.oMg[k] for k in range(len(geom.geometryObjects))]
+        yield filt, geom, q, T_base @ filt._T_base_armbase, placed
+
+
+def test_bounding_spheres_hold_their_geometry(tiago):
+    """Every TIAGo collision geometry, placed by pinocchio FK, lies in the sphere the filter places."""
+    worst, points = -np.inf, None
+    for filt, geom, q, T, placed in _placed_states(tiago, 3, 50):
+        points = points or [_surface_points(obj.geometry) for obj in geom.geometryObjects]
         C = filt.centres(q)
-        T = T_base @ filt._T_base_armbase
         C_world = C @ T[:3, :3].T + T[:3, 3]
         for k, P in enumerate(points):
-            M = T_world_root * gdata.oMg[k]
+            M = placed[k]
             p_world = P @ M.rotation.T + M.translation
             gap = np.linalg.norm(p_world - C_world[k], axis=1).max() - filt.radius[k]
             worst = max(worst, gap)
     assert worst <= 1e-9, f"a geometry point lies {worst} m outside its bounding sphere"
-    assert len(points) == len(filt.radius) == 64
+    assert points is not None and len(points) == len(filt.radius) == 64
+
+
+def test_contact_balls_lie_within_their_geometry(tiago):
+    """Every witness ball, placed by the filter's joint frames, lies within its geometry as coal, placed by pinocchio FK, finds it.
+
+    The oracle: coal's signed distance from a tiny sphere at the ball's centre to the geometry
+    (inside a solid: minus the depth) is at most minus the ball's radius (a mesh's: 0, a point of
+    its surface).
+    """
+    arm = tiago.arm()
+    tiny, request = coal.Sphere(1e-6), coal.DistanceRequest()
+    worst, solid = -np.inf, 0
+    for filt, geom, q, T, placed in _placed_states(tiago, 5, 10):
+        start, local, radius = filt._contact_balls
+        owner = np.repeat(np.arange(len(start) - 1), np.diff(start))
+        C = np.empty_like(local)
+        _arm_centres(q, arm.placements, arm.axes, arm.kinds, filt.joint[owner], local, C)
+        C_world = C @ T[:3, :3].T + T[:3, 3]
+        for b, k in enumerate(owner.tolist()):
+            M = placed[k]
+            result = coal.DistanceResult()
+            d = coal.distance(
+                geom.geometryObjects[k].geometry, coal.Transform3s(M.rotation, M.translation), tiny,
+                coal.Transform3s(np.eye(3), C_world[b]), request, result,
+            )  # fmt: skip
+            worst = max(worst, d + 1e-6 + radius[b])
+            solid += radius[b] > 0
+    assert worst <= 1e-6, f"a witness ball reaches {worst} m outside its geometry"
+    assert len(start) == 65 and solid > 0 and len(radius) > 64
 
 
 def test_moving_geometries_are_the_arms(tiago):

@@ -13,6 +13,9 @@ the filter's setup packed; nothing here allocates more than per-call scratch spa
 state: a pair certified by a distance bound keeps the margin while its geometries move less than
 the gap, so along a line whose every point's move is bounded (the lever arms) most pairs are asked
 at few states (conservative advancement). Both run the one state check of :func:`_uncertified`.
+
+:func:`_touch_proven` is the other direction: a state's scene pairs left over proven touching by
+balls inside the robot's geometries, so that coal need not be asked.
 """
 
 from __future__ import annotations
@@ -908,3 +911,90 @@ def _transformed_poses(C, T, out):
         for k in range(C.shape[0]):
             for a in range(3):
                 out[s, k, a] = T[s, a, 0] * C[k, 0] + T[s, a, 1] * C[k, 1] + T[s, a, 2] * C[k, 2] + T[s, a, 3]
+
+
+@nb.njit(cache=True)
+def _touch_proven(q, placements, axes, kinds, joint, T, left, scene_rows, limit, parts, offs, all_points, all_keys,
+                  all_starts, geo, ints, box_half, planes, ball_start, ball_local, ball_radius):  # fmt: skip
+    """Whether a ball inside a robot geometry proves one of the scene pairs ``left`` (P,) touching at arm state q (n,).
+
+    Coal's verdict on those pairs is then True without asking coal: a pair touches when its
+    geometries come closer than its margin, and a ball (centre, radius) that lies within a robot
+    geometry (:func:`~baseplace.world.state_filter.contact_balls`, ``ball_*`` per geometry, placed
+    by the arm's chain and ``T``, the arm's base in the world) and whose centre is closer to the
+    scene part than ``limit[p]`` (the margin less a depth for rounding) plus its radius brings the
+    geometry that close (a point's distance bounds the geometry's; a ball inside the part by a
+    depth must move that depth plus its radius to leave it). The centre's signed distance is exact
+    against an OcTree part's boxes (kind 0, ``box_half[q]`` the half side of every box, 0 where
+    they are not all one size: not asked) and, inside it, against a convex part's planes (kind 1;
+    outside, the planes bound it from below only); a part of kind 2 (only its bounding ball is
+    known) is not asked. False says nothing: coal decides.
+    """
+    F = np.empty((q.shape[0], 3, 4))
+    R, t = np.empty((3, 3)), np.empty(3)
+    _joint_frames(q, placements, axes, kinds, F, R, t)
+    x, w = np.empty(3), np.empty(3)
+    for q_ in range(parts.shape[0]):
+        kind, pa, pb, r0, r1 = parts[q_, 0], parts[q_, 1], parts[q_, 2], parts[q_, 3], parts[q_, 4]
+        if kind == 2 or (kind == 0 and not box_half[q_] > 0.0):
+            continue
+        pts = all_points[offs[q_, 0] : offs[q_ + 1, 0]]
+        keys = all_keys[offs[q_, 1] : offs[q_ + 1, 1]]
+        starts = all_starts[offs[q_, 2] : offs[q_ + 1, 2]]
+        lo, cell, dims = geo[q_, 0:3], geo[q_, 6], ints[q_, 0:3]
+        for p in range(r0, r1):
+            if not left[p]:
+                continue
+            g = scene_rows[p]
+            for s in range(ball_start[g], ball_start[g + 1]):
+                _place_one(joint[g], ball_local[s], F, x)
+                for a in range(3):
+                    w[a] = T[a, 0] * x[0] + T[a, 1] * x[1] + T[a, 2] * x[2] + T[a, 3]
+                bound = limit[p] + ball_radius[s]
+                if kind == 0:
+                    if _box_closer(w, bound, box_half[q_], pts, keys, starts, lo, cell, dims):
+                        return True
+                    continue
+                inside = -np.inf
+                for h in range(pa, pb):
+                    inside = max(
+                        inside, planes[h, 0] * w[0] + planes[h, 1] * w[1] + planes[h, 2] * w[2] + planes[h, 3]
+                    )
+                if inside <= 0.0 and inside < bound:
+                    return True
+    return False
+
+
+@nb.njit(cache=True)
+def _box_closer(c, bound, h, points, keys, starts, lo, cell, dims):
+    """Whether c (3,) has a signed distance below ``bound`` [m] to an axis-aligned cube of half side h centred at one of the points.
+
+    Outside a cube the distance is exact (the norm of how far c lies beyond each face pair),
+    inside it the negative depth (to the nearest face). The cubes' centres within ``bound`` plus
+    their half diagonal are the candidates, walked as :func:`~baseplace.world.point_index._within` walks them.
+    """
+    e = bound + h * 1.7320508075688772
+    if not e > 0.0 or len(points) == 0:
+        return False
+    i0, i1, j0, j1, k0, k1 = _cell_range(c, e + 1e-9, lo, cell, dims)
+    u = 0
+    for k in range(k0, k1 + 1):
+        for jj in range(j0, j1 + 1):
+            row = dims[0] * (jj + dims[1] * k)
+            u = _seek(keys, u, row + i0)
+            while u < len(keys) and keys[u] <= row + i1:
+                for p in range(starts[u], starts[u + 1]):
+                    dx, dy, dz = (
+                        abs(points[p, 0] - c[0]) - h,
+                        abs(points[p, 1] - c[1]) - h,
+                        abs(points[p, 2] - c[2]) - h,
+                    )
+                    if dx <= 0.0 and dy <= 0.0 and dz <= 0.0:
+                        if max(dx, dy, dz) < bound:
+                            return True
+                        continue
+                    d2 = max(dx, 0.0) ** 2 + max(dy, 0.0) ** 2 + max(dz, 0.0) ** 2
+                    if bound > 0.0 and d2 < bound * bound:
+                        return True
+                u += 1
+    return False
