@@ -29,8 +29,14 @@ from baseplace.placement.motion import MotionChecker, MotionSettings
 from common import other_module, report
 from profile_motion_stages import paired_arguments, paired_checks
 
-SWAPPED = ("_uncertified_line", "_uncertified_states")
-"""The kernel entry points the state filter calls."""
+SWAPPED = ("_uncertified_line", "_uncertified_states", "_touch_proven")
+"""The kernel entry points the state filter calls. A kernel without ``_touch_proven`` (before
+session 35) proved no contact: coal decided every state the spheres left (:func:`_no_proof`)."""
+
+
+def _no_proof(*args: Any) -> bool:
+    """A state kernel's contact proof where it had none: nothing proven, coal decides."""
+    return False
 
 
 def main() -> None:
@@ -42,7 +48,7 @@ def main() -> None:
 
     def side(name: str) -> tuple[Any, Any]:
         for entry in SWAPPED:
-            setattr(state_filter, entry, getattr(kernels[name], entry))
+            setattr(state_filter, entry, getattr(kernels[name], entry, _no_proof))
         return MotionChecker, MotionSettings
 
     report(args.name, paired_checks(args, rows, side))
