@@ -11,14 +11,17 @@ stowed configuration (the arm beside the torso).
 
 from __future__ import annotations
 
+import coal
 import numpy as np
 import pinocchio as pin
 import pytest
+from scipy.spatial import ConvexHull
+from scipy.spatial.transform import Rotation
 
 from baseplace.placement.motion import stowed_configuration
 from baseplace.robots.spheres import _joint_frames, _place
 from baseplace.world.environment import Environment
-from baseplace.world.state_filter import _no_anchors
+from baseplace.world.state_filter import _distinct_planes, _edge_planes, _no_anchors
 from baseplace.world.state_kernel import _hull_points_clear, _uncertified_states
 from test_state_filter import table_scene_states
 
@@ -154,3 +157,41 @@ def test_hull_points_margin_is_below_coals_distance(tiago):
     assert certified > 1000, certified
     assert min(by_hint, by_centre) > 100, (by_hint, by_centre)  # both ways of finding a plane at work
     assert column_cleared >= 0.9 * len(near), column_cleared
+
+
+def test_edge_planes_support_the_hull_and_clear_a_link_beside_a_rim():
+    """A convex part's edge planes hold its hull at or below 0, and a box they clear is as far by coal.
+
+    A table top (1.2 x 0.8 x 0.05 m) and a 6 cm cube placed at random around its rim, turned at
+    random: wherever all the cube's corners lie more than 1 cm beyond one edge plane, coal's
+    distance between the two is more than 1 cm. The planes must also do their work: some cubes
+    beside the rim are cleared by an edge plane and by no face plane.
+    """
+    V = np.array([[x, y, z] for x in (-0.6, 0.6) for y in (-0.4, 0.4) for z in (0.7, 0.75)])
+    planes = _distinct_planes(ConvexHull(V).equations)
+    edges = _edge_planes(V, planes)
+    assert len(planes) == 6 and len(edges) == 12
+    values = V @ edges[:, :3].T + edges[:, 3]
+    assert np.all(values <= 1e-12) and np.all(
+        (np.abs(values) <= 1e-12).sum(axis=0) == 2
+    )  # each through one edge
+    table, cube = coal.Box(1.2, 0.8, 0.05), coal.Box(0.06, 0.06, 0.06)
+    at_table = coal.Transform3s(np.eye(3), np.array([0.0, 0.0, 0.725]))
+    corners = np.array([[x, y, z] for x in (-0.03, 0.03) for y in (-0.03, 0.03) for z in (-0.03, 0.03)])
+    rng = np.random.default_rng(11)
+    reach, by_edges = 0.01, 0
+    for _ in range(2000):
+        R = Rotation.random(random_state=rng).as_matrix()
+        t = np.array(
+            [rng.uniform(-0.75, 0.75), rng.choice([-1, 1]) * rng.uniform(0.35, 0.5), rng.uniform(0.62, 0.8)]
+        )
+        C = corners @ R.T + t
+        by_face = np.any(np.all(C @ planes[:, :3].T + planes[:, 3] > reach, axis=0))
+        by_edge = np.any(np.all(C @ edges[:, :3].T + edges[:, 3] > reach, axis=0))
+        if by_edge:
+            d = coal.distance(
+                cube, coal.Transform3s(R, t), table, at_table, coal.DistanceRequest(), coal.DistanceResult()
+            )
+            assert d > reach, f"a cube at {t} cleared by an edge plane is {d} m from the table"
+            by_edges += not by_face
+    assert by_edges > 50

@@ -285,6 +285,7 @@ class _Part:
         self.margin: list[float] = []  # and security margin [m]
         self.indexes: list[tuple[PointIndex, float]] = []  # OcTree: (box centres, half diagonal)
         self.planes: FloatArray | None = None  # convex: (H, 4) unit normal, offset (inside: <= 0)
+        self.edges = np.zeros((0, 4))  # convex: a supporting plane at each edge (:func:`_edge_planes`)
         self.sphere: tuple[FloatArray, float] | None = None  # anything else: its bounding sphere
         if isinstance(geometry, coal.OcTree):
             self.indexes = _box_indexes(geometry)
@@ -293,6 +294,7 @@ class _Part:
         if vertices is not None and len(vertices) >= 4:
             world = vertices @ T_world_part[:3, :3].T + T_world_part[:3, 3]
             self.planes = _distinct_planes(ConvexHull(world).equations)  # unit normals
+            self.edges = _edge_planes(world, self.planes)
             return
         c, r = bounding_sphere(geometry)
         self.sphere = (T_world_part[:3, :3] @ c + T_world_part[:3, 3], r)
@@ -300,7 +302,7 @@ class _Part:
     def subset(self, keep: list[int], radius: FloatArray) -> _Part:
         """This part with only its pairs ``keep`` (indices into its pairs), finished (:meth:`finish`)."""
         out = _Part.__new__(_Part)
-        out.indexes, out.planes, out.sphere = self.indexes, self.planes, self.sphere
+        out.indexes, out.planes, out.edges, out.sphere = self.indexes, self.planes, self.edges, self.sphere
         out.robot = [self.robot[n] for n in keep]
         out.pair = [self.pair[n] for n in keep]
         out.margin = [self.margin[n] for n in keep]
@@ -566,6 +568,28 @@ def _distinct_planes(equations: FloatArray) -> FloatArray:
     """
     distinct = np.unique(equations, axis=0)
     return np.ascontiguousarray(distinct[np.argsort(-distinct[:, 2], kind="stable")])
+
+
+def _edge_planes(vertices: FloatArray, planes: FloatArray) -> FloatArray:
+    """(E, 4) a supporting plane at each edge of the convex hull of ``vertices`` (k, 3) with face planes ``planes``.
+
+    Its normal halves the angle between the two faces that meet at the edge (two planes that
+    share two or more of the vertices), its offset puts every vertex on its inner side
+    (``-max(vertices @ n)``): like a face plane it keeps the whole hull at or below 0, so a point
+    set beyond one by a margin is that far from the hull. Where the closest points of a link and
+    the hull are the hull's edge (an arm beside a table's rim), no face plane separates the two
+    and this plane may (:func:`~baseplace.world.state_kernel._vertices_outside`).
+    """
+    on = np.abs(vertices @ planes[:, :3].T + planes[:, 3]) <= 1e-9 * max(1.0, float(np.abs(vertices).max()))
+    shared = on.T.astype(np.int64) @ on.astype(np.int64)
+    out = []
+    for i, j in zip(*np.nonzero(np.triu(shared >= 2, k=1)), strict=True):
+        n = planes[i, :3] + planes[j, :3]
+        norm = np.linalg.norm(n)
+        if norm > 1e-6:  # not two opposite faces of a flat hull
+            n = n / norm
+            out.append([*n, -float(np.max(vertices @ n))])
+    return np.array(out, dtype=float).reshape(-1, 4)
 
 
 def _moved_planes(planes: FloatArray, T_frame_geometry: pin.SE3) -> FloatArray:
@@ -870,7 +894,7 @@ class StateFilter:
         box_half: list[float] = []  # per part, its boxes' half side when they are all one size, else 0
         n_planes = n_balls = 0
         for part in self.parts:
-            parts.append([0, 0, 0, len(rows), len(rows) + len(part.robot_a)])
+            parts.append([0, 0, 0, len(rows), len(rows) + len(part.robot_a), 0])
             order = np.argsort(self.joint[part.robot_a], kind="stable")  # a joint's geometries together
             rows += list(part.robot_a[order])
             reach += [part.margin[k] + SLACK for k in order]
@@ -885,8 +909,9 @@ class StateFilter:
                     half = max(h for _, h in part.indexes)
             elif part.planes is not None:
                 parts[-1][:3] = [1, n_planes, n_planes + len(part.planes)]
-                planes.append(part.planes)
-                n_planes += len(part.planes)
+                planes += [part.planes, part.edges]
+                n_planes += len(part.planes) + len(part.edges)
+                parts[-1][5] = n_planes
             else:
                 assert part.sphere is not None
                 parts[-1][:3] = [2, n_balls, n_balls + 1]
@@ -900,7 +925,7 @@ class StateFilter:
         self._box_half = np.array(box_half, dtype=float)
         self._contact_limit = self._scene_row_reach - SLACK - CONTACT_DEPTH
         """Per scene row, how close [m] a witness ball's surface must come to the part (its margin less :data:`CONTACT_DEPTH`)."""
-        self._scene_parts = (np.array(parts, dtype=np.int64).reshape(-1, 5), *_packed(indexes),
+        self._scene_parts = (np.array(parts, dtype=np.int64).reshape(-1, 6), *_packed(indexes),
                              np.array([*halves, 0.0], dtype=float), np.concatenate(planes), np.concatenate(balls))  # fmt: skip
 
     def _self_tables(self) -> tuple[NDArray[np.generic], ...]:

@@ -345,9 +345,9 @@ def _uncertified(Q, a, b, n, travel, levers, placements, axes, kinds, joint, loc
                             touch = True
                             break
                         gap = min(gap, sub_gap)
-                if touch and kind == 1:
+                if touch and kind == 1:  # by the part's face planes, then its edges' (parts[q_, 5])
                     touch = not _vertices_outside(
-                        g, W[g], reach[p], joint, F, T, vert_start, verts, planes, pa, pb
+                        g, W[g], radius[g], reach[p], joint, F, T, vert_start, verts, planes, pa, parts[q_, 5]
                     )
                     gap = 0.0
                 out_i[p], slack_i[p] = touch, 0.0 if touch else gap
@@ -452,7 +452,7 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
 
     Every state's spheres placed and tested in one call (:func:`_uncertified`). Scene pairs ``p < P``:
     robot geometry ``scene_rows[p]``, grouped by scene part (``parts[q]``:
-    kind, a, b, and the part's rows r0..r1; kind 0: box centres in the point index q packed by
+    kind, a, b, the part's rows r0..r1 and, for kind 1, the end of its edges' planes (b..); kind 0: box centres in the point index q packed by
     :func:`_packed` (``offs`` .. ``ints``),
     boxes ``halves[q]`` a half diagonal across (:func:`_points_rows`); kind 1, 2: :func:`_shape_gap`),
     certified when the geometry's bounding sphere or every sphere of its cover (``sub_*``) is
@@ -804,13 +804,14 @@ def _frame_entry(jg, jh, F, r, c):
 
 
 @nb.njit(cache=True)
-def _vertices_outside(g, c, reach, joint, F, T, vert_start, verts, planes, a, b):
+def _vertices_outside(g, c, r, reach, joint, F, T, vert_start, verts, planes, a, b):
     """Whether geometry g's hull points all lie more than ``reach`` outside one of the world planes a..b.
 
     The planes bound a convex part (inside <= 0), so such a plane keeps g's whole hull that far
-    from it. Only the plane that g's bounding sphere's centre c (3,) (world) lies farthest outside
-    is tried. The points (``verts[vert_start[g]:vert_start[g + 1]]``, in the frame of the arm
-    joint that moves g) are placed by ``F`` and ``T`` (the arm's base in the world).
+    from it. The plane that g's bounding sphere (centre c (3,), world; radius r) lies farthest
+    outside is tried first, then the others the sphere reaches beyond ``reach`` (no hull point
+    lies farther out than the sphere). The points (``verts[vert_start[g]:vert_start[g + 1]]``, in
+    the frame of the arm joint that moves g) are placed by ``F`` and ``T`` (the arm's base in the world).
     """
     u0, u1 = vert_start[g], vert_start[g + 1]
     if u0 == u1 or a == b:
@@ -822,14 +823,32 @@ def _vertices_outside(g, c, reach, joint, F, T, vert_start, verts, planes, a, b)
             h, best = k, d
     j = joint[g]
     base = np.empty(3)
+    world = np.empty((u1 - u0, 3))
     for u in range(u0, u1):
         _place_one(j, verts[u], F, base)
-        d = planes[h, 3]
         for m in range(3):
-            d += planes[h, m] * (T[m, 0] * base[0] + T[m, 1] * base[1] + T[m, 2] * base[2] + T[m, 3])
-        if not d > reach:
-            return False
-    return True
+            world[u - u0, m] = T[m, 0] * base[0] + T[m, 1] * base[1] + T[m, 2] * base[2] + T[m, 3]
+    for n in range(b - a + 1):
+        k = h if n == 0 else a + n - 1
+        if n > 0 and (
+            k == h
+            or not planes[k, 0] * c[0] + planes[k, 1] * c[1] + planes[k, 2] * c[2] + planes[k, 3] + r > reach
+        ):
+            continue
+        outside = True
+        for u in range(u1 - u0):
+            d = (
+                planes[k, 0] * world[u, 0]
+                + planes[k, 1] * world[u, 1]
+                + planes[k, 2] * world[u, 2]
+                + planes[k, 3]
+            )
+            if not d > reach:
+                outside = False
+                break
+        if outside:
+            return True
+    return False
 
 
 @nb.njit(cache=True, inline="always")
