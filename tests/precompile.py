@@ -53,7 +53,7 @@ def maps(robot: Robot) -> None:
 
 
 def motion(robot: Robot) -> None:
-    """The state kernel: states, lines and contact proofs against a table scene, in both collision models."""
+    """The state kernel: states, lines, states at their own poses and contact proofs against a table scene, in both collision models."""
     from test_state_filter import _environments
 
     arm = robot.arm()
@@ -67,6 +67,7 @@ def motion(robot: Robot) -> None:
         flt = env.state_filter(arm)
         flt.first_colliding_line(Q[0], Q[1], 8, 0.5, T_base)
         flt._touch_proven(Q[0], np.ones(len(flt._scene_rows), dtype=np.bool_), T_base @ flt._T_base_armbase)
+        env.colliding_arm_poses(arm, Q, np.stack([T_base, T_base]))
 
 
 if __name__ == "__main__":

@@ -61,6 +61,7 @@ from baseplace.world.state_kernel import (
     _transformed,
     _transformed_poses,
     _uncertified_line,
+    _uncertified_poses,
     _uncertified_states,
 )
 
@@ -1257,8 +1258,9 @@ class StateFilter:
         The geometries no arm joint moves do not depend on the arm's state, so their spheres are
         placed for every pose and tested against each scene part in one compiled call per part
         (:meth:`_static_uncertified`) instead of one setup per pose; a pose whose leftover pairs
-        coal finds touching collides. The others go through the compiled state check
-        (:func:`_uncertified_states`), one state at its own pose, and coal on the pairs left, with
+        coal finds touching collides. The others go through the compiled state check, each state
+        at its own pose, all in one call (:func:`_uncertified_poses`) up to the next state with
+        pairs left, and coal on those pairs, with
         the request and margin of :meth:`first_colliding`: the verdict is coal's. The static answer
         kept for :meth:`first_colliding` is neither used nor changed.
 
@@ -1272,28 +1274,31 @@ class StateFilter:
             return hit
         T_armbase = np.ascontiguousarray(T @ self._T_base_armbase)
         static = self._static_uncertified(T_armbase)
-        P = len(self._scene_rows)
-        out = np.empty((1, P + len(self._self_pairs)), dtype=np.bool_)
-        robot, scene_and_self = self._kernel_args
         for s in range(len(T)):
-            q_full = self._full(Q[s]) if static[s] else None
-            if q_full is not None and self._scene_coal(static[s], q_full, T[s]):
+            if static[s] and self._scene_coal(static[s], self._full(Q[s]), T[s]):
                 hit[s] = True
-                continue
-            if _uncertified_states(Q[s : s + 1], *robot, T_armbase[s], *scene_and_self, 0, out) < 0:  # type: ignore[call-arg]
-                continue
+        rest = np.flatnonzero(~hit)
+        Q_rest, T_rest = np.ascontiguousarray(Q[rest]), np.ascontiguousarray(T_armbase[rest])
+        P = len(self._scene_rows)
+        out = np.empty((len(rest), P + len(self._self_pairs)), dtype=np.bool_)
+        robot, scene_and_self = self._kernel_args
+        i = -1
+        while True:
+            i = _uncertified_poses(Q_rest, T_rest, *robot, *scene_and_self, i + 1, out)  # type: ignore[call-arg]
+            if i < 0:
+                return hit
             self.coal_states += 1
-            if self._touch_proven(Q[s], out[0, :P], T_armbase[s]):
+            s = rest[i]
+            if self._touch_proven(Q[s], out[i, :P], T_armbase[s]):
                 hit[s] = True
                 continue
-            q_full = self._full(Q[s]) if q_full is None else q_full
-            scene = self._scene_row_pair[np.flatnonzero(out[0, :P])]
+            q_full = self._full(Q[s])
+            scene = self._scene_row_pair[np.flatnonzero(out[i, :P])]
             if len(scene) and self._scene_coal(scene.tolist(), q_full, T[s]):
                 hit[s] = True
                 continue
-            own = self._self_index[np.flatnonzero(out[0, P:])]
+            own = self._self_index[np.flatnonzero(out[i, P:])]
             hit[s] = bool(len(own)) and self._self_coal(own, q_full)
-        return hit
 
     def _static_uncertified(self, T_world_armbase: FloatArray) -> list[list[int]]:
         """Per arm base pose (S, 4, 4), the scene pairs of the geometries no arm joint moves that their spheres do not clear.

@@ -483,6 +483,33 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
 
 
 @nb.njit(cache=True)
+def _uncertified_poses(Q, T_all, placements, axes, kinds, joint, local, radius, sub_start, sub_joint, sub_local,
+                       sub_radius, group_local, group_radius, hull_start, hull_planes, vert_start, verts, scene_rows,
+                       scene_reach, parts, offs, all_points, all_keys, all_starts, all_fields, geo, ints, halves, planes,
+                       balls, self_pairs, self_reach, self_runs, run_reach, self_table, tab_joint, tab_lo, tab_step, tab_n,
+                       tab_rho, tab_off, tab_cert, anchor_of, anc_joint, anc_box, anc_lo, anc_h, anc_dims, anc_off,
+                       anc_field, anc_reach, anc_group_reach, start, out):  # fmt: skip
+    """:func:`_uncertified_states` for states each at its own pose: Q[s] (n,) with the arm's base at ``T_all[s]`` (4, 4).
+
+    From state ``start`` on, the first with a pair left (its pairs in ``out[s]``), or -1: the
+    robustness score's error draws in one call instead of one per draw
+    (:meth:`~baseplace.world.state_filter.StateFilter.colliding_poses`).
+    """
+    first = start - start  # 0, not a literal (see _uncertified's note)
+    for s in range(start, Q.shape[0]):
+        k = _uncertified_states(Q[s : s + 1], placements, axes, kinds, joint, local, radius, sub_start, sub_joint,
+                                sub_local, sub_radius, group_local, group_radius, hull_start, hull_planes, vert_start,
+                                verts, T_all[s], scene_rows, scene_reach, parts, offs, all_points, all_keys, all_starts,
+                                all_fields, geo, ints, halves, planes, balls, self_pairs, self_reach, self_runs, run_reach,
+                                self_table, tab_joint, tab_lo, tab_step, tab_n, tab_rho, tab_off, tab_cert, anchor_of,
+                                anc_joint, anc_box, anc_lo, anc_h, anc_dims, anc_off, anc_field, anc_reach,
+                                anc_group_reach, first, out[s : s + 1])  # fmt: skip
+        if k >= 0:
+            return s
+    return -1
+
+
+@nb.njit(cache=True)
 def _uncertified_line(a, b, n, travel, levers, placements, axes, kinds, joint, local, radius, sub_start, sub_joint, sub_local,
                       sub_radius, group_local, group_radius, hull_start, hull_planes, vert_start, verts, T, scene_rows, scene_reach, parts, offs, all_points, all_keys, all_starts,
                       all_fields, geo, ints, halves, planes, balls, self_pairs, self_reach, self_runs, run_reach, self_table,
