@@ -451,9 +451,9 @@ def _uncertified_states(Q, placements, axes, kinds, joint, local, radius, sub_st
     """Per state Q[i] (n,), which pairs its spheres do not certify free: ``out[i, p]`` (m, P + S) bool.
 
     Every state's spheres placed and tested in one call (:func:`_uncertified`). Scene pairs ``p < P``:
-    robot geometry ``scene_rows[p]``, grouped by scene part (``parts[q]``:
-    kind, a, b, the part's rows r0..r1 and, for kind 1, the end of its edges' planes (b..); kind 0: box centres in the point index q packed by
-    :func:`_packed` (``offs`` .. ``ints``),
+    robot geometry ``scene_rows[p]``, grouped by scene part (``parts[q]``: kind, a, b, the part's
+    rows r0..r1 and, for kind 1, where its edges' planes end (they follow its faces' a..b); kind 0:
+    box centres in the point index q packed by :func:`_packed` (``offs`` .. ``ints``),
     boxes ``halves[q]`` a half diagonal across (:func:`_points_rows`); kind 1, 2: :func:`_shape_gap`),
     certified when the geometry's bounding sphere or every sphere of its cover (``sub_*``) is
     clear by ``scene_reach[p]``; then the self pairs (S, 2), certified when the bounding spheres
