@@ -85,6 +85,38 @@ def median_time(fn: Callable[[], Any], repeats: int = 5) -> float:
     return float(np.median(times))
 
 
+def alternated(turns: int, prepare: Callable[[str], Callable[[], Any]], sides: tuple[str, str] = ("this", "other")
+               ) -> tuple[dict[str, float], dict[str, Any]]:  # fmt: skip
+    """The two sides of a paired bench take turns, ``turns`` times each, alternately.
+
+    Each turn ``prepare(side)`` readies the side (not timed) and returns the work to time. The
+    first turn of each side is not counted (caches). Returns per side the fastest counted wall
+    time [ms] and the answer of its last turn.
+    """
+    fastest = dict.fromkeys(sides, np.inf)
+    answer: dict[str, Any] = {}
+    for turn in range(2 * turns):
+        side = sides[turn % 2]
+        work = prepare(side)
+        t = time.perf_counter()
+        answer[side] = work()
+        if turn >= 2:
+            fastest[side] = min(fastest[side], (time.perf_counter() - t) * 1e3)
+    return fastest, answer
+
+
+def ratio_summary(ms: dict[str, list[float]]) -> dict[str, Any]:
+    """Two sides' times [ms] over the same inputs (``ms``: the side first named, then the other): medians, means, the per-input ratio's median and quartiles."""
+    (first, a), (second, b) = ((k, np.array(v)) for k, v in ms.items())
+    ratio = a / b
+    return {
+        "median_ms": {first: float(np.median(a)), second: float(np.median(b))},
+        "mean_ms": {first: float(a.mean()), second: float(b.mean())},
+        "ratio_median": float(np.median(ratio)),
+        "ratio_quartiles": [float(x) for x in np.quantile(ratio, [0.25, 0.75])],
+    }
+
+
 def report(name: str, result: dict[str, Any], **provenance: Any) -> None:
     """Print a result and store it whole as bench/results/NAME.json, with its provenance.
 

@@ -28,7 +28,7 @@ Usage: python bench/paired_ik.py --other ../base [--turns 4] [--name paired_ik]
 from __future__ import annotations
 
 import argparse
-import time
+import functools
 from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType
@@ -41,7 +41,7 @@ from baseplace.geometry.poses import FloatArray
 from baseplace.placement.motion import WALK_LIMIT_GAIN
 from baseplace.robots.fk import forward_kinematics
 from baseplace.robots.model import Arm, Robot
-from common import other_module, reaches, report
+from common import alternated, other_module, reaches, report
 from find_rate import library_commit
 
 
@@ -126,15 +126,10 @@ def main() -> None:
     sets = problems(arm)
     summary: dict[str, Any] = {}
     for name, items in sets.items():
-        best = {"this": np.inf, "other": np.inf}
-        answers: dict[str, list[Answer]] = {}
-        for turn in range(2 * args.turns):
-            who = ("this", "other")[turn % 2]
-            solve = runner(modules[who], arm, name)
-            t = time.perf_counter()
-            answers[who] = solve(items)
-            if turn >= 2:
-                best[who] = min(best[who], (time.perf_counter() - t) * 1e3)
+        best, answers = alternated(
+            args.turns,
+            lambda who, name=name, items=items: functools.partial(runner(modules[who], arm, name), items),
+        )
         a, b = answers["this"], answers["other"]
         solved = {who: sum(q is not None for _, q in answers[who]) for who in answers}
         same = sum((x is None) == (y is None) for (_, x), (_, y) in zip(a, b, strict=False))

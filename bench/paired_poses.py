@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -28,7 +28,7 @@ import numpy as np
 from baseplace.placement.robustness import perturbed
 from baseplace.robots.model import Robot
 from baseplace.world.state_filter import _uncertified_states
-from common import report
+from common import alternated, ratio_summary, report
 from find_rate import library_commit
 
 sys.path.insert(0, str(Path(__file__).parent.parent / "tests"))
@@ -63,6 +63,13 @@ def per_draw(flt: Any, Q: np.ndarray, T: np.ndarray) -> np.ndarray:
     return hit
 
 
+def _turns(flt: Any, Q: np.ndarray, T: np.ndarray) -> Callable[[str], Callable[[], Any]]:
+    """Per side ("batched", "per_draw"), the work of one turn on the draws (Q, T)."""
+    return lambda side: (
+        (lambda: flt.colliding_poses(Q, T)) if side == "batched" else (lambda: per_draw(flt, Q, T))
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--batches", type=int, default=20, help="batches of 64 draws per scene and model")
@@ -84,26 +91,11 @@ def main() -> None:
                 q = states[rng.integers(len(states))]
             Q = np.clip(q + rng.normal(0.0, 0.005, (64, arm.n_joints)), arm.lower, arm.upper)
             T = perturbed(T_base, rng.normal(0.0, 1.0, (64, 3)) * (0.03, 0.03, np.radians(2.0)))
-            best = {"batched": np.inf, "per_draw": np.inf}
-            answer = {}
-            for turn in range(2 * args.turns):
-                side = ("batched", "per_draw")[turn % 2]
-                t = time.perf_counter()
-                answer[side] = flt.colliding_poses(Q, T) if side == "batched" else per_draw(flt, Q, T)
-                if turn >= 2:
-                    best[side] = min(best[side], (time.perf_counter() - t) * 1e3)
+            best, answer = alternated(args.turns, _turns(flt, Q, T), ("batched", "per_draw"))
             for side in ms:
                 ms[side].append(best[side])
             same += bool(np.array_equal(answer["batched"], answer["per_draw"]))
-    a, b = np.array(ms["batched"]), np.array(ms["per_draw"])
-    ratio = a / b
-    summary = {
-        "batches": len(a),
-        "same_verdicts": same,
-        "median_ms": {"batched": float(np.median(a)), "per_draw": float(np.median(b))},
-        "ratio_median": float(np.median(ratio)),
-        "ratio_quartiles": [float(x) for x in np.quantile(ratio, [0.25, 0.75])],
-    }
+    summary = {"batches": len(ms["batched"]), "same_verdicts": same, **ratio_summary(ms)}
     print(summary)
     report(args.name, {"turns": args.turns, "library": library_commit(), "summary": summary, "ms": ms})
 

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import cProfile
+import functools
 import json
 import pstats
 import sys
@@ -53,6 +54,7 @@ from baseplace.reachability.cache import resolve_map
 from baseplace.robots.ik import DampedLeastSquaresIK
 from baseplace.robots.model import Robot
 from bench_motion_verdicts import PROTOCOLS, check_seed, row_models
+from common import alternated, ratio_summary
 from find_rate import library_commit
 
 RESULTS = Path(__file__).parent / "results"
@@ -226,37 +228,26 @@ def paired_checks(args: argparse.Namespace, rows: list[dict[str, Any]], side: Ca
             models[key] = row_models(robot, arm.name, row)[:2]
         seed = check_seed(row["seed"], tuple(row["cell"]), row["grasp"], row["placement"])
         q, T_base, target = (np.array(row[k]) for k in ("q_grasp", "T_world_base", "target"))
-        fastest = {"this": np.inf, "other": np.inf}
-        answer: dict[str, Any] = {}
-        for turn in range(2 * args.turns):
-            name = ("this", "other")[turn % 2]
-            checker_class, settings_class = side(name)
-            checker = checker_class(robot, arm, *models[key], settings_class())
-            t = time.perf_counter()
-            answer[name] = checker.check(q, T_base, target, seed=seed)
-            wall = time.perf_counter() - t
-            if turn >= 2:
-                fastest[name] = min(fastest[name], wall * 1e3)
+        turn = functools.partial(_check_turn, side, robot, arm, models[key], q, T_base, target, seed)
+        fastest, answer = alternated(args.turns, turn)
         for name in best:
             best[name].append(fastest[name])
             found[name] += answer[name] is not None
         agree += _same_answer(answer["this"], answer["other"])
     side("this")
-    a, b = np.array(best["this"]), np.array(best["other"])
-    ratio = a / b
-    summary = {
-        "checks": len(a),
-        "found": found,
-        "same_answer": agree,
-        "median_ms": {"this": float(np.median(a)), "other": float(np.median(b))},
-        "mean_ms": {"this": float(a.mean()), "other": float(b.mean())},
-        "ratio_median": float(np.median(ratio)),
-        "ratio_quartiles": [float(x) for x in np.quantile(ratio, [0.25, 0.75])],
-    }
+    summary = {"checks": len(rows), "found": found, "same_answer": agree, **ratio_summary(best)}
     print(summary)
     other = library_commit(args.other / "src" / "baseplace")
     return {"inputs": args.results, "turns": args.turns, "other": other, "library": library_commit(),
             "summary": summary, "ms": best}  # fmt: skip
+
+
+def _check_turn(side: Callable[[str], tuple[Any, Any]], robot: Robot, arm: Any, models: Any, q: FloatArray,
+                T_base: FloatArray, target: FloatArray, seed: int, name: str) -> Callable[[], Any]:  # fmt: skip
+    """Side ``name`` readied (``side``) and its motion checker built on ``models``: one turn's check, to time."""
+    checker_class, settings_class = side(name)
+    checker = checker_class(robot, arm, *models, settings_class())
+    return lambda: checker.check(q, T_base, target, seed=seed)
 
 
 def _same_answer(a: Any, b: Any) -> bool:
