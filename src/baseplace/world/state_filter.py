@@ -398,10 +398,11 @@ _COVERS: weakref.WeakKeyDictionary[Robot, dict[int, list[tuple[FloatArray, Float
 """Per robot, the :func:`sphere_cover` of each of its first n collision geometries (by n)."""
 
 
-_CONTACTS: weakref.WeakKeyDictionary[Robot, dict[int, list[tuple[FloatArray, FloatArray]]]] = (
+_CONTACTS: weakref.WeakKeyDictionary[Robot, dict[int, tuple[FloatArray, FloatArray]]] = (
     weakref.WeakKeyDictionary()
 )
-"""Per robot, the :func:`contact_balls` of each of its first n collision geometries (by n)."""
+"""Per robot, the :func:`contact_balls` of its collision geometries that an arm moves, by geometry id
+(the robot's geometries come first in every scene model, with the same ids)."""
 
 
 _Table = tuple[list[int], FloatArray, FloatArray, list[int], FloatArray, FloatArray]
@@ -740,10 +741,7 @@ class StateFilter:
         if n_robot not in known:
             known[n_robot] = [convex_hull(geom.geometryObjects[k].geometry) for k in range(n_robot)]
         convex = known[n_robot]
-        balls = _CONTACTS.setdefault(robot, {})
-        if n_robot not in balls:
-            balls[n_robot] = [contact_balls(geom.geometryObjects[k].geometry) for k in range(n_robot)]
-        contacts = balls[n_robot]
+        contacts = _CONTACTS.setdefault(robot, {})  # by geometry id, for the geometries an arm moves
         ball_start, ball_local, ball_radius = [0], [], []  # the witness balls of each geometry
         gref = pin.GeometryData(geom)
         pin.updateGeometryPlacements(model, ref, geom, gref)
@@ -765,7 +763,9 @@ class StateFilter:
             sub_joint += [j] * len(cover_r)
             sub_local += list(cover_c @ T.rotation.T + T.translation)
             sub_radius += list(cover_r)
-            ball_c, ball_r = contacts[k]
+            if j >= 0 and k not in contacts:  # only a moving geometry's scene pairs reach a proof
+                contacts[k] = contact_balls(obj.geometry)
+            ball_c, ball_r = contacts[k] if j >= 0 else (np.zeros((0, 3)), np.zeros(0))
             ball_start.append(ball_start[-1] + len(ball_r))
             ball_local += list(ball_c @ T.rotation.T + T.translation)
             ball_radius += list(ball_r)
@@ -789,7 +789,8 @@ class StateFilter:
             np.array(ball_radius, dtype=float),
         )
         """Per robot geometry g, its :func:`contact_balls` (starts (G + 1,), centres in the frame of
-        the arm joint that moves it, radii) [m]."""
+        the arm joint that moves it, radii) [m]; none for a geometry no arm joint moves (its scene
+        pairs are checked once per base pose, :meth:`_static_touching`, never proven)."""
         self._hulls = (
             np.cumsum([0] + [len(h) for h in hulls], dtype=np.int64),
             np.ascontiguousarray(np.concatenate([np.zeros((0, 4)), *hulls])),
